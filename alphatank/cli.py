@@ -1,0 +1,33 @@
+"""``alphatank`` command line: one subcommand module per verb in ``alphatank.commands``."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+# verb -> module in alphatank.commands exposing add_arguments(parser) and run(args) -> int
+COMMANDS = {
+    "bench": "Measure ticks/s of the match, env steps/s, bot and renderer cost.",
+    "maps": "List shipped maps or show/validate one.",
+}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="alphatank", description=__doc__)
+    sub = parser.add_subparsers(dest="command", required=True)
+    for verb, help_text in COMMANDS.items():
+        module = importlib.import_module(f"alphatank.commands.{verb}")
+        p = sub.add_parser(verb, help=help_text, description=help_text)
+        module.add_arguments(p)
+        p.set_defaults(_run=module.run)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    return int(args._run(args) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
