@@ -132,6 +132,7 @@ class Match:
             self.zone_grid[r, c] = 1
         for r, c in self.debuffs:
             self.zone_grid[r, c] = -1
+        self._zone_rows = self.zone_grid.tolist()
         poses = np.zeros((n, 3))
         for i, cell in enumerate(spawn_cells):
             poses[i, :2] = spec.cell_center(cell)
@@ -188,6 +189,19 @@ class Match:
 
     # ---- rules ----------------------------------------------------------------------
 
+    def place_tank(self, tank: int, x: float, y: float, angle: float) -> None:
+        """Teleport a tank (for set-ups and tests); zones are re-evaluated."""
+        self.world.place_tank(tank, x, y, angle)
+        self.world.read_state()
+        self._update_zones(report=False)
+
+    def place_bullet(self, owner: int, x: float, y: float, angle: float) -> int:
+        """Put a bullet of ``owner`` anywhere (for set-ups and tests); returns its slot."""
+        b = self.world.spawn_bullet(owner, x, y, angle)
+        if b >= 0:
+            self.bullets_alive[owner] += 1
+        return b
+
     def bullet_limit(self, tank: int) -> int:
         if self.in_debuff[tank]:
             return self.cfg.debuff_max_bullets
@@ -202,13 +216,14 @@ class Match:
             raise RuntimeError("step() called on a finished match; call reset()")
         ev, w, cfg = self.events, self.world, self.cfg
         ev.clear()
-        np.maximum(self.cooldown - 1, 0, out=self.cooldown)
-        for i in range(self.n):
-            if not self.alive[i]:
+        cooldown = self.cooldown
+        np.subtract(cooldown, 1, out=cooldown, where=cooldown > 0)
+        alive = self.alive.tolist()
+        for i, (rot, move, fire) in enumerate(np.asarray(actions).tolist()):
+            if not alive[i]:
                 continue
-            rot, move, fire = actions[i]
-            w.drive(i, int(rot) - 1, int(move) - 1)
-            if fire and self.cooldown[i] == 0 and self.bullets_alive[i] < self.bullet_limit(i):
+            w.drive(i, rot - 1, move - 1)
+            if fire and cooldown[i] == 0 and self.bullets_alive[i] < self.bullet_limit(i):
                 b = w.fire(i)
                 if b >= 0:
                     ev.fired.append(Fired(i, b))
@@ -235,29 +250,27 @@ class Match:
                 self.alive[victim] = False
                 w.remove_tank(victim)
                 ev.kills.append(Killed(victim, shooter))
-        if w.wall_contact.any():
-            ev.wall_contacts.extend(WallContact(int(i)) for i in np.flatnonzero(w.wall_contact))
+        if w.wall_contacts.any():
+            ev.wall_contacts.extend(WallContact(int(i)) for i in np.flatnonzero(w.wall_contacts))
         self._update_zones(report=True)
         self._check_end()
         return ev
 
     def _update_zones(self, report: bool) -> None:
-        cell = self.spec.cell
-        rows, cols = self.spec.walls.shape
-        r = np.clip((self.tank_xy[:, 1] // cell).astype(np.int64), 0, rows - 1)
-        c = np.clip((self.tank_xy[:, 0] // cell).astype(np.int64), 0, cols - 1)
-        zone = self.zone_grid[r, c]
-        buff, debuff = (zone == 1) & self.alive, (zone == -1) & self.alive
-        if report:
-            for i in np.flatnonzero(buff & ~self.in_buff):
-                self.events.zones_entered.append(ZoneEntered(int(i), "buff"))
-            for i in np.flatnonzero(debuff & ~self.in_debuff):
-                self.events.zones_entered.append(ZoneEntered(int(i), "debuff"))
-        self.in_buff[:] = buff
-        self.in_debuff[:] = debuff
+        """Zone membership of live tanks (a few tanks: plain Python beats numpy here)."""
+        cell, zones = self.spec.cell, self._zone_rows
+        in_buff, in_debuff, alive = self.in_buff, self.in_debuff, self.alive
+        for i, (x, y) in enumerate(self.tank_xy.tolist()):
+            zone = zones[int(y // cell)][int(x // cell)] if alive[i] else 0
+            buff, debuff = zone == 1, zone == -1
+            if report and buff and not in_buff[i]:
+                self.events.zones_entered.append(ZoneEntered(i, "buff"))
+            if report and debuff and not in_debuff[i]:
+                self.events.zones_entered.append(ZoneEntered(i, "debuff"))
+            in_buff[i], in_debuff[i] = buff, debuff
 
     def _check_end(self) -> None:
-        if not self.cfg.immortal:
+        if self.events.kills:
             teams_alive = np.unique(self.team_index[self.alive])
             if teams_alive.size <= 1:
                 self.terminated = True

@@ -1,0 +1,274 @@
+"""Shared machinery of the rule-based bots: seeding, steering, aiming, evasion.
+
+Every bot sees the full match state (privileged, no pixels) and returns one action per
+tick: rotate {0 ccw, 1 none, 2 cw}, move {0 back, 1 stop, 2 forward}, fire {0, 1}.
+Angles are radians with y pointing down, so a positive angle change is clockwise on
+screen, which is what ``rotate = 2`` does.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, ClassVar
+
+import numpy as np
+
+from alphatank.ballistics import path_hits, predict_path
+from alphatank.navigation import NavGrid, nav_grid
+
+if TYPE_CHECKING:
+    from alphatank.match import Match
+
+TAU = 2.0 * math.pi
+CCW, NONE, CW = 0, 1, 2
+BACK, STOP, FORWARD = 0, 1, 2
+MOVE_CONE = math.radians(35.0)  # drive only while the heading error is below this
+REVERSE_CONE = math.radians(110.0)  # reverse instead of turning round beyond this
+DRIVE_RADIUS = 16.0  # clearance used for straight driving legs (tank half-length + 1)
+ARRIVE_PX = 6.0
+
+
+def wrap(a: float) -> float:
+    """Angle wrapped to [-pi, pi)."""
+    return (a + math.pi) % TAU - math.pi
+
+
+class Bot:
+    """Base class: seeding, per-episode set-up and helpers. Subclasses implement
+    :meth:`decide` returning (rotate, move, fire)."""
+
+    name: ClassVar[str] = "bot"
+
+    def __init__(self, seed: int | None = None):
+        self.seed = seed
+        self._seeder = np.random.default_rng(seed)
+        self.rng = np.random.default_rng(seed)
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(seed={self.seed!r})"
+
+    # ---- Policy protocol ------------------------------------------------------------
+
+    def reset(self, match: Match, seat: int, seed: int | None = None) -> None:
+        """New episode: fresh generator (from ``seed``, else the next draw of the bot's
+        own seed stream), map tables, and per-episode state."""
+        if seed is None:
+            seed = int(self._seeder.integers(2**63))
+        self.rng = np.random.default_rng(seed)
+        cfg = match.cfg
+        self.cfg = cfg
+        self.nav: NavGrid = nav_grid(match.spec)
+        self.turn_step = math.radians(cfg.rotation_speed) / cfg.tick_hz
+        self.hit_radius = cfg.tank_height / 2 + cfg.bullet_radius
+        self.muzzle_offset = cfg.tank_width / 2 + cfg.bullet_radius + 0.5
+        self.shot_range = cfg.bullet_max_distance
+        self._stuck_since = -1
+        self._stuck_xy = (0.0, 0.0)
+        self._unstick_until = -1
+        self._unstick_move = BACK
+        self.on_reset(match, seat)
+
+    def act(self, match: Match, seat: int) -> np.ndarray:
+        if not match.alive[seat]:
+            return np.array((NONE, STOP, 0), dtype=np.int64)
+        rot, move, fire = self.decide(match, seat)
+        return np.array((rot, move, fire), dtype=np.int64)
+
+    # ---- for subclasses -------------------------------------------------------------
+
+    def on_reset(self, match: Match, seat: int) -> None:
+        """Per-episode state of a subclass (called at the end of :meth:`reset`)."""
+
+    def decide(self, match: Match, seat: int) -> tuple[int, int, int]:
+        raise NotImplementedError
+
+    # ---- helpers --------------------------------------------------------------------
+
+    def steer(self, err: float) -> int:
+        """Rotate action reducing heading error ``err`` (target minus heading)."""
+        half = 0.5 * self.turn_step
+        if err > half:
+            return CW
+        if err < -half:
+            return CCW
+        return NONE
+
+    def drive(self, x: float, y: float, heading: float, tx: float, ty: float,
+              reverse: bool = True) -> tuple[int, int]:
+        """(rotate, move) that take a tank at (x, y, heading) towards (tx, ty), backing up
+        when the point is behind it; stops within ARRIVE_PX."""
+        dx, dy = tx - x, ty - y
+        if dx * dx + dy * dy < ARRIVE_PX * ARRIVE_PX:
+            return NONE, STOP
+        err = wrap(math.atan2(dy, dx) - heading)
+        move = FORWARD
+        if reverse and abs(err) > REVERSE_CONE:
+            err = wrap(err + math.pi)
+            move = BACK
+        if abs(err) > MOVE_CONE:
+            move = STOP
+        return self.steer(err), move
+
+    def away_point(self, x: float, y: float, fx: float, fy: float,
+                   reach: float = 50.0) -> tuple[float, float]:
+        """A point ``reach`` px from (x, y) away from (fx, fy), turned by up to 90 degrees
+        if needed to keep clear of walls."""
+        base = math.atan2(y - fy, x - fx)
+        turns = np.array([0.0, 0.25, -0.25, 0.5, -0.5]) * math.pi
+        ang = base + turns
+        pts = np.stack([x + reach * np.cos(ang), y + reach * np.sin(ang)], axis=1)
+        ok = self.nav.clearance(pts) > DRIVE_RADIUS + 4.0
+        i = int(np.argmax(ok)) if ok.any() else 0
+        return float(pts[i, 0]), float(pts[i, 1])
+
+    def route(self, match: Match, x: float, y: float, me: int, goal: int) -> tuple[float, float]:
+        """Next point to drive to on the BFS route from node ``me`` to node ``goal``:
+        the farthest path cell reachable in a straight leg, else the next cell."""
+        nav = self.nav
+        if me == goal:
+            gx, gy = nav.centers[goal]
+            return float(gx), float(gy)
+        gx, gy = nav.centers[nav.waypoint_idx(me, goal, DRIVE_RADIUS)]
+        if match.world.ray((float(x), float(y)), (float(gx), float(gy)),
+                           DRIVE_RADIUS - 2.0) is not None:
+            gx, gy = nav.centers[nav.next_table[me, goal]]
+        return float(gx), float(gy)
+
+    def enemies(self, match: Match, seat: int) -> np.ndarray:
+        """Indices of live tanks on other teams."""
+        return np.flatnonzero(match.alive & (match.team_index != match.team_index[seat]))
+
+    def nearest(self, match: Match, seat: int, tanks: np.ndarray) -> int:
+        """Tank in ``tanks`` nearest in straight-line distance (-1 if none)."""
+        if tanks.size == 0:
+            return -1
+        d = match.tank_xy[tanks] - match.tank_xy[seat]
+        return int(tanks[int(np.argmin((d * d).sum(axis=1)))])
+
+    def can_fire(self, match: Match, seat: int) -> bool:
+        """Whether a fire action this tick would spawn a bullet (cooldown ticks down
+        before firing; bullet limits follow buff/debuff zones)."""
+        return bool(match.cooldown[seat] <= 1
+                    and match.bullets_alive[seat] < match.bullet_limit(seat))
+
+    def lead_angle(self, match: Match, seat: int, target: int) -> float:
+        """Angle to shoot a straight bullet that meets ``target`` moving at its current
+        velocity (falls back to the direct angle when no intercept exists)."""
+        x, y = match.tank_xy[seat]
+        ex, ey = match.tank_xy[target]
+        vx, vy = match.tank_vel[target]
+        rx, ry = ex - x, ey - y
+        s, d0 = self.cfg.bullet_speed, self.muzzle_offset
+        # |r + v t| = d0 + s t  ->  (v.v - s^2) t^2 + 2 (r.v - d0 s) t + (r.r - d0^2) = 0
+        a = vx * vx + vy * vy - s * s
+        b = 2.0 * (rx * vx + ry * vy - d0 * s)
+        c = rx * rx + ry * ry - d0 * d0
+        disc = b * b - 4 * a * c
+        if a < 0 and disc >= 0:
+            t = (-b - math.sqrt(disc)) / (2 * a)
+            if t > 0:
+                return math.atan2(ry + vy * t, rx + vx * t)
+        return math.atan2(ry, rx)
+
+    def clear_shot(self, match: Match, seat: int, target: int) -> bool:
+        """A bullet-thick straight line from this tank to ``target`` misses every wall."""
+        x, y = match.tank_xy[seat]
+        tx, ty = match.tank_xy[target]
+        return match.world.ray((float(x), float(y)), (float(tx), float(ty)),
+                               self.cfg.bullet_radius) is None
+
+    def shot_hits(self, match: Match, seat: int, heading: float | None = None,
+                  hit_radius: float | None = None) -> tuple[bool, np.ndarray]:
+        """Predict a bullet fired now (ricochets included): (first tank it reaches is an
+        enemy, the predicted path). Teammates in the way make it False."""
+        w = match.world
+        x, y = match.tank_xy[seat]
+        a = float(match.tank_angle[seat]) if heading is None else heading
+        d = self.muzzle_offset
+        path = predict_path(w, x + math.cos(a) * d, y + math.sin(a) * d, a)
+        others = np.flatnonzero(match.alive)
+        others = others[others != seat]
+        k = path_hits(path, match.tank_xy[others], self.hit_radius if hit_radius is None
+                      else hit_radius)
+        if k < 0:
+            return False, path
+        return bool(match.team_index[others[k]] != match.team_index[seat]), path
+
+    def guard_move(self, match: Match, seat: int, move: int) -> int:
+        """Stuck watchdog around a planned ``move``: if the tank has been told to move for
+        20 ticks without getting 10 px anywhere, drive the other way for 12 ticks."""
+        t = match.tick
+        if t < self._unstick_until:
+            return self._unstick_move
+        if move == STOP:
+            self._stuck_since = -1
+            return move
+        x, y = match.tank_xy[seat]
+        sx, sy = self._stuck_xy
+        if self._stuck_since < 0 or (x - sx) ** 2 + (y - sy) ** 2 > 100.0:
+            self._stuck_since, self._stuck_xy = t, (float(x), float(y))
+            return move
+        if t - self._stuck_since >= 20:
+            self._unstick_until = t + 12
+            self._unstick_move = BACK if move == FORWARD else FORWARD
+            self._stuck_since = -1
+            return self._unstick_move
+        return move
+
+
+class Evader:
+    """Dodges incoming bullets: picks, among the 9 (rotate, move) pairs, the one whose
+    short-horizon motion keeps the tank farthest from every threatening bullet and out
+    of walls. Only does work when a bullet that can hit the tank is closing in."""
+
+    def __init__(self, bot: Bot, match: Match, horizon_ticks: int = 12, danger_px: float = 30.0):
+        cfg = match.cfg
+        self.bot, self.nav = bot, bot.nav
+        self.dt = cfg.dt
+        self.horizon = horizon_ticks
+        self.danger = danger_px + cfg.bullet_radius
+        self.wall_margin = cfg.tank_height / 2 + 1.0
+        k = np.arange(1, horizon_ticks + 1, dtype=np.float64)  # ticks ahead
+        rot = np.repeat(np.array([-1.0, 0.0, 1.0]), 3)  # candidate c = 3 * rot + move
+        move = np.tile(np.array([-1.0, 0.0, 1.0]), 3)
+        # A tick's motion follows the heading at its start: (9, K) heading change.
+        self.turn = rot[:, None] * bot.turn_step * (k[None, :] - 1)
+        self.step = move[:, None] * cfg.tank_speed * self.dt  # (9, 1) px per tick
+        self.times = k * self.dt  # (K,) seconds
+        self.can_hit = match.world.can_hit
+
+    def threats(self, match: Match, seat: int) -> np.ndarray:
+        """Indices of bullets that can hit ``seat`` and pass within danger soon."""
+        active = np.flatnonzero(match.bullet_active)
+        if active.size == 0:
+            return active
+        owners = match.bullet_owner[active]
+        active = active[self.can_hit[owners, seat] & (owners != seat)]
+        if active.size == 0:
+            return active
+        rel = match.bullet_xy[active] - match.tank_xy[seat]
+        vel = match.bullet_vel[active]
+        v2 = (vel * vel).sum(axis=1)
+        t = -(rel * vel).sum(axis=1) / np.maximum(v2, 1e-9)
+        miss = rel + vel * t[:, None]
+        close = (t > 0) & (t < self.times[-1] * 2) & ((miss * miss).sum(axis=1)
+                                                        < self.danger ** 2)
+        return active[close]
+
+    def evade(self, match: Match, seat: int, threats: np.ndarray) -> tuple[int, int]:
+        """Best (rotate, move) against ``threats`` (bullet indices)."""
+        x, y = match.tank_xy[seat]
+        h = float(match.tank_angle[seat])
+        heads = h + self.turn  # (9, K)
+        px = x + np.cumsum(np.cos(heads) * self.step, axis=1)
+        py = y + np.cumsum(np.sin(heads) * self.step, axis=1)
+        bxy = match.bullet_xy[threats]
+        bv = match.bullet_vel[threats]
+        bx = bxy[:, 0:1] + bv[:, 0:1] * self.times  # (T, K)
+        by = bxy[:, 1:2] + bv[:, 1:2] * self.times
+        gap = np.hypot(px[:, None, :] - bx[None], py[:, None, :] - by[None])  # (9, T, K)
+        score = np.minimum(gap.min(axis=(1, 2)), 2 * self.danger)
+        wall = self.nav.clearance(np.stack([px, py], axis=-1)).min(axis=1)
+        score = score - np.where(wall < self.wall_margin, 2 * self.danger, 0.0)
+        c = int(np.argmax(score))
+        return c // 3, c % 3

@@ -1,0 +1,66 @@
+"""DodgeBot: evasion first; keeps a safe band of distance; fires when an enemy is in line."""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+from alphatank.bots.base import NONE, STOP, Bot, Evader, wrap
+
+if TYPE_CHECKING:
+    from alphatank.match import Match
+
+
+class DodgeBot(Bot):
+    """Watches a threat radius: any bullet that can hit it and will pass within
+    ``danger_px`` in the next ``horizon_ticks`` is dodged by the best of the 9 turn/drive
+    pairs (sideways away from the bullet line, never into walls). Enemy tanks closer
+    than ``near_frac`` of the bullet range are fled; farther than ``far_frac`` (or out of
+    sight) they are approached by BFS route; in between it turns to the enemy and fires
+    when the enemy is in line and no wall is in the way."""
+
+    name = "dodge"
+
+    def __init__(self, seed: int | None = None, near_frac: float = 0.4, far_frac: float = 0.75,
+                 horizon_ticks: int = 14, danger_px: float = 32.0):
+        super().__init__(seed)
+        if not 0 <= near_frac < far_frac <= 1:
+            raise ValueError(f"DodgeBot: need 0 <= near_frac < far_frac <= 1, got "
+                             f"near_frac={near_frac}, far_frac={far_frac}")
+        if horizon_ticks < 1 or danger_px <= 0:
+            raise ValueError(f"DodgeBot: horizon_ticks must be >= 1 and danger_px > 0, got "
+                             f"{horizon_ticks}, {danger_px}")
+        self.near_frac, self.far_frac = near_frac, far_frac
+        self.horizon_ticks, self.danger_px = horizon_ticks, danger_px
+
+    def on_reset(self, match: Match, seat: int) -> None:
+        self.evader = Evader(self, match, self.horizon_ticks, self.danger_px)
+
+    def decide(self, match: Match, seat: int) -> tuple[int, int, int]:
+        target = self.nearest(match, seat, self.enemies(match, seat))
+        if target < 0:
+            return NONE, STOP, 0
+        threats = self.evader.threats(match, seat)
+        if threats.size:
+            rot, move = self.evader.evade(match, seat, threats)
+            return rot, move, 0
+        x, y = match.tank_xy[seat]
+        ex, ey = match.tank_xy[target]
+        heading = float(match.tank_angle[seat])
+        dist = math.hypot(ex - x, ey - y)
+        err = wrap(self.lead_angle(match, seat, target) - heading)
+        in_sight = self.clear_shot(match, seat, target)
+        if in_sight and dist < self.near_frac * self.shot_range:
+            gx, gy = self.away_point(x, y, ex, ey)
+            rot, move = self.drive(x, y, heading, gx, gy)
+            if move == STOP:
+                rot = self.steer(err)
+        elif not in_sight or dist > self.far_frac * self.shot_range:
+            nav = self.nav
+            gx, gy = self.route(match, x, y, nav.node_of(x, y), nav.node_of(ex, ey))
+            rot, move = self.drive(x, y, heading, gx, gy)
+        else:
+            rot, move = self.steer(err), STOP
+        tolerance = math.atan2(0.8 * self.hit_radius, max(dist, 1.0))
+        fire = int(in_sight and abs(err) < tolerance and self.can_fire(match, seat))
+        return rot, self.guard_move(match, seat, move), fire

@@ -1,0 +1,152 @@
+"""SmartBot: BFS to a firing position, direct and ricochet shots, dodges bullets."""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+from alphatank.bots.base import NONE, STOP, Bot, Evader, wrap
+
+from alphatank.ballistics import path_distances, predict_path
+
+if TYPE_CHECKING:
+    from alphatank.match import Match
+
+GOLDEN = 0.6180339887498949
+
+
+class SmartBot(Bot):
+    """Hunts the nearest enemy by BFS path length.
+
+    Movement: follows the map's BFS next-step tables (string-pulled into straight legs) to
+    the nearest cell that sees the enemy's cell within shooting range, so no search runs
+    per tick. Shooting: with a clear straight line it leads the target and fires when
+    aimed; otherwise (``ricochet=True``) it scans the headings it can turn to, one
+    predicted bullet path per tick, stops when a bank shot reaches the enemy, turns to it
+    and fires once the prediction from its actual heading still hits. Bullets about to
+    hit it are dodged (``evade``). ``ricochet=False`` is the paper's weakened teacher.
+    """
+
+    name = "smart"
+
+    def __init__(self, seed: int | None = None, ricochet: bool = True, evade: bool = True):
+        super().__init__(seed)
+        self.ricochet, self.evade = bool(ricochet), bool(evade)
+
+    def __repr__(self) -> str:
+        return (f"SmartBot(seed={self.seed!r}, ricochet={self.ricochet}, "
+                f"evade={self.evade})")
+
+    def on_reset(self, match: Match, seat: int) -> None:
+        self.evader = Evader(self, match) if self.evade else None
+        self.direct_range = 0.85 * self.shot_range
+        self.lattice = max(1, round(math.tau / self.turn_step))  # reachable headings
+        self._goals: dict[tuple[int, int], int] = {}
+        self._search_key: tuple[int, int] | None = None
+        self._search_k = 0
+        self._best = (math.inf, 0.0)  # (closest approach px, heading)
+        self._solution: float | None = None
+
+    # ---- planning tables (cached per map cell pair) ---------------------------------
+
+    def firing_cell(self, me: int, enemy: int) -> int:
+        """Nearest cell (BFS) whose centre sees ``enemy``'s centre within direct range."""
+        key = (me, enemy)
+        goal = self._goals.get(key)
+        if goal is None:
+            nav = self.nav
+            sees = nav.visible_row(enemy, self.cfg.bullet_radius).copy()
+            d = nav.centers - nav.centers[enemy]
+            sees &= (d * d).sum(axis=1) <= (0.8 * self.shot_range) ** 2
+            steps = nav.dist_table[me]
+            sees &= steps >= 0
+            if sees.any():
+                cand = np.flatnonzero(sees)
+                goal = int(cand[np.argmin(steps[cand])])
+            else:
+                goal = enemy
+            self._goals[key] = goal
+        return goal
+
+    # ---- decision -------------------------------------------------------------------
+
+    def decide(self, match: Match, seat: int) -> tuple[int, int, int]:
+        foes = self.enemies(match, seat)
+        if foes.size == 0:
+            return NONE, STOP, 0
+        nav = self.nav
+        x, y = match.tank_xy[seat]
+        heading = float(match.tank_angle[seat])
+        me = nav.node_of(x, y)
+        foe_nodes = nav.nodes_of(match.tank_xy[foes])
+        steps = nav.dist_table[me, foe_nodes].astype(np.float64)
+        steps[steps < 0] = np.inf
+        k = int(np.argmin(steps))
+        target, enode = int(foes[k]), int(foe_nodes[k])
+        ex, ey = match.tank_xy[target]
+        dist = math.hypot(ex - x, ey - y)
+
+        if self.evader is not None:
+            threats = self.evader.threats(match, seat)
+            if threats.size:
+                self._solution = None
+                rot, move = self.evader.evade(match, seat, threats)
+                return rot, move, 0
+
+        ready = self.can_fire(match, seat)
+        if dist <= self.direct_range and self.clear_shot(match, seat, target):
+            self._solution = None
+            err = wrap(self.lead_angle(match, seat, target) - heading)
+            tolerance = math.atan2(0.8 * self.hit_radius, max(dist, 1.0))
+            fire = ready and abs(err) < tolerance
+            if fire and match.n > 2:  # teammates may stand in the line of fire
+                fire = self.shot_hits(match, seat)[0]
+            return self.steer(err), STOP, int(fire)
+
+        fire = 0
+        if self.ricochet and dist <= self.shot_range + self.muzzle_offset:
+            if self._solution is not None:
+                err = wrap(self._solution - heading)
+                if abs(err) <= 0.5 * self.turn_step + 1e-9:
+                    hits = self.shot_hits(match, seat)[0]
+                    if hits and ready:
+                        fire = 1
+                    elif not hits:
+                        self._solution = None  # target moved: search again from here
+                        self._best = (math.inf, 0.0)
+                if self._solution is not None:
+                    return self.steer(err), STOP, fire
+            else:
+                self._search(match, seat, me, enode, (float(ex), float(ey)))
+                if self._solution is not None:
+                    return self.steer(wrap(self._solution - heading)), STOP, 0
+        else:
+            self._solution = None
+
+        gx, gy = self.route(match, x, y, me, self.firing_cell(me, enode))
+        rot, move = self.drive(x, y, heading, gx, gy)
+        if move == STOP and rot == NONE:  # arrived: face the enemy while waiting
+            rot = self.steer(wrap(math.atan2(ey - y, ex - x) - heading))
+        return rot, self.guard_move(match, seat, move), fire
+
+    def _search(self, match: Match, seat: int, me: int, enode: int,
+                target_xy: tuple[float, float]) -> None:
+        """Evaluate one reachable heading for a bank shot (golden-ratio order over the
+        heading lattice); restarts when this tank or the target changes cell."""
+        key = (me, enode)
+        if key != self._search_key:
+            self._search_key, self._search_k = key, 0
+            self._best = (math.inf, 0.0)
+        heading = float(match.tank_angle[seat])
+        j = int(self._search_k * GOLDEN * self.lattice) % self.lattice
+        self._search_k += 1
+        angle = heading + j * self.turn_step
+        x, y = match.tank_xy[seat]
+        d = self.muzzle_offset
+        path = predict_path(match.world, x + math.cos(angle) * d, y + math.sin(angle) * d, angle)
+        miss = float(path_distances(path, np.array([target_xy]))[0])
+        if miss < self._best[0]:
+            self._best = (miss, angle)
+        if self._best[0] < 0.8 * self.hit_radius:
+            self._solution = wrap(self._best[1])

@@ -1,0 +1,111 @@
+"""Map format: parsing, wall merging, validation errors with line and column."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from alphatank.mapspec import MapError, load_map, map_text, merge_walls, parse_map, shipped_maps
+
+GOOD = """\
+; a comment line
+name: tiny
+cell: 50
+description: test map
+
+#####
+#1.+#
+#.#.#
+#-.2#
+#####
+"""
+
+
+def test_parse_header_grid_spawns_zones():
+    spec = parse_map(GOOD, "tiny.txt")
+    assert spec.name == "tiny" and spec.cell == 50.0 and spec.description == "test map"
+    assert (spec.rows, spec.cols) == (5, 5)
+    assert spec.spawns == {1: (1, 1), 2: (3, 3)}
+    assert spec.buffs == ((1, 3),) and spec.debuffs == ((3, 1),)
+    assert spec.walls[2, 2] and not spec.walls[1, 1]
+    assert (spec.width, spec.height) == (250.0, 250.0)
+
+
+def test_grid_without_header_and_name_from_file():
+    spec = parse_map("###\n#1#\n#2#\n###\n", "maps/bare.txt")
+    assert spec.name == "bare" and spec.cell == 70.0
+
+
+def test_map_text_round_trips():
+    spec = parse_map(GOOD, "tiny.txt")
+    again = parse_map(map_text(spec), "again.txt")
+    assert np.array_equal(again.walls, spec.walls)
+    assert again.spawns == spec.spawns and again.buffs == spec.buffs
+    assert again.debuffs == spec.debuffs and again.cell == spec.cell
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_merged_rectangles_cover_walls_exactly(seed):
+    walls = np.random.default_rng(seed).random((9, 13)) < 0.45
+    cover = np.zeros(walls.shape, dtype=int)
+    for r0, c0, r1, c1 in merge_walls(walls):
+        cover[r0:r1, c0:c1] += 1
+    assert np.array_equal(cover, walls.astype(int))  # every wall once, no floor
+
+
+def test_merging_reduces_box_count():
+    spec = load_map("open")
+    assert len(spec.wall_rects) == 4  # the ring: two full rows, two columns
+
+
+@pytest.mark.parametrize("name", ["open", "battlefield", "maze", "arena4", "arena8"])
+def test_shipped_maps_load_by_name(name):
+    spec = load_map(name)
+    assert spec.name == name and spec.walls.any() and len(spec.spawns) >= 2
+
+
+def test_shipped_team_arenas_have_4_and_8_slots():
+    counts = {len(load_map(n).spawns) for n in shipped_maps()}
+    assert {4, 8} <= counts
+
+
+def test_load_by_path(tmp_path: Path):
+    f = tmp_path / "mine.txt"
+    f.write_text(GOOD)
+    assert load_map(f).name == "tiny"
+
+
+def test_unknown_map_name_lists_shipped():
+    with pytest.raises(MapError, match="shipped maps: .*maze"):
+        load_map("no_such_map")
+
+
+BAD = [
+    # (text, line, col, message fragment)
+    ("#####\n#1.2#\n#..#\n#####\n", 3, 5, "ragged row"),
+    ("#####\n#1x2#\n#####\n", 2, 3, "unknown character 'x'"),
+    ("#####\n#1.1#\n#####\n", 2, 4, "duplicate spawn 1"),
+    ("#####\n#1#2#\n#####\n", 2, 4, "spawn 2 cannot be reached"),
+    ("; only a comment\n\n", 2, 0, "empty map"),
+    ("name: x\nsize: 9\n\n###\n#1#\n###\n", 2, 1, "unknown header key 'size'"),
+    ("name: x\ncell: -3\n\n###\n#1#\n###\n", 2, 1, "'cell' must be a positive"),
+    ("###\n#1#\n\n#2#\n###\n", 3, 1, "blank line inside the grid"),
+    ("###\n###\n", 1, 1, "no floor cells"),
+    ("name: x\nzones: sometimes\n\n###\n#.#\n###\n", 2, 1, "'zones' must be"),
+]
+
+
+@pytest.mark.parametrize(("text", "line", "col", "fragment"), BAD)
+def test_malformed_maps_name_file_line_column(text, line, col, fragment):
+    with pytest.raises(MapError) as info:
+        parse_map(text, "bad.txt")
+    err = info.value
+    assert (err.source, err.line, err.col) == ("bad.txt", line, col)
+    assert fragment in err.message
+    assert str(err).startswith(f"bad.txt:{line}")
+
+
+def test_comment_lines_keep_original_line_numbers():
+    with pytest.raises(MapError) as info:
+        parse_map("; c1\n; c2\n###\n#?#\n###\n", "c.txt")
+    assert (info.value.line, info.value.col) == (4, 2)

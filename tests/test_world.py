@@ -1,0 +1,176 @@
+"""Physics world: no escapes, exact ricochets, limits, tanks vs walls."""
+
+import math
+
+import numpy as np
+import pytest
+
+from alphatank.config import PRESETS, game_config, replace
+from alphatank.mapspec import load_map, parse_map, shipped_maps
+from alphatank.world import World, substeps_for
+
+
+def _world(spec, cfg, poses):
+    w = World(cfg, spec, np.asarray(poses, dtype=float))
+    w.can_hit[:] = False  # bullets fly through tanks: only walls matter here
+    return w
+
+
+def _inside_walls(xy: np.ndarray, rects: np.ndarray) -> np.ndarray:
+    x, y = xy[:, None, 0], xy[:, None, 1]
+    return ((x > rects[None, :, 0]) & (x < rects[None, :, 2])
+            & (y > rects[None, :, 1]) & (y < rects[None, :, 3])).any(axis=1)
+
+
+@pytest.mark.parametrize("preset", sorted(PRESETS))
+@pytest.mark.parametrize("speed_factor", [1, 2, 4])
+def test_bullets_never_escape_or_enter_walls(preset, speed_factor):
+    """Thousands of bullets at random angles on every shipped map: 0 escapes, 0 wall
+    penetrations, constant speed."""
+    base = game_config(preset)
+    cfg = replace(base, bullet_speed=base.bullet_speed * speed_factor,
+                  bullet_max_distance=base.bullet_max_distance * 2, max_bullets=8)
+    rng = np.random.default_rng(speed_factor)
+    fired = escapes = inside = 0
+    worst_speed = 0.0
+    for name in shipped_maps():
+        spec = load_map(name)
+        rects = np.array(spec.wall_rects)
+        floor = spec.floor_cells()
+        for _ in range(25):
+            cells = [floor[i] for i in rng.choice(len(floor), 2, replace=False)]
+            poses = [(*spec.cell_center(c), 0.0) for c in cells]
+            w = _world(spec, cfg, poses)
+            x, y = poses[0][:2]
+            for a in rng.uniform(-math.pi, math.pi, size=w.capacity):
+                fired += w.spawn_bullet(0, x, y, a) >= 0
+            while w.bullet_active.any():
+                w.step()
+                xy = w.bullet_state[w.bullet_active, :2]
+                escapes += int(((xy[:, 0] < 0) | (xy[:, 0] > spec.width)
+                                | (xy[:, 1] < 0) | (xy[:, 1] > spec.height)).sum())
+                inside += int(_inside_walls(xy, rects).sum())
+                v = np.hypot(*w.bullet_state[w.bullet_active, 3:5].T)
+                if v.size:
+                    worst_speed = max(worst_speed, float(np.abs(v / cfg.bullet_speed - 1).max()))
+    assert fired >= 1000
+    assert escapes == 0 and inside == 0
+    assert worst_speed < 1e-6
+
+
+def test_substeps_grow_with_bullet_speed():
+    spec = load_map("maze")
+    slow = substeps_for(game_config(), spec.min_wall_thickness())
+    fast = substeps_for(game_config("long_range", bullet_speed=4800.0), spec.min_wall_thickness())
+    assert fast > slow >= 1
+    cfg = game_config("long_range", bullet_speed=4800.0)
+    per_substep = cfg.bullet_speed / cfg.tick_hz / fast
+    assert per_substep <= 0.8 * (spec.cell / 2 + cfg.bullet_radius)
+
+
+CORRIDOR = "name: corridor\n\n#######\n#.....#\n#######\n"
+
+
+def test_bullet_disappears_exactly_at_bounce_limit():
+    spec = parse_map(CORRIDOR)
+    cfg = game_config(bullet_max_distance=1e6, bullet_max_bounces=3)
+    w = _world(spec, cfg, [(105, 105, 0), (315, 105, 0)])
+    b = w.spawn_bullet(0, 210.0, 105.0, 0.0)  # flies along the corridor, wall to wall
+    bounces, died_on = 0, None
+    for _ in range(1000):
+        w.step()
+        bounces += sum(1 for e in w.bounces if e.bullet == b)
+        if not w.bullet_active[b]:
+            died_on = w.tick
+            break
+    assert bounces == 3 and died_on is not None
+    assert w.bullet_bounces[b] == 3
+
+
+def test_bullet_disappears_exactly_at_distance_limit():
+    spec = load_map("open")
+    cfg = game_config(bullet_max_distance=200.0)
+    w = _world(spec, cfg, [(105, 105, 0), (665, 665, 0)])
+    b = w.spawn_bullet(0, 200.0, 385.0, 0.0)  # 200 px of free floor ahead
+    per_tick = cfg.bullet_speed / cfg.tick_hz
+    ticks = 0
+    while w.bullet_active[b]:
+        last_x = w.bullet_state[b, 0]
+        w.step()
+        ticks += 1
+    assert ticks == math.ceil(200.0 / per_tick)
+    assert last_x - 200.0 < 200.0 <= last_x - 200.0 + per_tick
+
+
+def test_ricochet_is_a_mirror_reflection():
+    spec = load_map("open")
+    cfg = game_config(bullet_max_distance=400.0)
+    w = _world(spec, cfg, [(105, 105, 0), (665, 665, 0)])
+    angle = math.radians(-30)  # up and to the right, toward the top wall (y = 70)
+    b = w.spawn_bullet(0, 385.0, 200.0, angle)
+    while not w.bounces:
+        w.step()
+    bounce = w.bounces[0]
+    assert bounce.y == pytest.approx(70 + cfg.bullet_radius, abs=1e-9)
+    vx, vy = w.bullet_state[b, 3:5]
+    assert math.atan2(vy, vx) == pytest.approx(-angle, abs=1e-9)
+
+
+def _box_rect_depth(x, y, a, w, h, rect) -> float:
+    """Separating-axis penetration depth of an oriented w x h box into a rectangle."""
+    u = np.array([math.cos(a), math.sin(a)])
+    v = np.array([-math.sin(a), math.cos(a)])
+    corners = np.array([(x, y) + su * w / 2 * u + sv * h / 2 * v
+                        for su in (-1, 1) for sv in (-1, 1)])
+    x0, y0, x1, y1 = rect
+    rect_corners = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
+    depth = math.inf
+    for axis in (np.array([1.0, 0.0]), np.array([0.0, 1.0]), u, v):
+        p, q = corners @ axis, rect_corners @ axis
+        overlap = min(p.max(), q.max()) - max(p.min(), q.min())
+        if overlap <= 0:
+            return 0.0
+        depth = min(depth, overlap)
+    return depth
+
+
+def _max_overlap(w: World, tank: int) -> float:
+    """Deepest penetration (px) of a tank's exact box into any wall or the boundary."""
+    spec, t = w.spec, w.spec.cell
+    W, H = spec.width, spec.height
+    rects = [*spec.wall_rects, (-t, -t, W + t, 0), (-t, H, W + t, H + t), (-t, 0, 0, H),
+             (W, 0, W + t, H)]
+    x, y, a = w.tank_state[tank, :3]
+    return max(_box_rect_depth(x, y, a, w.cfg.tank_width, w.cfg.tank_height, r) for r in rects)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_tanks_never_sink_into_walls(seed):
+    spec = load_map("maze")
+    cfg = game_config()
+    rng = np.random.default_rng(seed)
+    w = _world(spec, cfg, [(105, 105, 0.3), (665, 665, 2.0)])
+    worst = 0.0
+    for t in range(2000):
+        if t % 20 == 0:
+            cmds = rng.integers(-1, 2, size=(2, 2))
+        for i in range(2):
+            w.drive(i, int(cmds[i, 0]), 1 if cmds[i, 1] >= 0 else -1)
+        w.step()
+        worst = max(worst, _max_overlap(w, 0), _max_overlap(w, 1))
+    assert worst < 1.0
+
+
+def test_a_tank_cannot_push_another_through_a_wall():
+    spec = load_map("open")
+    cfg = game_config()
+    # B sits against the right wall (x = 700); A drives into B from the left.
+    w = _world(spec, cfg, [(600, 385, 0.0), (680, 385, 0.0)])
+    for _ in range(300):
+        w.drive(0, 0, 1)
+        w.drive(1, 0, 0)
+        w.step()
+    bx = w.tank_state[1, 0]
+    assert bx + cfg.tank_width / 2 <= 700 + 1.0
+    assert _max_overlap(w, 1) < 1.0
+    assert w.tank_state[0, 0] < bx  # A did not pass through B either

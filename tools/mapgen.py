@@ -1,0 +1,298 @@
+"""Generate, validate, preview and edit AlphaTank maps (docs/mapgen.md).
+
+    python tools/mapgen.py generate --size 11x11 --algorithm maze --symmetry mirror -o maps/new.txt
+    python tools/mapgen.py batch --count 20 --seed 0 --out maps --split 0.8
+    python tools/mapgen.py validate maps/*.txt maps/train
+    python tools/mapgen.py preview maps/new.txt --png new.png
+    python tools/mapgen.py edit maps/new.txt
+
+A thin command line over ``alphatank.mapgen`` (generators, warnings, editor model) and
+``alphatank.mapeditor`` (the pygame editor). Validation is the game's own loader.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from fractions import Fraction
+from pathlib import Path
+
+from alphatank.mapgen import (
+    ALGORITHMS,
+    SYMMETRIES,
+    EditorModel,
+    GenOptions,
+    MapGenError,
+    ascii_art,
+    check_map,
+    describe,
+    generate_from,
+    map_warnings,
+)
+from alphatank.mapspec import MapError, MapSpec, load_map, map_text
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """``"11x13"`` -> (11 rows, 13 cols); ``"11"`` -> (11, 11)."""
+    parts = text.lower().split("x")
+    try:
+        rows, cols = (int(parts[0]), int(parts[-1])) if len(parts) <= 2 else (0, 0)
+    except ValueError:
+        rows = cols = 0
+    if rows <= 0 or cols <= 0:
+        raise argparse.ArgumentTypeError(f"size must be ROWSxCOLS like 11x11, got {text!r}")
+    return rows, cols
+
+
+def parse_zones(text: str) -> tuple[int, int] | None:
+    """``"2,2"`` -> (2 buff, 2 debuff); ``"3"`` -> (3, 3); ``"random"`` -> None."""
+    if text == "random":
+        return None
+    try:
+        nums = [int(p) for p in text.split(",")]
+    except ValueError:
+        nums = []
+    if len(nums) not in (1, 2) or min(nums) < 0:
+        raise argparse.ArgumentTypeError(
+            f"zones must be BUFF,DEBUFF counts like 2,2 (or one count, or 'random'), got {text!r}")
+    return (nums[0], nums[-1])
+
+
+def _split_list(text: str, allowed: tuple[str, ...], what: str) -> list[str]:
+    items = [s.strip() for s in text.split(",") if s.strip()]
+    bad = [s for s in items if s not in allowed]
+    if bad or not items:
+        raise argparse.ArgumentTypeError(f"{what} must be one or more of {list(allowed)} "
+                                         f"(comma-separated), got {text!r}")
+    return items
+
+
+def _add_gen_options(p: argparse.ArgumentParser, lists: bool) -> None:
+    many = " (comma-separated list: cycled over the maps)" if lists else ""
+    p.add_argument("--size", default="11x11", help=f"ROWSxCOLS (default 11x11){many}")
+    p.add_argument("--algorithm", default="maze",
+                   help=f"one of {', '.join(ALGORITHMS)} (default maze){many}")
+    p.add_argument("--density", type=float, default=0.25,
+                   help="target wall share of the interior, 0..1 (default 0.25; maze: fixed)")
+    p.add_argument("--symmetry", default="none",
+                   help=f"one of {', '.join(SYMMETRIES)} (default none){many}")
+    p.add_argument("--spawns", type=int, default=2, help="spawn slots 0..8 (default 2)")
+    p.add_argument("--zones", type=parse_zones, default=(2, 2),
+                   help="BUFF,DEBUFF zone cells, or 'random' (default 2,2)")
+    p.add_argument("--loops", type=float, default=0.1,
+                   help="share of thin walls knocked out to make loops, 0..1 (default 0.1)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--force", action="store_true", help="overwrite existing files")
+
+
+def _options(args: argparse.Namespace, i: int = 0, seed: int | None = None) -> GenOptions:
+    sizes = [parse_size(s) for s in args.size.split(",")]
+    algs = _split_list(args.algorithm, ALGORITHMS, "--algorithm")
+    syms = _split_list(args.symmetry, SYMMETRIES, "--symmetry")
+    combos = [(s, a, y) for s in sizes for a in algs for y in syms]
+    (rows, cols), alg, sym = combos[i % len(combos)]
+    return GenOptions(rows, cols, alg, args.density, sym, args.spawns, args.zones, args.loops,
+                      args.seed if seed is None else seed)
+
+
+def _write(spec: MapSpec, path: Path, force: bool) -> None:
+    if path.exists() and not force:
+        raise FileExistsError(f"{path} exists (use --force to overwrite)")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(map_text(spec), encoding="utf-8")
+    load_map(path)  # what was written loads with the game's loader
+
+
+def cmd_generate(args: argparse.Namespace) -> int:
+    opts = _options(args)
+    name = args.name or (Path(args.output).stem if args.output else None)
+    spec = generate_from(opts, name)
+    if args.output is None:
+        sys.stdout.write(map_text(spec))
+        for w in map_warnings(spec):
+            print(w, file=sys.stderr)
+        return 0
+    path = Path(args.output)
+    _write(spec, path, args.force)
+    print(f"wrote {path}: {describe(spec)}")
+    for w in check_map(path)[1]:
+        print(w)
+    return 0
+
+
+def cmd_batch(args: argparse.Namespace) -> int:
+    if args.count < 1:
+        raise MapGenError(f"--count must be >= 1, got {args.count}")
+    out = Path(args.out)
+    test_share = None
+    if args.split is not None:
+        if not 0.0 < args.split <= 1.0:
+            raise MapGenError(f"--split must be in (0, 1] (the train share), got {args.split}")
+        test_share = 1 - Fraction(str(args.split))
+    for i in range(args.count):
+        opts = _options(args, i, args.seed + i)
+        spec = generate_from(opts)
+        folder = out
+        if test_share is not None:  # every k-th map is held out, spread over the batch
+            held_out = int((i + 1) * test_share) > int(i * test_share)
+            folder = out / ("test" if held_out else "train")
+        path = folder / f"{spec.name}.txt"
+        _write(spec, path, args.force)
+        n_warn = len(map_warnings(spec))
+        print(f"{path}: {opts.algorithm} {opts.rows}x{opts.cols} {opts.symmetry}, "
+              f"{n_warn} warning(s)")
+    return 0
+
+
+def _map_sources(items: list[str]) -> list[str]:
+    """Files and shipped names as given; folders expand to their .txt maps."""
+    out: list[str] = []
+    for item in items:
+        p = Path(item)
+        if p.is_dir():
+            found = sorted(str(f) for f in p.glob("*.txt"))
+            out += found or [item]
+        else:
+            out.append(item)
+    return out
+
+
+def cmd_validate(args: argparse.Namespace) -> int:
+    status = 0
+    for src in _map_sources(args.maps):
+        if Path(src).is_dir():
+            print(f"{src}: folder holds no .txt maps")
+            status = 1
+            continue
+        try:
+            spec, warnings = check_map(src, args.teams)
+        except MapError as err:
+            print(err)  # exactly the game's loader message
+            status = 1
+            continue
+        print(f"{spec.source}: ok ({describe(spec)}), {len(warnings)} warning(s)")
+        for w in warnings:
+            print(w)
+        if warnings and args.strict:
+            status = 1
+    return status
+
+
+def _default_teams(n: int) -> list[str]:
+    """Slots 1..n//2 team A, the rest team B (the symmetric generator's convention)."""
+    return ["A"] * (n // 2) + ["B"] * (n - n // 2)
+
+
+def render_png(spec: MapSpec, path: Path, teams: list[str] | None = None, seed: int = 0,
+               scale: float = 1.0) -> None:
+    """Draw the map with tanks on their spawns using the game's renderer; save a PNG."""
+    os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
+    os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
+    import pygame
+
+    from alphatank.config import game_config
+    from alphatank.match import Match
+    from alphatank.render import Renderer
+
+    teams = teams or _default_teams(max(2, len(spec.spawns)))
+    match = Match(game_config(), spec, teams, seed=seed)
+    labels = [str(i + 1) for i in range(len(teams))]
+    renderer = Renderer(None, overlays="none", hud=False, explosions=False, scale=scale,
+                        labels=labels)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    pygame.image.save(renderer.draw(match), str(path))
+
+
+def cmd_preview(args: argparse.Namespace) -> int:
+    try:
+        spec, warnings = check_map(args.map, args.teams)
+    except MapError as err:
+        print(err)
+        return 1
+    print(describe(spec))
+    print(ascii_art(spec, show_fire=args.fire))
+    for w in warnings:
+        print(w)
+    if not args.no_png:
+        png = Path(args.png) if args.png else Path(f"{spec.name}.png")
+        teams = list(args.teams) if args.teams else None
+        render_png(spec, png, teams, args.seed, args.scale)
+        print(f"wrote {png}")
+    return 0
+
+
+def cmd_edit(args: argparse.Namespace) -> int:
+    from alphatank.mapeditor import MapEditor
+
+    path = Path(args.map)
+    if path.exists():
+        model = EditorModel.from_file(path)
+    else:
+        rows, cols = parse_size(args.size)
+        model = EditorModel.blank(rows, cols, name=path.stem)
+    editor = MapEditor(model, path, args.cell_px)
+    editor.run()
+    editor.close()
+    if editor.message:
+        print(editor.message)
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="mapgen.py", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("generate", help="write one seeded map")
+    _add_gen_options(p, lists=False)
+    p.add_argument("-o", "--output", help="map file to write (default: print the map)")
+    p.add_argument("--name", help="map name (default: the output file's stem)")
+    p.set_defaults(run=cmd_generate)
+
+    p = sub.add_parser("batch", help="write COUNT maps with consecutive seeds")
+    _add_gen_options(p, lists=True)
+    p.add_argument("--count", type=int, required=True, help="number of maps")
+    p.add_argument("--out", required=True, help="folder to write into")
+    p.add_argument("--split", type=float,
+                   help="train share, e.g. 0.8: writes OUT/train and OUT/test (every 5th map "
+                        "held out)")
+    p.set_defaults(run=cmd_batch)
+
+    p = sub.add_parser("validate", help="check maps with the game's loader, plus warnings")
+    p.add_argument("maps", nargs="+", metavar="MAP", help="map files, folders or shipped names")
+    p.add_argument("--strict", action="store_true", help="exit 1 on warnings too")
+    p.add_argument("--teams", help="team of each slot, e.g. AABB: line-of-fire warnings only "
+                                   "between enemies")
+    p.set_defaults(run=cmd_validate)
+
+    p = sub.add_parser("preview", help="print the map and draw it to a PNG")
+    p.add_argument("map", help="map file or shipped name")
+    p.add_argument("--png", help="PNG to write (default: NAME.png in the current folder)")
+    p.add_argument("--no-png", action="store_true", help="ASCII only")
+    p.add_argument("--fire", action="store_true", help="mark lines of fire between spawns")
+    p.add_argument("--teams", help="team of each slot, e.g. AABB (default: halves A and B)")
+    p.add_argument("--seed", type=int, default=0, help="match seed (random zones, headings)")
+    p.add_argument("--scale", type=float, default=1.0, help="PNG scale (default 1)")
+    p.set_defaults(run=cmd_preview)
+
+    p = sub.add_parser("edit", help="paint a map in a pygame window")
+    p.add_argument("map", help="map file to edit (created on first save if missing)")
+    p.add_argument("--size", default="11x11", help="ROWSxCOLS of a new map (default 11x11)")
+    p.add_argument("--cell-px", type=int, help="pixels per cell on screen")
+    p.set_defaults(run=cmd_edit)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.run(args))
+    except (MapGenError, FileExistsError, argparse.ArgumentTypeError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

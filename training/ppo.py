@@ -1,0 +1,298 @@
+"""PPO (clipped surrogate, GAE, minibatches) for one learner over many (env, seat) streams.
+
+Network and defaults follow the paper's Table 7 (CleanRL-style): separate actor and
+critic MLPs of two 128-unit tanh layers, one categorical head per action dimension.
+Sampling uses a private ``torch.Generator`` (Gumbel-max), so a run is reproducible and
+resumable bit for bit.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+
+from alphatank.training.buffers import RolloutBuffer, compute_gae
+from alphatank.training.normalize import ObsNormalizer, ReturnNormalizer
+
+NVEC = (3, 3, 2)  # rotate, move, fire — the one action layout (RULES.md)
+MASKED_LOGIT = -1e8  # exp() of this is exactly 0 in float32, and 0 * it stays finite
+
+
+@dataclass(frozen=True)
+class PPOConfig:
+    """PPO hyperparameters. Defaults: the paper's Table 7; the rest CleanRL's defaults."""
+
+    learning_rate: float = 3e-4
+    gamma: float = 0.99
+    gae_lambda: float = 0.95
+    clip_coef: float = 0.2
+    ent_coef: float = 0.01
+    vf_coef: float = 0.3
+    max_grad_norm: float = 0.3
+    num_steps: int = 512  # rollout length per stream
+    update_epochs: int = 60
+    # not in Table 7: CleanRL defaults
+    num_minibatches: int = 4
+    norm_adv: bool = True
+    clip_vloss: bool = True
+    anneal_lr: bool = False
+    target_kl: float | None = None
+    hidden: int = 128
+    norm_obs: bool = True
+    norm_reward: bool = True
+    obs_clip: float = 10.0
+    reward_clip: float = 10.0
+    adam_eps: float = 1e-5
+
+    def __post_init__(self) -> None:
+        for name in ("learning_rate", "num_steps", "update_epochs", "num_minibatches", "hidden"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"PPOConfig.{name} must be > 0, got {getattr(self, name)!r}")
+        for name in ("gamma", "gae_lambda"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"PPOConfig.{name} must be in [0, 1], got {getattr(self, name)}")
+
+
+def layer_init(layer: nn.Linear, std: float = math.sqrt(2), bias: float = 0.0) -> nn.Linear:
+    nn.init.orthogonal_(layer.weight, std)
+    nn.init.constant_(layer.bias, bias)
+    return layer
+
+
+def mlp(inp: int, hidden: int, out: int, out_std: float, act: type[nn.Module]) -> nn.Sequential:
+    return nn.Sequential(layer_init(nn.Linear(inp, hidden)), act(),
+                         layer_init(nn.Linear(hidden, hidden)), act(),
+                         layer_init(nn.Linear(hidden, out), std=out_std))
+
+
+class ActorCritic(nn.Module):
+    """Table 7: critic obs->128->128->1, actor obs->128->128->sum(nvec) logits (tanh)."""
+
+    def __init__(self, obs_dim: int, hidden: int = 128, nvec: tuple[int, ...] = NVEC):
+        super().__init__()
+        self.nvec = tuple(nvec)
+        self.critic = mlp(obs_dim, hidden, 1, 1.0, nn.Tanh)
+        self.actor = mlp(obs_dim, hidden, sum(self.nvec), 0.01, nn.Tanh)
+
+    def value(self, obs: torch.Tensor) -> torch.Tensor:
+        return self.critic(obs).squeeze(-1)
+
+    def logits(self, obs: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
+        logits = self.actor(obs)
+        if mask is not None:
+            logits = logits.masked_fill(~mask, MASKED_LOGIT)
+        return logits
+
+
+def head_log_probs(logits: torch.Tensor, nvec: tuple[int, ...]) -> list[torch.Tensor]:
+    return [torch.log_softmax(part, dim=-1) for part in torch.split(logits, nvec, dim=-1)]
+
+
+def sample_actions(logits: torch.Tensor, nvec: tuple[int, ...], generator: torch.Generator,
+                   deterministic: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
+    """Actions (B, len(nvec)) and their summed log-probabilities (B,), Gumbel-max sampling."""
+    logps = head_log_probs(logits, nvec)
+    if deterministic:
+        scores = logps
+    else:
+        u = torch.rand(logits.shape, generator=generator).clamp_(min=1e-20)
+        gumbel = torch.split(-torch.log(-torch.log(u)), nvec, dim=-1)
+        scores = [lp + g for lp, g in zip(logps, gumbel, strict=True)]
+    actions = torch.stack([s.argmax(dim=-1) for s in scores], dim=-1)
+    logprob = sum(lp.gather(-1, actions[:, i:i + 1]).squeeze(-1) for i, lp in enumerate(logps))
+    return actions, logprob
+
+
+def evaluate_actions(logits: torch.Tensor, actions: torch.Tensor, nvec: tuple[int, ...]
+                     ) -> tuple[torch.Tensor, torch.Tensor]:
+    """Summed log-probability and entropy (both (B,)) of given actions."""
+    logps = head_log_probs(logits, nvec)
+    logprob = sum(lp.gather(-1, actions[:, i:i + 1]).squeeze(-1) for i, lp in enumerate(logps))
+    entropy = sum(-(lp.exp() * lp).sum(-1) for lp in logps)
+    return logprob, entropy
+
+
+class PPO:
+    """One PPO learner controlling ``num_streams`` = num_envs x its seats.
+
+    Per env step the runner calls :meth:`act` with the streams' raw observations, then
+    :meth:`observe` with rewards and episode flags; when :attr:`ready`, :meth:`update`.
+    """
+
+    algo = "ppo"
+
+    def __init__(self, obs_dim: int, num_streams: int, cfg: PPOConfig | None = None,
+                 seed: int = 0, mask_dim: int = 0):
+        self.cfg = cfg = cfg or PPOConfig()
+        self.obs_dim, self.num_streams = obs_dim, num_streams
+        with torch.random.fork_rng(devices=[]):
+            torch.manual_seed(seed)
+            self.net = ActorCritic(obs_dim, cfg.hidden)
+        self.nvec = self.net.nvec
+        self.optimizer = torch.optim.Adam(self.net.parameters(), lr=cfg.learning_rate,
+                                          eps=cfg.adam_eps)
+        self.generator = torch.Generator().manual_seed(seed)
+        self.obs_norm = ObsNormalizer(obs_dim, cfg.norm_obs, cfg.obs_clip)
+        self.ret_norm = ReturnNormalizer(num_streams, cfg.gamma, cfg.norm_reward, cfg.reward_clip)
+        self.buffer = RolloutBuffer(cfg.num_steps, num_streams, obs_dim, mask_dim)
+        self.updates = 0
+        self.total_updates = 0  # set by the runner for learning-rate annealing
+
+    # ---- acting -----------------------------------------------------------------------
+
+    @torch.no_grad()
+    def act(self, obs: np.ndarray, masks: np.ndarray | None = None) -> np.ndarray:
+        """Sample actions (num_streams, 3) for raw observations and record the step."""
+        buf = self.buffer
+        t = buf.step
+        x = torch.from_numpy(self.obs_norm(obs, update=True))
+        mask = torch.from_numpy(np.asarray(masks, dtype=bool)) if masks is not None else None
+        actions, logprob = sample_actions(self.net.logits(x, mask), self.nvec, self.generator)
+        buf.obs[t] = x
+        buf.actions[t] = actions
+        buf.logprobs[t] = logprob
+        buf.values[t] = self.net.value(x)
+        if mask is not None and buf.masks is not None:
+            buf.masks[t] = mask
+        return actions.numpy()
+
+    @torch.no_grad()
+    def observe(self, next_obs: np.ndarray, rewards: np.ndarray, terminated: np.ndarray,
+                truncated: np.ndarray, final_obs: np.ndarray | None = None,
+                active: np.ndarray | None = None) -> None:
+        """Record the outcome of the last :meth:`act`: rewards (B,), flags (B,), the final
+        observations of ended streams (rows of ``final_obs``; others ignored) and which
+        streams' actions counted (``active``, e.g. False for dead tanks). ``next_obs`` is
+        unused (PPO reads it at the next :meth:`act`); it keeps one learner interface."""
+        del next_obs
+        buf = self.buffer
+        t = buf.step
+        ended = np.logical_or(terminated, truncated)
+        buf.rewards[t] = torch.from_numpy(self.ret_norm(rewards, ended))
+        buf.terminated[t] = torch.from_numpy(np.asarray(terminated, dtype=np.float32))
+        buf.truncated[t] = torch.from_numpy(np.asarray(truncated, dtype=np.float32))
+        buf.active[t] = True if active is None else torch.from_numpy(np.asarray(active, bool))
+        boot = np.flatnonzero(np.logical_and(truncated, np.logical_not(terminated)))
+        if boot.size:
+            if final_obs is None:
+                raise ValueError("truncated streams need final_obs to bootstrap from")
+            x = torch.from_numpy(self.obs_norm(final_obs[boot]))
+            buf.bootstrap[t, torch.from_numpy(boot)] = self.net.value(x)
+        buf.step += 1
+
+    @property
+    def ready(self) -> bool:
+        return self.buffer.full
+
+    # ---- learning ---------------------------------------------------------------------
+
+    def update(self, next_obs: np.ndarray) -> dict[str, float]:
+        """One PPO update on the full rollout; ``next_obs`` follows its last row."""
+        cfg, buf, net = self.cfg, self.buffer, self.net
+        if not buf.full:
+            raise RuntimeError(f"rollout has {buf.step}/{buf.num_steps} steps; update when ready")
+        if cfg.anneal_lr and self.total_updates > 0:
+            frac = max(0.0, 1.0 - self.updates / self.total_updates)
+            self.optimizer.param_groups[0]["lr"] = frac * cfg.learning_rate
+        with torch.no_grad():
+            last_values = net.value(torch.from_numpy(self.obs_norm(next_obs)))
+            advantages, returns = compute_gae(buf.rewards, buf.values, buf.terminated,
+                                              buf.truncated, buf.bootstrap, last_values,
+                                              cfg.gamma, cfg.gae_lambda)
+        n = buf.num_steps * buf.num_streams
+        b_obs = buf.obs.reshape(n, -1)
+        b_actions = buf.actions.reshape(n, -1)
+        b_logprobs, b_values = buf.logprobs.reshape(n), buf.values.reshape(n)
+        b_adv, b_ret = advantages.reshape(n), returns.reshape(n)
+        b_active = buf.active.reshape(n).float()
+        b_masks = buf.masks.reshape(n, -1) if buf.masks is not None else None
+        mb_size = max(1, n // cfg.num_minibatches)
+        stats: dict[str, list[float]] = {k: [] for k in
+                                         ("policy_loss", "value_loss", "entropy", "approx_kl",
+                                          "clipfrac")}
+        epochs_run = 0
+        for _ in range(cfg.update_epochs):
+            perm = torch.randperm(n, generator=self.generator)
+            approx_kl = torch.zeros(())
+            for start in range(0, n - mb_size + 1, mb_size):
+                idx = perm[start:start + mb_size]
+                mask = b_masks[idx] if b_masks is not None else None
+                logprob, entropy = evaluate_actions(net.logits(b_obs[idx], mask),
+                                                    b_actions[idx], self.nvec)
+                value = net.value(b_obs[idx])
+                act_w = b_active[idx]
+                n_act = act_w.sum().clamp(min=1.0)
+                log_ratio = logprob - b_logprobs[idx]
+                ratio = log_ratio.exp()
+                with torch.no_grad():
+                    approx_kl = (((ratio - 1) - log_ratio) * act_w).sum() / n_act
+                    clipfrac = (((ratio - 1.0).abs() > cfg.clip_coef).float() * act_w).sum() / n_act
+                adv = b_adv[idx]
+                if cfg.norm_adv:
+                    mean = (adv * act_w).sum() / n_act
+                    std = (((adv - mean) ** 2 * act_w).sum() / n_act).sqrt()
+                    adv = (adv - mean) / (std + 1e-8)
+                pg = torch.max(-adv * ratio,
+                               -adv * torch.clamp(ratio, 1 - cfg.clip_coef, 1 + cfg.clip_coef))
+                pg_loss = (pg * act_w).sum() / n_act
+                if cfg.clip_vloss:
+                    v_clipped = b_values[idx] + torch.clamp(value - b_values[idx],
+                                                            -cfg.clip_coef, cfg.clip_coef)
+                    v_loss = 0.5 * torch.max((value - b_ret[idx]) ** 2,
+                                             (v_clipped - b_ret[idx]) ** 2).mean()
+                else:
+                    v_loss = 0.5 * ((value - b_ret[idx]) ** 2).mean()
+                ent = (entropy * act_w).sum() / n_act
+                loss = pg_loss - cfg.ent_coef * ent + cfg.vf_coef * v_loss
+                self.optimizer.zero_grad(set_to_none=True)
+                loss.backward()
+                nn.utils.clip_grad_norm_(net.parameters(), cfg.max_grad_norm)
+                self.optimizer.step()
+                for key, val in (("policy_loss", pg_loss), ("value_loss", v_loss),
+                                 ("entropy", ent), ("approx_kl", approx_kl),
+                                 ("clipfrac", clipfrac)):
+                    stats[key].append(float(val.detach()))
+            epochs_run += 1
+            if cfg.target_kl is not None and float(approx_kl) > cfg.target_kl:
+                break
+        var_y = float(b_ret.var())
+        explained = float("nan") if var_y == 0 else 1.0 - float((b_ret - b_values).var()) / var_y
+        self.updates += 1
+        buf.clear()
+        out = {f"losses/{k}": float(np.mean(v)) for k, v in stats.items() if v}
+        out.update({"losses/explained_variance": explained, "losses/epochs": float(epochs_run),
+                    "charts/learning_rate": float(self.optimizer.param_groups[0]["lr"])})
+        return out
+
+    # ---- inference and persistence ------------------------------------------------------
+
+    @torch.no_grad()
+    def policy_actions(self, obs: np.ndarray, deterministic: bool = False,
+                       generator: torch.Generator | None = None) -> np.ndarray:
+        """Actions for raw observations with frozen statistics (no rollout recording)."""
+        x = torch.from_numpy(self.obs_norm(obs))
+        actions, _ = sample_actions(self.net.logits(x), self.nvec, generator or self.generator,
+                                    deterministic)
+        return actions.numpy()
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"net": self.net.state_dict(), "optimizer": self.optimizer.state_dict(),
+                "obs_norm": self.obs_norm.state_dict(), "ret_norm": self.ret_norm.state_dict(),
+                "generator": self.generator.get_state(),
+                "updates": torch.tensor(self.updates)}
+
+    def load_state_dict(self, state: dict[str, Any], weights_only: bool = False) -> None:
+        """Restore a learner; ``weights_only`` restores just what inference needs."""
+        self.net.load_state_dict(state["net"])
+        self.obs_norm.load_state_dict(state["obs_norm"])
+        if weights_only:
+            return
+        self.optimizer.load_state_dict(state["optimizer"])
+        self.ret_norm.load_state_dict(state["ret_norm"])
+        self.generator.set_state(state["generator"])
+        self.updates = int(state["updates"])
