@@ -1,0 +1,318 @@
+"""Map generator, warnings, the tools/mapgen.py CLI and the shipped train/test map folders."""
+
+import importlib.util
+import os
+import re
+from pathlib import Path
+
+os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
+os.environ.setdefault("SDL_AUDIODRIVER", "dummy")
+
+import numpy as np
+import pytest
+
+from alphatank.mapgen import (
+    ALGORITHMS,
+    SYMMETRIES,
+    GenOptions,
+    MapGenError,
+    ascii_art,
+    components,
+    generate,
+    generate_from,
+    image,
+    is_symmetric,
+    lines_clear,
+    map_warnings,
+    open_sides,
+)
+from alphatank.mapspec import MapError, load_map, map_text, parse_map
+
+ROOT = Path(__file__).resolve().parents[1]
+_spec = importlib.util.spec_from_file_location("mapgen_cli", ROOT / "tools" / "mapgen.py")
+cli = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(cli)
+
+# (rows, cols), spawns, zones: sizes odd and even, square and not; an odd spawn count sits
+# on the axis (mirror needs odd cols, rotation odd rows and cols).
+CONFIGS = [((7, 7), 2, (2, 2)), ((11, 11), 4, (2, 2)), ((12, 15), 2, (0, 2)),
+           ((16, 10), 8, (2, 2)), ((11, 11), 3, (2, 2)), ((9, 13), 2, None)]
+
+
+def _floor_edges(walls: np.ndarray) -> int:
+    f = ~walls
+    return int((f[1:, :] & f[:-1, :]).sum() + (f[:, 1:] & f[:, :-1]).sum())
+
+
+@pytest.mark.parametrize("symmetry", SYMMETRIES)
+@pytest.mark.parametrize("algorithm", ALGORITHMS)
+def test_every_generator_makes_valid_connected_maps_for_200_seeds(algorithm, symmetry):
+    for seed in range(200):
+        (rows, cols), spawns, zones = CONFIGS[seed % len(CONFIGS)]
+        density = (0.1, 0.25, 0.4, 0.6)[seed % 4]
+        spec = generate(rows, cols, algorithm, density, symmetry, spawns, zones,
+                        loops=0.15, seed=seed)
+        again = parse_map(map_text(spec), "gen.txt")  # the game's own validation
+        assert np.array_equal(again.walls, spec.walls)
+        w = spec.walls
+        assert w.shape == (rows, cols)
+        assert w[0].all() and w[-1].all() and w[:, 0].all() and w[:, -1].all()
+        assert components(w)[1] == 1, (algorithm, symmetry, seed)  # all floor connected
+        assert sorted(spec.spawns) == list(range(1, spawns + 1))
+        if zones is None:
+            assert spec.random_zones and not spec.buffs and not spec.debuffs
+        else:
+            assert (len(spec.buffs), len(spec.debuffs)) == zones
+        if symmetry != "none":
+            assert is_symmetric(spec, symmetry), (algorithm, symmetry, seed)
+        codes = {x.code for x in map_warnings(spec)}
+        assert not codes & {"unreachable-zone", "isolated-floor", "spawn-slots"}
+
+
+@pytest.mark.parametrize("symmetry", ["mirror", "rotational"])
+def test_symmetric_maps_are_exactly_symmetric(symmetry):
+    spec = generate(11, 11, "scatter", 0.35, symmetry, spawns=4, zones=(2, 2), seed=5)
+    flip = spec.walls[:, ::-1] if symmetry == "mirror" else spec.walls[::-1, ::-1]
+    assert np.array_equal(spec.walls, flip)
+    for slot in (1, 2):  # slot i faces slot i + n/2
+        assert spec.spawns[slot + 2] == image(spec.spawns[slot], (11, 11), symmetry)
+    for cells in (spec.buffs, spec.debuffs):
+        assert {image(c, (11, 11), symmetry) for c in cells} == set(cells)
+    assert not is_symmetric(generate(11, 11, "scatter", 0.35, "none", seed=5), symmetry)
+
+
+def test_same_seed_same_file_and_other_seeds_differ():
+    a = map_text(generate(13, 13, "rooms", 0.3, "mirror", seed=42))
+    b = map_text(generate(13, 13, "rooms", 0.3, "mirror", seed=42))
+    assert a == b
+    texts = {map_text(generate(13, 13, "rooms", 0.3, "mirror", seed=s, name="x"))
+             for s in range(10)}
+    assert len(texts) >= 9
+
+
+def test_cli_generate_same_seed_same_bytes(tmp_path, capsys):
+    args = ["generate", "--size", "11x13", "--algorithm", "maze", "--symmetry", "mirror",
+            "--spawns", "2", "--zones", "2,2", "--seed", "7"]
+    assert cli.main([*args, "-o", str(tmp_path / "a.txt")]) == 0
+    assert cli.main([*args, "-o", str(tmp_path / "b.txt"), "--name", "a"]) == 0
+    assert (tmp_path / "a.txt").read_bytes() == (tmp_path / "b.txt").read_bytes()
+    assert "wrote" in capsys.readouterr().out
+    spec = load_map(tmp_path / "a.txt")
+    assert spec.name == "a" and is_symmetric(spec, "mirror")
+    # The description records the options, so the file can be rebuilt from it.
+    assert "--algorithm maze --density 0.25 --symmetry mirror" in spec.description
+    assert cli.main([*args, "-o", str(tmp_path / "a.txt")]) == 2  # no silent overwrite
+    assert "--force" in capsys.readouterr().err
+
+
+def test_loops_turn_a_perfect_maze_into_a_graph_with_cycles():
+    for seed in range(5):
+        tree = generate(11, 15, "maze", symmetry="none", loops=0.0, seed=seed).walls
+        assert _floor_edges(tree) == int((~tree).sum()) - 1  # a spanning tree
+        loopy = generate(11, 15, "maze", symmetry="none", loops=0.3, seed=seed).walls
+        assert _floor_edges(loopy) > int((~loopy).sum()) - 1
+
+
+@pytest.mark.parametrize("algorithm", ["rooms", "open", "scatter"])
+def test_density_sets_the_wall_share(algorithm):
+    def share(d: float) -> float:
+        return float(np.mean([generate(15, 15, algorithm, d, loops=0.0, seed=s)
+                              .walls[1:-1, 1:-1].mean() for s in range(8)]))
+    low, high = share(0.05), share(0.3)
+    assert low < 0.12 and high > low + 0.1
+    assert share(0.0) == 0.0
+
+
+def test_generator_options_are_checked_with_allowed_values():
+    with pytest.raises(MapGenError, match=r"algorithm must be one of \['maze'"):
+        generate(algorithm="caves")
+    with pytest.raises(MapGenError, match="symmetry must be one of"):
+        GenOptions(symmetry="diagonal")
+    with pytest.raises(MapGenError, match="rows must be in"):
+        generate(rows=4)
+    with pytest.raises(MapGenError, match="centre column"):
+        generate(10, 10, symmetry="mirror", spawns=3)
+    with pytest.raises(MapGenError, match="do not fit"):
+        generate(5, 5, spawns=8, zones=(2, 2))
+    with pytest.raises(MapGenError, match="density"):
+        generate(density=1.0)
+
+
+def test_spawns_are_spread_out():
+    for seed in range(20):
+        spec = generate(11, 11, "open", 0.0, "mirror", spawns=2, zones=(0, 0), seed=seed)
+        (r1, c1), (r2, c2) = spec.spawns[1], spec.spawns[2]
+        assert abs(c1 - c2) >= 6
+
+
+# ---- warnings -------------------------------------------------------------------------
+
+
+def test_lines_clear_is_exact_on_the_grid():
+    walls = np.zeros((5, 5), dtype=bool)
+    a, b = np.array([[1, 1]]), np.array([[3, 3]])
+    assert lines_clear(walls, a, b)[0]
+    walls[1, 2] = True  # the diagonal passes through this cell's corner: grazing blocks
+    assert not lines_clear(walls, a, b)[0]
+    walls[:] = False
+    walls[1, 3] = True  # off the line
+    assert lines_clear(walls, a, b)[0]
+    walls[2, 2] = True
+    assert not lines_clear(walls, np.array([[2, 0]]), np.array([[2, 4]]))[0]
+    assert lines_clear(walls, np.array([[3, 0]]), np.array([[3, 4]]))[0]
+
+
+def test_line_of_fire_warning_names_both_spawns_and_positions():
+    spec = load_map("open")  # spawns (2, 2) and (8, 8) on an empty floor
+    ws = map_warnings(spec, (ROOT / "maps" / "open.txt").read_text())
+    assert [w.code for w in ws] == ["line-of-fire"]
+    assert (ws[0].line, ws[0].col) == (7, 3)
+    assert str(ws[0]).startswith("maps/open.txt:7:3: warning: spawn 1 has a direct line of "
+                                 "fire to spawn 2 (line 13, column 9)")
+    blocked = parse_map("#######\n#1....#\n#..#..#\n#....2#\n#######\n")
+    assert map_warnings(blocked) == []
+    # teams: only enemies count
+    arena = load_map("arena4")
+    all_pairs = [w for w in map_warnings(arena) if w.code == "line-of-fire"]
+    enemies = [w for w in map_warnings(arena, teams="AABB") if w.code == "line-of-fire"]
+    assert len(all_pairs) == 4 and len(enemies) == 2
+
+
+def test_dead_end_unreachable_zone_isolated_floor_and_skipped_slot_warnings():
+    text = "name: bad\n\n#########\n#1#...#.#\n#.#.3.#+#\n#.....###\n#########\n"
+    spec = parse_map(text, "bad.txt")
+    ws = {w.code: w for w in map_warnings(spec, text)}
+    assert set(ws) == {"dead-end-spawn", "unreachable-zone", "isolated-floor", "spawn-slots"}
+    assert (ws["dead-end-spawn"].line, ws["dead-end-spawn"].col) == (4, 2)
+    assert (ws["unreachable-zone"].line, ws["unreachable-zone"].col) == (5, 8)
+    assert "buff zone cannot be reached from spawn 1" in ws["unreachable-zone"].message
+    assert "2 floor cell(s)" in ws["isolated-floor"].message
+    assert "skip [2]" in ws["spawn-slots"].message and ws["spawn-slots"].line == 5
+    walled_in = parse_map("#####\n#1#.#\n#####\n")
+    assert "walled in" in map_warnings(walled_in)[0].message
+
+
+def test_warning_lines_follow_comments_and_header():
+    text = "; top\nname: c\n\n; between\n#####\n; inside\n#1.2#\n#...#\n#####\n"
+    ws = map_warnings(parse_map(text), text)
+    assert [(w.line, w.col) for w in ws] == [(7, 2)]
+
+
+def test_shipped_maps_have_no_errors_and_expected_warnings():
+    for name in ("open", "battlefield", "maze", "arena4", "arena8"):
+        codes = {w.code for w in map_warnings(load_map(name))}
+        assert codes <= {"line-of-fire"}
+
+
+# ---- CLI: validate, preview, batch ------------------------------------------------------
+
+MALFORMED = {
+    "header_no_colon": "name: x\nnot a header\n\n###\n#1#\n###\n",
+    "unknown_key": "name: x\ncolour: red\n\n###\n#1#\n###\n",
+    "duplicate_key": "name: x\nname: y\n\n###\n#.#\n###\n",
+    "empty": "name: x\n\n",
+    "blank_in_grid": "###\n#.#\n\n#.#\n###\n",
+    "ragged": "####\n#.#\n####\n",
+    "bad_cell": "cell: -3\n\n###\n#.#\n###\n",
+    "bad_zones": "zones: some\n\n###\n#.#\n###\n",
+    "unknown_char": "#####\n#1x2#\n#####\n",
+    "duplicate_spawn": "#####\n#1.1#\n#####\n",
+    "no_floor": "###\n###\n",
+    "unreachable": "#####\n#1#2#\n#####\n",
+}
+
+
+@pytest.mark.parametrize("case", sorted(MALFORMED))
+def test_validate_prints_exactly_the_loaders_message(case, tmp_path, capsys):
+    path = tmp_path / f"{case}.txt"
+    path.write_text(MALFORMED[case])
+    with pytest.raises(MapError) as err:
+        load_map(path)
+    assert cli.main(["validate", str(path)]) == 1
+    out = capsys.readouterr().out.splitlines()
+    assert out == [str(err.value)]
+    assert re.match(rf"{re.escape(str(path))}:\d+", out[0])
+
+
+def test_validate_missing_files_and_folders_like_the_loader(tmp_path, capsys):
+    missing = tmp_path / "none.txt"
+    with pytest.raises(MapError) as err:
+        load_map(missing)
+    assert cli.main(["validate", str(missing), "no_such_map"]) == 1
+    out = capsys.readouterr().out.splitlines()
+    assert out[0] == str(err.value) and out[1].startswith("no_such_map: unknown map")
+
+
+def test_validate_ok_warnings_strict_and_folders(tmp_path, capsys):
+    assert cli.main(["validate", "maze", "open"]) == 0
+    out = capsys.readouterr().out
+    assert "maps/maze.txt: ok" in out and "[line-of-fire]" in out
+    assert cli.main(["validate", "--strict", "open"]) == 1
+    capsys.readouterr()
+    (tmp_path / "a.txt").write_text("#####\n#1.2#\n#####\n")
+    (tmp_path / "b.txt").write_text("#####\n#1#2#\n#####\n")
+    assert cli.main(["validate", str(tmp_path)]) == 1
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith(f"{tmp_path / 'a.txt'}: ok")
+    assert any(line.startswith(f"{tmp_path / 'b.txt'}:2:4: spawn 2 cannot") for line in out)
+
+
+def test_preview_prints_ascii_and_draws_png_with_the_game_renderer(tmp_path, capsys):
+    import pygame
+
+    from alphatank.render import FLOOR, WALL
+
+    png = tmp_path / "arena4.png"
+    assert cli.main(["preview", "arena4", "--png", str(png), "--fire"]) == 0
+    out = capsys.readouterr().out
+    art = ascii_art(load_map("arena4"), show_fire=True)
+    assert art in out and "* " in art and f"wrote {png}" in out
+    assert art.splitlines()[1].startswith("##1 * *")
+    img = pygame.image.load(str(png))
+    assert img.get_size() == (13 * 70, 10 * 70)
+    assert tuple(img.get_at((35, 35)))[:3] == WALL  # border cell centre
+    assert tuple(img.get_at((5 * 70 + 10, 3 * 70 + 10)))[:3] != WALL  # floor
+    assert tuple(img.get_at((3 * 70 + 35, 3 * 70 + 5)))[:3] in (FLOOR, tuple(FLOOR))
+
+
+def test_batch_writes_consecutive_seeds_and_a_held_out_split(tmp_path, capsys):
+    args = ["batch", "--count", "10", "--seed", "100", "--out", str(tmp_path), "--split",
+            "0.8", "--algorithm", "maze,rooms", "--symmetry", "mirror,rotational"]
+    assert cli.main(args) == 0
+    train = sorted(p.name for p in (tmp_path / "train").glob("*.txt"))
+    test = sorted(p.name for p in (tmp_path / "test").glob("*.txt"))
+    assert len(train) == 8 and len(test) == 2
+    seeds = sorted(int(n[-8:-4]) for n in train + test)
+    assert seeds == list(range(100, 110))
+    assert test == ["maze_0104.txt", "maze_0109.txt"]  # every 5th map is held out
+    for p in sorted(tmp_path.rglob("*.txt")):
+        spec = load_map(p)
+        sym = re.search(r"--symmetry (\w+)", spec.description).group(1)
+        assert is_symmetric(spec, sym)
+    first = (tmp_path / "train" / "maze_0100.txt").read_text()
+    assert cli.main(args) == 2  # refuses to overwrite
+    assert cli.main([*args, "--force"]) == 0
+    assert (tmp_path / "train" / "maze_0100.txt").read_text() == first
+    assert cli.main(["batch", "--count", "3", "--out", str(tmp_path / "flat")]) == 0
+    assert len(list((tmp_path / "flat").glob("*.txt"))) == 3
+
+
+# ---- shipped folders ----------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("folder,count", [("train", 16), ("test", 4)])
+def test_shipped_train_and_test_maps_are_valid_and_rebuildable(folder, count):
+    paths = sorted((ROOT / "maps" / folder).glob("*.txt"))
+    assert len(paths) == count
+    for p in paths:
+        spec = load_map(p)
+        assert spec.name == p.stem
+        args = re.search(r"generated by tools/mapgen.py (.*)$", spec.description).group(1)
+        parsed = cli.build_parser().parse_args(["generate", *args.split()])
+        rebuilt = generate_from(cli._options(parsed), name=spec.name)
+        assert map_text(rebuilt) == p.read_text()
+        assert not {w.code for w in map_warnings(spec)} - {"line-of-fire"}
+        assert open_sides(spec.walls)[spec.spawns[1]] >= 2
+    train = {p.stem for p in (ROOT / "maps" / "train").glob("*.txt")}
+    test = {p.stem for p in (ROOT / "maps" / "test").glob("*.txt")}
+    assert not train & test
