@@ -14,27 +14,39 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pymunk
 
-from alphatank.world import World, trace
+from alphatank.world import SKIN, WALLS_ONLY, World, trace
 
 
 def predict_path(world: World, x: float, y: float, angle: float,
                  max_distance: float | None = None, max_bounces: int | None = None,
-                 radius: float | None = None) -> np.ndarray:
+                 radius: float | None = None, exact: bool = True) -> np.ndarray:
     """Polyline of a bullet's centre fired from (x, y) at ``angle`` (radians, 0 = +x,
     y down): (k, 2) array of the start, each bounce point (centre at contact), the end.
 
     The bullet stops at the wall contact after ``max_bounces`` ricochets or once it has
     travelled ``max_distance`` px (defaults: the world's config). Tanks are ignored (use
-    :func:`path_hits` for them). ``(x, y)`` should be a muzzle position
-    (``world.muzzle(tank)``), i.e. not inside a wall.
+    :func:`path_hits` for them). ``(x, y)`` is a muzzle position (``world.muzzle(tank)``);
+    if a bullet there would overlap a wall (the world fires nothing) the path is just
+    ``[start, start]``.
+
+    ``exact=True`` runs the physics' own :func:`alphatank.world.trace`. ``exact=False``
+    traces the same way with pymunk's space-level segment query, about 3x cheaper, which
+    can miss a wall corner grazed only by the bullet's rim (bots use it to search, then
+    confirm with an exact prediction before firing).
     """
     cfg = world.cfg
     length = cfg.bullet_max_distance if max_distance is None else float(max_distance)
     bounces = cfg.bullet_max_bounces if max_bounces is None else int(max_bounces)
     r = cfg.bullet_radius if radius is None else float(radius)
-    ex, ey, _, _, points, _ = trace(world.space, float(x), float(y), math.cos(angle),
-                                    math.sin(angle), length, r, bounces)
+    x, y = float(x), float(y)
+    inside = world.space.point_query_nearest((x, y), r, WALLS_ONLY)
+    if inside is not None and inside.distance < r - 1e-9:
+        return np.array([(x, y), (x, y)], dtype=np.float64)
+    run = trace if exact else _quick_trace
+    ex, ey, _, _, points, _ = run(world.space, x, y, math.cos(angle), math.sin(angle),
+                                  length, r, bounces)
     out = np.empty((len(points) + 2, 2), dtype=np.float64)
     out[0] = (x, y)
     if points:
@@ -92,3 +104,30 @@ def _seg_dist(path: np.ndarray, targets: np.ndarray) -> tuple[np.ndarray, np.nda
     len2 = np.maximum(d.real * d.real + d.imag * d.imag, 1e-300)  # zero legs: t = 0
     t = np.minimum(np.maximum((rel * d.conj()).real / len2, 0.0), 1.0)
     return np.abs(rel - t * d), t
+
+
+def _quick_trace(space: pymunk.Space, x: float, y: float, dx: float, dy: float,
+                 length: float, radius: float, bounces_left: int
+                 ) -> tuple[float, float, float, float, list[tuple[float, float]], bool]:
+    """:func:`alphatank.world.trace` with the space-level segment query (see
+    :func:`predict_path`, ``exact=False``); same rules and return value."""
+    points: list[tuple[float, float]] = []
+    query = space.segment_query_first
+    while True:
+        q = query((x, y), (x + dx * length, y + dy * length), radius, WALLS_ONLY)
+        if q is None:
+            return x + dx * length, y + dy * length, dx, dy, points, False
+        nx, ny = q.normal
+        travel = length * q.alpha
+        x, y = x + dx * travel, y + dy * travel
+        if bounces_left == 0:
+            return x, y, dx, dy, points, True
+        vn = dx * nx + dy * ny
+        if vn < 0:
+            dx, dy = dx - 2 * vn * nx, dy - 2 * vn * ny
+            norm = math.hypot(dx, dy)
+            dx, dy = dx / norm, dy / norm
+            points.append((x, y))
+            bounces_left -= 1
+        length -= travel
+        x, y = x + nx * SKIN, y + ny * SKIN

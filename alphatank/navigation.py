@@ -133,9 +133,9 @@ class NavGrid:
     def cells_of(self, xy: np.ndarray) -> np.ndarray:
         """Vectorised ``cell_of``: (n, 2) pixels -> (n, 2) int (row, col)."""
         xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-        r = np.clip((xy[:, 1] // self.cell).astype(np.int64), 0, self.rows - 1)
-        c = np.clip((xy[:, 0] // self.cell).astype(np.int64), 0, self.cols - 1)
-        return np.stack([r, c], axis=1)
+        rc = (xy[:, ::-1] // self.cell).astype(np.int64)
+        np.maximum(rc, 0, out=rc)
+        return np.minimum(rc, (self.rows - 1, self.cols - 1), out=rc)
 
     def node_of(self, x: float, y: float) -> int:
         """Floor index for pixel (x, y): its cell, or the nearest floor cell if a wall."""
@@ -256,9 +256,10 @@ class NavGrid:
         xy = np.asarray(xy, dtype=np.float64)
         c = np.floor(xy[..., 0] / res).astype(np.int64)
         r = np.floor(xy[..., 1] / res).astype(np.int64)
-        inside = (r >= 0) & (r < grid.shape[0]) & (c >= 0) & (c < grid.shape[1])
-        return np.where(inside, grid[np.clip(r, 0, grid.shape[0] - 1),
-                                     np.clip(c, 0, grid.shape[1] - 1)], 0.0)
+        h, w = grid.shape
+        inside = (r >= 0) & (r < h) & (c >= 0) & (c < w)
+        return np.where(inside, grid[np.minimum(np.maximum(r, 0), h - 1),
+                                     np.minimum(np.maximum(c, 0), w - 1)], 0.0)
 
     def waypoint_idx(self, i: int, j: int, radius: float) -> int:
         """Farthest cell on the BFS path from ``i`` to ``j`` that a disc of ``radius`` reaches

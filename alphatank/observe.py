@@ -57,6 +57,7 @@ class ObsLayout:
     size: int = 0
     index: dict[str, slice] = field(default_factory=dict)
     fields: list[str] = field(default_factory=list)  # scalar names in vector order
+    widths: dict[str, int] = field(default_factory=dict)  # block -> floats per slot
 
     def __getitem__(self, name: str) -> slice:
         try:
@@ -74,6 +75,7 @@ class ObsLayout:
     def add(self, block: str, count: int | None, names: Sequence[str]) -> slice:
         """Append a block of ``count`` slots (None: a single unnumbered slot)."""
         start = self.size
+        self.widths[block] = len(names)
         for k in [None] if count is None else range(count):
             head = block if k is None else f"{block}[{k}]"
             s0 = self.size
@@ -103,6 +105,7 @@ class StateBatch:
 
     def __init__(self, cfg: GameConfig, n: int, num_envs: int, max_walls: int,
                  max_buffs: int, max_debuffs: int):
+        self._args = (cfg, n, num_envs, max_walls, max_buffs, max_debuffs)
         self.cfg, self.n, self.num_envs = cfg, n, num_envs
         cap = cfg.bullet_capacity
         nb = n * cap
@@ -134,6 +137,11 @@ class StateBatch:
         self.idiag = np.ones((E, 1, 1))  # 1 / diagonal: distances
         self.corner_u = np.zeros((E, 1, 4, 2))  # normalised corner offsets (times cos)
         self.corner_v = np.zeros((E, 1, 4, 2))  # (times sin)
+
+    def __reduce__(self) -> tuple:
+        """Pickle as a fresh batch (views into ``raw`` must stay views; contents are
+        refilled at the next reset)."""
+        return (type(self), self._args)
 
     def gather(self, e: int, match: object) -> None:
         """Copy match ``e``'s dynamic arrays (one batch read already done by the world)."""
@@ -207,6 +215,7 @@ class ObservationBuilder:
             raise ValueError(f"observer seats {bad} out of range 0..{n - 1}")
         if rays < 1 or not ray_length > 0:
             raise ValueError(f"rays must be >= 1 and ray_length > 0, got {rays}, {ray_length}")
+        self._args = (kind, batch, teams, observers, team_flags, rays, ray_length)
         self.kind, self.batch, self.cfg = kind, batch, batch.cfg
         self.teams = list(teams)
         self.team_flags = (len(set(teams)) < n) if team_flags is None else team_flags
@@ -239,6 +248,9 @@ class ObservationBuilder:
         self._count_scale = np.array([1.0 / self.cfg.cooldown_ticks, 1.0 / cap])
         self._ray_angles = np.arange(rays) * (2 * math.pi / rays)
 
+    def __reduce__(self) -> tuple:
+        return (type(self), self._args)
+
     # ---- layout ---------------------------------------------------------------------
 
     def _make_layout(self, n_oth: int, K: int, cap: int, batch: StateBatch) -> ObsLayout:
@@ -270,7 +282,7 @@ class ObservationBuilder:
     def _block(self, name: str, count: int) -> np.ndarray:
         """(E, L, count, fields) view of a numbered block of the output buffer."""
         E, L, _ = self.out.shape
-        return self.out[:, :, self.layout[name]].reshape(E, L, count, -1)
+        return self.out[:, :, self.layout[name]].reshape(E, L, count, self.layout.widths[name])
 
     def _views(self) -> None:
         lay, cap = self.layout, self.batch.capacity
@@ -487,6 +499,7 @@ class GlobalState:
     episode's elapsed fraction. ``layout`` is its index map."""
 
     def __init__(self, batch: StateBatch, teams: Sequence[str]):
+        self._args = (batch, teams)
         self.batch = batch
         n, nb = batch.n, batch.n_bullets
         names = sorted(set(teams))
@@ -502,10 +515,13 @@ class GlobalState:
         self.out = np.zeros((E, lay.size), dtype=np.float32)
         self._tt = np.zeros((E, n, len(TANK_FIELDS)))
         self._bt = np.zeros((E, nb, 4))
-        self._tank = self.out[:, lay["tank"]].reshape(E, n, -1)
-        self._bullet = self.out[:, lay["bullet"]].reshape(E, nb, -1)
-        self._zone = self.out[:, lay["zone"]].reshape(E, Z, -1)
+        self._tank = self.out[:, lay["tank"]].reshape(E, n, lay.widths["tank"])
+        self._bullet = self.out[:, lay["bullet"]].reshape(E, nb, lay.widths["bullet"])
+        self._zone = self.out[:, lay["zone"]].reshape(E, Z, lay.widths["zone"])
         self._kind = np.where(np.arange(Z) < batch.max_buffs, 1.0, -1.0)
+
+    def __reduce__(self) -> tuple:
+        return (type(self), self._args)
 
     def build(self) -> np.ndarray:
         b = self.batch

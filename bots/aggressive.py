@@ -42,8 +42,7 @@ class AggressiveBot(Bot):
             move = FORWARD
         elif dist < self.min_frac * self.shot_range:
             move = BACK
-        move = self.guard_move(match, seat, move)
         tolerance = math.atan2(self.hit_radius * 0.8, max(dist, 1.0))
-        fire = int(abs(err) < tolerance and self.can_fire(match, seat)
+        fire = int(abs(err) < tolerance and dist < self.shot_range and self.can_fire(match, seat)
                    and self.clear_shot(match, seat, target))
         return rot, move, fire

@@ -15,6 +15,7 @@ import numpy as np
 
 from alphatank.ballistics import path_hits, predict_path
 from alphatank.navigation import NavGrid, nav_grid
+from alphatank.world import WALLS_ONLY
 
 if TYPE_CHECKING:
     from alphatank.match import Match
@@ -26,6 +27,7 @@ MOVE_CONE = math.radians(35.0)  # drive only while the heading error is below th
 REVERSE_CONE = math.radians(110.0)  # reverse instead of turning round beyond this
 DRIVE_RADIUS = 16.0  # clearance used for straight driving legs (tank half-length + 1)
 ARRIVE_PX = 6.0
+_NONE = np.zeros(0, dtype=np.int64)
 
 
 def wrap(a: float) -> float:
@@ -38,6 +40,7 @@ class Bot:
     :meth:`decide` returning (rotate, move, fire)."""
 
     name: ClassVar[str] = "bot"
+    guarded: ClassVar[bool] = True  # run the stuck watchdog (:meth:`guard`) on decisions
 
     def __init__(self, seed: int | None = None):
         self.seed = seed
@@ -62,8 +65,9 @@ class Bot:
         self.hit_radius = cfg.tank_height / 2 + cfg.bullet_radius
         self.muzzle_offset = cfg.tank_width / 2 + cfg.bullet_radius + 0.5
         self.shot_range = cfg.bullet_max_distance
+        self._route: tuple[int, int] | None = None
         self._stuck_since = -1
-        self._stuck_xy = (0.0, 0.0)
+        self._stuck_pose = (0.0, 0.0, 0.0)
         self._unstick_until = -1
         self._unstick_move = BACK
         self.on_reset(match, seat)
@@ -71,8 +75,17 @@ class Bot:
     def act(self, match: Match, seat: int) -> np.ndarray:
         if not match.alive[seat]:
             return np.array((NONE, STOP, 0), dtype=np.int64)
+        self._route = None
         rot, move, fire = self.decide(match, seat)
+        if self.guarded:
+            rot, move = self.guard(match, seat, rot, move)
         return np.array((rot, move, fire), dtype=np.int64)
+
+    def planned_path(self, match: Match, seat: int) -> list[tuple[int, int]] | None:
+        """Grid cells of the BFS route the bot last steered along (for overlays)."""
+        if self._route is None or not match.alive[seat]:
+            return None
+        return [self.nav.cell_at(k) for k in self.nav.path_idx(*self._route)]
 
     # ---- for subclasses -------------------------------------------------------------
 
@@ -121,17 +134,19 @@ class Bot:
         i = int(np.argmax(ok)) if ok.any() else 0
         return float(pts[i, 0]), float(pts[i, 1])
 
-    def route(self, match: Match, x: float, y: float, me: int, goal: int) -> tuple[float, float]:
-        """Next point to drive to on the BFS route from node ``me`` to node ``goal``:
-        the farthest path cell reachable in a straight leg, else the next cell."""
+    def route(self, match: Match, x: float, y: float, me: int, goal: int
+              ) -> tuple[float, float]:
+        """Next point to drive to on the BFS route from node ``me`` to node ``goal``: the
+        farthest path cell a straight leg from the tank reaches, else the next cell, else
+        the centre of the tank's own cell (so corners are turned from the cell centre)."""
         nav = self.nav
-        if me == goal:
-            gx, gy = nav.centers[goal]
-            return float(gx), float(gy)
-        gx, gy = nav.centers[nav.waypoint_idx(me, goal, DRIVE_RADIUS)]
-        if match.world.ray((float(x), float(y)), (float(gx), float(gy)),
-                           DRIVE_RADIUS - 2.0) is not None:
-            gx, gy = nav.centers[nav.next_table[me, goal]]
+        self._route = (me, goal)
+        r = DRIVE_RADIUS - 2.0
+        for k in (nav.waypoint_idx(me, goal, DRIVE_RADIUS), nav.next_table[me, goal]):
+            gx, gy = nav.centers[k]
+            if k >= 0 and match.world.ray((x, y), (float(gx), float(gy)), r) is None:
+                return float(gx), float(gy)
+        gx, gy = nav.centers[me]
         return float(gx), float(gy)
 
     def enemies(self, match: Match, seat: int) -> np.ndarray:
@@ -174,18 +189,30 @@ class Bot:
         """A bullet-thick straight line from this tank to ``target`` misses every wall."""
         x, y = match.tank_xy[seat]
         tx, ty = match.tank_xy[target]
-        return match.world.ray((float(x), float(y)), (float(tx), float(ty)),
-                               self.cfg.bullet_radius) is None
+        return self.clear(match, float(x), float(y), float(tx), float(ty),
+                          self.cfg.bullet_radius)
+
+    @staticmethod
+    def clear(match: Match, x0: float, y0: float, x1: float, y1: float, radius: float) -> bool:
+        """Quick thick line-of-sight test for decisions (pymunk's space-level segment
+        query: can miss a corner grazed only by the rim; firing is confirmed exactly)."""
+        return match.world.space.segment_query_first((x0, y0), (x1, y1), radius,
+                                                     WALLS_ONLY) is None
+
+    # Driving legs use the exact ``world.ray`` instead: a tank-wide leg clips corners the
+    # thin segment's bounding box never reaches.
 
     def shot_hits(self, match: Match, seat: int, heading: float | None = None,
-                  hit_radius: float | None = None) -> tuple[bool, np.ndarray]:
+                  hit_radius: float | None = None, exact: bool = True
+                  ) -> tuple[bool, np.ndarray]:
         """Predict a bullet fired now (ricochets included): (first tank it reaches is an
-        enemy, the predicted path). Teammates in the way make it False."""
+        enemy, the predicted path). Teammates in the way make it False. ``exact=False``
+        uses the cheaper search-grade prediction (see ``predict_path``)."""
         w = match.world
         x, y = match.tank_xy[seat]
         a = float(match.tank_angle[seat]) if heading is None else heading
         d = self.muzzle_offset
-        path = predict_path(w, x + math.cos(a) * d, y + math.sin(a) * d, a)
+        path = predict_path(w, x + math.cos(a) * d, y + math.sin(a) * d, a, exact=exact)
         others = np.flatnonzero(match.alive)
         others = others[others != seat]
         k = path_hits(path, match.tank_xy[others], self.hit_radius if hit_radius is None
@@ -194,26 +221,32 @@ class Bot:
             return False, path
         return bool(match.team_index[others[k]] != match.team_index[seat]), path
 
-    def guard_move(self, match: Match, seat: int, move: int) -> int:
-        """Stuck watchdog around a planned ``move``: if the tank has been told to move for
-        20 ticks without getting 10 px anywhere, drive the other way for 12 ticks."""
+    def guard(self, match: Match, seat: int, rot: int, move: int) -> tuple[int, int]:
+        """Stuck watchdog around a planned (rotate, move): if the tank has been told to
+        turn or drive for 20 ticks yet neither got 8 px anywhere nor turned 8 degrees
+        (pinned against a wall), drive towards the open side for 12 ticks."""
         t = match.tick
         if t < self._unstick_until:
-            return self._unstick_move
-        if move == STOP:
+            return rot, self._unstick_move
+        if rot == NONE and move == STOP:
             self._stuck_since = -1
-            return move
+            return rot, move
         x, y = match.tank_xy[seat]
-        sx, sy = self._stuck_xy
-        if self._stuck_since < 0 or (x - sx) ** 2 + (y - sy) ** 2 > 100.0:
-            self._stuck_since, self._stuck_xy = t, (float(x), float(y))
-            return move
+        a = float(match.tank_angle[seat])
+        sx, sy, sa = self._stuck_pose
+        if (self._stuck_since < 0 or (x - sx) ** 2 + (y - sy) ** 2 > 64.0
+                or abs(wrap(a - sa)) > 0.14):
+            self._stuck_since, self._stuck_pose = t, (float(x), float(y), a)
+            return rot, move
         if t - self._stuck_since >= 20:
+            probe = np.array([[x + 30 * math.cos(a), y + 30 * math.sin(a)],
+                              [x - 30 * math.cos(a), y - 30 * math.sin(a)]])
+            ahead, behind = self.nav.clearance(probe)
+            self._unstick_move = FORWARD if ahead > behind else BACK
             self._unstick_until = t + 12
-            self._unstick_move = BACK if move == FORWARD else FORWARD
             self._stuck_since = -1
-            return self._unstick_move
-        return move
+            return rot, self._unstick_move
+        return rot, move
 
 
 class Evader:
@@ -221,7 +254,8 @@ class Evader:
     short-horizon motion keeps the tank farthest from every threatening bullet and out
     of walls. Only does work when a bullet that can hit the tank is closing in."""
 
-    def __init__(self, bot: Bot, match: Match, horizon_ticks: int = 12, danger_px: float = 30.0):
+    def __init__(self, bot: Bot, match: Match, seat: int, horizon_ticks: int = 12,
+                 danger_px: float = 30.0):
         cfg = match.cfg
         self.bot, self.nav = bot, bot.nav
         self.dt = cfg.dt
@@ -235,17 +269,18 @@ class Evader:
         self.turn = rot[:, None] * bot.turn_step * (k[None, :] - 1)
         self.step = move[:, None] * cfg.tank_speed * self.dt  # (9, 1) px per tick
         self.times = k * self.dt  # (K,) seconds
-        self.can_hit = match.world.can_hit
+        # tanks whose bullets can hit this seat (own bullets never: grace, self_hit off)
+        can_hit = match.world.can_hit[:, seat].copy()
+        can_hit[seat] = False
+        self.shooters = [int(k) for k in np.flatnonzero(can_hit)]
 
     def threats(self, match: Match, seat: int) -> np.ndarray:
         """Indices of bullets that can hit ``seat`` and pass within danger soon."""
-        active = np.flatnonzero(match.bullet_active)
-        if active.size == 0:
-            return active
-        owners = match.bullet_owner[active]
-        active = active[self.can_hit[owners, seat] & (owners != seat)]
-        if active.size == 0:
-            return active
+        if not any(match.bullets_alive[k] for k in self.shooters):
+            return _NONE
+        cap = match.capacity
+        active = np.concatenate([np.flatnonzero(match.bullet_active[k * cap:(k + 1) * cap])
+                                 + k * cap for k in self.shooters])
         rel = match.bullet_xy[active] - match.tank_xy[seat]
         vel = match.bullet_vel[active]
         v2 = (vel * vel).sum(axis=1)
@@ -255,8 +290,10 @@ class Evader:
                                                         < self.danger ** 2)
         return active[close]
 
-    def evade(self, match: Match, seat: int, threats: np.ndarray) -> tuple[int, int]:
-        """Best (rotate, move) against ``threats`` (bullet indices)."""
+    def evade(self, match: Match, seat: int, threats: np.ndarray,
+              aim_err: float = 0.0) -> tuple[int, int]:
+        """Best (rotate, move) against ``threats`` (bullet indices); among equally safe
+        choices, the one turning towards ``aim_err`` (radians to the bot's aim)."""
         x, y = match.tank_xy[seat]
         h = float(match.tank_angle[seat])
         heads = h + self.turn  # (9, K)
@@ -270,5 +307,6 @@ class Evader:
         score = np.minimum(gap.min(axis=(1, 2)), 2 * self.danger)
         wall = self.nav.clearance(np.stack([px, py], axis=-1)).min(axis=1)
         score = score - np.where(wall < self.wall_margin, 2 * self.danger, 0.0)
+        score[3 * self.bot.steer(aim_err):3 * self.bot.steer(aim_err) + 3] += 0.5
         c = int(np.argmax(score))
         return c // 3, c % 3

@@ -28,7 +28,7 @@ class DefensiveBot(Bot):
         self.keep_frac, self.evade = keep_frac, bool(evade)
 
     def on_reset(self, match: Match, seat: int) -> None:
-        self.evader = Evader(self, match) if self.evade else None
+        self.evader = Evader(self, match, seat) if self.evade else None
         nav = self.nav
         zones = match.buffs or [match.spawn_cells[seat]]
         self.zone_nodes = np.array([nav.idx(c) for c in zones], dtype=np.int64)
@@ -70,6 +70,10 @@ class DefensiveBot(Bot):
             if move == STOP and me == goal and rot == NONE:
                 rot = self.steer(aim_err)  # holding the zone: turn to the enemy
         fire = 0
-        if self.can_fire(match, seat) and abs(aim_err) < math.radians(25):
-            fire = int(self.shot_hits(match, seat)[0])
-        return rot, self.guard_move(match, seat, move), fire
+        if self.can_fire(match, seat):
+            tolerance = math.atan2(0.6 * self.hit_radius, max(dist, 1.0))
+            if abs(aim_err) < tolerance and self.clear_shot(match, seat, target):
+                fire = 1
+            elif match.tick % 3 == seat % 3:  # bank shots: check the heading now and then
+                fire = int(self.shot_hits(match, seat, exact=False)[0])
+        return rot, move, fire

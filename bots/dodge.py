@@ -5,7 +5,8 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
-from alphatank.bots.base import NONE, STOP, Bot, Evader, wrap
+import numpy as np
+from alphatank.bots.base import BACK, DRIVE_RADIUS, FORWARD, NONE, STOP, Bot, Evader, wrap
 
 if TYPE_CHECKING:
     from alphatank.match import Match
@@ -34,21 +35,51 @@ class DodgeBot(Bot):
         self.horizon_ticks, self.danger_px = horizon_ticks, danger_px
 
     def on_reset(self, match: Match, seat: int) -> None:
-        self.evader = Evader(self, match, self.horizon_ticks, self.danger_px)
+        self.evader = Evader(self, match, seat, self.horizon_ticks, self.danger_px)
+        self._dir = 1
+        self._flip_at = 0
+        self._attack_at = 0
+
+    def strafe(self, match: Match, seat: int, x: float, y: float, heading: float,
+               ex: float, ey: float, aim_err: float) -> tuple[int, int]:
+        """Side-on to the enemy, driving to and fro (direction flips every 15-45 ticks or
+        at a wall); every ``attack_every`` ticks with a bullet ready, face it to shoot."""
+        t = match.tick
+        if t >= self._flip_at:
+            self._dir = -self._dir
+            self._flip_at = t + int(self.rng.integers(15, 46))
+        if self.can_fire(match, seat) and t >= self._attack_at:
+            if abs(aim_err) < 0.5 * self.turn_step:
+                self._attack_at = t + int(self.rng.integers(30, 90))
+            return self.steer(aim_err), STOP
+        side = math.atan2(ey - y, ex - x) + math.pi / 2
+        err = wrap(side - heading)
+        if abs(err) > math.pi / 2:
+            err = wrap(err + math.pi)
+        ahead = self._dir * 30.0
+        probe = self.nav.clearance(np.array([x + ahead * math.cos(heading),
+                                             y + ahead * math.sin(heading)]))
+        if probe < DRIVE_RADIUS:
+            self._dir = -self._dir
+            self._flip_at = t + int(self.rng.integers(15, 46))
+        return self.steer(err), FORWARD if self._dir > 0 else BACK
 
     def decide(self, match: Match, seat: int) -> tuple[int, int, int]:
         target = self.nearest(match, seat, self.enemies(match, seat))
         if target < 0:
             return NONE, STOP, 0
-        threats = self.evader.threats(match, seat)
-        if threats.size:
-            rot, move = self.evader.evade(match, seat, threats)
-            return rot, move, 0
         x, y = match.tank_xy[seat]
         ex, ey = match.tank_xy[target]
         heading = float(match.tank_angle[seat])
         dist = math.hypot(ex - x, ey - y)
         err = wrap(self.lead_angle(match, seat, target) - heading)
+        tolerance = math.atan2(0.8 * self.hit_radius, max(dist, 1.0))
+        threats = self.evader.threats(match, seat)
+        if threats.size:  # dodge first; shoot back if the turn happens to line up
+            rot, move = self.evader.evade(match, seat, threats, err)
+            fire = (abs(err) < tolerance and dist < self.shot_range
+                    and self.can_fire(match, seat) and self.clear_shot(match, seat, target))
+            return rot, move, int(fire)
         in_sight = self.clear_shot(match, seat, target)
         if in_sight and dist < self.near_frac * self.shot_range:
             gx, gy = self.away_point(x, y, ex, ey)
@@ -59,8 +90,8 @@ class DodgeBot(Bot):
             nav = self.nav
             gx, gy = self.route(match, x, y, nav.node_of(x, y), nav.node_of(ex, ey))
             rot, move = self.drive(x, y, heading, gx, gy)
-        else:
-            rot, move = self.steer(err), STOP
-        tolerance = math.atan2(0.8 * self.hit_radius, max(dist, 1.0))
-        fire = int(in_sight and abs(err) < tolerance and self.can_fire(match, seat))
-        return rot, self.guard_move(match, seat, move), fire
+        else:  # in the band: strafe side-on, hard to hit, turning to shoot when ready
+            rot, move = self.strafe(match, seat, x, y, heading, ex, ey, err)
+        fire = int(in_sight and abs(err) < tolerance and dist < self.shot_range
+                   and self.can_fire(match, seat))
+        return rot, move, fire

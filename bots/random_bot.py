@@ -14,6 +14,7 @@ class RandomBot(Bot):
     """Draws (rotate, move, fire) uniformly and keeps it for a random 10-30 ticks."""
 
     name = "random"
+    guarded = False
 
     def __init__(self, seed: int | None = None, hold_min: int = 10, hold_max: int = 30):
         super().__init__(seed)

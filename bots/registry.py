@@ -41,6 +41,49 @@ def make_bot(name: str, weakness: float | None = None, seed: int | None = None,
     return Weakened(bot, weakness, seed=seed)
 
 
+def parse_bot_spec(text: str) -> tuple[str, float | None, dict[str, Any]]:
+    """``NAME[:KEY=VALUE...][@WEAKNESS]`` -> (name, weakness, options), e.g.
+    ``"smart:ricochet=false@0.5"``. Values: true/false, numbers, else strings."""
+    body, at, weak = text.strip().partition("@")
+    name, *pairs = [p.strip() for p in body.split(":")]
+    _lookup(name)
+    options: dict[str, Any] = {}
+    for pair in pairs:
+        key, eq, value = pair.partition("=")
+        if not eq or not key.strip():
+            raise ValueError(f"bot spec {text!r}: option {pair!r} must be KEY=VALUE; "
+                             f"valid options of {name!r}: {bot_options(name)}")
+        options[key.strip()] = _value(value.strip())
+    weakness = None
+    if at:
+        try:
+            weakness = float(weak)
+        except ValueError:
+            raise ValueError(f"bot spec {text!r}: weakness after '@' must be a number in "
+                             f"[0, 1], got {weak!r}") from None
+    return name, weakness, options
+
+
+def bot_from_spec(text: str, seed: int | None = None) -> Bot | Weakened:
+    """:func:`make_bot` from a ``NAME[:KEY=VALUE...][@WEAKNESS]`` string."""
+    name, weakness, options = parse_bot_spec(text)
+    return make_bot(name, weakness=weakness, seed=seed, **options)
+
+
+def _value(text: str) -> Any:
+    low = text.lower()
+    if low in ("true", "yes", "on"):
+        return True
+    if low in ("false", "no", "off"):
+        return False
+    for cast in (int, float):
+        try:
+            return cast(text)
+        except ValueError:
+            pass
+    return text
+
+
 def _lookup(name: str) -> type[Bot]:
     cls = BOTS.get(name)
     if cls is None:

@@ -39,7 +39,7 @@ class SmartBot(Bot):
                 f"evade={self.evade})")
 
     def on_reset(self, match: Match, seat: int) -> None:
-        self.evader = Evader(self, match) if self.evade else None
+        self.evader = Evader(self, match, seat) if self.evade else None
         self.direct_range = 0.85 * self.shot_range
         self.lattice = max(1, round(math.tau / self.turn_step))  # reachable headings
         self._goals: dict[tuple[int, int], int] = {}
@@ -79,11 +79,13 @@ class SmartBot(Bot):
         x, y = match.tank_xy[seat]
         heading = float(match.tank_angle[seat])
         me = nav.node_of(x, y)
-        foe_nodes = nav.nodes_of(match.tank_xy[foes])
-        steps = nav.dist_table[me, foe_nodes].astype(np.float64)
-        steps[steps < 0] = np.inf
-        k = int(np.argmin(steps))
-        target, enode = int(foes[k]), int(foe_nodes[k])
+        target, enode, best = -1, -1, math.inf
+        for f in foes:  # few tanks: plain Python beats numpy here
+            node = nav.node_of(*match.tank_xy[f])
+            steps = nav.dist_table[me, node]
+            steps = math.inf if steps < 0 else steps
+            if target < 0 or steps < best:
+                target, enode, best = int(f), node, steps
         ex, ey = match.tank_xy[target]
         dist = math.hypot(ex - x, ey - y)
 
@@ -128,7 +130,7 @@ class SmartBot(Bot):
         rot, move = self.drive(x, y, heading, gx, gy)
         if move == STOP and rot == NONE:  # arrived: face the enemy while waiting
             rot = self.steer(wrap(math.atan2(ey - y, ex - x) - heading))
-        return rot, self.guard_move(match, seat, move), fire
+        return rot, move, fire
 
     def _search(self, match: Match, seat: int, me: int, enode: int,
                 target_xy: tuple[float, float]) -> None:
@@ -144,7 +146,8 @@ class SmartBot(Bot):
         angle = heading + j * self.turn_step
         x, y = match.tank_xy[seat]
         d = self.muzzle_offset
-        path = predict_path(match.world, x + math.cos(angle) * d, y + math.sin(angle) * d, angle)
+        path = predict_path(match.world, x + math.cos(angle) * d, y + math.sin(angle) * d, angle,
+                            exact=False)
         miss = float(path_distances(path, np.array([target_xy]))[0])
         if miss < self._best[0]:
             self._best = (miss, angle)

@@ -45,6 +45,10 @@ class Weakened:
     def __repr__(self) -> str:
         return f"Weakened({self.bot!r}, weakness={self.weakness})"
 
+    def planned_path(self, match: Match, seat: int) -> list[tuple[int, int]] | None:
+        """The wrapped bot's planned route (for overlays)."""
+        return self.bot.planned_path(match, seat)
+
     def reset(self, match: Match, seat: int, seed: int | None = None) -> None:
         if seed is None:
             seed = int(self._seeder.integers(2**63))

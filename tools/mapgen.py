@@ -86,7 +86,9 @@ def _add_gen_options(p: argparse.ArgumentParser, lists: bool) -> None:
     p.add_argument("--force", action="store_true", help="overwrite existing files")
 
 
-def _options(args: argparse.Namespace, i: int = 0, seed: int | None = None) -> GenOptions:
+def options_from_args(args: argparse.Namespace, i: int = 0, seed: int | None = None
+                      ) -> GenOptions:
+    """Generator options for map ``i`` of a run (lists cycle over size x algorithm x symmetry)."""
     sizes = [parse_size(s) for s in args.size.split(",")]
     algs = _split_list(args.algorithm, ALGORITHMS, "--algorithm")
     syms = _split_list(args.symmetry, SYMMETRIES, "--symmetry")
@@ -105,7 +107,7 @@ def _write(spec: MapSpec, path: Path, force: bool) -> None:
 
 
 def cmd_generate(args: argparse.Namespace) -> int:
-    opts = _options(args)
+    opts = options_from_args(args)
     name = args.name or (Path(args.output).stem if args.output else None)
     spec = generate_from(opts, name)
     if args.output is None:
@@ -131,7 +133,7 @@ def cmd_batch(args: argparse.Namespace) -> int:
             raise MapGenError(f"--split must be in (0, 1] (the train share), got {args.split}")
         test_share = 1 - Fraction(str(args.split))
     for i in range(args.count):
-        opts = _options(args, i, args.seed + i)
+        opts = options_from_args(args, i, args.seed + i)
         spec = generate_from(opts)
         folder = out
         if test_share is not None:  # every k-th map is held out, spread over the batch

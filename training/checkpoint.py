@@ -5,7 +5,7 @@ Layout of ``<run>/checkpoints/step_<N>/``::
     meta.json           format/version, train config, scenario, observation layout,
                         learners (algo, seats, hyperparameters), progress, RNG states,
                         schedule state, SHA-256 of every other file
-    <learner>.pt        weights, optimiser state, normalisers, sampling generator
+    <learner>.pt        weights, optimiser state, normalisers, random generator states
                         (plain tensors and dicts: ``torch.load(weights_only=True)``)
     <learner>.replay.npz  SAC replay buffer (for exact resume; ``allow_pickle=False``)
 
@@ -27,11 +27,11 @@ from typing import Any
 
 import numpy as np
 import torch
+from alphatank.training.learners import make_learner
+from alphatank.training.presets import LearnerSpec, TrainConfig
 
 from alphatank.policy import NOOP
 from alphatank.scenarios import Scenario, ScenarioError, parse_scenario
-from alphatank.training.learners import make_learner
-from alphatank.training.presets import LearnerSpec, TrainConfig
 
 FORMAT = "alphatank-checkpoint"
 VERSION = 1
@@ -246,63 +246,63 @@ def load_checkpoint(path: str | Path) -> Checkpoint:
     return Checkpoint(ckpt_dir, meta)
 
 
-class CheckpointPolicy:
-    """A trained learner as a :class:`alphatank.policy.Policy` for any seat of any match
-    with the same number of tanks and observation size as its training scenario.
+class NetworkPolicy:
+    """Trained learners as a :class:`alphatank.policy.Policy` for any seat of any match
+    with the same number of tanks and observation size as their training scenario.
 
     The learner is picked per seat at :meth:`reset`: ``learner`` if given, else the one
     that trained in that scenario seat, else the first. Observations are built for the
     seat with the env's own :class:`~alphatank.observe.ObservationBuilder`.
     """
 
-    def __init__(self, ckpt: Checkpoint, learner: str | None = None,
-                 deterministic: bool = False):
-        if learner is not None and learner not in ckpt.learner_names():
-            raise CheckpointError(f"{ckpt.path}: no learner {learner!r}; learners: "
-                                  f"{ckpt.learner_names()}")
-        self.ckpt, self.learner_name, self.deterministic = ckpt, learner, deterministic
-        obs = ckpt.meta["observation"]
-        self.kind, self.obs_dim = obs["kind"], int(obs["obs_dim"])
-        self.slots = (int(obs["max_walls"]), int(obs["max_buffs"]), int(obs["max_debuffs"]))
-        self.team_flags = bool(obs["team_flags"])
-        self.seat_learner = {int(k): v for k, v in obs["seat_learner"].items()}
-        self._learners: dict[str, Any] = {}
+    def __init__(self, observation: dict[str, Any], learner_names: list[str],
+                 learner: str | None = None, deterministic: bool = False,
+                 source: str = "policy"):
+        if learner is not None and learner not in learner_names:
+            raise CheckpointError(f"{source}: no learner {learner!r}; learners: "
+                                  f"{learner_names}")
+        self.source, self.names = source, list(learner_names)
+        self.learner_name, self.deterministic = learner, deterministic
+        self.kind, self.obs_dim = observation["kind"], int(observation["obs_dim"])
+        self.slots = (int(observation["max_walls"]), int(observation["max_buffs"]),
+                      int(observation["max_debuffs"]))
+        self.team_flags = bool(observation["team_flags"])
+        self.seat_learner = {int(k): v for k, v in observation["seat_learner"].items()}
+        self.n_tanks = int(observation["tanks"])
         self._builders: dict[tuple, Any] = {}
-        self.generator = torch.Generator().manual_seed(0)
+        self.rng = np.random.default_rng(0)
         self.learner: Any = None
         self.builder: Any = None
 
     def name_for_seat(self, seat: int) -> str:
         if self.learner_name is not None:
             return self.learner_name
-        return self.seat_learner.get(seat, self.ckpt.learner_names()[0])
+        return self.seat_learner.get(seat, self.names[0])
 
     def get_learner(self, name: str) -> Any:
-        if name not in self._learners:
-            self._learners[name] = self.ckpt.load_learner(name, weights_only=True)
-        return self._learners[name]
+        raise NotImplementedError
 
     def reset(self, match: Any, seat: int, seed: int | None = None) -> None:
         from alphatank.observe import ObservationBuilder, StateBatch
 
         self.learner = self.get_learner(self.name_for_seat(seat))
-        self.generator.manual_seed(0 if seed is None else int(seed) % (2**63))
+        self.rng = np.random.default_rng(seed)
         key = (match.cfg, tuple(match.teams), seat)
         if key not in self._builders:
             walls, buffs, debuffs = self.slots
             need = len(match.spec.wall_rects)
             if self.kind == "paper" and need > walls:
                 raise CheckpointError(
-                    f"{self.ckpt.path}: trained with room for {walls} wall rectangles in its "
+                    f"{self.source}: trained with room for {walls} wall rectangles in its "
                     f"'paper' observation; map {match.spec.name!r} has {need}")
             batch = StateBatch(match.cfg, match.n, 1, walls, buffs, debuffs)
             builder = ObservationBuilder(self.kind, batch, match.teams, [seat],
                                          team_flags=self.team_flags)
             if builder.layout.size != self.obs_dim:
                 raise CheckpointError(
-                    f"{self.ckpt.path}: expects {self.obs_dim} observation features "
-                    f"({self.kind}, {len(self.ckpt.scenario.seats)} tanks); seat {seat} of this "
-                    f"match ({match.n} tanks, teams {match.teams}) gives {builder.layout.size}")
+                    f"{self.source}: expects {self.obs_dim} observation features "
+                    f"({self.kind}, {self.n_tanks} tanks); seat {seat} of this match "
+                    f"({match.n} tanks, teams {match.teams}) gives {builder.layout.size}")
             self._builders[key] = builder
         self.builder = builder = self._builders[key]
         builder.batch.set_static(0, match)
@@ -314,7 +314,37 @@ class CheckpointPolicy:
             return NOOP.copy()
         self.builder.batch.gather(0, match)
         obs = self.builder.build()[0]
-        return self.learner.policy_actions(obs, self.deterministic, self.generator)[0]
+        return self.learner.policy_actions(obs, self.deterministic, self.rng)[0]
+
+
+class LivePolicy(NetworkPolicy):
+    """In-memory learners of a running training (videos, evaluation during training)."""
+
+    def __init__(self, learners: dict[str, Any], observation: dict[str, Any],
+                 learner: str | None = None, deterministic: bool = False):
+        super().__init__(observation, list(learners), learner, deterministic, "training")
+        self.learners = learners
+
+    def get_learner(self, name: str) -> Any:
+        return self.learners[name]
+
+
+class CheckpointPolicy(NetworkPolicy):
+    """A checkpoint's learners as a Policy (all weights loaded and checked up front)."""
+
+    def __init__(self, ckpt: Checkpoint, learner: str | None = None,
+                 deterministic: bool = False):
+        super().__init__(ckpt.meta["observation"], ckpt.learner_names(), learner,
+                         deterministic, str(ckpt.path))
+        self.ckpt = ckpt
+        wanted = [learner] if learner is not None else ckpt.learner_names()
+        self.learners = {name: ckpt.load_learner(name, weights_only=True) for name in wanted}
+
+    def get_learner(self, name: str) -> Any:
+        return self.learners[name]
+
+    def __repr__(self) -> str:
+        return f"CheckpointPolicy({str(self.ckpt.path)!r}, learners={list(self.learners)})"
 
 
 def load_policy(path: str | Path, learner: str | None = None,

@@ -34,15 +34,15 @@ class RunningMeanStd:
         self.count = total
 
     def state_dict(self) -> dict[str, torch.Tensor]:
-        return {"mean": torch.from_numpy(self.mean.copy()),
-                "var": torch.from_numpy(self.var.copy()),
+        return {"mean": torch.from_numpy(np.array(self.mean, dtype=np.float64)),
+                "var": torch.from_numpy(np.array(self.var, dtype=np.float64)),
                 "count": torch.tensor(self.count, dtype=torch.float64)}
 
     def load_state_dict(self, state: dict[str, torch.Tensor]) -> None:
         mean = state["mean"].numpy().astype(np.float64)
-        if mean.shape != self.mean.shape:
+        if mean.shape != np.shape(self.mean):
             raise ValueError(f"normaliser shape mismatch: saved {tuple(mean.shape)}, "
-                             f"expected {tuple(self.mean.shape)}")
+                             f"expected {np.shape(self.mean)}")
         self.mean = mean.copy()
         self.var = state["var"].numpy().astype(np.float64).copy()
         self.count = float(state["count"])

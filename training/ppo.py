@@ -14,10 +14,9 @@ from typing import Any
 
 import numpy as np
 import torch
-from torch import nn
-
 from alphatank.training.buffers import RolloutBuffer, compute_gae
 from alphatank.training.normalize import ObsNormalizer, ReturnNormalizer
+from torch import nn
 
 NVEC = (3, 3, 2)  # rotate, move, fire — the one action layout (RULES.md)
 MASKED_LOGIT = -1e8  # exp() of this is exactly 0 in float32, and 0 * it stays finite
@@ -117,6 +116,59 @@ def evaluate_actions(logits: torch.Tensor, actions: torch.Tensor, nvec: tuple[in
     return logprob, entropy
 
 
+class NumpyActorCritic:
+    """Float32 numpy copy of an :class:`ActorCritic` for rollout and play inference: a
+    handful of BLAS calls instead of dozens of small torch ops (the hot path). The first
+    actor and critic layers are fused into one matrix product. ``sync`` after updates."""
+
+    def __init__(self, net: ActorCritic):
+        self.sync(net)
+
+    def sync(self, net: ActorCritic) -> None:
+        def wt(layer: nn.Module) -> np.ndarray:
+            return np.ascontiguousarray(layer.weight.detach().numpy().T, dtype=np.float32)
+
+        def bias(layer: nn.Module) -> np.ndarray:
+            return layer.bias.detach().numpy().astype(np.float32)
+
+        a, c = net.actor, net.critic
+        self.hidden = a[0].out_features
+        self.w1 = np.ascontiguousarray(np.concatenate([wt(a[0]), wt(c[0])], axis=1))
+        self.b1 = np.concatenate([bias(a[0]), bias(c[0])])
+        self.wa2, self.ba2, self.wc2, self.bc2 = wt(a[2]), bias(a[2]), wt(c[2]), bias(c[2])
+        self.wa3, self.ba3, self.wc3, self.bc3 = wt(a[4]), bias(a[4]), wt(c[4]), bias(c[4])
+
+    def forward(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Logits (B, sum(nvec)) and values (B,) for normalised float32 observations."""
+        h = np.tanh(x @ self.w1 + self.b1)
+        ha = np.tanh(h[:, :self.hidden] @ self.wa2 + self.ba2)
+        hc = np.tanh(h[:, self.hidden:] @ self.wc2 + self.bc2)
+        return ha @ self.wa3 + self.ba3, (hc @ self.wc3 + self.bc3)[:, 0]
+
+
+def np_sample(logits: np.ndarray, nvec: tuple[int, ...], rng: np.random.Generator,
+              deterministic: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Numpy twin of :func:`sample_actions`: actions (B, len(nvec)) int64 and summed
+    log-probabilities (B,) float32, Gumbel-max sampling from ``rng``."""
+    b = logits.shape[0]
+    rows = np.arange(b)
+    actions = np.empty((b, len(nvec)), dtype=np.int64)
+    logprob = np.zeros(b, dtype=np.float32)
+    if not deterministic:
+        u = np.maximum(rng.random(logits.shape, dtype=np.float32), np.float32(1e-20))
+        scores = logits - np.log(-np.log(u))
+    off = 0
+    for i, n in enumerate(nvec):
+        part = logits[:, off:off + n]
+        top = part.max(axis=1)
+        lse = top + np.log(np.exp(part - top[:, None]).sum(axis=1))
+        a = (part if deterministic else scores[:, off:off + n]).argmax(axis=1)
+        actions[:, i] = a
+        logprob += part[rows, a] - lse
+        off += n
+    return actions, logprob
+
+
 class PPO:
     """One PPO learner controlling ``num_streams`` = num_envs x its seats.
 
@@ -136,7 +188,9 @@ class PPO:
         self.nvec = self.net.nvec
         self.optimizer = torch.optim.Adam(self.net.parameters(), lr=cfg.learning_rate,
                                           eps=cfg.adam_eps)
-        self.generator = torch.Generator().manual_seed(seed)
+        self.generator = torch.Generator().manual_seed(seed)  # minibatch order
+        self.np_rng = np.random.default_rng(seed)  # action sampling
+        self.mirror = NumpyActorCritic(self.net)
         self.obs_norm = ObsNormalizer(obs_dim, cfg.norm_obs, cfg.obs_clip)
         self.ret_norm = ReturnNormalizer(num_streams, cfg.gamma, cfg.norm_reward, cfg.reward_clip)
         self.buffer = RolloutBuffer(cfg.num_steps, num_streams, obs_dim, mask_dim)
@@ -145,23 +199,24 @@ class PPO:
 
     # ---- acting -----------------------------------------------------------------------
 
-    @torch.no_grad()
     def act(self, obs: np.ndarray, masks: np.ndarray | None = None) -> np.ndarray:
         """Sample actions (num_streams, 3) for raw observations and record the step."""
         buf = self.buffer
         t = buf.step
-        x = torch.from_numpy(self.obs_norm(obs, update=True))
-        mask = torch.from_numpy(np.asarray(masks, dtype=bool)) if masks is not None else None
-        actions, logprob = sample_actions(self.net.logits(x, mask), self.nvec, self.generator)
-        buf.obs[t] = x
-        buf.actions[t] = actions
-        buf.logprobs[t] = logprob
-        buf.values[t] = self.net.value(x)
-        if mask is not None and buf.masks is not None:
-            buf.masks[t] = mask
-        return actions.numpy()
+        x = self.obs_norm(obs, update=True)
+        logits, values = self.mirror.forward(x)
+        if masks is not None:
+            masks = np.asarray(masks, dtype=bool)
+            logits[~masks] = MASKED_LOGIT
+            if buf.masks is not None:
+                buf.masks[t] = torch.from_numpy(masks)
+        actions, logprob = np_sample(logits, self.nvec, self.np_rng)
+        buf.obs[t] = torch.from_numpy(x)
+        buf.actions[t] = torch.from_numpy(actions)
+        buf.logprobs[t] = torch.from_numpy(logprob)
+        buf.values[t] = torch.from_numpy(values)
+        return actions
 
-    @torch.no_grad()
     def observe(self, next_obs: np.ndarray, rewards: np.ndarray, terminated: np.ndarray,
                 truncated: np.ndarray, final_obs: np.ndarray | None = None,
                 active: np.ndarray | None = None) -> None:
@@ -181,8 +236,8 @@ class PPO:
         if boot.size:
             if final_obs is None:
                 raise ValueError("truncated streams need final_obs to bootstrap from")
-            x = torch.from_numpy(self.obs_norm(final_obs[boot]))
-            buf.bootstrap[t, torch.from_numpy(boot)] = self.net.value(x)
+            values = self.mirror.forward(self.obs_norm(final_obs[boot]))[1]
+            buf.bootstrap[t, torch.from_numpy(boot)] = torch.from_numpy(values)
         buf.step += 1
 
     @property
@@ -200,7 +255,7 @@ class PPO:
             frac = max(0.0, 1.0 - self.updates / self.total_updates)
             self.optimizer.param_groups[0]["lr"] = frac * cfg.learning_rate
         with torch.no_grad():
-            last_values = net.value(torch.from_numpy(self.obs_norm(next_obs)))
+            last_values = torch.from_numpy(self.mirror.forward(self.obs_norm(next_obs))[1])
             advantages, returns = compute_gae(buf.rewards, buf.values, buf.terminated,
                                               buf.truncated, buf.bootstrap, last_values,
                                               cfg.gamma, cfg.gae_lambda)
@@ -264,6 +319,7 @@ class PPO:
         explained = float("nan") if var_y == 0 else 1.0 - float((b_ret - b_values).var()) / var_y
         self.updates += 1
         buf.clear()
+        self.mirror.sync(net)
         out = {f"losses/{k}": float(np.mean(v)) for k, v in stats.items() if v}
         out.update({"losses/explained_variance": explained, "losses/epochs": float(epochs_run),
                     "charts/learning_rate": float(self.optimizer.param_groups[0]["lr"])})
@@ -271,28 +327,29 @@ class PPO:
 
     # ---- inference and persistence ------------------------------------------------------
 
-    @torch.no_grad()
     def policy_actions(self, obs: np.ndarray, deterministic: bool = False,
-                       generator: torch.Generator | None = None) -> np.ndarray:
-        """Actions for raw observations with frozen statistics (no rollout recording)."""
-        x = torch.from_numpy(self.obs_norm(obs))
-        actions, _ = sample_actions(self.net.logits(x), self.nvec, generator or self.generator,
-                                    deterministic)
-        return actions.numpy()
+                       rng: np.random.Generator | None = None) -> np.ndarray:
+        """Actions for raw observations (B, obs_dim) with frozen statistics and no
+        recording; ``rng`` (default: the learner's own) draws the samples."""
+        logits, _ = self.mirror.forward(self.obs_norm(np.atleast_2d(obs)))
+        return np_sample(logits, self.nvec, rng or self.np_rng, deterministic)[0]
 
     def state_dict(self) -> dict[str, Any]:
         return {"net": self.net.state_dict(), "optimizer": self.optimizer.state_dict(),
                 "obs_norm": self.obs_norm.state_dict(), "ret_norm": self.ret_norm.state_dict(),
                 "generator": self.generator.get_state(),
+                "np_rng": self.np_rng.bit_generator.state,
                 "updates": torch.tensor(self.updates)}
 
     def load_state_dict(self, state: dict[str, Any], weights_only: bool = False) -> None:
         """Restore a learner; ``weights_only`` restores just what inference needs."""
         self.net.load_state_dict(state["net"])
+        self.mirror.sync(self.net)
         self.obs_norm.load_state_dict(state["obs_norm"])
         if weights_only:
             return
         self.optimizer.load_state_dict(state["optimizer"])
         self.ret_norm.load_state_dict(state["ret_norm"])
         self.generator.set_state(state["generator"])
+        self.np_rng.bit_generator.state = state["np_rng"]
         self.updates = int(state["updates"])

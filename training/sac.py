@@ -16,11 +16,10 @@ import gymnasium as gym
 import numpy as np
 import torch
 import torch.nn.functional as F  # noqa: N812
-from torch import nn
-
 from alphatank.training.buffers import ReplayBuffer
 from alphatank.training.normalize import ObsNormalizer
 from alphatank.training.ppo import NVEC
+from torch import nn
 
 LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0
 LOG_2PI = math.log(2 * math.pi)
@@ -122,7 +121,7 @@ class SquashedGaussianActor(nn.Module):
         eps = torch.randn(mean.shape, generator=generator)
         u = mean + log_std.exp() * eps
         action = torch.sigmoid(u)
-        # log N(u) - log |d sigmoid/du| with d sigmoid/du = s (1 - s) = exp(-softplus(-u) - softplus(u))
+        # log N(u) - log|d sigmoid/du|, with d sigmoid/du = exp(-softplus(-u) - softplus(u))
         log_prob = (-0.5 * eps**2 - log_std - 0.5 * LOG_2PI
                     + F.softplus(-u) + F.softplus(u)).sum(-1)
         return action, log_prob
@@ -199,8 +198,9 @@ class SAC:
             if final_obs is None:
                 raise ValueError("ended streams need final_obs for their last transition")
             real_next = np.where(ended[:, None], final_obs, next_obs)
-        self.replay.add(self._obs, self._act, np.asarray(rewards, np.float32) * self.cfg.reward_scale,
-                        real_next, np.asarray(terminated, np.float32))
+        scaled = np.asarray(rewards, np.float32) * self.cfg.reward_scale
+        self.replay.add(self._obs, self._act, scaled, real_next,
+                        np.asarray(terminated, np.float32))
         self.transitions += self.num_streams
         if self.transitions >= self.cfg.update_after:
             self.since_update += self.num_streams
@@ -264,21 +264,25 @@ class SAC:
                 for p, tp in zip(net.parameters(), tgt.parameters(), strict=True):
                     tp.mul_(1.0 - cfg.tau).add_(p, alpha=cfg.tau)
         self.grad_steps += 1
-        return {"qf_loss": float(qf_loss) / 2, "actor_loss": float(actor_loss),
-                "alpha_loss": float(alpha_loss), "q_value": float(q1.mean()),
-                "entropy": float(-logp.mean())}
+        return {"qf_loss": float(qf_loss.detach()) / 2, "actor_loss": float(actor_loss.detach()),
+                "alpha_loss": float(alpha_loss.detach()), "q_value": float(q1.detach().mean()),
+                "entropy": float(-logp.detach().mean())}
 
     # ---- inference and persistence ------------------------------------------------------
 
     @torch.no_grad()
     def policy_actions(self, obs: np.ndarray, deterministic: bool = False,
-                       generator: torch.Generator | None = None) -> np.ndarray:
-        x = torch.from_numpy(self.obs_norm(obs))
+                       rng: np.random.Generator | None = None) -> np.ndarray:
+        """Discrete actions for raw observations (B, obs_dim), frozen statistics;
+        ``deterministic`` uses the mean action, else noise from ``rng``."""
+        x = torch.from_numpy(self.obs_norm(np.atleast_2d(obs)))
+        mean, log_std = self.actor(x)
         if deterministic:
-            cont = torch.sigmoid(self.actor(x)[0])
+            u = mean
         else:
-            cont = self.actor.sample(x, generator or self.generator)[0]
-        return continuous_to_discrete(cont.numpy(), self.nvec)
+            eps = (rng or self.rng).standard_normal(mean.shape, dtype=np.float32)
+            u = mean + log_std.exp() * torch.from_numpy(eps)
+        return continuous_to_discrete(torch.sigmoid(u).numpy(), self.nvec)
 
     def state_dict(self) -> dict[str, Any]:
         state = {"actor": self.actor.state_dict(), "q1": self.q1.state_dict(),
@@ -288,6 +292,7 @@ class SAC:
                  "actor_optimizer": self.actor_optimizer.state_dict(),
                  "log_alpha": self.log_alpha.detach().clone(),
                  "obs_norm": self.obs_norm.state_dict(), "generator": self.generator.get_state(),
+                 "np_rng": self.rng.bit_generator.state,
                  "counters": torch.tensor([self.transitions, self.since_update, self.updates,
                                            self.grad_steps])}
         if self.alpha_optimizer is not None:
@@ -306,12 +311,6 @@ class SAC:
         if self.alpha_optimizer is not None:
             self.alpha_optimizer.load_state_dict(state["alpha_optimizer"])
         self.generator.set_state(state["generator"])
+        self.rng.bit_generator.state = state["np_rng"]
         self.transitions, self.since_update, self.updates, self.grad_steps = (
             int(v) for v in state["counters"])
-
-    def rng_state(self) -> dict[str, Any]:
-        """numpy generator state (for exact resume; saved as JSON by the checkpoint)."""
-        return self.rng.bit_generator.state
-
-    def set_rng_state(self, state: dict[str, Any]) -> None:
-        self.rng.bit_generator.state = state

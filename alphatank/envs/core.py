@@ -25,7 +25,7 @@ import numpy as np
 from gymnasium import spaces
 
 from alphatank.match import Match
-from alphatank.observe import GlobalState, ObservationBuilder, StateBatch, slot_counts
+from alphatank.observe import OBS_KINDS, GlobalState, ObservationBuilder, StateBatch, slot_counts
 from alphatank.policy import NOOP, Policy
 from alphatank.rewards import RewardTracker
 from alphatank.scenarios import Scenario, ScenarioError, Seat, load_scenario, seat_policy
@@ -75,6 +75,8 @@ class MatchSet:
         self.reward_cfg = sc.reward_config(**dict(reward_overrides or {}))
         self.specs = sc.map_specs()
         self.kind = observation or sc.observation
+        if self.kind not in OBS_KINDS:
+            raise ScenarioError(f"observation {self.kind!r} is not one of {list(OBS_KINDS)}")
         self.teams = sc.teams
         self.n = n = len(sc.seats)
         self.driven = list(sc.learner_seats if driven is None else driven)
@@ -94,11 +96,8 @@ class MatchSet:
         self.weakness: float | None = None
         walls, buffs, debuffs = slot_counts(self.game, self.specs)
         self.batch = StateBatch(self.game, n, E, walls, buffs, debuffs)
-        try:
-            self.obs = ObservationBuilder(self.kind, self.batch, self.teams, self.driven,
-                                          team_flags=sc.team_mode)
-        except ValueError as exc:
-            raise ScenarioError(f"{sc.source}: observation: {exc}") from None
+        self.obs = ObservationBuilder(self.kind, self.batch, self.teams, self.driven,
+                                      team_flags=sc.team_mode)
         self.global_state = GlobalState(self.batch, self.teams)
         self.tracker = RewardTracker(self.reward_cfg, self.game, self.teams, E)
         self.matches: list[Match] = []
@@ -109,6 +108,19 @@ class MatchSet:
         self.joint = np.ones((E, n, 3), dtype=np.int64)
         self.driven_idx = np.array(self.driven, dtype=np.int64)
         self.team_of = np.array([sc.seats[s].team for s in self.driven], dtype=object)
+
+    # ---- pickling -------------------------------------------------------------------
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Everything but the live matches and their controllers: pymunk's solver caches
+        do not survive pickling bit for bit, so an unpickled set must be reset (episodes
+        are reproducible from their seeds)."""
+        state = self.__dict__.copy()
+        state["matches"] = []
+        state["controllers"] = [[None] * self.n for _ in range(self.num_envs)]
+        state["_bots"] = [{} for _ in range(self.num_envs)]
+        state["_played"] = [[] for _ in range(self.num_envs)]
+        return state
 
     # ---- spaces ---------------------------------------------------------------------
 
@@ -232,6 +244,8 @@ class MatchSet:
         """One tick in every env. ``actions``: validated int (E, L, 3). Returns the
         (E, len(TERMS), n) reward terms of this step and the (E, L, D) observations
         (internal buffers: copy what you keep)."""
+        if len(self.matches) < self.num_envs:
+            raise RuntimeError("step() before reset() (an unpickled env must be reset)")
         for e in range(self.num_envs):
             self._tick(e, actions[e])
         terms = self.tracker.step(slice(None), self.batch, self.matches, self.joint)

@@ -86,7 +86,7 @@ class TankBattleEnv(gym.Env):
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
         if not self.core.matches:
-            raise RuntimeError("step() before reset()")
+            raise RuntimeError("step() before reset() (an unpickled env must be reset)")
         m = self.core.matches[0]
         if m.done:
             raise RuntimeError("step() after the episode ended; call reset()")
@@ -111,6 +111,11 @@ class TankBattleEnv(gym.Env):
             from alphatank.render import Renderer
             self._renderer = Renderer(self.render_mode, fps=self.metadata["render_fps"])
         return self._renderer.render(self.core.matches[0])
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_renderer"] = None
+        return state
 
     def close(self) -> None:
         if self._renderer is not None:

@@ -1,0 +1,171 @@
+"""Checkpoints: atomic save, Policy in any seat, exact resume, clear errors on bad files."""
+
+import dataclasses
+import json
+import shutil
+
+import numpy as np
+import pytest
+import torch
+
+from alphatank.envs.core import MatchSet
+from alphatank.policy import Policy
+from alphatank.scenarios import parse_scenario
+from alphatank.training.checkpoint import CheckpointError, load_checkpoint, load_policy
+from alphatank.training.presets import LearnerSpec, TrainConfig
+from alphatank.training.ppo import PPOConfig
+from alphatank.training.runner import Trainer, resume_trainer
+from alphatank.training.sac import SACConfig
+
+torch.set_num_threads(1)
+
+PPO_TINY = PPOConfig(num_steps=16, update_epochs=2, num_minibatches=2)
+SAC_TINY = SACConfig(batch_size=32, start_steps=32, update_after=32, update_every=16,
+                     buffer_size=4096, hidden=32)
+E = 4
+ITER = 16 * E  # env steps per iteration
+
+
+def tiny_config(name: str, iterations: int, **kw) -> TrainConfig:
+    base = dict(name=name, scenario="vs_aggressive", total_steps=iterations * ITER,
+                num_envs=E, num_workers=1, seed=3, wandb="disabled", checkpoint_every=2,
+                game={"max_steps": 40}, learners=(LearnerSpec("ppo", "ppo", (0,), ppo=PPO_TINY),))
+    base.update(kw)
+    return TrainConfig(**base)
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory):
+    run = tmp_path_factory.mktemp("runs") / "tiny"
+    Trainer(tiny_config("tiny", 3), run, progress=False).train()
+    return run
+
+
+def test_save_layout_is_complete_and_atomic(trained):
+    ckpts = sorted(p.name for p in (trained / "checkpoints").iterdir())
+    assert ckpts == [f"step_{2 * ITER:010d}", f"step_{3 * ITER:010d}"]  # every 2 + final
+    assert (trained / "latest").read_text().strip() == f"checkpoints/step_{3 * ITER:010d}"
+    ck = load_checkpoint(trained)  # run dir resolves to the latest save
+    assert ck.meta["progress"]["global_step"] == 3 * ITER
+    assert set(ck.meta["files"]) == {"ppo.pt"}
+    assert ck.scenario.name == "vs_aggressive" and ck.train_config.num_envs == E
+    state = torch.load(ck.path / "ppo.pt", weights_only=True)
+    assert {"net", "optimizer", "obs_norm", "ret_norm", "generator"} <= set(state)
+    assert state["obs_norm"]["count"] > 3 * ITER - 1  # the normaliser is saved
+    assert not [p for p in (trained / "checkpoints").iterdir() if p.name.startswith(".")]
+
+
+def test_checkpoint_is_a_policy_in_any_seat(trained):
+    pol = load_policy(trained)
+    assert isinstance(pol, Policy)
+    for seat in (0, 1):  # trained in seat 0; also plays seat 1 against the bot
+        seats = [{"team": "A", "controller": "bot", "bot": "aggressive"},
+                 {"team": "B", "controller": "bot", "bot": "aggressive"}]
+        seats[seat] = {"team": "AB"[seat], "controller": "learner"}
+        sc = parse_scenario({"name": "t", "map": "open", "seats": seats})
+        core = MatchSet(sc, 1, driven=[], seat_policies={seat: pol})
+        core.reset_env(0, 11)
+        m = core.matches[0]
+        for _ in range(60):
+            if m.done:
+                break
+            core.step(np.zeros((1, 0, 3), dtype=np.int64))
+        assert m.tick > 0
+    # a scenario seat of controller "checkpoint" loads it by path
+    sc = parse_scenario({"name": "t", "map": "open", "seats": [
+        {"team": "A", "controller": "checkpoint", "path": str(trained)},
+        {"team": "B", "controller": "bot", "bot": "aggressive", "weakness": 0.0}]})
+    core = MatchSet(sc, 1, driven=[])
+    core.reset_env(0, 5)
+    a = core.controllers[0][0].act(core.matches[0], 0)
+    assert a.shape == (3,) and a.dtype == np.int64
+
+
+def test_checkpoint_policy_rejects_a_match_it_cannot_observe(trained):
+    pol = load_policy(trained)
+    sc = parse_scenario({"name": "t", "map": "arena4", "seats": [
+        {"team": "A", "controller": "learner"}, {"team": "A", "controller": "bot", "bot": "random"},
+        {"team": "B", "controller": "bot", "bot": "random"}]})
+    core = MatchSet(sc, 1, driven=[], seat_policies={0: pol})
+    with pytest.raises(CheckpointError, match="observation features|wall rectangles"):
+        core.reset_env(0, 1)
+
+
+def test_resume_continues_exactly_like_an_uninterrupted_run(tmp_path):
+    spec_sac = LearnerSpec("sac", "sac", (1,), sac=SAC_TINY)
+    spec_ppo = LearnerSpec("ppo", "ppo", (0,), ppo=PPO_TINY)
+    cfg = tiny_config("pair", 4, scenario="pair", learners=(spec_ppo, spec_sac),
+                      game={"max_steps": 30})
+    full = Trainer(cfg, tmp_path / "full", progress=False)
+    full.train()
+    half = Trainer(dataclasses.replace(cfg, total_steps=2 * ITER), tmp_path / "half",
+                   progress=False)
+    half.train()
+    resumed = resume_trainer(tmp_path / "half", progress=False, total_steps=4 * ITER)
+    assert resumed.global_step == 2 * ITER and resumed.iteration == 2
+    resumed.train()
+    # the update right after resuming (iteration 3) and the one after are identical
+    assert resumed.history[0]["step"] == full.history[2]["step"]
+    for key in ("losses/policy_loss/ppo", "losses/value_loss/ppo", "losses/qf_loss/sac"):
+        assert resumed.history[0][key] == full.history[2][key], key
+    for name in ("ppo", "sac"):
+        a, b = full.learners[name].state_dict(), resumed.learners[name].state_dict()
+        net = "net" if name == "ppo" else "actor"
+        for k in a[net]:
+            assert torch.equal(a[net][k], b[net][k]), (name, k)
+    assert len(resumed.learners["sac"].replay) == len(full.learners["sac"].replay)
+
+
+def _copy(trained, tmp_path):
+    dst = tmp_path / "ck"
+    shutil.copytree(load_checkpoint(trained).path, dst)
+    return dst
+
+
+def test_corrupt_checkpoint_file_gives_a_clear_error(trained, tmp_path):
+    ck = _copy(trained, tmp_path)
+    data = bytearray((ck / "ppo.pt").read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    (ck / "ppo.pt").write_bytes(bytes(data))
+    with pytest.raises(CheckpointError, match=r"ppo\.pt: corrupt or truncated"):
+        load_policy(ck)
+
+
+def test_truncated_checkpoint_without_checksum_gives_a_clear_error(trained, tmp_path):
+    ck = _copy(trained, tmp_path)
+    meta = json.loads((ck / "meta.json").read_text())
+    meta["files"] = {}
+    (ck / "meta.json").write_text(json.dumps(meta))
+    data = (ck / "ppo.pt").read_bytes()
+    (ck / "ppo.pt").write_bytes(data[: len(data) // 3])
+    with pytest.raises(CheckpointError, match=r"ppo\.pt: cannot be loaded"):
+        load_policy(ck)
+
+
+def test_truncated_meta_and_missing_files_are_named(trained, tmp_path):
+    ck = _copy(trained, tmp_path)
+    text = (ck / "meta.json").read_text()
+    (ck / "meta.json").write_text(text[: len(text) // 2])
+    with pytest.raises(CheckpointError, match=r"meta\.json: invalid JSON"):
+        load_checkpoint(ck)
+    (ck / "meta.json").write_text(text)
+    (ck / "ppo.pt").unlink()
+    with pytest.raises(CheckpointError, match=r"ppo\.pt: missing"):
+        load_policy(ck)
+    with pytest.raises(CheckpointError, match="no such checkpoint"):
+        load_checkpoint(tmp_path / "nope")
+    with pytest.raises(CheckpointError, match="not a checkpoint"):
+        load_checkpoint(tmp_path)
+
+
+def test_mismatched_checkpoint_gives_a_clear_error(trained, tmp_path):
+    ck = _copy(trained, tmp_path)
+    meta = json.loads((ck / "meta.json").read_text())
+    meta["observation"]["obs_dim"] += 7  # weights no longer fit the declared observation
+    (ck / "meta.json").write_text(json.dumps(meta))
+    with pytest.raises(CheckpointError, match=r"ppo\.pt: does not fit a ppo learner"):
+        load_policy(ck)
+    meta["version"] = 99
+    (ck / "meta.json").write_text(json.dumps(meta))
+    with pytest.raises(CheckpointError, match="version 99"):
+        load_checkpoint(ck)

@@ -1,0 +1,37 @@
+"""The core CLI verbs: maps and bench."""
+
+import json
+import subprocess
+import sys
+
+from alphatank.cli import main
+
+
+def test_maps_lists_shipped_maps(capsys):
+    assert main(["maps"]) == 0
+    out = capsys.readouterr().out
+    for name in ("open", "battlefield", "maze", "arena4", "arena8"):
+        assert name in out
+
+
+def test_maps_validates_files(tmp_path, capsys):
+    bad = tmp_path / "bad.txt"
+    bad.write_text("#####\n#1x2#\n#####\n")
+    assert main(["maps", "maze", str(bad)]) == 1
+    out = capsys.readouterr().out
+    assert "maps/maze.txt: ok" in out
+    assert f"error: {bad}:2:3: unknown character 'x'" in out
+
+
+def test_bench_reports_match_ticks(tmp_path, capsys):
+    report = tmp_path / "bench.json"
+    assert main(["bench", "--ticks", "200", "--repeats", "1", "--json", str(report)]) == 0
+    figures = json.loads(report.read_text())
+    assert figures["match_1v1_ticks_per_s"] > 0 and figures["match_4v4_ticks_per_s"] > 0
+    assert "1v1:" in capsys.readouterr().out
+
+
+def test_console_script_runs():
+    out = subprocess.run([sys.executable, "-m", "alphatank.cli", "--help"], capture_output=True,
+                         text=True, check=True)
+    assert "bench" in out.stdout and "maps" in out.stdout

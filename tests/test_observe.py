@@ -1,0 +1,199 @@
+"""Observations: index map, hand-placed tanks and bullets, rays against known walls."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from alphatank.envs.core import MatchSet
+from alphatank.observe import DEFAULT_RAY_LENGTH
+from alphatank.scenarios import parse_scenario
+
+W = H = 770.0
+DIAG = math.hypot(W, H)
+
+
+def duel(kind: str, map_name: str = "open", teams: tuple[str, ...] = ("A", "B")) -> MatchSet:
+    seats = [{"team": t, "controller": "learner"} for t in teams]
+    sc = parse_scenario({"name": "duel", "map": map_name, "observation": kind, "seats": seats})
+    ms = MatchSet(sc, 1)
+    ms.reset_env(0, 1)
+    return ms
+
+
+def place(ms: MatchSet, poses, bullets=()) -> np.ndarray:
+    """Put tanks at (x, y, angle) and bullets (owner, slot, x, y, vx, vy); return obs."""
+    m = ms.matches[0]
+    w = m.world
+    for i, (x, y, a) in enumerate(poses):
+        body = w.tank_bodies[i]
+        body.position, body.angle, body.velocity = (x, y), a, (0.0, 0.0)
+    w.bullet_active[:] = False
+    for owner, slot, x, y, vx, vy in bullets:
+        b = owner * w.capacity + slot
+        w.bullet_active[b] = True
+        w.bullet_bodies[b].position, w.bullet_bodies[b].velocity = (x, y), (vx, vy)
+    w.read_state()
+    ms.batch.gather(0, m)
+    return ms.obs.build()
+
+
+def feat(ms: MatchSet, obs: np.ndarray, name: str, learner: int = 0) -> float:
+    return float(obs[0, learner, ms.obs.layout[name]][0])
+
+
+@pytest.mark.parametrize("kind", ["paper", "egocentric"])
+def test_index_map_is_complete_and_contiguous(kind):
+    ms = duel(kind, "arena4", ("A", "A", "B", "B"))
+    lay = ms.obs.layout
+    assert lay.size == ms.obs_dim == ms.obs.out.shape[-1]
+    assert len(lay.fields) == lay.size == len(set(lay.fields))
+    for k, name in enumerate(lay.fields):
+        assert lay[name] == slice(k, k + 1)
+    blocks = lay.blocks()
+    assert lay[blocks[0]].start == 0 and lay[blocks[-1]].stop == lay.size
+    for a, b in zip(blocks, blocks[1:], strict=False):
+        assert lay[a].stop == lay[b].start
+    assert "tank[2].team" in lay and "bullet[0].team" in lay  # team scenario flags
+    assert all(b in lay.describe() for b in blocks)
+    with pytest.raises(KeyError, match="blocks"):
+        lay["self.colour"]
+    obs = ms.obs.build()
+    assert obs.dtype == np.float32 and np.abs(obs).max() <= 1.0
+
+
+def test_paper_features_equal_hand_computed_values():
+    ms = duel("paper")
+    x0, y0, a0 = 200.0, 300.0, 0.3
+    x1, y1, a1 = 500.0, 600.0, -2.0
+    obs = place(ms, [(x0, y0, a0), (x1, y1, a1)],
+                bullets=[(0, 2, 250.0, 310.0, 300.0, 0.0),  # own bullet in slot 2
+                         (1, 0, 480.0, 300.0, 0.0, -300.0),  # enemy bullets: far ...
+                         (1, 3, 220.0, 330.0, -300.0, 0.0)])  # ... and near
+    f = lambda name: feat(ms, obs, name)  # noqa: E731
+    assert f("self.x") == pytest.approx(2 * x0 / W - 1, abs=1e-6)
+    assert f("self.y") == pytest.approx(2 * y0 / H - 1, abs=1e-6)
+    assert f("self.sin") == pytest.approx(math.sin(a0), abs=1e-6)
+    assert f("self.cos") == pytest.approx(math.cos(a0), abs=1e-6)
+    assert f("self.alive") == 1.0
+    # Front-left corner (eq. 2): centre + R(angle) @ (w/2, -h/2).
+    cx = x0 + math.cos(a0) * 15 - math.sin(a0) * -12
+    cy = y0 + math.sin(a0) * 15 + math.cos(a0) * -12
+    assert f("self.c0x") == pytest.approx(2 * cx / W - 1, abs=1e-6)
+    assert f("self.c0y") == pytest.approx(2 * cy / H - 1, abs=1e-6)
+    assert f("tank[0].x") == pytest.approx(2 * x1 / W - 1, abs=1e-6)
+    assert f("tank[0].rel_x") == pytest.approx((x1 - x0) / W, abs=1e-6)
+    assert f("tank[0].rel_y") == pytest.approx((y1 - y0) / W, abs=1e-6)
+    assert f("tank[0].dist") == pytest.approx(math.hypot(x1 - x0, y1 - y0) / DIAG, abs=1e-6)
+    assert f("tank[0].sin") == pytest.approx(math.sin(a1), abs=1e-6)
+    # Own bullets stay in their slot; empty slots are all zero.
+    assert f("own_bullet[2].mask") == 1.0
+    assert f("own_bullet[2].x") == pytest.approx(2 * 250 / W - 1, abs=1e-6)
+    assert f("own_bullet[2].vx") == pytest.approx(1.0, abs=1e-6)
+    assert not obs[0, 0, ms.obs.layout["own_bullet[0]"]].any()
+    # Enemy bullets nearest first, with relative position and distance.
+    assert f("bullet[0].mask") == f("bullet[1].mask") == 1.0
+    assert f("bullet[0].rel_x") == pytest.approx((220 - x0) / W, abs=1e-6)
+    assert f("bullet[0].dist") == pytest.approx(math.hypot(20, 30) / DIAG, abs=1e-6)
+    assert f("bullet[0].vx") == pytest.approx(-1.0, abs=1e-6)
+    assert f("bullet[1].rel_x") == pytest.approx((480 - x0) / W, abs=1e-6)
+    assert f("bullet[1].vy") == pytest.approx(-1.0, abs=1e-6)
+    assert not obs[0, 0, ms.obs.layout["bullet[2]"]].any()
+    # Walls (static): the first merged rectangle of the open map is its top row.
+    assert f("wall[0].mask") == 1.0
+    assert [f(f"wall[0].{k}") for k in ("x0", "y0", "x1", "y1")] == pytest.approx(
+        [-1.0, -1.0, 1.0, 2 * 70 / H - 1], abs=1e-6)
+
+
+def test_zones_and_flags():
+    ms = duel("paper", "arena4")
+    m = ms.matches[0]
+    (br, bc), = m.buffs
+    bx, by = m.spec.cell_center((br, bc))
+    obs = place(ms, [(bx, by, 0.0), (100.0, 100.0, 0.0)])
+    m._update_zones(report=False)
+    ms.batch.gather(0, m)
+    obs = ms.obs.build()
+    assert feat(ms, obs, "buff[0].mask") == 1.0
+    assert feat(ms, obs, "buff[0].x") == pytest.approx(2 * bx / m.spec.width - 1, abs=1e-6)
+    assert feat(ms, obs, "zone.in_buff") == 1.0 and feat(ms, obs, "zone.in_debuff") == 0.0
+
+
+def test_team_flags_and_order_teammates_first():
+    ms = duel("paper", "arena4", ("A", "B", "A", "B"))
+    obs = ms.obs.build()
+    # Seat 0's others: seat 2 (mate), then seats 1 and 3.
+    assert [feat(ms, obs, f"tank[{k}].team") for k in range(3)] == [1.0, 0.0, 0.0]
+    xs = ms.matches[0].tank_xy[:, 0]
+    assert feat(ms, obs, "tank[0].x") == pytest.approx(2 * xs[2] / ms.matches[0].spec.width - 1,
+                                                       abs=1e-6)
+    assert [feat(ms, obs, f"tank[{k}].team", learner=1) for k in range(3)] == [1.0, 0.0, 0.0]
+
+
+def test_egocentric_frame_and_rays_against_known_walls():
+    ms = duel("egocentric")
+    # Facing +y (down the screen); the enemy 100 px to the tank's left on screen (+x).
+    obs = place(ms, [(385.0, 385.0, math.pi / 2), (485.0, 385.0, math.pi)],
+                bullets=[(1, 0, 385.0, 485.0, 0.0, -300.0)])
+    f = lambda name: feat(ms, obs, name)  # noqa: E731
+    assert f("tank[0].fwd") == pytest.approx(0.0, abs=1e-6)
+    assert f("tank[0].side") == pytest.approx(-100 / W, abs=1e-6)
+    assert f("tank[0].dist") == pytest.approx(100 / DIAG, abs=1e-6)
+    assert f("tank[0].sin") == pytest.approx(math.sin(math.pi / 2), abs=1e-6)  # heading diff
+    # Enemy bullet straight ahead, coming at the tank.
+    assert f("bullet[0].fwd") == pytest.approx(100 / W, abs=1e-6)
+    assert f("bullet[0].side") == pytest.approx(0.0, abs=1e-6)
+    assert f("bullet[0].v_fwd") == pytest.approx(-1.0, abs=1e-6)
+    # The open map's inner wall faces are at 70 and 700 px: 315 px from the centre.
+    R = ms.obs.rays
+    assert f("ray[0].dist") == pytest.approx(315 / DEFAULT_RAY_LENGTH, abs=1e-6)  # ahead
+    assert f(f"ray[{R // 4}].dist") == pytest.approx(315 / DEFAULT_RAY_LENGTH, abs=1e-6)
+    assert f(f"ray[{R // 8}].dist") == 1.0  # diagonal: beyond the ray length
+
+
+def test_rays_match_pymunk_segment_queries():
+    ms = duel("egocentric", "maze")
+    m = ms.matches[0]
+    rng = np.random.default_rng(3)
+    floor = m.spec.floor_cells()
+    L = 2000.0
+    for _ in range(20):
+        cell = floor[int(rng.integers(len(floor)))]
+        x, y = m.spec.cell_center(cell)
+        x += rng.uniform(-20, 20)
+        y += rng.uniform(-20, 20)
+        a = rng.uniform(-math.pi, math.pi)
+        ours = ms.obs.ray_distances(np.array([[[x, y]]]), np.array([[a]]))[0, 0]
+        ms.obs.ray_length = L
+        ours = ms.obs.ray_distances(np.array([[[x, y]]]), np.array([[a]]))[0, 0]
+        for r, d in enumerate(ours):
+            ang = a + 2 * math.pi * r / ms.obs.rays
+            end = (x + L * math.cos(ang), y + L * math.sin(ang))
+            hit = m.world.ray((x, y), end)
+            assert hit is not None
+            assert d == pytest.approx(hit.alpha * L, abs=1e-6)
+
+
+def test_global_state_layout():
+    ms = duel("paper", "arena4", ("A", "A", "B", "B"))
+    st = ms.global_state.build()[0]
+    lay = ms.global_state.layout
+    assert st.shape == (lay.size,) == ms.state_space().shape
+    m = ms.matches[0]
+    assert st[lay["tank[3].x"]][0] == pytest.approx(2 * m.tank_xy[3, 0] / m.spec.width - 1,
+                                                     abs=1e-6)
+    assert st[lay["tank[3].team"]][0] == 1.0 and st[lay["tank[0].team"]][0] == 0.0
+    assert st[lay["time.t"]][0] == 0.0
+
+
+def test_dead_tank_alive_flag():
+    ms = duel("paper")
+    m = ms.matches[0]
+    m.alive[1] = False
+    ms.batch.gather(0, m)
+    obs = ms.obs.build()
+    assert feat(ms, obs, "tank[0].alive") == 0.0 and feat(ms, obs, "self.alive") == 1.0
+    assert feat(ms, obs, "tank[0].alive", learner=1) == 1.0
+    assert feat(ms, obs, "self.alive", learner=1) == 0.0
