@@ -131,3 +131,46 @@ def _quick_trace(space: pymunk.Space, x: float, y: float, dx: float, dy: float,
             bounces_left -= 1
         length -= travel
         x, y = x + nx * SKIN, y + ny * SKIN
+
+
+def wall_faces(rects: np.ndarray, width: float, height: float) -> np.ndarray:
+    """Faces of axis-aligned wall rectangles (x0, y0, x1, y1), plus the grid's outer
+    boundary: (m, 5) rows (axis, c, lo, hi, side) for the line x = c (axis 0) or
+    y = c (axis 1) spanning [lo, hi] on the other axis, open towards ``side`` (+1/-1)."""
+    rects = np.asarray(rects, dtype=np.float64).reshape(-1, 4)
+    x0, y0, x1, y1 = rects.T
+    faces = [np.stack([np.zeros_like(x0), x0, y0, y1, -np.ones_like(x0)], axis=1),
+             np.stack([np.zeros_like(x0), x1, y0, y1, np.ones_like(x0)], axis=1),
+             np.stack([np.ones_like(x0), y0, x0, x1, -np.ones_like(x0)], axis=1),
+             np.stack([np.ones_like(x0), y1, x0, x1, np.ones_like(x0)], axis=1),
+             np.array([[0, 0.0, 0.0, height, 1], [0, width, 0.0, height, -1],
+                       [1, 0.0, 0.0, width, 1], [1, height, 0.0, width, -1]], dtype=np.float64)]
+    return np.concatenate(faces)
+
+
+def bank_angles(faces: np.ndarray, x: float, y: float, tx: float, ty: float, radius: float,
+                max_distance: float) -> np.ndarray:
+    """Headings of one-bounce shots from (x, y) to (tx, ty) off ``faces`` (from
+    :func:`wall_faces`), by mirroring the target in each face's contact line (offset by
+    the bullet ``radius``); sorted by path length, at most ``max_distance`` long. Pure
+    geometry: walls in the way are not checked (confirm with :func:`predict_path`)."""
+    axis, c, lo, hi, side = faces.T
+    line = c + side * radius  # where the bullet centre touches the face
+    vertical = axis == 0
+    p = np.where(vertical, x, y)  # coordinate across the line
+    q = np.where(vertical, y, x)  # coordinate along the line
+    tp = np.where(vertical, tx, ty)
+    tq = np.where(vertical, ty, tx)
+    ok = ((p - line) * side > 0) & ((tp - line) * side > 0)  # both on the open side
+    mp = 2 * line - tp  # mirrored target, across the line
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = (line - p) / (mp - p)
+    hit_q = q + u * (tq - q)  # where the bounce lands along the face
+    ok &= (hit_q >= lo - radius) & (hit_q <= hi + radius)
+    length = np.hypot(mp - p, tq - q)
+    ok &= length <= max_distance
+    dx = np.where(vertical, mp - p, tq - q)
+    dy = np.where(vertical, tq - q, mp - p)
+    idx = np.flatnonzero(ok)
+    idx = idx[np.argsort(length[idx], kind="stable")]
+    return np.arctan2(dy[idx], dx[idx])

@@ -8,8 +8,12 @@ import sys
 
 # verb -> module in alphatank.commands exposing add_arguments(parser) and run(args) -> int
 COMMANDS = {
+    "play": "Play interactively: humans, bots and checkpoints in any seat.",
+    "record": "Record a headless match to MP4/GIF (and a replay file).",
+    "replay": "Re-simulate, render or record a replay file.",
+    "arena": "Play every pair of bots on both sides; win/draw/loss matrix.",
     "bench": "Measure ticks/s of the match, env steps/s, bot and renderer cost.",
-    "maps": "List shipped maps or show/validate one.",
+    "maps": "List shipped maps or validate and print some.",
 }
 
 

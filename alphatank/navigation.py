@@ -13,13 +13,16 @@ as numpy arrays for bulk use:
 ``next_table``  (F, F) int32: first step from ``a`` towards ``b`` on a shortest path
                 (``a`` itself when ``a == b``, -1 when unreachable). Ties go to the
                 first neighbour in up, down, left, right order, so paths are deterministic.
+``rects``       (R, 4) float64: the map's merged wall rectangles (x0, y0, x1, y1) in px.
+
+Lazily computed and cached: ``visible_row(i, radius)`` (cells seen from cell ``i``),
+``waypoint_idx(i, j, radius)`` (string-pulled route target) and ``clearance_map(res)``
+(distance-to-wall raster, read with ``clearance(xy)``).
 
 Cell-based methods (``dist``, ``next_cell``, ``path``) take and return (row, col) tuples;
 ``*_idx`` variants work on floor indices. Line of sight is exact geometry against the map's
 wall rectangles grown by a radius (a disc swept along the segment), so it agrees with the
-physics' thick segment queries up to floating point. Tables that depend on a radius
-(``visible_row``, ``waypoint_idx``) are filled lazily, one row or entry at a time, and
-cached, so nothing is recomputed per tick.
+physics' thick segment queries up to floating point. Nothing is recomputed per tick.
 
 :func:`nav_grid` returns the NavGrid of a map, cached by the map's content (wall grid and
 cell size), so every bot, reward and overlay on the same map shares one.

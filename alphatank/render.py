@@ -46,6 +46,7 @@ WRECK: Color = (72, 72, 76)
 TEXT: Color = (235, 238, 242)
 DIM_TEXT: Color = (150, 156, 166)
 HUD_BG = (12, 14, 18, 190)
+PANEL_BG = (12, 14, 18, 228)
 
 
 def team_color(team_index: int) -> Color:
@@ -109,6 +110,7 @@ class Renderer:
         self.hud, self.explosions, self.fps, self.scale = hud, explosions, fps, scale
         self.labels = list(labels) if labels is not None else None
         self.caption = caption
+        self.banner = True  # winner banner at the end (play draws its own summary)
         self.screen: pygame.Surface | None = None
         self._clock: pygame.time.Clock | None = None
         self._bg_key: tuple[Any, ...] | None = None
@@ -119,8 +121,9 @@ class Renderer:
         self._texts: dict[tuple[str, Color, int], pygame.Surface] = {}
         self._world: object | None = None
         self._prev_alive: np.ndarray | None = None
-        self._booms: list[list[float]] = []  # x, y, frames elapsed
-        self._fx = pygame.Surface((160, 160), pygame.SRCALPHA)
+        self._booms: list[list[Any]] = []  # x, y, frames elapsed, puff/spark layout
+        self._fx = pygame.Surface((220, 220), pygame.SRCALPHA)
+        self._fx_rng = np.random.default_rng(0)  # explosion shapes (cosmetic only)
         self._band: pygame.Surface | None = None
         self._nav: Any = None
         self._nav_spec: object | None = None
@@ -219,22 +222,37 @@ class Renderer:
             out = self._texts[key] = font.render(s, True, color)
         return out
 
+    def _fit(self, s: str, color: Color, width: float) -> pygame.Surface:
+        """Text with its first word shortened until it fits ``width`` px."""
+        img = self.text(s, color)
+        head, _, tail = s.partition(" ")
+        while img.get_width() > width and len(head) > 1:
+            head = head[:-1]
+            img = self.text(f"{head} {tail}", color)
+        return img
+
     def panel(self, surf: pygame.Surface, lines: Sequence[tuple[str, Color]],
-              title: tuple[str, Color] | None = None) -> None:
-        """A centred translucent box with an optional big title and lines of text."""
-        rows = []
-        if title is not None:
-            rows.append(self.text(title[0], title[1], self._fsize * 2))
-        rows += [self.text(s, c) for s, c in lines]
+              title: tuple[str, Color] | None = None, footer: tuple[str, Color] | None = None,
+              align: str = "center") -> None:
+        """A centred box: an optional big title, lines of text (centred or, with
+        ``align="left"``, left-aligned as a block) and an optional centred footer."""
+        head = self.text(title[0], title[1], self._fsize * 2) if title else None
+        foot = self.text(*footer) if footer else None
+        rows = [self.text(s, c) for s, c in lines]
         pad = self._fsize
-        w = max(r.get_width() for r in rows) + 2 * pad
-        h = sum(r.get_height() + 4 for r in rows) + 2 * pad
+        all_rows = [r for r in (head, *rows, foot) if r is not None]
+        w = max(r.get_width() for r in all_rows) + 2 * pad
+        h = sum(r.get_height() + 4 for r in all_rows) + 2 * pad + (pad // 2 if foot else 0)
         box = pygame.Surface((w, h), pygame.SRCALPHA)
-        box.fill(HUD_BG)
+        box.fill(PANEL_BG)
         pygame.draw.rect(box, (*DIM_TEXT, 220), box.get_rect(), 2, border_radius=8)
         y = pad
-        for r in rows:
-            box.blit(r, ((w - r.get_width()) // 2, y))
+        block = max((r.get_width() for r in rows), default=0)
+        for r in all_rows:
+            if r is foot:
+                y += pad // 2
+            x = (w - block) // 2 if align == "left" and r in rows else (w - r.get_width()) // 2
+            box.blit(r, (x, y))
             y += r.get_height() + 4
         surf.blit(box, ((surf.get_width() - w) // 2, (surf.get_height() - h) // 2))
 
@@ -264,7 +282,11 @@ class Renderer:
         died = self._prev_alive & ~match.alive
         for i in np.flatnonzero(died):
             x, y = match.tank_xy[i]
-            self._booms.append([float(x), float(y), 0.0])
+            rng = self._fx_rng
+            layout = {"puffs": np.stack([rng.uniform(0, math.tau, 9), rng.uniform(0.2, 1.0, 9),
+                                         rng.uniform(0.6, 1.2, 9)], axis=1).tolist(),
+                      "sparks": rng.uniform(0, math.tau, 12).tolist()}
+            self._booms.append([float(x), float(y), 0.0, layout])
         self._prev_alive[:] = match.alive
 
     # ---- layers ---------------------------------------------------------------------
@@ -416,22 +438,36 @@ class Renderer:
         return self._nav
 
     def _draw_booms(self, surf: pygame.Surface) -> None:
-        duration = max(1.0, 0.7 * (self.fps or 30.0))
+        """Explosions: a flash, fireball puffs turning to smoke, sparks, a shock ring."""
+        duration = max(1.0, 0.8 * (self.fps or 30.0))
         fx = self._fx
         half = fx.get_width() / 2
         for boom in self._booms:
-            x, y, age = boom
+            x, y, age, layout = boom
             t = age / duration
-            fx.fill((0, 0, 0, 0))
             fade = 1.0 - t
-            pygame.draw.circle(fx, (255, 120, 30, int(200 * fade)), (half, half),
-                               12 + 50 * t ** 0.5)
-            pygame.draw.circle(fx, (255, 220, 90, int(230 * fade)), (half, half),
-                               8 + 30 * t ** 0.5)
-            pygame.draw.circle(fx, (255, 255, 235, int(255 * fade * fade)), (half, half),
-                               max(1.0, 10 * (1 - t)))
-            pygame.draw.circle(fx, (255, 170, 60, int(255 * fade)), (half, half),
-                               16 + 60 * t ** 0.5, 3)
+            grow = t ** 0.5
+            fx.fill((0, 0, 0, 0))
+            pygame.draw.circle(fx, (255, 210, 140, int(170 * fade)), (half, half),
+                               14 + 70 * grow, 2)
+            if t < 0.6:
+                for a in layout["sparks"]:
+                    dx, dy = math.cos(a), math.sin(a)
+                    r0, r1 = 10 + 70 * grow, 18 + 85 * grow
+                    pygame.draw.line(fx, (255, 230, 160, int(255 * (1 - t / 0.6))),
+                                     (half + dx * r0, half + dy * r0),
+                                     (half + dx * r1, half + dy * r1), 2)
+            pygame.draw.circle(fx, (240, 90, 20, int(150 * fade)), (half, half),
+                               14 + 40 * grow)
+            col = _fire_color(t)
+            for a, dist, size in layout["puffs"]:
+                d = dist * (6 + 30 * grow)
+                pygame.draw.circle(fx, (*col, int(240 * fade ** 0.6)),
+                                   (half + math.cos(a) * d, half + math.sin(a) * d),
+                                   size * (11 + 12 * t))
+            if t < 0.35:
+                pygame.draw.circle(fx, (255, 255, 240, int(255 * (1 - t / 0.35))), (half, half),
+                                   16 * (1 - t / 0.35) + 2)
             surf.blit(fx, (x - half, y - half))
             boom[2] += 1
         self._booms = [b for b in self._booms if b[2] < duration]
@@ -457,7 +493,7 @@ class Renderer:
                              border_radius=3)
             x += fs
             s = (f"{name} {alive}/{size} {hits}h" if compact
-                 else f"Team {name}  {alive}/{size} alive  {hits} hits")
+                 else f"Team {name}  {alive}/{size} alive  {plural(hits, 'hit')}")
             img = self.text(s, col if alive else DIM_TEXT)
             surf.blit(img, (x, 6))
             x += img.get_width() + fs
@@ -466,28 +502,29 @@ class Renderer:
                           DIM_TEXT)
         if x + clock.get_width() < w - 8:
             surf.blit(clock, (w - clock.get_width() - 8, 6))
-        # Bottom: per tank, its label and bullets left (filled pips) of its current limit.
+        # Bottom: per tank, its label and bullets left of its current limit: filled pips
+        # (hollow = in flight), or "label 4/6" where the pips do not fit.
         y = surf.get_height() - band_h
         slot = w / match.n
         pip = max(3, fs // 5)
+        cy = y + band_h / 2
         for i in range(match.n):
             x0 = 8 + i * slot
             col = team_color(int(match.team_index[i])) if match.alive[i] else DIM_TEXT
             label = self.labels[i] if self.labels and i < len(self.labels) else f"{i + 1}"
-            img = self.text(label, col)
-            surf.blit(img, (x0, y + 6))
             limit = match.bullet_limit(i)
             left = max(0, limit - int(match.bullets_alive[i])) if match.alive[i] else 0
-            room = slot - img.get_width() - 20
-            step = min(pip * 2.6, room / max(limit, 1))
-            cy = y + band_h / 2
+            img = self.text(label, col)
+            step = pip * 2.6
+            if img.get_width() + 8 + step * limit > slot - 12:
+                img = self._fit(f"{label} {left}/{limit}", col, slot - 12)
+                surf.blit(img, (x0, y + 6))
+                continue
+            surf.blit(img, (x0, y + 6))
             for k in range(limit):
                 cx = x0 + img.get_width() + 8 + pip + k * step
-                if k < left:
-                    pygame.draw.circle(surf, col, (cx, cy), pip)
-                else:
-                    pygame.draw.circle(surf, col, (cx, cy), pip, 1)
-        if match.done:
+                pygame.draw.circle(surf, col, (cx, cy), pip, 0 if k < left else 1)
+        if match.done and self.banner:
             self._draw_banner(surf, match)
 
     def _draw_banner(self, surf: pygame.Surface, match: Match) -> None:
@@ -500,7 +537,7 @@ class Renderer:
         if match.winner is None and match.terminated:
             why = "no tank left"
         self.panel(surf, [(f"{why} - {match.tick / match.cfg.tick_hz:.1f}s, "
-                           f"{int(match.score.sum())} hits", TEXT)], title=title)
+                           f"{plural(int(match.score.sum()), 'hit')}", TEXT)], title=title)
 
 
 def planned_path(policy: object, match: Match, seat: int) -> Sequence[tuple[int, int]] | None:
@@ -570,6 +607,18 @@ def draw_background(spec: Any, buffs: Iterable[tuple[int, int]],
         if c < cols - 1 and not walls[r, c + 1]:
             pygame.draw.line(bg, mix(WALL, (0, 0, 0), 0.3), (x1, y0), (x1, y1), 2)
     return bg
+
+
+def _fire_color(t: float) -> Color:
+    """Fireball colour over an explosion's life t in [0, 1]: yellow, orange, then smoke."""
+    if t < 0.4:
+        return mix((255, 220, 80), (245, 105, 20), t / 0.4)
+    return mix((245, 105, 20), (70, 70, 76), (t - 0.4) / 0.6)
+
+
+def plural(n: int, word: str) -> str:
+    """"1 hit", "2 hits"."""
+    return f"{n} {word}" if n == 1 else f"{n} {word}s"
 
 
 def _dashed(surf: pygame.Surface, col: Color, a: tuple[float, float],

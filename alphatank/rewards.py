@@ -68,11 +68,31 @@ def trajectory(d: float, radius: float, cfg: RewardConfig) -> tuple[float, float
     return 0.0, 0.0
 
 
-def bullet_progress(prev: np.ndarray, now: np.ndarray, valid: np.ndarray
-                    ) -> tuple[np.ndarray, np.ndarray]:
+def path_min_distance(path: np.ndarray, targets: np.ndarray) -> float:
+    """Closest approach of the polyline ``path`` (k, 2) to any of ``targets`` (m, 2).
+
+    Same result as :func:`alphatank.ballistics.path_min_distance`; a scalar loop, because
+    a shot's path has a handful of legs and a match a handful of tanks, where this is
+    several times cheaper than the array version (it runs on every shot)."""
+    best = math.inf
+    pts = path.tolist()
+    tgs = targets.tolist()
+    for (ax, ay), (bx, by) in zip(pts, pts[1:], strict=False):
+        dx, dy = bx - ax, by - ay
+        len2 = dx * dx + dy * dy
+        for tx, ty in tgs:
+            rx, ry = tx - ax, ty - ay
+            u = 0.0 if len2 == 0.0 else min(1.0, max(0.0, (rx * dx + ry * dy) / len2))
+            ex, ey = rx - u * dx, ry - u * dy
+            best = min(best, ex * ex + ey * ey)
+    return math.sqrt(best)
+
+
+def bullet_progress(prev: np.ndarray, now: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(closer, farther) masks of bullets whose distance to the nearest enemy fell / rose
-    since the previous tick; ``valid`` marks bullets alive on both ticks."""
-    return valid & (now < prev), valid & (now > prev)
+    since the previous tick. NaN marks "no distance" (bullet not alive on that tick, or no
+    live enemy), so fresh and finished bullets compare neither way."""
+    return now < prev, now > prev
 
 
 def streak(count: np.ndarray, condition: np.ndarray) -> np.ndarray:
@@ -121,18 +141,31 @@ def rotation(turned_deg: np.ndarray, cfg: RewardConfig) -> np.ndarray:
 
 # ---- tracker ------------------------------------------------------------------------
 
+def as_index(idx: np.ndarray) -> slice | np.ndarray:
+    """A slice for a contiguous ascending run of indices (basic indexing is several times
+    cheaper than fancy indexing on small arrays), else the array itself."""
+    idx = np.asarray(idx)
+    if idx.size and np.array_equal(idx, np.arange(idx[0], idx[0] + idx.size)):
+        return slice(int(idx[0]), int(idx[0]) + idx.size)
+    return idx
+
+
 class RewardTracker:
     """Per-tank counters of the stateful terms for ``num_envs`` matches of one scenario,
     and the per-step evaluation of every enabled term."""
 
     def __init__(self, cfg: RewardConfig, game: GameConfig, teams: Sequence[str],
-                 num_envs: int):
+                 num_envs: int, rewarded: Sequence[int] | None = None):
+        """``rewarded``: seats whose rewards are read (default all); the costly per-shot
+        and per-tank predictions (trajectory, aim streak) are skipped for the others."""
         self.cfg, self.game = cfg, game
         names = sorted(set(teams))
         self.team_index = np.array([names.index(t) for t in teams])
         n = self.n = len(teams)
         cap = game.bullet_capacity
         self.capacity = cap
+        self.rewarded = np.zeros(n, dtype=bool)
+        self.rewarded[list(range(n)) if rewarded is None else list(rewarded)] = True
         E = num_envs
         self.terms = np.zeros((E, len(TERMS), n))
         self.radius = hit_radius(game)
@@ -140,7 +173,12 @@ class RewardTracker:
         # enemy[b, j]: tank j is an enemy of bullet b's owner.
         self.enemy = self.team_index[owner][:, None] != self.team_index[None, :]
         self.foe = self.team_index[:, None] != self.team_index[None, :]  # (n, n)
-        self.bullet_prev = np.full((E, n * cap), np.inf)
+        # Bullet slots of rewarded seats (only their progress is scored), NaN = none.
+        self.rw_seats = np.flatnonzero(self.rewarded)
+        self.rw_bullets = (self.rw_seats[:, None] * cap + np.arange(cap)).reshape(-1)
+        self.rw_enemy = self.enemy[self.rw_bullets]  # (nr, n)
+        self._rw_b, self._rw_s = as_index(self.rw_bullets), as_index(self.rw_seats)
+        self.bullet_prev = np.full((E, len(self.rw_bullets)), np.nan)
         self.wall_count = np.zeros((E, n), dtype=np.int64)
         self.still_count = np.zeros((E, n), dtype=np.int64)
         self.last_cell = np.zeros((E, n, 2), dtype=np.int64)
@@ -158,7 +196,7 @@ class RewardTracker:
 
     def reset_env(self, e: int, match: Match) -> None:
         """Start env ``e``'s counters for a new episode of ``match``."""
-        self.bullet_prev[e] = np.inf
+        self.bullet_prev[e] = np.nan
         self.wall_count[e] = 0
         self.still_count[e] = 0
         self.last_cell[e] = (match.tank_xy // match.spec.cell).astype(np.int64)[:, ::-1]
@@ -224,6 +262,8 @@ class RewardTracker:
             terms[T["team_hit_penalty"]] = team
         if ev.fired and self.on_trajectory:
             for f in ev.fired:
+                if not self.rewarded[f.tank]:
+                    continue
                 th, td = trajectory(self._shot_distance(match, f.tank, f.bullet),
                                     self.radius, cfg)
                 terms[T["trajectory_hit"], f.tank] += th
@@ -234,7 +274,7 @@ class RewardTracker:
 
     def _shot_distance(self, match: Match, tank: int, b: int) -> float:
         """Closest approach of a just-fired bullet's predicted path to a live enemy."""
-        from alphatank.ballistics import path_min_distance, predict_path
+        from alphatank.ballistics import predict_path
         w = match.world
         if not w.bullet_active[b]:
             return math.inf  # hit or gone within its first tick: the hit term scores it
@@ -249,25 +289,28 @@ class RewardTracker:
         return path_min_distance(path, match.tank_xy[enemies])
 
     def _progress(self, sl: slice, batch: StateBatch, terms: np.ndarray) -> None:
-        """bullet_close / bullet_away: each own live bullet closer to / farther from its
-        nearest live enemy than on the previous tick. A slot is only ever re-fired after
-        a tick in which it was inactive (distance inf), so fresh bullets never compare."""
-        bxy, txy = batch.bullet_xy[sl], batch.tank_xy[sl]
-        d = bxy[:, :, None, :] - txy[:, None, :, :]  # (E, nb, n, 2)
-        dist = np.hypot(d[..., 0], d[..., 1])
-        ok = self.enemy[None] & batch.alive[sl][:, None, :]
-        now = np.where(ok, dist, np.inf).min(axis=-1)
-        act = batch.bullet_active[sl]
-        now[~act] = np.inf
+        """bullet_close / bullet_away: each live bullet of a rewarded seat closer to /
+        farther from its nearest live enemy than on the previous tick. A slot is only ever
+        re-fired after a tick in which it was inactive (NaN), so fresh bullets never
+        compare."""
         prev = self.bullet_prev[sl]
-        valid = np.isfinite(prev) & np.isfinite(now)
-        closer, farther = bullet_progress(prev, now, valid)
-        E = closer.shape[0]
-        terms[:, T["bullet_close"]] = (self.cfg.bullet_close
-                                       * closer.reshape(E, self.n, -1).sum(axis=-1))
-        terms[:, T["bullet_away"]] = (self.cfg.bullet_away
-                                      * farther.reshape(E, self.n, -1).sum(axis=-1))
-        self.bullet_prev[sl] = now
+        act = batch.bullet_active[sl][:, self._rw_b]
+        if not act.any():
+            prev[...] = np.nan
+            return
+        d = batch.bullet_xy[sl][:, self._rw_b, None, :] - batch.tank_xy[sl][:, None]
+        dist = np.hypot(d[..., 0], d[..., 1])  # (E, nr, n)
+        ok = self.rw_enemy & batch.alive[sl][:, None, :]
+        now = np.fmin.reduce(np.where(ok, dist, np.nan), axis=-1)
+        now[~act] = np.nan
+        closer, farther = bullet_progress(prev, now)
+        E, cap = closer.shape[0], self.capacity
+        seats = self._rw_s
+        terms[:, T["bullet_close"], seats] = (
+            self.cfg.bullet_close * closer.reshape(E, -1, cap).sum(axis=-1))
+        terms[:, T["bullet_away"], seats] = (
+            self.cfg.bullet_away * farther.reshape(E, -1, cap).sum(axis=-1))
+        prev[...] = now
 
     def _rotation(self, sl: slice, batch: StateBatch, terms: np.ndarray) -> None:
         cfg = self.cfg
@@ -297,10 +340,10 @@ class RewardTracker:
 
     def _aimed(self, match: Match) -> np.ndarray:
         """Per tank: does a bullet fired now have a predicted path through an enemy?"""
-        from alphatank.ballistics import path_min_distance, predict_path
+        from alphatank.ballistics import predict_path
         out = np.zeros(self.n, dtype=bool)
         w = match.world
-        for i in np.flatnonzero(match.alive):
+        for i in np.flatnonzero(match.alive & self.rewarded):
             enemies = match.alive & self.foe[i]
             if enemies.any():
                 mx, my = w.muzzle(int(i))

@@ -13,6 +13,7 @@ Bullet slot ``b`` belongs to tank ``b // capacity``.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -293,8 +294,9 @@ class World:
 
 
 def first_wall_hit(space: pymunk.Space, x0: float, y0: float, x1: float, y1: float,
-                   radius: float) -> pymunk.SegmentQueryInfo | None:
-    """First wall touched by a circle swept from (x0, y0) to (x1, y1).
+                   radius: float, skip: Sequence[pymunk.Shape] = ()
+                   ) -> pymunk.SegmentQueryInfo | None:
+    """First wall touched by a circle swept from (x0, y0) to (x1, y1), ignoring ``skip``.
 
     Space-level thick segment queries test the thin segment against shape bounding boxes
     and miss walls only the circle's rim reaches, so gather candidates with a bounding-box
@@ -304,6 +306,8 @@ def first_wall_hit(space: pymunk.Space, x0: float, y0: float, x1: float, y1: flo
                    max(x0, x1) + radius, max(y0, y1) + radius)
     best = None
     for shape in space.bb_query(bb, WALLS_ONLY):
+        if shape in skip:
+            continue
         q = shape.segment_query((x0, y0), (x1, y1), radius)
         if q is not None and (best is None or q.alpha < best.alpha):
             best = q
@@ -319,26 +323,31 @@ def trace(space: pymunk.Space, x: float, y: float, dx: float, dy: float, length:
     Returns the end position and direction, the centre at each ricochet, and whether the
     bullet died on a wall contact with no bounces left (it then ends at that contact).
     The physics and the ricochet predictor both use this, so they agree exactly.
+    A circle that starts overlapping a wall it is moving away from just leaves it.
     """
     points: list[tuple[float, float]] = []
+    leaving: list[pymunk.Shape] = []  # walls overlapped at the start and moved away from
     while True:
-        q = first_wall_hit(space, x, y, x + dx * length, y + dy * length, radius)
+        q = first_wall_hit(space, x, y, x + dx * length, y + dy * length, radius, leaving)
         if q is None:
             return x + dx * length, y + dy * length, dx, dy, points, False
         nx, ny = q.normal  # out of the wall, toward the bullet
+        vn = dx * nx + dy * ny
+        if vn >= 0:
+            leaving.append(q.shape)
+            continue
         travel = length * q.alpha
         x, y = x + dx * travel, y + dy * travel
         if bounces_left == 0:
             return x, y, dx, dy, points, True
-        vn = dx * nx + dy * ny
-        if vn < 0:
-            dx, dy = dx - 2 * vn * nx, dy - 2 * vn * ny
-            norm = math.hypot(dx, dy)
-            dx, dy = dx / norm, dy / norm
-            points.append((x, y))
-            bounces_left -= 1
+        dx, dy = dx - 2 * vn * nx, dy - 2 * vn * ny
+        norm = math.hypot(dx, dy)
+        dx, dy = dx / norm, dy / norm
+        points.append((x, y))
+        bounces_left -= 1
         length -= travel
         x, y = x + nx * SKIN, y + ny * SKIN
+        leaving.clear()
 
 
 def _bullet_wall(arbiter: pymunk.Arbiter, space: pymunk.Space, world: World) -> None:

@@ -65,6 +65,7 @@ class Bot:
         self.hit_radius = cfg.tank_height / 2 + cfg.bullet_radius
         self.muzzle_offset = cfg.tank_width / 2 + cfg.bullet_radius + 0.5
         self.shot_range = cfg.bullet_max_distance
+        self._foes = [int(k) for k in np.flatnonzero(match.team_index != match.team_index[seat])]
         self._route: tuple[int, int] | None = None
         self._stuck_since = -1
         self._stuck_pose = (0.0, 0.0, 0.0)
@@ -149,16 +150,21 @@ class Bot:
         gx, gy = nav.centers[me]
         return float(gx), float(gy)
 
-    def enemies(self, match: Match, seat: int) -> np.ndarray:
-        """Indices of live tanks on other teams."""
-        return np.flatnonzero(match.alive & (match.team_index != match.team_index[seat]))
+    def enemies(self, match: Match, seat: int) -> list[int]:
+        """Live tanks on other teams (a handful: plain Python is cheapest)."""
+        alive = match.alive
+        return [k for k in self._foes if alive[k]]
 
-    def nearest(self, match: Match, seat: int, tanks: np.ndarray) -> int:
+    def nearest(self, match: Match, seat: int, tanks: list[int]) -> int:
         """Tank in ``tanks`` nearest in straight-line distance (-1 if none)."""
-        if tanks.size == 0:
-            return -1
-        d = match.tank_xy[tanks] - match.tank_xy[seat]
-        return int(tanks[int(np.argmin((d * d).sum(axis=1)))])
+        x, y = match.tank_xy[seat]
+        best, best_d = -1, math.inf
+        for k in tanks:
+            ex, ey = match.tank_xy[k]
+            d = (ex - x) ** 2 + (ey - y) ** 2
+            if d < best_d:
+                best, best_d = k, d
+        return best
 
     def can_fire(self, match: Match, seat: int) -> bool:
         """Whether a fire action this tick would spawn a bullet (cooldown ticks down
@@ -194,13 +200,12 @@ class Bot:
 
     @staticmethod
     def clear(match: Match, x0: float, y0: float, x1: float, y1: float, radius: float) -> bool:
-        """Quick thick line-of-sight test for decisions (pymunk's space-level segment
-        query: can miss a corner grazed only by the rim; firing is confirmed exactly)."""
+        """Quick thick line-of-sight test for aiming decisions (pymunk's space-level
+        segment query, ~3x cheaper than ``world.ray`` but it can miss a corner grazed only
+        by the rim, harmless at bullet radius). Driving legs use the exact ``world.ray``:
+        a tank-wide leg clips corners the thin segment's bounding box never reaches."""
         return match.world.space.segment_query_first((x0, y0), (x1, y1), radius,
                                                      WALLS_ONLY) is None
-
-    # Driving legs use the exact ``world.ray`` instead: a tank-wide leg clips corners the
-    # thin segment's bounding box never reaches.
 
     def shot_hits(self, match: Match, seat: int, heading: float | None = None,
                   hit_radius: float | None = None, exact: bool = True
@@ -265,22 +270,27 @@ class Evader:
         k = np.arange(1, horizon_ticks + 1, dtype=np.float64)  # ticks ahead
         rot = np.repeat(np.array([-1.0, 0.0, 1.0]), 3)  # candidate c = 3 * rot + move
         move = np.tile(np.array([-1.0, 0.0, 1.0]), 3)
-        # A tick's motion follows the heading at its start: (9, K) heading change.
-        self.turn = rot[:, None] * bot.turn_step * (k[None, :] - 1)
-        self.step = move[:, None] * cfg.tank_speed * self.dt  # (9, 1) px per tick
+        # Each candidate's path in the tank's own frame (heading 0), once: a tick's motion
+        # follows the heading at its start. At run time it is only rotated and shifted.
+        turn = rot[:, None] * bot.turn_step * (k[None, :] - 1)  # (9, K)
+        step = move[:, None] * cfg.tank_speed * self.dt
+        self.fwd = np.cumsum(np.cos(turn) * step, axis=1)  # (9, K) along the heading
+        self.side = np.cumsum(np.sin(turn) * step, axis=1)  # (9, K) clockwise of it
         self.times = k * self.dt  # (K,) seconds
+        self.raster = bot.nav.clearance_map()  # distance to walls, 5 px raster
+        self.res = 5.0
         # tanks whose bullets can hit this seat (own bullets never: grace, self_hit off)
         can_hit = match.world.can_hit[:, seat].copy()
         can_hit[seat] = False
         self.shooters = [int(k) for k in np.flatnonzero(can_hit)]
+        self.shooter_mask = can_hit
 
     def threats(self, match: Match, seat: int) -> np.ndarray:
         """Indices of bullets that can hit ``seat`` and pass within danger soon."""
         if not any(match.bullets_alive[k] for k in self.shooters):
             return _NONE
-        cap = match.capacity
-        active = np.concatenate([np.flatnonzero(match.bullet_active[k * cap:(k + 1) * cap])
-                                 + k * cap for k in self.shooters])
+        active = np.flatnonzero(match.bullet_active)
+        active = active[self.shooter_mask[match.bullet_owner[active]]]
         rel = match.bullet_xy[active] - match.tank_xy[seat]
         vel = match.bullet_vel[active]
         v2 = (vel * vel).sum(axis=1)
@@ -296,17 +306,23 @@ class Evader:
         choices, the one turning towards ``aim_err`` (radians to the bot's aim)."""
         x, y = match.tank_xy[seat]
         h = float(match.tank_angle[seat])
-        heads = h + self.turn  # (9, K)
-        px = x + np.cumsum(np.cos(heads) * self.step, axis=1)
-        py = y + np.cumsum(np.sin(heads) * self.step, axis=1)
+        c, s = math.cos(h), math.sin(h)
+        px = x + c * self.fwd - s * self.side  # (9, K)
+        py = y + s * self.fwd + c * self.side
         bxy = match.bullet_xy[threats]
         bv = match.bullet_vel[threats]
         bx = bxy[:, 0:1] + bv[:, 0:1] * self.times  # (T, K)
         by = bxy[:, 1:2] + bv[:, 1:2] * self.times
-        gap = np.hypot(px[:, None, :] - bx[None], py[:, None, :] - by[None])  # (9, T, K)
-        score = np.minimum(gap.min(axis=(1, 2)), 2 * self.danger)
-        wall = self.nav.clearance(np.stack([px, py], axis=-1)).min(axis=1)
-        score = score - np.where(wall < self.wall_margin, 2 * self.danger, 0.0)
-        score[3 * self.bot.steer(aim_err):3 * self.bot.steer(aim_err) + 3] += 0.5
-        c = int(np.argmax(score))
-        return c // 3, c % 3
+        dx = px[:, None, :] - bx[None]
+        dy = py[:, None, :] - by[None]
+        gap2 = (dx * dx + dy * dy).reshape(9, -1).min(axis=1)
+        score = np.sqrt(np.minimum(gap2, 4 * self.danger * self.danger))
+        h_r, w_r = self.raster.shape
+        r = np.minimum(np.maximum((py * (1 / self.res)).astype(np.intp), 0), h_r - 1)
+        q = np.minimum(np.maximum((px * (1 / self.res)).astype(np.intp), 0), w_r - 1)
+        wall = self.raster[r, q].min(axis=1)
+        score[wall < self.wall_margin] -= 2 * self.danger
+        turn = self.bot.steer(aim_err)
+        score[3 * turn:3 * turn + 3] += 0.5
+        best = int(np.argmax(score))
+        return best // 3, best % 3

@@ -46,15 +46,19 @@ class DefensiveBot(Bot):
         target = self.nearest(match, seat, self.enemies(match, seat))
         if target < 0:
             return NONE, STOP, 0
-        if self.evader is not None:
-            threats = self.evader.threats(match, seat)
-            if threats.size:
-                rot, move = self.evader.evade(match, seat, threats)
-                return rot, move, 0
         x, y = match.tank_xy[seat]
         ex, ey = match.tank_xy[target]
         heading = float(match.tank_angle[seat])
         dist = math.hypot(ex - x, ey - y)
+        tolerance = math.atan2(0.6 * self.hit_radius, max(dist, 1.0))
+        if self.evader is not None:
+            threats = self.evader.threats(match, seat)
+            if threats.size:  # dodge; shoot back if the dodge happens to line up
+                err = wrap(self.lead_angle(match, seat, target) - heading)
+                rot, move = self.evader.evade(match, seat, threats, err)
+                fire = (abs(err) < tolerance and dist <= self.shot_range
+                        and self.can_fire(match, seat) and self.clear_shot(match, seat, target))
+                return rot, move, int(fire)
         me = self.nav.node_of(x, y)
         goal = self.home(me)
         aim_err = wrap(self.lead_angle(match, seat, target) - heading)
@@ -71,9 +75,9 @@ class DefensiveBot(Bot):
                 rot = self.steer(aim_err)  # holding the zone: turn to the enemy
         fire = 0
         if self.can_fire(match, seat):
-            tolerance = math.atan2(0.6 * self.hit_radius, max(dist, 1.0))
             if abs(aim_err) < tolerance and self.clear_shot(match, seat, target):
                 fire = 1
             elif match.tick % 3 == seat % 3:  # bank shots: check the heading now and then
-                fire = int(self.shot_hits(match, seat, exact=False)[0])
+                fire = int(self.shot_hits(match, seat, exact=False)[0]
+                           and self.shot_hits(match, seat)[0])
         return rot, move, fire

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from alphatank.bots.base import NONE, STOP, Bot, Evader, wrap
 
-from alphatank.ballistics import path_distances, predict_path
+from alphatank.ballistics import bank_angles, path_distances, predict_path, wall_faces
 
 if TYPE_CHECKING:
     from alphatank.match import Match
@@ -22,9 +22,10 @@ class SmartBot(Bot):
     Movement: follows the map's BFS next-step tables (string-pulled into straight legs) to
     the nearest cell that sees the enemy's cell within shooting range, so no search runs
     per tick. Shooting: with a clear straight line it leads the target and fires when
-    aimed; otherwise (``ricochet=True``) it scans the headings it can turn to, one
-    predicted bullet path per tick, stops when a bank shot reaches the enemy, turns to it
-    and fires once the prediction from its actual heading still hits. Bullets about to
+    aimed; otherwise (``ricochet=True``) it tries one heading per tick with a predicted
+    bullet path: first the one-bounce mirror solutions off every wall face, then a sweep
+    of all headings it can turn to. It stops when a bank shot reaches the enemy, turns to
+    it and fires once the exact prediction from its actual heading still hits. Bullets about to
     hit it are dodged (``evade``). ``ricochet=False`` is the paper's weakened teacher.
     """
 
@@ -40,11 +41,13 @@ class SmartBot(Bot):
 
     def on_reset(self, match: Match, seat: int) -> None:
         self.evader = Evader(self, match, seat) if self.evade else None
-        self.direct_range = 0.85 * self.shot_range
+        self.direct_range = self.shot_range  # from the centre; bullets start at the muzzle
         self.lattice = max(1, round(math.tau / self.turn_step))  # reachable headings
         self._goals: dict[tuple[int, int], int] = {}
         self._search_key: tuple[int, int] | None = None
         self._search_k = 0
+        self._banks: list[float] = []
+        self.faces = wall_faces(self.nav.rects, match.spec.width, match.spec.height)
         self._best = (math.inf, 0.0)  # (closest approach px, heading)
         self._solution: float | None = None
 
@@ -73,7 +76,7 @@ class SmartBot(Bot):
 
     def decide(self, match: Match, seat: int) -> tuple[int, int, int]:
         foes = self.enemies(match, seat)
-        if foes.size == 0:
+        if not foes:
             return NONE, STOP, 0
         nav = self.nav
         x, y = match.tank_xy[seat]
@@ -85,19 +88,24 @@ class SmartBot(Bot):
             steps = nav.dist_table[me, node]
             steps = math.inf if steps < 0 else steps
             if target < 0 or steps < best:
-                target, enode, best = int(f), node, steps
+                target, enode, best = f, node, steps
         ex, ey = match.tank_xy[target]
         dist = math.hypot(ex - x, ey - y)
 
         if self.evader is not None:
             threats = self.evader.threats(match, seat)
-            if threats.size:
+            if threats.size:  # dodge; shoot back if the dodge happens to line up
                 self._solution = None
-                rot, move = self.evader.evade(match, seat, threats)
-                return rot, move, 0
+                err = wrap(self.lead_angle(match, seat, target) - heading)
+                rot, move = self.evader.evade(match, seat, threats, err)
+                fire = (abs(err) < math.atan2(0.8 * self.hit_radius, max(dist, 1.0))
+                        and dist <= self.direct_range and self.can_fire(match, seat)
+                        and self.clear_shot(match, seat, target))
+                return rot, move, int(fire)
 
         ready = self.can_fire(match, seat)
-        if dist <= self.direct_range and self.clear_shot(match, seat, target):
+        in_sight = self.clear_shot(match, seat, target)
+        if in_sight and dist <= self.direct_range:
             self._solution = None
             err = wrap(self.lead_angle(match, seat, target) - heading)
             tolerance = math.atan2(0.8 * self.hit_radius, max(dist, 1.0))
@@ -107,7 +115,8 @@ class SmartBot(Bot):
             return self.steer(err), STOP, int(fire)
 
         fire = 0
-        if self.ricochet and dist <= self.shot_range + self.muzzle_offset:
+        # Bank shots only round walls: with a clear line, a bounce is only a longer way.
+        if self.ricochet and not in_sight and dist <= self.shot_range + self.muzzle_offset:
             if self._solution is not None:
                 err = wrap(self._solution - heading)
                 if abs(err) <= 0.5 * self.turn_step + 1e-9:
@@ -134,17 +143,25 @@ class SmartBot(Bot):
 
     def _search(self, match: Match, seat: int, me: int, enode: int,
                 target_xy: tuple[float, float]) -> None:
-        """Evaluate one reachable heading for a bank shot (golden-ratio order over the
-        heading lattice); restarts when this tank or the target changes cell."""
+        """Evaluate one heading for a bank shot: first the one-bounce mirror solutions
+        (recomputed when this tank or the target changes cell), then a golden-ratio sweep
+        over every heading the tank can turn to (multi-bounce shots)."""
+        x, y = (float(v) for v in match.tank_xy[seat])
+        heading = float(match.tank_angle[seat])
         key = (me, enode)
         if key != self._search_key:
-            self._search_key, self._search_k = key, 0
+            self._search_key = key
             self._best = (math.inf, 0.0)
-        heading = float(match.tank_angle[seat])
-        j = int(self._search_k * GOLDEN * self.lattice) % self.lattice
-        self._search_k += 1
-        angle = heading + j * self.turn_step
-        x, y = match.tank_xy[seat]
+            self._banks = list(bank_angles(self.faces, x, y, target_xy[0], target_xy[1],
+                                           self.cfg.bullet_radius,
+                                           self.shot_range + self.muzzle_offset))
+        if self._banks:  # snap to the heading lattice the tank can actually reach
+            angle = heading + round(wrap(self._banks.pop(0) - heading) / self.turn_step) \
+                * self.turn_step
+        else:
+            j = int(self._search_k * GOLDEN * self.lattice) % self.lattice
+            self._search_k += 1
+            angle = heading + j * self.turn_step
         d = self.muzzle_offset
         path = predict_path(match.world, x + math.cos(angle) * d, y + math.sin(angle) * d, angle,
                             exact=False)

@@ -6,9 +6,17 @@ import zlib
 import numpy as np
 import pytest
 
-from alphatank.ballistics import path_distances, path_hits, path_min_distance, predict_path
+from alphatank.ballistics import (
+    bank_angles,
+    path_distances,
+    path_hits,
+    path_min_distance,
+    predict_path,
+    wall_faces,
+)
 from alphatank.config import GameConfig
 from alphatank.mapspec import load_map, shipped_maps
+from alphatank.navigation import nav_grid
 from alphatank.world import World
 
 
@@ -100,3 +108,24 @@ def test_path_hits_order_and_distance():
     # two targets on the same leg: the nearer along the leg wins
     two = np.array([[80.0, 3.0], [20.0, -4.0]])
     assert path_hits(path, two, 10.0) == 1
+
+
+def test_bank_angles_are_real_one_bounce_shots():
+    spec = load_map("battlefield")
+    cfg = GameConfig()
+    world = World(cfg, spec, np.array([(-500.0, -500.0, 0.0)]))
+    nav = nav_grid(spec)
+    faces = wall_faces(nav.rects, spec.width, spec.height)
+    rng = np.random.default_rng(1)
+    floor = spec.floor_cells()
+    found = 0
+    for _ in range(60):
+        s = np.array(spec.cell_center(floor[rng.integers(len(floor))]))
+        t = np.array(spec.cell_center(floor[rng.integers(len(floor))]))
+        if np.hypot(*(s - t)) < 1:
+            continue
+        for a in bank_angles(faces, *s, *t, cfg.bullet_radius, 400.0)[:3]:
+            path = predict_path(world, s[0], s[1], a, max_distance=400.0)
+            if len(path) >= 3 and path_distances(path[:3], t[None])[0] < 1e-6:
+                found += 1  # the mirror solution is exact when no wall is in the way
+    assert found >= 20

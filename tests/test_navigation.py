@@ -119,3 +119,16 @@ def test_visibility_row_and_waypoints():
     assert w in path[1:] and w != j
     assert maze.line_of_sight(tuple(maze.centers[i]), tuple(maze.centers[w]), 15.0)
     assert maze.waypoint_idx(i, j, 15.0) == w  # cached, same answer
+
+
+def test_clearance_map_distances():
+    spec = load_map("maze")
+    g = nav_grid(spec)
+    pts = np.array([[105.0, 105.0], [72.5, 105.0], [175.0, 105.0], [5.0, 5.0]])
+    clear = g.clearance(pts)
+    # (1,1) centre: 35 px to the surrounding walls (to raster resolution); next to a wall: ~0
+    assert clear[0] == pytest.approx(35.0, abs=5.0)
+    assert clear[1] < 5.0
+    assert clear[3] == 0.0  # inside a wall
+    assert g.clearance(np.array([[-50.0, 20.0]]))[0] == 0.0  # off the grid
+    assert g.clearance_map() is g.clearance_map()  # computed once

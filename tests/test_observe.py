@@ -30,6 +30,7 @@ def place(ms: MatchSet, poses, bullets=()) -> np.ndarray:
     for i, (x, y, a) in enumerate(poses):
         body = w.tank_bodies[i]
         body.position, body.angle, body.velocity = (x, y), a, (0.0, 0.0)
+        w.controls[i].position, w.controls[i].angle = (x, y), a
     w.bullet_active[:] = False
     for owner, slot, x, y, vx, vy in bullets:
         b = owner * w.capacity + slot
@@ -165,7 +166,6 @@ def test_rays_match_pymunk_segment_queries():
         x += rng.uniform(-20, 20)
         y += rng.uniform(-20, 20)
         a = rng.uniform(-math.pi, math.pi)
-        ours = ms.obs.ray_distances(np.array([[[x, y]]]), np.array([[a]]))[0, 0]
         ms.obs.ray_length = L
         ours = ms.obs.ray_distances(np.array([[[x, y]]]), np.array([[a]]))[0, 0]
         for r, d in enumerate(ours):

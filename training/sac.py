@@ -107,6 +107,11 @@ class SquashedGaussianActor(nn.Module):
                                    nn.Linear(hidden, hidden), nn.ReLU())
         self.mean = nn.Linear(hidden, act_dim)
         self.log_std = nn.Linear(hidden, act_dim)
+        # Start at std 1 before the squash: sigmoid(N(0, 1)) reaches every bin of eq. (33)
+        # (the usual init gives std ~0.2, i.e. actions in [0.4, 0.6]: rotate and move
+        # would never leave their middle bin).
+        nn.init.constant_(self.log_std.bias, math.atanh(-1 - 2 * LOG_STD_MIN /
+                                                        (LOG_STD_MAX - LOG_STD_MIN)))
 
     def forward(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         h = self.trunk(obs)
@@ -170,7 +175,7 @@ class SAC:
 
     @property
     def alpha(self) -> float:
-        return float(self.log_alpha.exp())
+        return float(self.log_alpha.detach().exp())
 
     # ---- acting -----------------------------------------------------------------------
 

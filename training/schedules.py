@@ -10,6 +10,7 @@ reward by :meth:`OpponentSchedule.victory_scale`.
 from __future__ import annotations
 
 import math
+import re
 from collections import deque
 from typing import Any, Protocol
 
@@ -156,10 +157,11 @@ class CycleSchedule(OpponentSchedule):
         return metrics
 
     def record(self, opponent: str, outcome: str) -> None:
-        for bot in self.pool:  # opponent labels may carry options, e.g. "smart(w=1)"
-            if opponent == bot or opponent.startswith(bot + "("):
+        """``opponent``: a bot name or an env label such as ``B:dodge(w=1)``."""
+        names = set(re.findall(r"([A-Za-z_]+)\(", opponent)) or {opponent}
+        for bot in self.pool:
+            if bot in names:
                 self.results[bot].append(1.0 if outcome == "win" else 0.0)
-                return
 
     def victory_scale(self, step: int) -> float:
         if not self.scale_victory:

@@ -32,6 +32,7 @@ from alphatank.render import (
     Renderer,
     open_window,
     parse_overlays,
+    plural,
     team_color,
 )
 from alphatank.replay import ReplayRecorder, save_replay
@@ -214,9 +215,9 @@ def summary_lines(match: Match, lineup_labels: Sequence[str], shots: np.ndarray
     out = []
     for i in range(match.n):
         state = "alive" if match.alive[i] else "destroyed"
-        out.append((f"{i + 1}. {lineup_labels[i]:>8} (team {match.teams[i]}): "
-                    f"{int(match.score[i])} hits, {int(shots[i])} shots, {state}",
-                    team_color(int(match.team_index[i]))))
+        out.append((f"{i + 1}. {lineup_labels[i]} (team {match.teams[i]}): "
+                    f"{plural(int(match.score[i]), 'hit')}, {plural(int(shots[i]), 'shot')}, "
+                    f"{state}", team_color(int(match.team_index[i]))))
     return out
 
 
@@ -241,12 +242,13 @@ class EpisodeResult:
 @dataclass
 class PlayReport:
     frames: int
-    seconds: float
+    seconds: float  # from the first frame shown to the last
     episodes: list[EpisodeResult]
 
     @property
     def fps(self) -> float:
-        return self.frames / self.seconds if self.seconds > 0 else 0.0
+        """Steady frame rate: frames shown per second after the first."""
+        return (self.frames - 1) / self.seconds if self.seconds > 0 else 0.0
 
 
 class PlaySession:
@@ -267,6 +269,7 @@ class PlaySession:
         self.tick_limit = tick_limit
         self.save_path = Path(save_replay) if save_replay else None
         self.renderer = Renderer(None, overlays=overlays, labels=lineup.labels, fps=fps)
+        self.renderer.banner = False  # the end screen shows the full summary instead
         self._scale = scale
         # P pauses unless a player fires with it (IJKL + P); Esc always pauses.
         self.pause_keys = {"escape"} | ({"p"} if not any(k.keys == "ijkl"
@@ -373,18 +376,19 @@ class PlaySession:
         r, m = self.renderer, self.match
         surf = r.draw(m, self.lineup.policies)
         if self.paused:
-            keys = [f"{kb.keys}: {kb.layout.describe()}" for kb in self.lineup.keyboards]
+            keys = [f"P{HUMAN_ORDER.index(kb.keys) + 1}: {kb.layout.describe()}"
+                    for kb in self.lineup.keyboards]
             pause = "P/Esc" if "p" in self.pause_keys else "Esc"
             r.panel(surf, [*((k, TEXT) for k in keys),
-                           (f"{pause} resume   R new match   Q quit", DIM_TEXT),
                            ("V aim line   T trajectory   B BFS path", DIM_TEXT)],
-                    title=("PAUSED", TEXT))
+                    title=("PAUSED", TEXT),
+                    footer=(f"{pause} resume   R new match   Q quit", DIM_TEXT))
         elif self.over:
             title_col = (team_color(m.team_names.index(m.winner)) if m.winner is not None
                          else TEXT)
-            r.panel(surf, [*summary_lines(m, self.lineup.labels, self.shots),
-                           ("R play again   Esc/Q quit", DIM_TEXT)],
-                    title=(result_title(m), title_col))
+            r.panel(surf, summary_lines(m, self.lineup.labels, self.shots),
+                    title=(result_title(m), title_col),
+                    footer=("R play again   Esc/Q quit", DIM_TEXT), align="left")
         return surf
 
     def run(self, max_frames: int | None = None,
@@ -406,8 +410,8 @@ class PlaySession:
             scale = min(1.0, fit) if info.current_w > 0 and info.current_h > 0 else 1.0
         size = (round(spec.width * scale), round(spec.height * scale))
         screen = open_window(size, caption)
-        clock = pygame.time.Clock()
-        frames, t0 = 0, time.perf_counter()
+        frames, first, last = 0, 0.0, 0.0
+        base, base_frame = 0.0, 0  # frame k is due at base + (k - base_frame) / fps
         try:
             while self.running and (max_frames is None or frames < max_frames):
                 if event_source is not None:
@@ -424,13 +428,20 @@ class PlaySession:
                 else:
                     screen.blit(surf, (0, 0))
                 pygame.display.flip()
+                last = time.perf_counter()
+                if not first:
+                    first = base = last
                 frames += 1
-                if self.realtime:
-                    clock.tick(self.fps)
+                if self.realtime:  # catch up after a slow frame; resync after a stall
+                    delay = base + (frames - base_frame) / self.fps - last
+                    if delay > 0:
+                        time.sleep(delay)
+                    elif delay < -0.25:
+                        base, base_frame = last, frames - 1
         finally:
             self.end_episode()
             pygame.display.quit()
-        return PlayReport(frames, time.perf_counter() - t0, self.episodes)
+        return PlayReport(frames, last - first, self.episodes)
 
 
 # ---- command line ----------------------------------------------------------------------

@@ -2,9 +2,9 @@
 a batched vector env for training. Importing this package registers the Gymnasium ids:
 
 * ``AlphaTank/TankBattle-v0``: any scenario (``scenario="vs_smart"`` by default);
-* ``AlphaTank/<Scenario>-v0`` for each shipped scenario with a learner seat, e.g.
-  ``AlphaTank/VsSmart-v0``, ``AlphaTank/TeamVsBot-v0`` (other learner seats of team
-  scenarios need ``seat_policies=`` or ``opponent_policy=``).
+* ``AlphaTank/<Scenario>-v0`` for each shipped scenario with exactly one learner seat,
+  e.g. ``AlphaTank/VsSmart-v0`` (others: ``TankBattle-v0`` with ``scenario=`` and
+  ``seat_policies=`` / ``opponent_policy=`` for the extra learner seats).
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ def register_envs() -> list[str]:
     if ids[0] not in gymnasium.registry:
         gymnasium.register(ids[0], entry_point=ENTRY_POINT, kwargs={"scenario": "vs_smart"})
     for name in shipped_scenarios():
-        if not load_scenario(name).learner_seats:
+        if len(load_scenario(name).learner_seats) != 1:
             continue
         gid = gym_id(name)
         if gid not in gymnasium.registry:

@@ -99,7 +99,8 @@ class MatchSet:
         self.obs = ObservationBuilder(self.kind, self.batch, self.teams, self.driven,
                                       team_flags=sc.team_mode)
         self.global_state = GlobalState(self.batch, self.teams)
-        self.tracker = RewardTracker(self.reward_cfg, self.game, self.teams, E)
+        self.tracker = RewardTracker(self.reward_cfg, self.game, self.teams, E,
+                                     rewarded=self.driven)
         self.matches: list[Match] = []
         self.map_index = np.zeros(E, dtype=np.int64)
         self.controllers: list[list[Policy | None]] = [[None] * n for _ in range(E)]
@@ -107,6 +108,8 @@ class MatchSet:
         self._played: list[list[tuple[int, Policy]]] = [[] for _ in range(E)]
         self.joint = np.ones((E, n, 3), dtype=np.int64)
         self.driven_idx = np.array(self.driven, dtype=np.int64)
+        cap = self.game.bullet_capacity
+        self._driven_bullets = np.isin(np.arange(n * cap) // cap, self.driven_idx)
         self.team_of = np.array([sc.seats[s].team for s in self.driven], dtype=object)
 
     # ---- pickling -------------------------------------------------------------------
@@ -257,12 +260,16 @@ class MatchSet:
 
     def _play_out(self, e: int) -> None:
         """Finish env ``e``'s match without its (dead) driven seats; adds the rewards of
-        the remaining ticks to this step's terms."""
+        the remaining ticks to this step's terms. Only ticks where a driven seat's bullet
+        still flies, and the last one, can reward a dead driven seat: only those are
+        scored."""
         acc = self.tracker.terms[e].copy()
         m, sl = self.matches[e], slice(e, e + 1)
+        mine = self._driven_bullets
         while not m.done:
             self._tick(e, None)
-            acc += self.tracker.step(sl, self.batch, self.matches, self.joint)[0]
+            if m.done or (m.bullet_active & mine).any():
+                acc += self.tracker.step(sl, self.batch, self.matches, self.joint)[0]
         self.tracker.terms[e] = acc
 
     def rewards(self, terms: np.ndarray) -> np.ndarray:

@@ -1,0 +1,202 @@
+"""Gymnasium and PettingZoo envs: API checkers, seeding, errors, pickling, SB3."""
+
+from __future__ import annotations
+
+import pickle
+
+import gymnasium
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+from pettingzoo.test import max_cycles_test, parallel_api_test, parallel_seed_test, render_test
+
+import alphatank.envs as envs
+from alphatank.envs import TankBattleEnv, parallel
+from alphatank.policy import NOOP
+from alphatank.scenarios import NoopPolicy, ScenarioError
+
+
+@pytest.mark.parametrize("render_mode", [None, "rgb_array", "human"])
+def test_gymnasium_check_env_every_render_mode(render_mode):
+    env = gymnasium.make("AlphaTank/TankBattle-v0", render_mode=render_mode)
+    check_env(env.unwrapped, skip_render_check=False)
+    if render_mode == "rgb_array":
+        env.reset(seed=0)
+        frame = env.render()
+        assert frame.dtype == np.uint8 and frame.shape == (770, 770, 3)
+    env.close()
+
+
+def test_no_render_mode_leaves_pygame_display_alone():
+    import pygame
+
+    env = gymnasium.make("AlphaTank/VsSmart-v0")
+    env.reset(seed=0)
+    env.step(env.action_space.sample())
+    assert not pygame.display.get_init()
+
+
+def test_registered_ids():
+    assert "AlphaTank/TankBattle-v0" in envs.GYM_IDS
+    assert envs.gym_id("vs_smart") == "AlphaTank/VsSmart-v0"
+    for gid in ("AlphaTank/VsRandom-v0", "AlphaTank/VsAggressive-v0", "AlphaTank/VsDodge-v0",
+                "AlphaTank/VsSmart-v0"):
+        assert gid in gymnasium.registry
+    env = gymnasium.make("AlphaTank/VsDefensive-v0")
+    assert env.unwrapped.core.game.bullet_max_distance == 800.0
+    assert "AlphaTank/BotTeams-v0" not in gymnasium.registry  # no learner seat
+    team = gymnasium.make("AlphaTank/TankBattle-v0", scenario="team_vs_bot",
+                          seat_policies={1: NoopPolicy()})
+    assert team.reset(seed=0)[0].shape == team.observation_space.shape
+
+
+def test_same_seed_same_trajectory():
+    def rollout(seed):
+        env = TankBattleEnv("vs_smart")
+        env.action_space.seed(seed)
+        obs, _ = env.reset(seed=seed)
+        out = [obs]
+        for _ in range(200):
+            obs, r, term, trunc, info = env.step(env.action_space.sample())
+            out.append(np.append(obs, r))
+            if term or trunc:
+                obs, _ = env.reset()
+        return np.concatenate(out)
+    assert np.array_equal(rollout(3), rollout(3))
+    assert not np.array_equal(rollout(3), rollout(4))
+
+
+def test_make_vec_sync_async_and_wrappers():
+    for mode in ("sync", "async"):
+        vec = gymnasium.make_vec("AlphaTank/VsRandom-v0", num_envs=2, vectorization_mode=mode)
+        obs, _ = vec.reset(seed=1)
+        assert obs.shape == (2, vec.single_observation_space.shape[0])
+        for _ in range(20):
+            obs, rew, term, trunc, _ = vec.step(vec.action_space.sample())
+        assert rew.shape == (2,) and obs.dtype == np.float32
+        vec.close()
+    env = gymnasium.wrappers.RecordEpisodeStatistics(
+        gymnasium.wrappers.TimeLimit(gymnasium.make("AlphaTank/VsRandom-v0"), 50))
+    env.reset(seed=0)
+    for _ in range(60):
+        *_, term, trunc, info = env.step(env.action_space.sample())
+        if term or trunc:
+            assert "episode" in info
+            break
+    else:
+        pytest.fail("TimeLimit did not end the episode")
+
+
+@pytest.mark.parametrize("bad,match", [
+    (np.array([1, 1]), "shape"),
+    (np.array([1, 3, 0]), "rotate 0..2"),
+    (np.array([-1, 1, 0]), "out of range"),
+    (np.array([1.0, 1.0, 0.0]), "integers"),
+    ("fire", "integers"),
+])
+def test_wrong_gym_actions_name_the_seat(bad, match):
+    env = TankBattleEnv("vs_random")
+    env.reset(seed=0)
+    with pytest.raises((ValueError, TypeError), match=match) as err:
+        env.step(bad)
+    if "range" in match:
+        assert "seat 0" in str(err.value)
+
+
+def test_gym_learner_seat_validation():
+    with pytest.raises(ScenarioError, match="seat_policies"):
+        TankBattleEnv("team_vs_bot")
+    with pytest.raises(ScenarioError, match="learner seats"):
+        TankBattleEnv("vs_smart", learner_seat=1)
+    with pytest.raises(ScenarioError, match="no learner|has none"):
+        TankBattleEnv("bot_teams")
+    env = TankBattleEnv("team_vs_bot", learner_seat=1, seat_policies={0: NoopPolicy()})
+    obs, info = env.reset(seed=0)
+    assert info["seat"] == 1 and obs.shape == env.observation_space.shape
+
+
+def test_dead_learner_match_is_played_out_with_its_outcome():
+    env = TankBattleEnv("mixed_teams", seat_policies={5: NoopPolicy()})
+    env.reset(seed=2)
+    m = env.match
+    m.alive[2] = False  # the learner dies (the rest of the match goes on)
+    m.world.remove_tank(2)
+    _, r, term, trunc, info = env.step(NOOP)
+    assert m.done and (term or trunc)
+    assert info["outcome"] in ("win", "loss", "draw")
+    assert info["winner"] == m.winner
+    if info["outcome"] == "win":
+        assert info["reward_terms"]["victory"] == 200.0
+
+
+def test_pettingzoo_parallel_api_seed_and_max_cycles():
+    parallel_api_test(parallel.parallel_env(scenario="team"), num_cycles=400)
+    parallel_api_test(parallel.parallel_env(scenario="mixed_teams"), num_cycles=200)
+    parallel_seed_test(lambda: parallel.parallel_env(scenario="team_vs_bot"), num_cycles=100)
+    max_cycles_test(parallel)
+
+
+def test_pettingzoo_render_test():
+    render_test(lambda render_mode=None: parallel.env(scenario="pair", render_mode=render_mode))
+
+
+def test_pettingzoo_spaces_state_and_dead_agents():
+    env = parallel.parallel_env(scenario="team")
+    obs, infos = env.reset(seed=0)
+    assert env.agents == ["tank_0", "tank_1", "tank_2", "tank_3"]
+    assert env.observation_space("tank_0") is env.observation_space("tank_0")
+    assert env.state().shape == env.state_space.shape
+    m = env.core.matches[0]
+    m.alive[1] = False
+    m.world.remove_tank(1)
+    _, rew, term, trunc, info = env.step({a: NOOP for a in env.agents})
+    assert term["tank_1"] and "tank_1" not in env.agents and not term["tank_0"]
+    with pytest.raises(ValueError, match="tank_1"):
+        env.step({a: NOOP for a in ["tank_0", "tank_1", "tank_2", "tank_3"]})
+    with pytest.raises(ValueError, match="no action for live agent"):
+        env.step({"tank_0": NOOP})
+    with pytest.raises(ValueError, match="tank_3.*out of range"):
+        env.step({"tank_0": NOOP, "tank_2": NOOP, "tank_3": np.array([1, 1, 2])})
+    kept = parallel.parallel_env(scenario="team", keep_dead_agents=True)
+    kept.reset(seed=0)
+    kept.core.matches[0].alive[1] = False
+    _, _, term, _, _ = kept.step({a: NOOP for a in kept.agents})
+    assert not term["tank_1"] and "tank_1" in kept.agents
+
+
+def test_pickle_round_trip():
+    env = parallel.parallel_env(scenario="team_vs_bot")
+    env.reset(seed=3)
+    for _ in range(10):
+        env.step({a: env.action_space(a).sample() for a in env.agents})
+    clone = pickle.loads(pickle.dumps(env))
+    assert clone.possible_agents == env.possible_agents and clone.agents == []
+    assert clone.observation_space("tank_0") == env.observation_space("tank_0")
+    o1, _ = env.reset(seed=9)
+    o2, _ = clone.reset(seed=9)
+    for _ in range(50):
+        assert all(np.array_equal(o1[a], o2[a]) for a in o1)
+        acts = {a: env.action_space(a).sample() for a in env.agents}
+        o1, r1, *_ = env.step(acts)
+        o2, r2, *_ = clone.step(acts)
+        assert r1 == r2
+        if not env.agents:
+            break
+    genv = TankBattleEnv("vs_random")
+    genv.reset(seed=1)
+    gclone = pickle.loads(pickle.dumps(genv))
+    with pytest.raises(RuntimeError, match="reset"):
+        gclone.step(NOOP)
+    assert np.array_equal(gclone.reset(seed=5)[0], genv.reset(seed=5)[0])
+
+
+def test_stable_baselines3_ppo_trains():
+    from stable_baselines3 import PPO
+
+    env = gymnasium.make("AlphaTank/VsRandom-v0")
+    model = PPO("MlpPolicy", env, n_steps=512, batch_size=128, n_epochs=2, seed=0,
+                device="cpu", verbose=0)
+    model.learn(total_timesteps=2048)
+    assert model.num_timesteps >= 2048
+    action, _ = model.predict(env.reset(seed=0)[0], deterministic=True)
+    assert env.action_space.contains(action)

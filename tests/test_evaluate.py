@@ -1,0 +1,118 @@
+"""Evaluation: exact counts, symmetric tables, Wilson intervals, Table-3 layout, CSV/JSON."""
+
+import argparse
+import csv
+import json
+
+import pytest
+import torch
+from alphatank.bots import make_bot
+from alphatank.training.evaluate import (
+    EvalResult,
+    evaluate_checkpoint,
+    evaluate_policies,
+    format_table,
+    write_csv,
+    write_json,
+)
+from alphatank.training.ppo import PPOConfig
+from alphatank.training.presets import LearnerSpec, TrainConfig
+from alphatank.training.runner import Trainer
+
+from alphatank.commands import eval as eval_cmd
+from alphatank.scenarios import parse_scenario
+from alphatank.stats import wilson_interval
+
+torch.set_num_threads(1)
+
+
+def duel(max_steps: int) -> object:
+    """Two learner seats on the open map (filled with policies by the tests)."""
+    return parse_scenario({"name": "duel", "map": "open", "game": {"max_steps": max_steps},
+                           "seats": [{"team": "A", "controller": "learner"},
+                                     {"team": "B", "controller": "learner"}]})
+
+
+def bots(w: float) -> dict:
+    return {0: make_bot("aggressive", weakness=w, seed=1),
+            1: make_bot("aggressive", weakness=w, seed=2)}
+
+
+def test_idle_bots_draw_every_game_exactly():
+    res = evaluate_policies(duel(20), bots(0.0), team="A", games=13, num_envs=4)
+    assert (res.wins, res.losses, res.draws, res.games) == (0, 0, 13, 13)
+    assert res.lengths == [20] * 13
+    assert res.interval == wilson_interval(0, 13)
+
+
+def test_bot_against_itself_gives_a_symmetric_table():
+    sc = duel(600)
+    a = evaluate_policies(sc, bots(1.0), team="A", games=40, num_envs=8, seed=3)
+    b = evaluate_policies(sc, bots(1.0), team="B", games=40, num_envs=8, seed=3)
+    assert a.games == b.games == 40
+    assert (a.wins, a.losses, a.draws) == (b.losses, b.wins, b.draws)  # same games, mirrored
+    assert max(a.lengths) < 600 and a.wins > 0  # every game ends in combat (draw: both die)
+    assert abs(a.wins - a.losses) <= 8  # identical bots: no side wins by much
+
+
+def test_counts_do_not_depend_on_how_games_are_split_over_envs():
+    sc = duel(300)
+    r4 = evaluate_policies(sc, bots(1.0), team="A", games=10, num_envs=4, seed=9)
+    r7 = evaluate_policies(sc, bots(1.0), team="A", games=10, num_envs=7, seed=9)
+    assert (r4.wins, r4.losses, r4.draws) == (r7.wins, r7.losses, r7.draws)
+    assert sorted(r4.lengths) == sorted(r7.lengths)
+
+
+def test_table_layout_wilson_and_files(tmp_path):
+    rows = [EvalResult("PPO Agent vs Smart Bot", "smart", wins=60, losses=40),
+            EvalResult("2 PPO Agents vs 1 Defensive + 2 Smart Bots", "x", wins=40, losses=55,
+                       draws=5)]
+    table = format_table(rows).splitlines()
+    assert [c.strip() for c in table[0].split("|")[1:-1]] == [
+        "Experiment Name", "Agent Wins", "Bot Wins", "Draws", "Agent Win Ratio", "Wilson 95% CI"]
+    assert len({len(line) for line in table}) == 1  # aligned columns
+    lo, hi = wilson_interval(60, 100)
+    assert "| 60% " in table[2] and f"[{100 * lo:.1f}%, {100 * hi:.1f}%]" in table[2]
+    assert "| 40%" in table[3] and "| 5 " in table[3]
+    write_csv(rows, tmp_path / "t.csv")
+    write_json(rows, tmp_path / "t.json")
+    with open(tmp_path / "t.csv") as f:
+        got = list(csv.DictReader(f))
+    assert got[1]["wins"] == "40" and got[1]["draws"] == "5" and got[1]["games"] == "100"
+    data = json.loads((tmp_path / "t.json").read_text())
+    assert data[0]["win_rate"] == 0.6 and data[0]["ci95_low"] == round(lo, 4)
+
+
+@pytest.fixture(scope="module")
+def checkpoint(tmp_path_factory):
+    run = tmp_path_factory.mktemp("runs") / "ev"
+    cfg = TrainConfig("ev", "vs_aggressive", total_steps=128, num_envs=4, wandb="disabled",
+                      game={"max_steps": 60},
+                      learners=(LearnerSpec("ppo", "ppo", (0,),
+                                            ppo=PPOConfig(num_steps=16, update_epochs=1)),))
+    Trainer(cfg, run, progress=False).train()
+    return run
+
+
+def test_checkpoint_against_several_bots(checkpoint):
+    res = evaluate_checkpoint(checkpoint, ["random", "aggressive"], games=6, num_envs=3)
+    assert [r.name for r in res] == ["PPO Agent vs Random Bot", "PPO Agent vs Aggressive Bot"]
+    assert all(r.games == 6 for r in res)
+    again = evaluate_checkpoint(checkpoint, ["random", "aggressive"], games=6, num_envs=3)
+    assert [(r.wins, r.losses, r.draws) for r in res] == \
+        [(r.wins, r.losses, r.draws) for r in again]
+
+
+def test_eval_command_prints_table_and_writes_files(checkpoint, tmp_path, capsys):
+    parser = argparse.ArgumentParser()
+    eval_cmd.add_arguments(parser)
+    args = parser.parse_args([str(checkpoint), "--vs", "aggressive", "--games", "4",
+                              "--num-envs", "2", "--csv", str(tmp_path / "e.csv"),
+                              "--json", str(tmp_path / "e.json")])
+    assert eval_cmd.run(args) == 0
+    out = capsys.readouterr().out
+    assert "| PPO Agent vs Aggressive Bot |" in out and "Wilson 95% CI" in out
+    assert json.loads((tmp_path / "e.json").read_text())[0]["games"] == 4
+    bad = parser.parse_args([str(tmp_path / "missing")])
+    assert eval_cmd.run(bad) == 2
+    assert "no such checkpoint" in capsys.readouterr().out

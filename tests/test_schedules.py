@@ -1,0 +1,140 @@
+"""Opponent schedules: curriculum by bot weakness, cycle learning over a bot pool."""
+
+import numpy as np
+import pytest
+import torch
+from alphatank.training.ppo import PPOConfig
+from alphatank.training.presets import LearnerSpec, TrainConfig
+from alphatank.training.runner import Trainer, opponent_key
+from alphatank.training.schedules import CurriculumSchedule, CycleSchedule, make_schedule
+
+from alphatank.envs.vector import VectorMatchEnv
+
+torch.set_num_threads(1)
+
+
+class Recorder:
+    """Stands in for a vector env's opponent setters, remembering every call."""
+
+    def __init__(self):
+        self.calls = []
+
+    def set_bot_weakness(self, w):
+        self.calls.append(("weakness", w))
+
+    def set_opponents(self, names, weakness=None):
+        self.calls.append(("opponents", tuple(names), weakness))
+
+
+def test_linear_curriculum_goes_from_start_to_end():
+    c = CurriculumSchedule(steps=1000)  # paper defaults 0.1 -> 0.8
+    assert [c.weakness(s) for s in (0, 500, 1000, 5000)] == pytest.approx([0.1, 0.45, 0.8, 0.8])
+
+
+def test_sigmoid_curriculum_is_slow_fast_slow_and_hits_the_ends():
+    c = CurriculumSchedule(steps=1000, shape="sigmoid")
+    lin = CurriculumSchedule(steps=1000)
+    w = [c.weakness(s) for s in range(0, 1001, 50)]
+    assert w[0] == pytest.approx(0.1) and w[-1] == pytest.approx(0.8)
+    assert c.weakness(500) == pytest.approx(0.45)
+    assert all(b > a for a, b in zip(w, w[1:], strict=False))
+    assert c.weakness(100) < lin.weakness(100) and c.weakness(900) > lin.weakness(900)
+    assert (c.weakness(550) - c.weakness(450)) > (lin.weakness(550) - lin.weakness(450))
+
+
+def test_curriculum_reaches_the_bots_of_the_next_episode():
+    env = VectorMatchEnv("vs_aggressive", 2, seed=0, game_overrides={"max_steps": 5})
+    env.reset()
+    c = CurriculumSchedule(steps=100)
+    assert c.apply(env, 50) == {"schedule/weakness": 0.45}
+    for _ in range(5):  # episodes end after 5 ticks; the reset picks up the new weakness
+        env.step(np.ones((2, 1, 3), dtype=np.int64))
+    bot = env.core.controllers[0][1]
+    assert bot.weakness == pytest.approx(0.45)
+    rec = Recorder()
+    c2 = CurriculumSchedule(steps=100)
+    for step in (0, 0, 10):
+        c2.apply(rec, step)
+    assert rec.calls == [("weakness", 0.1), ("weakness", 0.17)]  # only changes are pushed
+
+
+def test_fixed_and_random_cycles():
+    pool = ["random", "aggressive", "defensive", "dodge"]
+    fixed = CycleSchedule(pool, "fixed", interval=10, scale_victory=False)
+    rec = Recorder()
+    seen = []
+    for step in range(0, 80, 5):
+        fixed.apply(rec, step)
+        seen.append(fixed.current)
+    assert seen[::2] == pool + pool
+    assert [c[1] for c in rec.calls] == [(b,) for b in pool + pool]
+    a = CycleSchedule(pool, "random", interval=1, seed=4)
+    b = CycleSchedule(pool, "random", interval=1, seed=4)
+    picks = []
+    for step in range(200):
+        a.apply(Recorder(), step)
+        b.apply(Recorder(), step)
+        picks.append(a.current)
+        assert a.current == b.current
+    assert set(picks) == set(pool)
+
+
+def test_adaptive_cycle_favours_the_bots_it_loses_to_and_scales_victory():
+    pool = ["random", "dodge"]
+    c = CycleSchedule(pool, "adaptive", interval=1, window=20, target=0.6, mastery_phase=1000,
+                      seed=0)
+    for _ in range(20):
+        c.record("B:random(w=1)", "win")
+        c.record("B:dodge(w=1)", "loss")
+    assert c.win_rate("random") == 1.0 and c.win_rate("dodge") == 0.0
+    picks = []
+    for step in range(400):
+        c.apply(Recorder(), step)
+        picks.append(c.current)
+    assert picks.count("dodge") > 5 * picks.count("random")
+    # victory reward scale: mastered fraction during the phase, all-or-nothing after it
+    assert c.victory_scale(10) == 0.5
+    assert c.victory_scale(5000) == 0.0
+    for _ in range(20):
+        c.record("B:dodge(w=1)", "win")
+    assert c.victory_scale(10) == 1.0 and c.victory_scale(5000) == 1.0
+    state = c.state_dict()
+    d = CycleSchedule(pool, "adaptive", interval=1, window=20, seed=99)
+    d.load_state_dict(state)
+    assert d.win_rate("dodge") == c.win_rate("dodge") and d.current == c.current
+    d.apply(Recorder(), 400), c.apply(Recorder(), 400)
+    assert d.current == c.current  # same generator state
+
+
+def test_bad_schedule_settings_are_rejected():
+    with pytest.raises(ValueError, match="shape"):
+        CurriculumSchedule(steps=10, shape="cubic")
+    with pytest.raises(ValueError, match="weakness"):
+        CurriculumSchedule(steps=10, end=1.5)
+    with pytest.raises(ValueError, match="cycle mode"):
+        CycleSchedule(["random"], mode="round-robin")
+    with pytest.raises(ValueError, match="unknown schedule kind"):
+        make_schedule({"kind": "league"}, 100)
+    with pytest.raises(ValueError, match="schedule 'curriculum'"):
+        make_schedule({"kind": "curriculum", "speed": 2}, 100)
+
+
+def test_cycle_training_rotates_the_opponents_and_scales_the_victory_reward(tmp_path):
+    cfg = TrainConfig("cyc", "vs_aggressive", total_steps=6 * 64, num_envs=4, wandb="disabled",
+                      checkpoint_every=0, game={"max_steps": 16},
+                      schedule={"kind": "cycle", "pool": ["random", "aggressive"],
+                                "mode": "fixed", "interval": 64, "mastery_phase": 10**6},
+                      learners=(LearnerSpec("ppo", "ppo", (0,),
+                                            ppo=PPOConfig(num_steps=16, update_epochs=1)),))
+    tr = Trainer(cfg, tmp_path / "cyc", progress=False)
+    tr.train()
+    opps = {k for h in tr.history for k in h if k.startswith("charts/win_rate_vs/")}
+    assert opps == {"charts/win_rate_vs/random", "charts/win_rate_vs/aggressive"}
+    assert all(h["schedule/victory_scale"] == 0.0 for h in tr.history)  # nothing mastered yet
+    # a win's victory reward is scaled away before the learner sees it
+    rewards = np.full((4, 1), 250.0, dtype=np.float32)
+    ep = {"env": 2, "length": 9, "outcome": ["win"], "return": np.array([250.0]),
+          "opponent": "B:random(w=1)"}
+    tr._record_episode(ep, rewards, scale=0.25)
+    assert rewards[2, 0] == pytest.approx(250.0 - 0.75 * 200.0) and rewards[0, 0] == 250.0
+    assert opponent_key("B:aggressive(w=1), B:smart(w=0.5,ricochet=False)") == "aggressive+smart"

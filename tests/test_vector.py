@@ -1,0 +1,169 @@
+"""Batched vector env and its shared-memory subprocess variant."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from alphatank.envs.vector import (
+    SubprocVectorMatchEnv,
+    VectorMatchEnv,
+    episode_seed,
+    make_vector_env,
+)
+from alphatank.scenarios import NoopPolicy
+
+KEYS = {"env", "return", "length", "winner", "outcome", "opponent", "map", "terms"}
+
+
+def rollout(env, steps: int, seed: int = 0):
+    rng = np.random.default_rng(seed)
+    shape = (env.num_envs, env.num_learners, 3)
+    out = [env.reset(seed)]
+    eps = []
+    for _ in range(steps):
+        obs, rew, term, trunc, info = env.step(rng.integers(0, [3, 3, 2], size=shape))
+        out += [obs, rew, term, trunc, info["final_obs"]]
+        eps += info["episodes"]
+    return out, eps
+
+
+def test_contract_shapes_dtypes_and_spaces():
+    env = VectorMatchEnv("team_vs_bot", 3, seed=1)
+    assert env.num_envs == 3 and env.num_learners == 2 and env.learner_teams == ["A", "A"]
+    assert env.observation_space.shape == (env.obs_dim,)
+    assert env.action_space.nvec.tolist() == [3, 3, 2]
+    obs = env.reset()
+    assert obs.shape == (3, 2, env.obs_dim) and obs.dtype == np.float32
+    obs, rew, term, trunc, info = env.step(np.ones((3, 2, 3), dtype=np.int64))
+    assert rew.shape == (3, 2) and rew.dtype == np.float32
+    assert term.shape == trunc.shape == (3,) and term.dtype == bool
+    assert info["final_obs"].shape == obs.shape and info["episodes"] == []
+
+
+def test_same_step_autoreset_and_episode_records():
+    env = VectorMatchEnv("vs_random", 4, seed=2, game_overrides={"max_steps": 40})
+    env.reset()
+    rng = np.random.default_rng(0)
+    seen = 0
+    for _ in range(90):
+        obs, rew, term, trunc, info = env.step(rng.integers(0, [3, 3, 2], size=(4, 1, 3)))
+        done = term | trunc
+        for e in np.flatnonzero(~done):
+            assert not info["final_obs"][e].any()
+        for ep in info["episodes"]:
+            assert set(ep) == KEYS and done[ep["env"]]
+            assert ep["map"] == "battlefield" and ep["opponent"] == "B:random(w=1)"
+            assert ep["outcome"] == (["draw"] if ep["winner"] is None else
+                                     ["win"] if ep["winner"] == "A" else ["loss"])
+            assert ep["length"] <= 40 and ep["return"].shape == (1,)
+            # The returned obs is the next episode's first: time restarts.
+            assert info["final_obs"][ep["env"]].any()
+            assert env.core.matches[ep["env"]].tick == 0
+            seen += 1
+        assert len(info["episodes"]) == done.sum()
+    assert seen >= 8
+
+
+def test_dead_learner_keeps_its_slot_until_the_match_ends():
+    env = VectorMatchEnv("team_vs_bot", 1, seed=0)
+    env.reset()
+    m = env.core.matches[0]
+    m.alive[1] = False
+    m.world.remove_tank(1)
+    obs, rew, term, trunc, info = env.step(np.ones((1, 2, 3), dtype=np.int64))
+    alive = env.layout["self.alive"]
+    assert obs[0, 1, alive][0] == 0.0 and obs[0, 0, alive][0] == 1.0
+    assert not (term | trunc).any() and obs.shape[1] == 2
+
+
+def test_wrong_actions_name_env_and_learner():
+    env = VectorMatchEnv("team_vs_bot", 2)
+    env.reset()
+    bad = np.ones((2, 2, 3), dtype=np.int64)
+    bad[1, 1, 2] = 5
+    with pytest.raises(ValueError, match=r"env 1, learner 1 \(seat 1, team A\).*fire 0\.\.1"):
+        env.step(bad)
+    with pytest.raises(ValueError, match="shape"):
+        env.step(np.ones((2, 3), dtype=np.int64))
+    with pytest.raises(TypeError, match="integers"):
+        env.step(np.ones((2, 2, 3)))
+
+
+def test_seeds_reproduce_and_differ():
+    a, _ = rollout(VectorMatchEnv("vs_smart", 2, seed=5), 60)
+    b, _ = rollout(VectorMatchEnv("vs_smart", 2, seed=5), 60)
+    c, _ = rollout(VectorMatchEnv("vs_smart", 2, seed=5), 60, seed=1)
+    assert all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
+    assert not np.array_equal(a[0], c[0])
+    assert episode_seed(0, 1, 0) != episode_seed(0, 0, 1)
+
+
+@pytest.mark.parametrize("observation", ["paper", "egocentric"])
+def test_subprocess_variant_is_bit_identical(observation):
+    kwargs = {"game_overrides": {"max_steps": 60}, "observation": observation}
+    local, eps_local = rollout(VectorMatchEnv("team_vs_bot", 4, seed=3, **kwargs), 130)
+    sub = SubprocVectorMatchEnv("team_vs_bot", 4, seed=3, num_workers=2, **kwargs)
+    try:
+        remote, eps_remote = rollout(sub, 130)
+        assert sub.num_learners == 2 and sub.obs_dim == sub.observation_space.shape[0]
+        with pytest.raises(ValueError, match="env 3, learner 0"):
+            bad = np.ones((4, 2, 3), dtype=np.int64)
+            bad[3, 0, 0] = 9
+            sub.step(bad)
+    finally:
+        sub.close()
+    assert len(local) == len(remote)
+    for x, y in zip(local, remote, strict=True):
+        assert x.dtype == y.dtype and np.array_equal(x, y)
+    assert len(eps_local) == len(eps_remote) >= 4
+    for p, q in zip(eps_local, eps_remote, strict=True):
+        assert p["env"] == q["env"] and np.array_equal(p["return"], q["return"])
+
+
+def test_make_vector_env_picks_the_variant():
+    env = make_vector_env("vs_random", 2, seed=0)
+    assert isinstance(env, VectorMatchEnv)
+    sub = make_vector_env("vs_random", 2, seed=0, num_workers=2)
+    try:
+        assert isinstance(sub, SubprocVectorMatchEnv)
+        sub.set_bot_weakness(0.5)
+        sub.set_opponents(["smart"])
+        sub.reset()
+        _, eps = rollout(sub, 5)
+    finally:
+        sub.close()
+
+
+def test_opponent_controls_apply_from_next_episode():
+    env = VectorMatchEnv("vs_random", 4, seed=0, game_overrides={"max_steps": 5})
+    env.reset()
+    env.set_opponents(["smart", "dodge"], weakness=0.25)
+    assert env.core.describe_opponents(0) == "B:smart(w=0.25)"
+    assert env.core.describe_opponents(1) == "B:dodge(w=0.25)"
+    _, eps = rollout(env, 6)
+    assert {ep["opponent"] for ep in eps} == {"B:smart(w=0.25)", "B:dodge(w=0.25)"}
+    assert type(env.core.controllers[0][1]).__name__ == "Weakened"
+    env.set_opponent_policy(NoopPolicy())
+    env.reset()
+    assert env.core.describe_opponents(2) == "B:policy:NoopPolicy"
+    assert isinstance(env.core.controllers[2][1], NoopPolicy)
+    env.set_opponent_policy(None)
+    env.set_opponents(None)
+    env.set_bot_weakness(1.0)
+    env.reset()
+    assert env.core.describe_opponents(3) == "B:random(w=1)"
+    with pytest.raises(ValueError, match="valid"):
+        env.set_opponents(["genius"])
+    with pytest.raises(ValueError, match=r"\[0, 1\]"):
+        env.set_bot_weakness(2.0)
+
+
+def test_selfplay_two_learners_and_no_learner_scenarios():
+    env = VectorMatchEnv("selfplay_1v1", 2, seed=0)
+    assert env.num_learners == 2 and env.learner_teams == ["A", "B"]
+    watch = VectorMatchEnv("bot_teams", 2, seed=0)
+    obs = watch.reset()
+    assert obs.shape == (2, 0, watch.obs_dim)
+    obs, rew, *_ = watch.step(np.zeros((2, 0, 3), dtype=np.int64))
+    assert rew.shape == (2, 0)
