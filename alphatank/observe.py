@@ -5,7 +5,7 @@ scenario and an index map (:class:`ObsLayout`, feature name -> slice):
 
 ``paper``       every component of the paper's Table 1 in map coordinates: own tank
                 (position, heading sin/cos, velocity, corners, wall contact, alive, plus
-                reload and ammo), own bullets, every other tank (teammates first, then
+                reload and bullets in flight), own bullets, every other tank (teammates first, then
                 enemies; position, relative position, distance, corners, velocity, ...),
                 other tanks' bullets nearest first (position, velocity, relative position,
                 distance), the map's wall rectangles, buff/debuff zone positions and
@@ -28,11 +28,15 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from alphatank.config import GameConfig
 from alphatank.mapspec import MapSpec
+
+if TYPE_CHECKING:
+    from alphatank.match import Match
 
 OBS_KINDS = ("paper", "egocentric")
 TANK_FIELDS = ("alive", "x", "y", "sin", "cos", "vx", "vy", "c0x", "c0y", "c1x", "c1y",
@@ -143,24 +147,24 @@ class StateBatch:
         refilled at the next reset)."""
         return (type(self), self._args)
 
-    def gather(self, e: int, match: object) -> None:
+    def gather(self, e: int, match: Match) -> None:
         """Copy match ``e``'s dynamic arrays (one batch read already done by the world)."""
-        w = match.world  # type: ignore[attr-defined]
+        w = match.world
         self.raw[e] = w.state
         f = self.flags[e]
-        f[0] = match.alive  # type: ignore[attr-defined]
+        f[0] = match.alive
         np.greater(w.wall_contacts, 0, out=f[1])
-        f[2] = match.in_buff  # type: ignore[attr-defined]
-        f[3] = match.in_debuff  # type: ignore[attr-defined]
+        f[2] = match.in_buff
+        f[3] = match.in_debuff
         self.bullet_active[e] = w.bullet_active
         c = self.counts[e]
-        c[0] = match.cooldown  # type: ignore[attr-defined]
-        c[1] = match.bullets_alive  # type: ignore[attr-defined]
-        self.tick[e] = match.tick  # type: ignore[attr-defined]
+        c[0] = match.cooldown
+        c[1] = match.bullets_alive
+        self.tick[e] = match.tick
 
-    def set_static(self, e: int, match: object) -> None:
+    def set_static(self, e: int, match: Match) -> None:
         """Map size, wall rectangles and zone centres of match ``e``'s episode."""
-        spec: MapSpec = match.spec  # type: ignore[attr-defined]
+        spec = match.spec
         g = self.cfg
         self.size[e] = (spec.width, spec.height)
         inv = 2.0 / self.size[e]
@@ -184,7 +188,7 @@ class StateBatch:
                                       self.ray_rects[e].shape)
         self.zones[e] = 0.0
         self.zone_mask[e] = False
-        for j, cells in ((0, match.buffs), (self.max_buffs, match.debuffs)):  # type: ignore
+        for j, cells in ((0, match.buffs), (self.max_buffs, match.debuffs)):
             for i, cell in enumerate(cells):
                 self.zones[e, j + i] = spec.cell_center(cell)
                 self.zone_mask[e, j + i] = True
@@ -300,6 +304,7 @@ class ObservationBuilder:
             self.v_zone = self.out[:, :, lay["zone"]]
         else:
             self.v_ray = self.out[:, :, lay["ray"]]
+            self._ego_tables()
 
     # ---- statics --------------------------------------------------------------------
 
@@ -337,13 +342,17 @@ class ObservationBuilder:
         counts = self.batch.counts[:, :, self.observers]  # (E, 2, L)
         np.multiply(counts.transpose(0, 2, 1), self._count_scale, out=out)
 
-    def _other_bullets(self, self_xy: np.ndarray) -> tuple[np.ndarray, ...]:
+    def _other_bullets(self, self_xy: np.ndarray) -> tuple[np.ndarray, ...] | None:
         """Other tanks' bullets sorted nearest first: slot indices, relative xy and
-        distance (px), and the active mask; all (E, L, K[, 2])."""
+        distance (px), and the active mask; all (E, L, K[, 2]). None (and the block
+        zeroed) when no other bullet flies anywhere in the batch."""
         b, bidx = self.batch, self.other_bidx
+        act = b.bullet_active[:, bidx]
+        if not act.any():
+            self.v_bullet[...] = 0.0
+            return None
         rel = b.bullet_xy[:, bidx] - self_xy  # (E, L, K, 2)
         dist = np.hypot(rel[..., 0], rel[..., 1])
-        act = b.bullet_active[:, bidx]
         order = np.where(act, dist, np.inf).argsort(axis=-1, kind="stable")
         ge, gl = self._ge, self._gl
         mask = act[ge, gl, order]
@@ -370,78 +379,109 @@ class ObservationBuilder:
         vo = self.v_own
         vo[..., 0] = b.bullet_active[:, self.own_bidx]
         vo[..., 1:5] = bt[:, self.own_bidx]
-        sel, brel, bdist, mask = self._other_bullets(self_xy)
-        vb = self.v_bullet
-        vb[..., 0] = mask
-        vb[..., t + 1:t + 5] = bt[self._ge, sel]
-        k = mask * b.scale
-        np.multiply(brel, k[..., None], out=vb[..., t + 5:t + 7])
-        np.multiply(bdist, k * (b.idiag / b.scale), out=vb[..., t + 7])
+        others = self._other_bullets(self_xy)
+        if others is not None:
+            sel, brel, bdist, mask = others
+            vb = self.v_bullet
+            vb[..., 0] = mask
+            vb[..., t + 1:t + 5] = bt[self._ge, sel]
+            k = mask * b.scale
+            np.multiply(brel, k[..., None], out=vb[..., t + 5:t + 7])
+            np.multiply(bdist, k * (b.idiag / b.scale), out=vb[..., t + 7])
         self.v_zone[..., 0] = b.in_buff[:, obs]
         self.v_zone[..., 1] = b.in_debuff[:, obs]
+
+    def _ego_tables(self) -> None:
+        """Column maps of the egocentric kind: every relative position (other tanks, own
+        bullets, other bullets, zones) and every velocity (tanks, own and other bullets)
+        is rotated in one batch, then scattered to its ``fwd``/``side``/``dist`` slots."""
+        lay = self.layout
+        no, cap, K = self.n_others, self.batch.capacity, self.n_other_bullets
+        B, Dz = self.batch.max_buffs, self.batch.max_debuffs
+        rel = ([f"tank[{j}]" for j in range(no)] + [f"own_bullet[{k}]" for k in range(cap)]
+               + [f"bullet[{k}]" for k in range(K)] + [f"buff[{k}]" for k in range(B)]
+               + [f"debuff[{k}]" for k in range(Dz)])
+        vel = rel[:no + cap + K]
+
+        def col(names: list[str], f: str) -> np.ndarray:
+            return np.array([lay[f"{n}.{f}"].start for n in names], dtype=np.int64)
+
+        self._rel_cols = (col(rel, "fwd"), col(rel, "side"), col(rel, "dist"))
+        self._vel_cols = (col(vel, "v_fwd"), col(vel, "v_side"))
+        E, L = self.out.shape[:2]
+        self._relv = np.zeros((E, L, len(rel), 2))
+        self._velv = np.zeros((E, L, len(vel), 2))
+        self._rmask = np.ones((E, L, len(rel)))
+        self._vmask = np.ones((E, L, len(vel)))
+        g = self.cfg
+        self._vscale = np.r_[np.full(no, 1.0 / g.tank_speed),
+                             np.full(cap + K, 1.0 / g.bullet_speed)]
+        self._seg = (no, no + cap, no + cap + K)  # ends of the tank / own / other-bullet groups
 
     def _build_ego(self) -> None:
         b, g, t = self.batch, self.cfg, self._tf
         obs, oi = self.observers, self.other_idx
         ang = b.tank_angle
         sin, cos = np.sin(ang), np.cos(ang)
-        s, c = sin[:, obs][..., None], cos[:, obs][..., None]  # (E, L, 1)
-
-        def rotate(v: np.ndarray, out: np.ndarray, k: float | np.ndarray) -> None:
-            """(..., 2) vectors into the observers' frames (fwd, side), times ``k``."""
-            out[..., 0] = (v[..., 0] * c + v[..., 1] * s) * k
-            out[..., 1] = (v[..., 1] * c - v[..., 0] * s) * k
-
+        s, c = sin[:, obs], cos[:, obs]  # (E, L)
         vs = self.v_self
         vs[..., 0] = b.alive[:, obs]
-        vs[..., 1] = s[..., 0]
-        vs[..., 2] = c[..., 0]
+        vs[..., 1] = s
+        vs[..., 2] = c
         v = b.tank_vel[:, obs] * (1.0 / g.tank_speed)  # (E, L, 2)
-        vs[..., 3] = v[..., 0] * c[..., 0] + v[..., 1] * s[..., 0]
-        vs[..., 4] = v[..., 1] * c[..., 0] - v[..., 0] * s[..., 0]
+        vs[..., 3] = v[..., 0] * c + v[..., 1] * s
+        vs[..., 4] = v[..., 1] * c - v[..., 0] * s
         vs[..., 5] = b.wall[:, obs]
         self._self_counts(vs[..., 6:8])
         vs[..., 8] = b.in_buff[:, obs]
         vs[..., 9] = b.in_debuff[:, obs]
-        self_xy = b.tank_xy[:, obs][:, :, None, :]
-        self.v_ray[...] = self.ray_distances(self_xy[:, :, 0], ang[:, obs]) / self.ray_length
-        scale, idiag = b.scale[..., None], b.idiag
-        # Other tanks.
+        xy = b.tank_xy[:, obs]
+        self_xy = xy[:, :, None, :]
+        self.v_ray[...] = self.ray_distances(xy, ang[:, obs]) / self.ray_length
+        # Other tanks: scalars.
         vt = self.v_tank
-        rel = b.tank_xy[:, oi] - self_xy
         vt[..., t] = b.alive[:, oi]
-        rotate(rel, vt[..., t + 1:t + 3], b.scale)
-        vt[..., t + 3] = np.hypot(rel[..., 0], rel[..., 1]) * idiag
         so, co = sin[:, oi], cos[:, oi]
-        vt[..., t + 4] = so * c - co * s  # sin(their heading - mine)
-        vt[..., t + 5] = co * c + so * s
-        rotate(b.tank_vel[:, oi], vt[..., t + 6:t + 8], 1.0 / g.tank_speed)
+        s3, c3 = s[..., None], c[..., None]
+        vt[..., t + 4] = so * c3 - co * s3  # sin(their heading - mine)
+        vt[..., t + 5] = co * c3 + so * s3
         vt[..., t + 8] = b.wall[:, oi]
-        # Own bullets.
-        vo = self.v_own
-        act = b.bullet_active[:, self.own_bidx]  # (E, L, cap)
-        orel = b.bullet_xy[:, self.own_bidx] - self_xy
-        vo[..., 0] = act
-        rotate(orel, vo[..., 1:3], b.scale * act)
-        rotate(b.bullet_vel[:, self.own_bidx], vo[..., 3:5], act / g.bullet_speed)
-        vo[..., 5] = np.hypot(orel[..., 0], orel[..., 1]) * (idiag * act)
-        # Other bullets, nearest first.
-        sel, brel, bdist, mask = self._other_bullets(self_xy)
-        vb = self.v_bullet
-        vb[..., 0] = mask
-        rotate(brel, vb[..., t + 1:t + 3], b.scale * mask)
-        rotate(b.bullet_vel[self._ge, sel], vb[..., t + 3:t + 5], mask / g.bullet_speed)
-        vb[..., t + 5] = bdist * (idiag * mask)
-        # Zones.
-        zrel = b.zones[:, None, :, :] - self_xy  # (E, L, Z, 2)
-        zm = b.zone_mask[:, None, :]  # (E, 1, Z)
-        nbf = b.max_buffs
-        for view, sl in ((self.v_buff, slice(0, nbf)), (self.v_debuff, slice(nbf, None))):
-            r, mk = zrel[:, :, sl], zm[..., sl]
-            view[..., 0] = mk
-            rotate(r, view[..., 1:3], b.scale * mk)
-            view[..., 3] = np.hypot(r[..., 0], r[..., 1]) * (idiag * mk)
-        del scale
+        # Every relative position and velocity, then one rotation.
+        o, oc, ock = self._seg
+        relv, velv, rm, vm = self._relv, self._velv, self._rmask, self._vmask
+        np.subtract(b.tank_xy[:, oi], self_xy, out=relv[:, :, :o])
+        np.subtract(b.bullet_xy[:, self.own_bidx], self_xy, out=relv[:, :, o:oc])
+        np.subtract(b.zones[:, None], self_xy, out=relv[:, :, ock:])
+        velv[:, :, :o] = b.tank_vel[:, oi]
+        velv[:, :, o:oc] = b.bullet_vel[:, self.own_bidx]
+        act = b.bullet_active[:, self.own_bidx]
+        rm[:, :, o:oc] = act
+        vm[:, :, o:oc] = act
+        rm[:, :, ock:] = b.zone_mask[:, None, :]
+        others = self._other_bullets(self_xy)
+        if others is None:
+            rm[:, :, oc:ock] = 0.0
+            vm[:, :, oc:ock] = 0.0
+        else:
+            sel, brel, _, mask = others
+            relv[:, :, oc:ock] = brel
+            velv[:, :, oc:ock] = b.bullet_vel[self._ge, sel]
+            rm[:, :, oc:ock] = mask
+            vm[:, :, oc:ock] = mask
+            self.v_bullet[..., 0] = mask
+        out = self.out
+        fc, sc_, dc = self._rel_cols
+        k = rm * b.scale
+        out[..., fc] = (relv[..., 0] * c3 + relv[..., 1] * s3) * k
+        out[..., sc_] = (relv[..., 1] * c3 - relv[..., 0] * s3) * k
+        out[..., dc] = np.hypot(relv[..., 0], relv[..., 1]) * (rm * b.idiag)
+        vf, vsd = self._vel_cols
+        k = vm * self._vscale
+        out[..., vf] = (velv[..., 0] * c3 + velv[..., 1] * s3) * k
+        out[..., vsd] = (velv[..., 1] * c3 - velv[..., 0] * s3) * k
+        self.v_own[..., 0] = act
+        self.v_buff[..., 0] = b.zone_mask[:, None, :b.max_buffs]
+        self.v_debuff[..., 0] = b.zone_mask[:, None, b.max_buffs:]
 
     def ray_distances(self, xy: np.ndarray, angle: np.ndarray) -> np.ndarray:
         """(E, L, R) px to the nearest wall rectangle along ``rays`` directions from each
@@ -450,9 +490,9 @@ class ObservationBuilder:
         b = self.batch
         a = angle[..., None] + self._ray_angles  # (E, L, R)
         dx, dy = np.cos(a), np.sin(a)
-        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            ix = (1.0 / np.where(np.abs(dx) < 1e-12, 1e-12, dx))[..., None]
-            iy = (1.0 / np.where(np.abs(dy) < 1e-12, 1e-12, dy))[..., None]
+        # 1 / direction, with axis-parallel rays nudged off zero (no division by zero).
+        ix = (1.0 / np.where(np.abs(dx) < 1e-12, 1e-12, dx))[..., None]
+        iy = (1.0 / np.where(np.abs(dy) < 1e-12, 1e-12, dy))[..., None]
         rr = b.ray_rects[:, None, None, :, :]  # (E, 1, 1, W, 4)
         ox = xy[..., 0][..., None, None]
         oy = xy[..., 1][..., None, None]

@@ -46,7 +46,7 @@ from alphatank.config import (
     from_dict,
     game_config,
 )
-from alphatank.mapspec import MapError, MapSpec, load_map, parse_map
+from alphatank.mapspec import MapError, MapSpec, load_map, parse_map, shipped_maps
 from alphatank.policy import NOOP, Policy
 
 CONTROLLERS = ("learner", "bot", "human", "checkpoint")
@@ -256,7 +256,6 @@ def _resolve_maps(value: str, base: Path | None, fail: Any) -> tuple[str, ...]:
         return _checked(found, fail)
     if root.joinpath(f"{value}.txt").is_file():
         return _checked((f"pkg:{value}.txt",), fail)
-    from alphatank.mapspec import shipped_maps
     raise fail("map", f"unknown map {value!r}; shipped maps: {shipped_maps()} "
                "(or a path to a .txt map or a folder of maps)")
 

@@ -142,6 +142,9 @@ class Bot:
         the centre of the tank's own cell (so corners are turned from the cell centre)."""
         nav = self.nav
         self._route = (me, goal)
+        if me == goal:
+            gx, gy = nav.centers[me]
+            return float(gx), float(gy)
         r = DRIVE_RADIUS - 2.0
         for k in (nav.waypoint_idx(me, goal, DRIVE_RADIUS), nav.next_table[me, goal]):
             gx, gy = nav.centers[k]

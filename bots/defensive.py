@@ -77,7 +77,8 @@ class DefensiveBot(Bot):
         if self.can_fire(match, seat):
             if abs(aim_err) < tolerance and self.clear_shot(match, seat, target):
                 fire = 1
-            elif match.tick % 3 == seat % 3:  # bank shots: check the heading now and then
+            elif (match.tick % 3 == seat % 3  # bank shots: check the heading now and then
+                  and dist <= self.shot_range + self.muzzle_offset):
                 fire = int(self.shot_hits(match, seat, exact=False)[0]
                            and self.shot_hits(match, seat)[0])
         return rot, move, fire

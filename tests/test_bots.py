@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+
 from alphatank.bots import (
     BOT_NAMES,
     AggressiveBot,
@@ -21,7 +22,6 @@ from alphatank.bots import (
 from alphatank.bots.arena import run_arena
 from alphatank.bots.benchmark import bot_costs
 from alphatank.bots.runner import play_game
-
 from alphatank.commands import arena as arena_cmd
 from alphatank.config import GameConfig
 from alphatank.mapspec import load_map, parse_map

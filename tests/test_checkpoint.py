@@ -12,8 +12,8 @@ from alphatank.envs.core import MatchSet
 from alphatank.policy import Policy
 from alphatank.scenarios import parse_scenario
 from alphatank.training.checkpoint import CheckpointError, load_checkpoint, load_policy
-from alphatank.training.presets import LearnerSpec, TrainConfig
 from alphatank.training.ppo import PPOConfig
+from alphatank.training.presets import LearnerSpec, TrainConfig
 from alphatank.training.runner import Trainer, resume_trainer
 from alphatank.training.sac import SACConfig
 

@@ -42,7 +42,7 @@ def test_registered_ids():
     for gid in ("AlphaTank/VsRandom-v0", "AlphaTank/VsAggressive-v0", "AlphaTank/VsDodge-v0",
                 "AlphaTank/VsSmart-v0"):
         assert gid in gymnasium.registry
-    env = gymnasium.make("AlphaTank/VsDefensive-v0")
+    env = gymnasium.make("alphatank.envs:AlphaTank/VsDefensive-v0")
     assert env.unwrapped.core.game.bullet_max_distance == 800.0
     assert "AlphaTank/BotTeams-v0" not in gymnasium.registry  # no learner seat
     team = gymnasium.make("AlphaTank/TankBattle-v0", scenario="team_vs_bot",

@@ -6,7 +6,11 @@ import json
 
 import pytest
 import torch
+
 from alphatank.bots import make_bot
+from alphatank.commands import eval as eval_cmd
+from alphatank.scenarios import parse_scenario
+from alphatank.stats import wilson_interval
 from alphatank.training.evaluate import (
     EvalResult,
     evaluate_checkpoint,
@@ -18,10 +22,6 @@ from alphatank.training.evaluate import (
 from alphatank.training.ppo import PPOConfig
 from alphatank.training.presets import LearnerSpec, TrainConfig
 from alphatank.training.runner import Trainer
-
-from alphatank.commands import eval as eval_cmd
-from alphatank.scenarios import parse_scenario
-from alphatank.stats import wilson_interval
 
 torch.set_num_threads(1)
 

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 import torch
+
 from alphatank.training.buffers import ReplayBuffer, compute_gae
 from alphatank.training.normalize import ObsNormalizer, ReturnNormalizer, RunningMeanStd
 from alphatank.training.ppo import PPO, PPOConfig

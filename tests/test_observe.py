@@ -106,6 +106,10 @@ def test_paper_features_equal_hand_computed_values():
     assert f("wall[0].mask") == 1.0
     assert [f(f"wall[0].{k}") for k in ("x0", "y0", "x1", "y1")] == pytest.approx(
         [-1.0, -1.0, 1.0, 2 * 70 / H - 1], abs=1e-6)
+    # Once the bullets are gone their slots are zero again.
+    obs = place(ms, [(x0, y0, a0), (x1, y1, a1)])
+    lay = ms.obs.layout
+    assert not obs[0, 0, lay["bullet"]].any() and not obs[0, 0, lay["own_bullet"]].any()
 
 
 def test_zones_and_flags():

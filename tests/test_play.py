@@ -239,6 +239,7 @@ def test_human_vs_trained_agent_and_checkpoint_in_learner_seats(tmp_path):
     """A tiny trained checkpoint fills a `checkpoint:` seat and, via --checkpoint, the
     scenario's learner seat; the agent drives its tank."""
     import torch
+
     from alphatank.training.ppo import PPOConfig
     from alphatank.training.presets import LearnerSpec, TrainConfig
     from alphatank.training.runner import Trainer

@@ -3,6 +3,10 @@
 import numpy as np
 import pytest
 import torch
+
+from alphatank.envs.vector import VectorMatchEnv
+from alphatank.scenarios import parse_scenario
+from alphatank.training.evaluate import evaluate_learners
 from alphatank.training.ppo import (
     PPO,
     ActorCritic,
@@ -10,6 +14,32 @@ from alphatank.training.ppo import (
     evaluate_actions,
     sample_actions,
 )
+from alphatank.training.presets import LearnerSpec, TrainConfig
+from alphatank.training.runner import Trainer
+
+torch.set_num_threads(1)
+
+RANGE = """name: range
+description: 5x5 firing range for learning tests
+
+#######
+#.....#
+#.1...#
+#.....#
+#...2.#
+#.....#
+#######
+"""
+
+
+def firing_range(tmp_path) -> object:
+    """A learner 2 cells (diagonally) from an aggressive bot of weakness 0 (never acts)."""
+    path = tmp_path / "range.txt"
+    path.write_text(RANGE)
+    return parse_scenario({"name": "range", "map": str(path), "game": {"max_steps": 120},
+                           "seats": [{"team": "A", "controller": "learner"},
+                                     {"team": "B", "controller": "bot", "bot": "aggressive",
+                                      "weakness": 0.0}]})
 
 
 class ToyTargetEnv:
@@ -99,3 +129,19 @@ def test_bad_config_is_rejected_by_name():
         PPOConfig(num_steps=0)
     with pytest.raises(ValueError, match="gae_lambda"):
         PPOConfig(gae_lambda=1.5)
+
+
+def test_ppo_learns_to_shoot_a_helpless_bot(tmp_path):
+    sc = firing_range(tmp_path)
+    cfg = TrainConfig("range", "vs_aggressive", total_steps=28 * 1024, num_envs=8, seed=1,
+                      wandb="disabled", checkpoint_every=0,
+                      learners=(LearnerSpec("ppo", "ppo", (0,), ppo=PPOConfig(
+                          num_steps=128, update_epochs=4, learning_rate=1e-3)),))
+    tr = Trainer(cfg, tmp_path / "run", env=VectorMatchEnv(sc, 8, seed=1), progress=False)
+    tr.train()
+    assert tr.learners["ppo"].updates == 28
+    first = tr.history[1]["charts/win_rate"]  # mostly random play
+    assert first < 0.5
+    res = evaluate_learners(tr.learners, tr.observation_meta, {"ppo": "ppo"}, sc, [None],
+                            games=40, seed=5, num_envs=8)[0]
+    assert res.win_rate >= 0.8, (first, res)

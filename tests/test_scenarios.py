@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from alphatank.bots import BOT_NAMES
 
+from alphatank.bots import BOT_NAMES
 from alphatank.config import RewardConfig
 from alphatank.envs.core import MatchSet
 from alphatank.envs.vector import VectorMatchEnv

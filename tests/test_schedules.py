@@ -3,12 +3,12 @@
 import numpy as np
 import pytest
 import torch
+
+from alphatank.envs.vector import VectorMatchEnv
 from alphatank.training.ppo import PPOConfig
 from alphatank.training.presets import LearnerSpec, TrainConfig
 from alphatank.training.runner import Trainer, opponent_key
 from alphatank.training.schedules import CurriculumSchedule, CycleSchedule, make_schedule
-
-from alphatank.envs.vector import VectorMatchEnv
 
 torch.set_num_threads(1)
 

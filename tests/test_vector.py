@@ -13,6 +13,14 @@ from alphatank.envs.vector import (
 )
 from alphatank.scenarios import NoopPolicy
 
+
+class ExplodingPolicy(NoopPolicy):
+    """A seat controller that fails at the start of an episode."""
+
+    def reset(self, match, seat, seed=None):
+        raise ValueError("boom at reset")
+
+
 KEYS = {"env", "return", "length", "winner", "outcome", "opponent", "map", "terms"}
 
 
@@ -119,6 +127,14 @@ def test_subprocess_variant_is_bit_identical(observation):
     assert len(eps_local) == len(eps_remote) >= 4
     for p, q in zip(eps_local, eps_remote, strict=True):
         assert p["env"] == q["env"] and np.array_equal(p["return"], q["return"])
+
+
+def test_worker_errors_reach_the_parent():
+    sub = SubprocVectorMatchEnv("vs_random", 2, seed=0, num_workers=2,
+                                seat_policies={1: ExplodingPolicy()})
+    with pytest.raises(RuntimeError, match="boom at reset"):
+        sub.reset()
+    sub.close()
 
 
 def test_make_vector_env_picks_the_variant():

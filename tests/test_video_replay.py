@@ -21,8 +21,8 @@ import imageio_ffmpeg
 import numpy as np
 import pygame
 import pytest
-from alphatank.bots import make_bot
 
+from alphatank.bots import make_bot
 from alphatank.commands import record, replay
 from alphatank.commands.play import PlaySession, build_lineup, parse_seats, start_episode
 from alphatank.replay import (

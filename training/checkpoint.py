@@ -27,11 +27,11 @@ from typing import Any
 
 import numpy as np
 import torch
-from alphatank.training.learners import make_learner
-from alphatank.training.presets import LearnerSpec, TrainConfig
 
 from alphatank.policy import NOOP
 from alphatank.scenarios import Scenario, ScenarioError, parse_scenario
+from alphatank.training.learners import make_learner
+from alphatank.training.presets import LearnerSpec, TrainConfig
 
 FORMAT = "alphatank-checkpoint"
 VERSION = 1

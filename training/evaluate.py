@@ -20,12 +20,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from alphatank.training.checkpoint import Checkpoint, load_checkpoint
 
 from alphatank.envs.core import MatchSet
 from alphatank.policy import Policy
 from alphatank.scenarios import Scenario, Seat, load_scenario
 from alphatank.stats import wilson_interval
+from alphatank.training.checkpoint import Checkpoint, load_checkpoint
 
 
 @dataclass

@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import Any, Protocol
 
 import numpy as np
+
 from alphatank.training.ppo import PPO
 from alphatank.training.presets import LearnerSpec
 from alphatank.training.sac import SAC

@@ -14,9 +14,10 @@ from typing import Any
 
 import numpy as np
 import torch
+from torch import nn
+
 from alphatank.training.buffers import RolloutBuffer, compute_gae
 from alphatank.training.normalize import ObsNormalizer, ReturnNormalizer
-from torch import nn
 
 NVEC = (3, 3, 2)  # rotate, move, fire — the one action layout (RULES.md)
 MASKED_LOGIT = -1e8  # exp() of this is exactly 0 in float32, and 0 * it stays finite

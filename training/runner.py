@@ -22,6 +22,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from alphatank.envs.vector import make_vector_env
+from alphatank.observe import slot_counts
+from alphatank.scenarios import Scenario, load_scenario
 from alphatank.training.checkpoint import (
     Checkpoint,
     LivePolicy,
@@ -34,10 +38,6 @@ from alphatank.training.logging import RunLogger
 from alphatank.training.presets import LearnerSpec, TrainConfig
 from alphatank.training.schedules import make_schedule
 from alphatank.training.threads import limit_threads
-
-from alphatank.envs.vector import make_vector_env
-from alphatank.observe import slot_counts
-from alphatank.scenarios import Scenario, load_scenario
 
 WINDOW = 100  # episodes in the rolling win-rate / return windows
 

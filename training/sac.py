@@ -16,10 +16,11 @@ import gymnasium as gym
 import numpy as np
 import torch
 import torch.nn.functional as F  # noqa: N812
+from torch import nn
+
 from alphatank.training.buffers import ReplayBuffer
 from alphatank.training.normalize import ObsNormalizer
 from alphatank.training.ppo import NVEC
-from torch import nn
 
 LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0
 LOG_2PI = math.log(2 * math.pi)

@@ -14,7 +14,8 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
-from pettingzoo import ParallelEnv
+from gymnasium import spaces
+from pettingzoo import AECEnv, ParallelEnv
 from pettingzoo.utils import parallel_to_aec
 
 from alphatank.envs.core import MatchSet, action_space, check_actions
@@ -71,10 +72,10 @@ class TankBattleParallelEnv(ParallelEnv):
     def state_layout(self) -> ObsLayout:
         return self.core.global_state.layout
 
-    def observation_space(self, agent: str):  # noqa: ANN201 - gymnasium Space
+    def observation_space(self, agent: str) -> spaces.Box:
         return self._obs_spaces[agent]
 
-    def action_space(self, agent: str):  # noqa: ANN201
+    def action_space(self, agent: str) -> spaces.MultiDiscrete:
         return self._act_spaces[agent]
 
     def reset(self, seed: int | None = None, options: dict | None = None
@@ -159,6 +160,6 @@ def parallel_env(**kwargs: Any) -> TankBattleParallelEnv:
     return TankBattleParallelEnv(**kwargs)
 
 
-def env(**kwargs: Any):  # noqa: ANN201 - a PettingZoo AECEnv
+def env(**kwargs: Any) -> AECEnv:
     """PettingZoo AEC env: :func:`parallel_env` through ``parallel_to_aec``."""
     return parallel_to_aec(parallel_env(**kwargs))

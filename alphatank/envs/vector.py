@@ -240,7 +240,10 @@ def _worker(conn: Any, kwargs: dict, lo: int, hi: int, specs: dict, names: dict)
 
 class SubprocVectorMatchEnv:
     """:class:`VectorMatchEnv` split over ``num_workers`` processes (shared-memory arrays,
-    same interface, bit-identical results for the same seed)."""
+    same interface, bit-identical results for the same seed). Workers start with
+    ``start_method`` ("spawn": safe next to torch threads; a script must then create the
+    env under ``if __name__ == "__main__":``). Frozen policies and ``seat_policies`` are
+    pickled to the workers."""
 
     def __init__(self, scenario: str | Scenario, num_envs: int, seed: int = 0,
                  observation: str | None = None, game_overrides: dict | None = None,
@@ -288,7 +291,13 @@ class SubprocVectorMatchEnv:
     def _gather(self) -> list:
         out = []
         for conn in self._conns:
-            status, payload = conn.recv()
+            try:
+                status, payload = conn.recv()
+            except (EOFError, OSError):
+                status, payload = "error", (
+                    "the worker process exited without answering (with the 'spawn' start "
+                    "method a script must create the env under `if __name__ == "
+                    "\"__main__\":`)")
             if status == "error":
                 self.close()
                 raise RuntimeError(f"vector env worker failed: {payload}")

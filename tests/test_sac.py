@@ -1,0 +1,180 @@
+"""SAC: the paper's eq. (33) action mapping, twin critics, targets, entropy tuning, replay."""
+
+import numpy as np
+import pytest
+import torch
+
+from alphatank.envs.gym import TankBattleEnv
+from alphatank.envs.vector import VectorMatchEnv
+from alphatank.scenarios import parse_scenario
+from alphatank.training.evaluate import evaluate_learners
+from alphatank.training.presets import LearnerSpec, TrainConfig
+from alphatank.training.runner import Trainer
+from alphatank.training.sac import (
+    SAC,
+    ContinuousToDiscreteWrapper,
+    SACConfig,
+    continuous_to_discrete,
+)
+
+torch.set_num_threads(1)
+
+
+def test_equation_33_bins():
+    a = np.array([[0.0, 0.0, 0.0], [0.24, 0.24, 0.49], [0.25, 0.25, 0.5],
+                  [0.74, 0.74, 0.99], [0.75, 0.75, 1.0], [-0.3, 1.7, 2.0]])
+    got = continuous_to_discrete(a, (3, 3, 2))
+    assert got.tolist() == [[0, 0, 0], [0, 0, 0], [1, 1, 1], [1, 1, 1], [2, 2, 1], [0, 2, 1]]
+    assert got.dtype == np.int64
+    # every bin of every dimension is reachable and the mapping is monotone
+    grid = np.linspace(0, 1, 101)[:, None].repeat(3, axis=1)
+    bins = continuous_to_discrete(grid)
+    assert [sorted(set(bins[:, i])) for i in range(3)] == [[0, 1, 2], [0, 1, 2], [0, 1]]
+    assert (np.diff(bins, axis=0) >= 0).all()
+    with pytest.raises(ValueError, match="expected 3"):
+        continuous_to_discrete(np.zeros(2))
+
+
+def test_wrapper_turns_the_tank_env_continuous():
+    env = ContinuousToDiscreteWrapper(TankBattleEnv("vs_aggressive"))
+    assert env.action_space.shape == (3,) and env.action_space.low.min() == 0.0
+    assert env.action([0.9, 0.1, 0.7]).tolist() == [2, 0, 1]
+    env.reset(seed=0)
+    obs, reward, term, trunc, info = env.step(np.array([0.9, 1.0, 1.0], dtype=np.float32))
+    assert obs.shape == env.observation_space.shape and np.isfinite(reward)
+    with pytest.raises(TypeError, match="MultiDiscrete"):
+        ContinuousToDiscreteWrapper(ContinuousToDiscreteWrapper(TankBattleEnv("vs_random")))
+
+
+class Bandit:
+    """Each step a random target in {0,1,2} is shown one-hot; reward 1 for rotate ==
+    target plus 1 for fire == (target == 0); episodes last 8 steps (truncated)."""
+
+    def __init__(self, n: int, seed: int):
+        self.n, self.rng = n, np.random.default_rng(seed)
+        self.t = np.zeros(n, dtype=np.int64)
+        self.target = self.rng.integers(0, 3, n)
+
+    def obs(self):
+        o = np.zeros((self.n, 4), dtype=np.float32)
+        o[np.arange(self.n), self.target] = 1.0
+        o[:, 3] = self.rng.normal(size=self.n)
+        return o
+
+    def step(self, a):
+        r = (a[:, 0] == self.target).astype(np.float32) + (a[:, 2] == (self.target == 0))
+        self.t += 1
+        trunc = self.t >= 8
+        final = self.obs()
+        self.t[trunc] = 0
+        self.target = self.rng.integers(0, 3, self.n)
+        return self.obs(), r, np.zeros(self.n, bool), trunc, final
+
+
+def test_sac_learns_a_toy_task_within_bounded_updates():
+    cfg = SACConfig(hidden=64, batch_size=64, start_steps=256, update_after=256,
+                    update_every=32, utd_ratio=0.5, buffer_size=20000)
+    env, sac = Bandit(16, 0), SAC(4, 16, cfg, seed=0)
+    obs, rewards = env.obs(), []
+    for _ in range(500):
+        a = sac.act(obs)
+        obs, r, term, trunc, final = env.step(a)
+        sac.observe(obs, r, term, trunc, final)
+        rewards.append(float(r.mean()))
+        if sac.ready:
+            sac.update()
+    assert np.mean(rewards[:16]) < 1.2  # uniform random play earns ~0.83
+    assert np.mean(rewards[-50:]) > 1.8, np.mean(rewards[-50:])
+    assert sac.grad_steps <= 0.5 * 500 * 16  # bounded by utd_ratio
+    greedy = sac.policy_actions(env.obs(), deterministic=True)
+    assert (greedy[:, 0] == env.target).mean() > 0.9
+
+
+def test_replay_stores_final_obs_and_terminations_only():
+    sac = SAC(2, 3, SACConfig(buffer_size=10, start_steps=0, update_after=100), seed=1)
+    obs = np.zeros((3, 2), np.float32)
+    nxt = np.ones((3, 2), np.float32)
+    final = np.full((3, 2), 7.0, np.float32)
+    sac.act(obs)
+    sac.observe(nxt, np.array([1.0, 2.0, 3.0]), np.array([True, False, False]),
+                np.array([False, True, False]), final_obs=final)
+    assert sac.replay.next_obs[:3, 0].tolist() == [7.0, 7.0, 1.0]  # ended: their last obs
+    assert sac.replay.dones[:3].tolist() == [1.0, 0.0, 0.0]  # truncation keeps bootstrapping
+    assert sac.replay.rewards[:3].tolist() == [1.0, 2.0, 3.0]
+
+
+def test_twin_critics_targets_and_entropy_tuning():
+    cfg = SACConfig(hidden=16, batch_size=8, start_steps=0, update_after=8, update_every=8,
+                    buffer_size=100, tau=0.1)
+    sac = SAC(3, 4, cfg, seed=2)
+    rng = np.random.default_rng(0)
+    for _ in range(4):
+        sac.act(rng.normal(size=(4, 3)).astype(np.float32))
+        sac.observe(rng.normal(size=(4, 3)).astype(np.float32), rng.normal(size=4),
+                    np.zeros(4, bool), np.zeros(4, bool))
+    assert not torch.equal(sac.q1.net[0].weight, sac.q2.net[0].weight)  # two critics
+    q1_before = [p.detach().clone() for p in sac.q1.parameters()]
+    t1_before = [p.detach().clone() for p in sac.q1_target.parameters()]
+    assert all(torch.equal(a, b) for a, b in zip(q1_before, t1_before, strict=True))
+    alpha0 = sac.alpha
+    sac._gradient_step()
+    for p, t_old, t_new in zip(sac.q1.parameters(), t1_before, sac.q1_target.parameters(),
+                               strict=True):
+        assert torch.allclose(t_new, 0.9 * t_old + 0.1 * p, atol=1e-6)  # Polyak average
+    # the initial policy's entropy (~0 for std 1 before the sigmoid) exceeds the target
+    # (-3), so automatic tuning lowers alpha
+    assert sac.alpha < alpha0
+
+
+def test_each_sac_learner_keeps_its_own_replay_buffer(tmp_path):
+    sac_cfg = SACConfig(hidden=16, batch_size=16, start_steps=16, update_after=16,
+                        update_every=16, buffer_size=1000)
+    cfg = TrainConfig("s2", "pair", total_steps=4 * 32, num_envs=4, rollout_steps=8,
+                      wandb="disabled", checkpoint_every=0, game={"max_steps": 20},
+                      learners=(LearnerSpec("sac_a", "sac", (0,), sac=sac_cfg),
+                                LearnerSpec("sac_b", "sac", (1,), sac=sac_cfg)))
+    tr = Trainer(cfg, tmp_path / "s2", progress=False)
+    tr.train()
+    a, b = tr.learners["sac_a"], tr.learners["sac_b"]
+    assert len(a.replay) == len(b.replay) == 128
+    assert a.replay is not b.replay
+    assert not np.array_equal(a.replay.rewards[:128], b.replay.rewards[:128])
+    assert a.grad_steps > 0 and b.grad_steps > 0
+
+
+RANGE = """name: range
+description: 5x5 firing range for learning tests
+
+#######
+#.....#
+#.1...#
+#.....#
+#...2.#
+#.....#
+#######
+"""
+
+
+def test_sac_learns_to_shoot_a_helpless_bot(tmp_path):
+    """The learner, 2 cells from an aggressive bot of weakness 0, with the paper's
+    aiming-streak shaping term on (weight 5; off by default)."""
+    (tmp_path / "range.txt").write_text(RANGE)
+    sc = parse_scenario({"name": "range", "map": str(tmp_path / "range.txt"),
+                         "game": {"max_steps": 120}, "rewards": {"aim_streak": 5.0},
+                         "seats": [{"team": "A", "controller": "learner"},
+                                   {"team": "B", "controller": "bot", "bot": "aggressive",
+                                    "weakness": 0.0}]})
+    sac_cfg = SACConfig(hidden=64, batch_size=64, update_every=64, reward_scale=0.05,
+                        gamma=0.95, tau=0.01, policy_lr=1e-3, q_lr=1e-3, alpha_lr=1e-3,
+                        buffer_size=50_000)
+    cfg = TrainConfig("range", "vs_aggressive", total_steps=16 * 1024, num_envs=8,
+                      rollout_steps=64, wandb="disabled", checkpoint_every=0,
+                      learners=(LearnerSpec("sac", "sac", (0,), sac=sac_cfg),))
+    tr = Trainer(cfg, tmp_path / "run", env=VectorMatchEnv(sc, 8, seed=0), progress=False)
+    tr.train()
+    sac = tr.learners["sac"]
+    assert sac.grad_steps == 16 * 1024 - 1024  # one per transition after update_after
+    first = tr.history[1]["charts/win_rate"]  # random actions (start_steps) and early play
+    res = evaluate_learners(tr.learners, tr.observation_meta, {"sac": "sac"}, sc, [None],
+                            games=40, seed=5, num_envs=8, reward_overrides={"aim_streak": 5.0})[0]
+    assert first < 0.4 and res.win_rate >= 0.6, (first, res)
