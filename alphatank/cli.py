@@ -8,6 +8,9 @@ import sys
 
 # verb -> module in alphatank.commands exposing add_arguments(parser) and run(args) -> int
 COMMANDS = {
+    "demo": "The main job: train PPO vs the aggressive bot, evaluate, record (runs/<name>/).",
+    "train": "Train PPO/SAC learners from a named preset (vs bots, self-play, teams).",
+    "eval": "Evaluate a checkpoint against bots: Table-3 layout with Wilson 95%% intervals.",
     "play": "Play interactively: humans, bots and checkpoints in any seat.",
     "record": "Record a headless match to MP4/GIF (and a replay file).",
     "replay": "Re-simulate, render or record a replay file.",

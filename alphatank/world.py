@@ -13,7 +13,7 @@ Bullet slot ``b`` belongs to tank ``b // capacity``.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -314,9 +314,13 @@ def first_wall_hit(space: pymunk.Space, x0: float, y0: float, x1: float, y1: flo
     return best
 
 
+WallQuery = Callable[[pymunk.Space, float, float, float, float, float, Sequence[pymunk.Shape]],
+                     pymunk.SegmentQueryInfo | None]
+
+
 def trace(space: pymunk.Space, x: float, y: float, dx: float, dy: float, length: float,
-          radius: float, bounces_left: int) -> tuple[float, float, float, float,
-                                                     list[tuple[float, float]], bool]:
+          radius: float, bounces_left: int, query: WallQuery = first_wall_hit
+          ) -> tuple[float, float, float, float, list[tuple[float, float]], bool]:
     """Move a circle of ``radius`` from (x, y) along unit (dx, dy) for ``length`` px,
     reflecting elastically off walls (continuous: exact contact points, no tunnelling).
 
@@ -328,7 +332,7 @@ def trace(space: pymunk.Space, x: float, y: float, dx: float, dy: float, length:
     points: list[tuple[float, float]] = []
     leaving: list[pymunk.Shape] = []  # walls overlapped at the start and moved away from
     while True:
-        q = first_wall_hit(space, x, y, x + dx * length, y + dy * length, radius, leaving)
+        q = query(space, x, y, x + dx * length, y + dy * length, radius, leaving)
         if q is None:
             return x + dx * length, y + dy * length, dx, dy, points, False
         nx, ny = q.normal  # out of the wall, toward the bullet

@@ -12,7 +12,7 @@ from alphatank.bots.runner import GameResult, play_game
 from alphatank.config import GameConfig
 from alphatank.mapspec import MapSpec
 from alphatank.match import Match
-from alphatank.stats import wilson_interval
+from alphatank.stats import League, wilson_interval
 
 
 @dataclass
@@ -21,6 +21,7 @@ class ArenaResult:
 
     names: list[str]
     wdl: np.ndarray  # (n, n, 3) int
+    league: League
     ticks: list[int] = field(default_factory=list)
 
     def games(self, i: int, j: int) -> int:
@@ -53,6 +54,10 @@ class ArenaResult:
             rate, lo, hi = self.win_rate(i)
             cells.append(f"{rate:4.0%} [{lo:.0%},{hi:.0%}]" if n else "-")
             lines.append(f"{name:<{width}}" + "".join(f"{c:>{width}}" for c in cells))
+        lines += ["", "openskill (Plackett-Luce) league, games in play order:",
+                  f"{'':<{width}}{'mu':>8}{'sigma':>8}{'ordinal':>9}"]
+        lines += [f"{name:<{width}}{mu:8.2f}{sigma:8.2f}{ordinal:9.2f}"
+                  for name, mu, sigma, ordinal in self.league.table()]
         return "\n".join(lines)
 
     def _cell(self, i: int, j: int) -> str:
@@ -74,7 +79,7 @@ def run_arena(specs: Sequence[str], spec: MapSpec, cfg: GameConfig, games: int,
     for s in specs:
         parse_bot_spec(s)  # fail early, naming the valid bots
     n = len(specs)
-    result = ArenaResult(list(specs), np.zeros((n, n, 3), dtype=np.int64))
+    result = ArenaResult(list(specs), np.zeros((n, n, 3), dtype=np.int64), League(list(specs)))
     for i in range(n):
         for j in range(i + 1, n):
             bots = [bot_from_spec(specs[i], seed=seed), bot_from_spec(specs[j], seed=seed)]
@@ -85,6 +90,7 @@ def run_arena(specs: Sequence[str], spec: MapSpec, cfg: GameConfig, games: int,
                 out_i = res.outcome(order.index(0))  # +1 / 0 / -1 for bot i
                 result.wdl[i, j, 1 - out_i] += 1
                 result.wdl[j, i, 1 + out_i] += 1
+                result.league.record(i, j, out_i)
                 result.ticks.append(res.ticks)
                 if on_game is not None:
                     on_game(specs[i], specs[j], res)

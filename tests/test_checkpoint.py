@@ -37,8 +37,17 @@ def tiny_config(name: str, iterations: int, **kw) -> TrainConfig:
 @pytest.fixture(scope="module")
 def trained(tmp_path_factory):
     run = tmp_path_factory.mktemp("runs") / "tiny"
-    Trainer(tiny_config("tiny", 3), run, progress=False).train()
+    Trainer(tiny_config("tiny", 3, wandb="offline", video_every=3), run, progress=False).train()
     return run
+
+
+def test_run_folder_has_offline_wandb_metrics_and_video(trained):
+    assert list((trained / "wandb").glob("offline-run-*/run-*.wandb"))  # no account needed
+    rows = [json.loads(line) for line in (trained / "metrics.jsonl").read_text().splitlines()]
+    assert [r["step"] for r in rows] == [ITER, 2 * ITER, 3 * ITER]
+    assert {"charts/sps", "losses/policy_loss", "losses/entropy"} <= set(rows[-1])
+    video = trained / "videos" / f"step_{3 * ITER:010d}.mp4"
+    assert video.stat().st_size > 1000
 
 
 def test_save_layout_is_complete_and_atomic(trained):
@@ -169,3 +178,33 @@ def test_mismatched_checkpoint_gives_a_clear_error(trained, tmp_path):
     (ck / "meta.json").write_text(json.dumps(meta))
     with pytest.raises(CheckpointError, match="version 99"):
         load_checkpoint(ck)
+
+
+def test_train_command_runs_resumes_and_refuses_to_overwrite(tmp_path, capsys):
+    import argparse
+
+    from alphatank.commands import train as train_cmd
+
+    parser = argparse.ArgumentParser()
+    train_cmd.add_arguments(parser)
+    common = ["--runs", str(tmp_path), "--num-envs", "2", "--wandb", "disabled",
+              "--no-progress"]
+    args = parser.parse_args(["--preset", "ppo_vs_aggressive", "--name", "cli",
+                              "--total-steps", "64", "--ppo", "num_steps=16,update_epochs=1",
+                              *common])
+    assert train_cmd.run(args) == 0
+    assert load_checkpoint(tmp_path / "cli").meta["progress"]["global_step"] == 64
+    assert train_cmd.run(args) == 2  # the run exists: resume it instead
+    assert "--resume" in capsys.readouterr().out
+    resume = parser.parse_args(["--resume", str(tmp_path / "cli"), "--total-steps", "128",
+                                *common])
+    assert train_cmd.run(resume) == 0
+    ck = load_checkpoint(tmp_path / "cli")
+    assert ck.meta["progress"]["global_step"] == 128
+    assert ck.learner_specs[0].ppo.num_steps == 16  # the run keeps its own settings
+    bad = parser.parse_args(["--preset", "ppo_vs_aggressive", "--name", "x",
+                             "--ppo", "num_stepz=3", *common])
+    assert train_cmd.run(bad) == 2
+    assert "num_stepz" in capsys.readouterr().out
+    assert train_cmd.run(parser.parse_args(["--list"])) == 0
+    assert "team_ppo_vs_ppo" in capsys.readouterr().out

@@ -10,9 +10,10 @@ from alphatank.training.evaluate import evaluate_learners
 from alphatank.training.ppo import (
     PPO,
     ActorCritic,
+    NumpyActorCritic,
     PPOConfig,
     evaluate_actions,
-    sample_actions,
+    np_sample,
 )
 from alphatank.training.presets import LearnerSpec, TrainConfig
 from alphatank.training.runner import Trainer
@@ -103,25 +104,39 @@ def test_ppo_same_seed_same_run():
 
 def test_action_mask_forbids_masked_choices_and_keeps_losses_finite():
     net = ActorCritic(4)
-    gen = torch.Generator().manual_seed(0)
     obs = torch.randn(256, 4)
     mask = torch.ones(256, 8, dtype=torch.bool)
     mask[:, 7] = False  # fire = 1 forbidden
     mask[:, 0] = False  # rotate ccw forbidden
-    logits = net.logits(obs, mask)
-    actions, logprob = sample_actions(logits, net.nvec, gen)
+    logits = net.logits(obs, mask).detach()
+    actions, logprob = np_sample(logits.numpy(), net.nvec, np.random.default_rng(0))
     assert (actions[:, 2] == 0).all() and (actions[:, 0] != 0).all()
-    lp, ent = evaluate_actions(logits, actions, net.nvec)
+    lp, ent = evaluate_actions(logits, torch.from_numpy(actions), net.nvec)
     assert torch.isfinite(lp).all() and torch.isfinite(ent).all()
-    assert torch.allclose(lp, logprob)
+    assert torch.allclose(lp, torch.from_numpy(logprob), atol=1e-5)  # numpy == torch
+
+
+def test_numpy_mirror_matches_the_torch_network():
+    net = ActorCritic(7)
+    mirror = NumpyActorCritic(net)
+    x = torch.randn(32, 7)
+    logits, values = mirror.forward(x.numpy())
+    with torch.no_grad():
+        assert np.allclose(logits, net.logits(x).numpy(), atol=1e-5)
+        assert np.allclose(values, net.value(x).numpy(), atol=1e-5)
 
 
 def test_sampling_matches_categorical_probabilities():
-    logits = torch.log(torch.tensor([[0.7, 0.2, 0.1, 0.1, 0.1, 0.8, 0.5, 0.5]]))
-    logits = logits.repeat(20000, 1)
-    actions, _ = sample_actions(logits, (3, 3, 2), torch.Generator().manual_seed(1))
-    freq = torch.bincount(actions[:, 0], minlength=3).float() / 20000
-    assert torch.allclose(freq, torch.tensor([0.7, 0.2, 0.1]), atol=0.015)
+    logits = np.log(np.array([[0.7, 0.2, 0.1, 0.1, 0.1, 0.8, 0.5, 0.5]], dtype=np.float32))
+    actions, logprob = np_sample(np.repeat(logits, 20000, axis=0), (3, 3, 2),
+                                 np.random.default_rng(1))
+    freq = np.bincount(actions[:, 0], minlength=3) / 20000
+    assert np.allclose(freq, [0.7, 0.2, 0.1], atol=0.015)
+    greedy, _ = np_sample(logits, (3, 3, 2), np.random.default_rng(1), deterministic=True)
+    assert greedy.tolist() == [[0, 2, 0]]
+    heads = [np.array([0.7, 0.2, 0.1]), np.array([0.1, 0.1, 0.8]), np.array([0.5, 0.5])]
+    want = sum(np.log(h[actions[:, i]]) for i, h in enumerate(heads))
+    assert np.allclose(logprob, want, atol=1e-5)
 
 
 def test_bad_config_is_rejected_by_name():
@@ -145,3 +160,26 @@ def test_ppo_learns_to_shoot_a_helpless_bot(tmp_path):
     res = evaluate_learners(tr.learners, tr.observation_meta, {"ppo": "ppo"}, sc, [None],
                             games=40, seed=5, num_envs=8)[0]
     assert res.win_rate >= 0.8, (first, res)
+
+
+def test_action_mask_hook_reaches_the_rollout(tmp_path):
+    def no_fire_no_reverse(obs):
+        mask = np.ones(obs.shape[:2] + (8,), dtype=bool)
+        mask[..., 3] = False  # move: backward
+        mask[..., 7] = False  # fire: yes
+        return mask
+
+    cfg = TrainConfig("mask", "vs_aggressive", total_steps=2 * 64, num_envs=4,
+                      wandb="disabled", checkpoint_every=0,
+                      learners=(LearnerSpec("ppo", "ppo", (0,),
+                                            ppo=PPOConfig(num_steps=16, update_epochs=1)),))
+    tr = Trainer(cfg, tmp_path / "mask", progress=False, action_mask=no_fire_no_reverse)
+    ppo = tr.learners["ppo"]
+    seen = []
+    act = ppo.act
+    ppo.act = lambda x, m=None: seen.append(act(x, m)) or seen[-1]
+    tr.train()
+    actions = np.concatenate(seen)
+    assert actions.shape == (2 * 16 * 4, 3)
+    assert (actions[:, 2] == 0).all() and (actions[:, 1] != 0).all()
+    assert ppo.updates == 2

@@ -167,14 +167,14 @@ def test_sac_learns_to_shoot_a_helpless_bot(tmp_path):
     sac_cfg = SACConfig(hidden=64, batch_size=64, update_every=64, reward_scale=0.05,
                         gamma=0.95, tau=0.01, policy_lr=1e-3, q_lr=1e-3, alpha_lr=1e-3,
                         buffer_size=50_000)
-    cfg = TrainConfig("range", "vs_aggressive", total_steps=16 * 1024, num_envs=8,
+    cfg = TrainConfig("range", "vs_aggressive", total_steps=24 * 1024, num_envs=8,
                       rollout_steps=64, wandb="disabled", checkpoint_every=0,
                       learners=(LearnerSpec("sac", "sac", (0,), sac=sac_cfg),))
     tr = Trainer(cfg, tmp_path / "run", env=VectorMatchEnv(sc, 8, seed=0), progress=False)
     tr.train()
     sac = tr.learners["sac"]
-    assert sac.grad_steps == 16 * 1024 - 1024  # one per transition after update_after
-    first = tr.history[1]["charts/win_rate"]  # random actions (start_steps) and early play
+    assert sac.grad_steps == 24 * 1024 - 1024  # one per transition after update_after
+    first = tr.history[2]["charts/win_rate"]  # random actions (start_steps) and early play
     res = evaluate_learners(tr.learners, tr.observation_meta, {"sac": "sac"}, sc, [None],
-                            games=40, seed=5, num_envs=8, reward_overrides={"aim_streak": 5.0})[0]
-    assert first < 0.4 and res.win_rate >= 0.6, (first, res)
+                            games=40, seed=5, num_envs=8, deterministic=True)[0]
+    assert first < 0.35 and res.win_rate >= 0.55, (first, res)  # seed 0: 0.2 -> 0.75

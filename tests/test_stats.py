@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from alphatank.stats import wilson_interval
+from alphatank.stats import League, wilson_interval
 
 
 def test_known_values():
@@ -46,3 +46,15 @@ def test_z_widens():
 def test_bad_input(s, n, z):
     with pytest.raises(ValueError, match="wilson_interval"):
         wilson_interval(s, n, z)
+
+
+def test_league_ranks_the_player_who_wins():
+    league = League(["strong", "weak", "even"])
+    for _ in range(10):
+        league.record(0, 1, 1)
+        league.record(2, 1, 0)
+    rows = league.table()
+    assert rows[0][0] == "strong"
+    assert rows[-1][0] == "weak"
+    with pytest.raises(ValueError, match="outcome must be"):
+        league.record(0, 1, 2)

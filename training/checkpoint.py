@@ -149,7 +149,10 @@ class Checkpoint:
 
     @property
     def train_config(self) -> TrainConfig:
-        return TrainConfig.from_dict(self.meta["train_config"])
+        try:
+            return TrainConfig.from_dict(self.meta["train_config"])
+        except (ValueError, KeyError, TypeError) as exc:
+            raise CheckpointError(f"{self.path / 'meta.json'}: train_config: {exc}") from None
 
     @property
     def scenario(self) -> Scenario:
@@ -160,7 +163,10 @@ class Checkpoint:
 
     @property
     def learner_specs(self) -> list[LearnerSpec]:
-        return [LearnerSpec.from_dict(d) for d in self.meta["learners"]]
+        try:
+            return [LearnerSpec.from_dict(d) for d in self.meta["learners"]]
+        except (ValueError, KeyError, TypeError) as exc:
+            raise CheckpointError(f"{self.path / 'meta.json'}: learners: {exc}") from None
 
     @property
     def obs_dim(self) -> int:
@@ -205,11 +211,10 @@ class Checkpoint:
     def load_learner(self, name: str, num_streams: int = 1, weights_only: bool = False,
                      seed: int = 0) -> Any:
         """A PPO/SAC learner rebuilt from its spec with this checkpoint's state."""
-        spec = next(s for s in self.learner_specs if s.name == name) \
-            if name in self.learner_names() else None
-        if spec is None:
-            raise CheckpointError(f"{self.path}: no learner {name!r}; learners: "
-                                  f"{self.learner_names()}")
+        specs = {s.name: s for s in self.learner_specs}
+        if name not in specs:
+            raise CheckpointError(f"{self.path}: no learner {name!r}; learners: {list(specs)}")
+        spec = specs[name]
         learner = make_learner(spec, self.obs_dim, num_streams, seed)
         state = self.state(name)
         try:

@@ -12,6 +12,8 @@ import os
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from alphatank.training.presets import WANDB_MODES
 
 
@@ -81,25 +83,37 @@ def read_metrics(run_dir: str | Path) -> list[dict[str, float]]:
 
 
 def plot_learning_curve(run_dir: str | Path, out: str | Path | None = None,
-                        keys: tuple[str, ...] = ("charts/win_rate", "eval/win_rate")) -> Path:
-    """PNG of win rates (training window and evaluations) and episode return vs env step."""
+                        evals: list[tuple[int, float, float, float]] | None = None) -> Path:
+    """PNG of the win rate (last-100-episode window, per opponent when there are several;
+    ``eval/win_rate`` points and ``evals`` = (step, rate, ci_low, ci_high) with their
+    intervals) and the episode return against env steps."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     rows = read_metrics(run_dir)
     out = Path(out) if out else Path(run_dir) / "learning_curve.png"
+    keys = {k for r in rows for k in r}
+    per_opp = sorted(k for k in keys if k.startswith("charts/win_rate_vs/"))
+    lines = sorted(k for k in keys if k.startswith("charts/win_rate") and
+                   not k.startswith("charts/win_rate_vs/"))
+    if len(per_opp) > 1:
+        lines += per_opp
     fig, (ax_w, ax_r) = plt.subplots(1, 2, figsize=(11, 4))
-    for prefix in keys:
-        for key in sorted({k for r in rows for k in r if k.startswith(prefix)}):
-            pts = [(r["step"], r[key]) for r in rows if key in r]
-            ax_w.plot(*zip(*pts, strict=True), label=key, marker="o" if "eval" in key else None,
-                      markersize=3)
-    for key in sorted({k for r in rows for k in r if k.startswith("charts/episode_return")}):
+    for key in lines:
         pts = [(r["step"], r[key]) for r in rows if key in r]
-        ax_r.plot(*zip(*pts, strict=True), label=key)
+        ax_w.plot(*zip(*pts, strict=True), label=key.replace("charts/", "train "), lw=1.2)
+    points = [(r["step"], r["eval/win_rate"], r["eval/win_ci_low"], r["eval/win_ci_high"])
+              for r in rows if "eval/win_rate" in r] + list(evals or [])
+    if points:
+        x, y, lo, hi = (np.array(v) for v in zip(*points, strict=True))
+        ax_w.errorbar(x, y, yerr=[y - lo, hi - y], fmt="o", color="black", capsize=3,
+                      markersize=4, label="evaluation (Wilson 95%)")
+    for key in sorted(k for k in keys if k.startswith("charts/episode_return")):
+        pts = [(r["step"], r[key]) for r in rows if key in r]
+        ax_r.plot(*zip(*pts, strict=True), label=key.replace("charts/", ""))
     ax_w.set(xlabel="env steps", ylabel="win rate", ylim=(-0.02, 1.02), title="Win rate")
-    ax_r.set(xlabel="env steps", ylabel="return", title="Episode return")
+    ax_r.set(xlabel="env steps", ylabel="return", title="Episode return (last 100)")
     for ax in (ax_w, ax_r):
         ax.grid(alpha=0.3)
         if ax.lines:

@@ -2,8 +2,8 @@
 
 Network and defaults follow the paper's Table 7 (CleanRL-style): separate actor and
 critic MLPs of two 128-unit tanh layers, one categorical head per action dimension.
-Sampling uses a private ``torch.Generator`` (Gumbel-max), so a run is reproducible and
-resumable bit for bit.
+Rollout inference runs on a numpy mirror of the network with Gumbel-max sampling from
+the learner's own generator, so a run is reproducible and resumable bit for bit.
 """
 
 from __future__ import annotations
@@ -93,21 +93,6 @@ def head_log_probs(logits: torch.Tensor, nvec: tuple[int, ...]) -> list[torch.Te
     return [torch.log_softmax(part, dim=-1) for part in torch.split(logits, nvec, dim=-1)]
 
 
-def sample_actions(logits: torch.Tensor, nvec: tuple[int, ...], generator: torch.Generator,
-                   deterministic: bool = False) -> tuple[torch.Tensor, torch.Tensor]:
-    """Actions (B, len(nvec)) and their summed log-probabilities (B,), Gumbel-max sampling."""
-    logps = head_log_probs(logits, nvec)
-    if deterministic:
-        scores = logps
-    else:
-        u = torch.rand(logits.shape, generator=generator).clamp_(min=1e-20)
-        gumbel = torch.split(-torch.log(-torch.log(u)), nvec, dim=-1)
-        scores = [lp + g for lp, g in zip(logps, gumbel, strict=True)]
-    actions = torch.stack([s.argmax(dim=-1) for s in scores], dim=-1)
-    logprob = sum(lp.gather(-1, actions[:, i:i + 1]).squeeze(-1) for i, lp in enumerate(logps))
-    return actions, logprob
-
-
 def evaluate_actions(logits: torch.Tensor, actions: torch.Tensor, nvec: tuple[int, ...]
                      ) -> tuple[torch.Tensor, torch.Tensor]:
     """Summed log-probability and entropy (both (B,)) of given actions."""
@@ -149,8 +134,9 @@ class NumpyActorCritic:
 
 def np_sample(logits: np.ndarray, nvec: tuple[int, ...], rng: np.random.Generator,
               deterministic: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """Numpy twin of :func:`sample_actions`: actions (B, len(nvec)) int64 and summed
-    log-probabilities (B,) float32, Gumbel-max sampling from ``rng``."""
+    """Actions (B, len(nvec)) int64 and their summed log-probabilities (B,) float32 from
+    logits (B, sum(nvec)): Gumbel-max sampling from ``rng`` (or the most likely choice).
+    :func:`evaluate_actions` computes the same log-probabilities in torch."""
     b = logits.shape[0]
     rows = np.arange(b)
     actions = np.empty((b, len(nvec)), dtype=np.int64)

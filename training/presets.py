@@ -114,6 +114,52 @@ class TrainConfig:
         return _dataclass_from(cls, {**data, "learners": learners}, "train config")
 
 
+def default_learners(num_learners: int) -> tuple[LearnerSpec, ...]:
+    """One independent PPO learner (Table 7) per learner seat."""
+    if num_learners == 1:
+        return (LearnerSpec("ppo", "ppo", (0,)),)
+    return tuple(LearnerSpec(f"ppo_{i}", "ppo", (i,)) for i in range(num_learners))
+
+
+def parse_assignments(text: str, cls: type, where: str) -> dict[str, Any]:
+    """``"update_epochs=4,num_steps=128"`` -> typed field values of dataclass ``cls``."""
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    out: dict[str, Any] = {}
+    for item in filter(None, (part.strip() for part in text.split(","))):
+        key, sep, raw = item.partition("=")
+        key = key.strip()
+        if not sep or key not in fields:
+            raise ValueError(f"{where}: expected KEY=VALUE with KEY one of {sorted(fields)}, "
+                             f"got {item!r}")
+        kind = str(fields[key].type)
+        raw = raw.strip()
+        try:
+            if "bool" in kind:
+                if raw.lower() not in ("true", "false", "1", "0"):
+                    raise ValueError(raw)
+                out[key] = raw.lower() in ("true", "1")
+            elif raw.lower() == "none" and "None" in kind:
+                out[key] = None
+            elif "int" in kind and "float" not in kind:
+                out[key] = int(raw)
+            else:
+                out[key] = float(raw)
+        except ValueError:
+            raise ValueError(f"{where}: {key} needs a {kind} value, got {raw!r}") from None
+    return out
+
+
+def with_algo_overrides(cfg: TrainConfig, num_learners: int, ppo: str = "", sac: str = ""
+                        ) -> TrainConfig:
+    """``cfg`` with hyperparameters changed for all its PPO / SAC learners."""
+    p = parse_assignments(ppo, PPOConfig, "--ppo")
+    s = parse_assignments(sac, SACConfig, "--sac")
+    specs = cfg.learners or default_learners(num_learners)
+    specs = tuple(dataclasses.replace(spec, ppo=dataclasses.replace(spec.ppo, **p),
+                                      sac=dataclasses.replace(spec.sac, **s)) for spec in specs)
+    return dataclasses.replace(cfg, learners=specs)
+
+
 def _dataclass_from(cls: type, data: dict[str, Any], where: str) -> Any:
     valid = {f.name for f in dataclasses.fields(cls)}
     unknown = sorted(set(data) - valid)
@@ -183,8 +229,8 @@ PRESETS: dict[str, TrainConfig] = {p.name: p for p in (
                       enumerate((("a", 1), ("a", 2), ("b", 1), ("b", 2))))),
     # the make-demo job and the time-to-skill run
     TrainConfig("demo", "vs_aggressive", "make demo: PPO vs aggressive, short budget",
-                (_ppo(cfg=PPO_FAST),), total_steps=1_500_000, num_envs=16, num_workers=2,
-                checkpoint_every=50, time_limit_s=540.0),
+                (_ppo(cfg=PPO_FAST),), total_steps=2_000_000, num_envs=16, num_workers=2,
+                checkpoint_every=50, time_limit_s=480.0),
 )}
 
 

@@ -18,6 +18,7 @@ import math
 import re
 import time
 from collections import deque
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -35,7 +36,8 @@ from alphatank.training.checkpoint import (
 )
 from alphatank.training.learners import make_learner
 from alphatank.training.logging import RunLogger
-from alphatank.training.presets import LearnerSpec, TrainConfig
+from alphatank.training.ppo import NVEC
+from alphatank.training.presets import TrainConfig, default_learners
 from alphatank.training.schedules import make_schedule
 from alphatank.training.threads import limit_threads
 
@@ -46,13 +48,6 @@ def derive_seed(*parts: int) -> int:
     return int(np.random.SeedSequence(list(parts)).generate_state(1, np.uint64)[0] >> 1)
 
 
-def default_learners(num_learners: int) -> tuple[LearnerSpec, ...]:
-    """One independent PPO learner per learner seat."""
-    if num_learners == 1:
-        return (LearnerSpec("ppo", "ppo", (0,)),)
-    return tuple(LearnerSpec(f"ppo_{i}", "ppo", (i,)) for i in range(num_learners))
-
-
 def opponent_key(label: str) -> str:
     """'B:aggressive(w=1), B:smart(w=0.5)' -> 'aggressive+smart' (for per-opponent stats)."""
     names = re.findall(r"([A-Za-z_]+)\(", label)
@@ -60,32 +55,54 @@ def opponent_key(label: str) -> str:
 
 
 class Trainer:
-    """Runs a :class:`TrainConfig` in ``run_dir``; ``env`` may be injected (tests)."""
+    """Runs a :class:`TrainConfig` in ``run_dir``. ``env`` (a vector env) and
+    ``scenario`` may be given instead of being built from ``cfg.scenario``.
+
+    ``action_mask``: optional hook ``f(obs (E, L, D)) -> bool (E, L, 8)`` over the
+    concatenated choices (rotate 3, move 3, fire 2); PPO learners never sample a masked
+    choice and their losses use the same masks.
+    """
 
     def __init__(self, cfg: TrainConfig, run_dir: str | Path, env: Any = None,
                  resume: Checkpoint | None = None, progress: bool = True,
-                 wandb_id: str | None = None):
+                 wandb_id: str | None = None,
+                 action_mask: Callable[[np.ndarray], np.ndarray] | None = None,
+                 scenario: Scenario | None = None):
         self.cfg = cfg
+        self.action_mask = action_mask
         self.run_dir = Path(run_dir)
         self.progress = progress
         limit_threads(cfg.torch_threads)
-        self.scenario: Scenario = load_scenario(cfg.scenario)
+        # an injected env brings its own scenario (tests use custom maps); a resumed run
+        # uses the one saved in its checkpoint
+        self.scenario: Scenario = (scenario or getattr(env, "scenario", None)
+                                   or load_scenario(cfg.scenario))
+        n_learners = len(self.scenario.learner_seats)
+        specs = cfg.learners or default_learners(n_learners)
+        self.specs = specs = list(specs)
+        owned = sorted(s for spec in specs for s in spec.seats)
+        if owned != list(range(n_learners)):
+            raise ValueError(f"learners must drive each of the scenario's {n_learners} learner "
+                             f"seats exactly once; they drive {owned} "
+                             f"({[(s.name, list(s.seats)) for s in specs]})")
         self.env = env if env is not None else make_vector_env(
             self.scenario, cfg.num_envs, seed=cfg.seed, num_workers=cfg.num_workers,
             observation=cfg.observation, game_overrides=cfg.game or None,
             reward_overrides=cfg.rewards or None)
-        env = self.env
+        try:
+            self._setup(specs, resume, wandb_id)
+        except BaseException:
+            if env is None:  # do not leave worker processes behind
+                self.env.close()
+            raise
+
+    def _setup(self, specs: list, resume: Checkpoint | None, wandb_id: str | None) -> None:
+        cfg, env = self.cfg, self.env
         self.E, self.L, self.D = env.num_envs, env.num_learners, env.obs_dim
-        specs = cfg.learners or default_learners(self.L)
-        self.specs = list(specs)
-        owned = sorted(s for spec in specs for s in spec.seats)
-        if owned != list(range(self.L)):
-            raise ValueError(f"learners must drive each of the scenario's {self.L} learner "
-                             f"seats exactly once; they drive {owned} "
-                             f"({[(s.name, list(s.seats)) for s in specs]})")
         self.cols = {spec.name: list(spec.seats) for spec in specs}
+        mask_dim = sum(NVEC) if self.action_mask is not None else 0
         self.learners = {spec.name: make_learner(spec, self.D, self.E * len(spec.seats),
-                                                 derive_seed(cfg.seed, k))
+                                                 derive_seed(cfg.seed, k), mask_dim)
                          for k, spec in enumerate(specs)}
         ppo_steps = [spec.ppo.num_steps for spec in specs if spec.algo == "ppo"]
         self.rollout_steps = cfg.rollout_steps or (max(ppo_steps) if ppo_steps else 512)
@@ -102,7 +119,8 @@ class Trainer:
         layout = getattr(env, "layout", None)
         self.alive_col = (layout["self.alive"].start
                           if layout is not None and "self.alive" in layout else None)
-        self.victory = self.scenario.reward_config(**cfg.rewards).victory
+        self.victory = (env.core.reward_cfg.victory if hasattr(env, "core")
+                        else self.scenario.reward_config(**cfg.rewards).victory)
         self.schedule = make_schedule(cfg.schedule, cfg.total_steps, cfg.seed)
         game = self.scenario.game_config(**cfg.game)
         walls, buffs, debuffs = slot_counts(game, self.scenario.map_specs())
@@ -217,10 +235,12 @@ class Trainer:
         metrics: dict[str, float] = {}
         E, D = self.E, self.D
         for _ in range(self.rollout_steps):
+            masks = self.action_mask(obs) if self.action_mask is not None else None
             for name, learner in self.learners.items():
                 cols = self.cols[name]
                 x = obs[:, cols].reshape(-1, D)
-                self.actions[:, cols] = learner.act(x).reshape(E, len(cols), 3)
+                m = masks[:, cols].reshape(-1, masks.shape[-1]) if masks is not None else None
+                self.actions[:, cols] = learner.act(x, m).reshape(E, len(cols), 3)
             next_obs, rewards, term, trunc, info = self.env.step(self.actions)
             if info["episodes"]:
                 scale = self.schedule.victory_scale(self.global_step)
@@ -339,4 +359,4 @@ def resume_trainer(path: str | Path, progress: bool = True, env: Any = None,
     ckpt = load_checkpoint(path)
     cfg = ckpt.train_config.with_overrides(**overrides)
     return Trainer(cfg, ckpt.path.parent.parent, env=env, resume=ckpt, progress=progress,
-                   wandb_id=ckpt.meta.get("wandb_id"))
+                   wandb_id=ckpt.meta.get("wandb_id"), scenario=ckpt.scenario)

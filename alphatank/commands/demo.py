@@ -52,7 +52,9 @@ def run(args: argparse.Namespace) -> int:
     (run_dir / "eval.md").write_text(table + "\n", encoding="utf-8")
     write_csv(results, run_dir / "eval.csv")
     write_json(results, run_dir / "eval.json")
-    curve = plot_learning_curve(run_dir)
+    lo, hi = results[0].interval
+    curve = plot_learning_curve(run_dir, evals=[(summary["global_step"], results[0].win_rate,
+                                                 lo, hi)])
     from alphatank.training.checkpoint import load_policy
     video = record_policy_match(cfg.scenario, load_policy(ckpt), run_dir / "match.mp4",
                                 seed=7)

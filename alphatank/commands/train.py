@@ -23,6 +23,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--time-limit", type=float, metavar="S",
                    help="stop (with a checkpoint) after S seconds of training")
     p.add_argument("--checkpoint-every", type=int, metavar="N", help="iterations per save")
+    p.add_argument("--keep-checkpoints", type=int, metavar="K",
+                   help="newest saves kept (default: 3; 0 keeps all)")
     p.add_argument("--eval-every", type=int, metavar="N", help="iterations per evaluation")
     p.add_argument("--eval-games", type=int, help="games per evaluation during training")
     p.add_argument("--video-every", type=int, metavar="N", help="iterations per match video")
@@ -30,6 +32,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tensorboard", action="store_true", default=None,
                    help="also write TensorBoard logs (needs the tensorboard package)")
     p.add_argument("--torch-threads", type=int, help="torch threads (default: 1)")
+    p.add_argument("--ppo", default="", metavar="K=V,...",
+                   help="PPO hyperparameters for every PPO learner, e.g. "
+                        "update_epochs=4,num_steps=128 (new runs only)")
+    p.add_argument("--sac", default="", metavar="K=V,...",
+                   help="SAC hyperparameters for every SAC learner, e.g. utd_ratio=0.25")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -37,6 +44,7 @@ def _overrides(args: argparse.Namespace) -> dict:
     return {"total_steps": args.total_steps, "num_envs": args.num_envs,
             "num_workers": args.workers, "seed": args.seed, "time_limit_s": args.time_limit,
             "checkpoint_every": args.checkpoint_every, "eval_every": args.eval_every,
+            "keep_checkpoints": args.keep_checkpoints,
             "eval_games": args.eval_games, "video_every": args.video_every,
             "wandb": args.wandb, "tensorboard": args.tensorboard,
             "torch_threads": args.torch_threads}
@@ -52,6 +60,8 @@ def list_presets() -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    from alphatank.scenarios import load_scenario
+    from alphatank.training.presets import with_algo_overrides
     from alphatank.training.runner import Trainer, resume_trainer
 
     if args.list:
@@ -59,11 +69,20 @@ def run(args: argparse.Namespace) -> int:
         return 0
     progress = not args.no_progress
     if args.resume:
+        if args.ppo or args.sac:
+            print("error: --ppo/--sac apply to new runs; a resumed run keeps its settings")
+            return 2
         trainer = resume_trainer(args.resume, progress=progress, **_overrides(args))
         print(f"resuming {trainer.run_dir} at step {trainer.global_step:,}")
     else:
-        cfg = get_preset(args.preset)
-        cfg = cfg.with_overrides(name=args.name or cfg.name, **_overrides(args))
+        try:
+            cfg = get_preset(args.preset)
+            cfg = cfg.with_overrides(name=args.name or cfg.name, **_overrides(args))
+            cfg = with_algo_overrides(cfg, len(load_scenario(cfg.scenario).learner_seats),
+                                      args.ppo, args.sac)
+        except ValueError as exc:
+            print(f"error: {exc}")
+            return 2
         run_dir = Path(args.runs) / cfg.name
         if (run_dir / "latest").exists():
             print(f"error: {run_dir} already holds a run; continue it with --resume {run_dir} "

@@ -110,7 +110,7 @@ class TankBattleEnv(gym.Env):
         if self._renderer is None:
             from alphatank.render import Renderer
             self._renderer = Renderer(self.render_mode, fps=self.metadata["render_fps"])
-        return self._renderer.render(self.core.matches[0])
+        return self._renderer.render(self.core.matches[0], self.core.controllers[0])
 
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()

@@ -139,7 +139,7 @@ class TankBattleParallelEnv(ParallelEnv):
         if self._renderer is None:
             from alphatank.render import Renderer
             self._renderer = Renderer(self.render_mode, fps=self.metadata["render_fps"])
-        return self._renderer.render(self.core.matches[0])
+        return self._renderer.render(self.core.matches[0], self.core.controllers[0])
 
     def __getstate__(self) -> dict[str, Any]:
         """Configuration, spaces and seed stream; the live match is not carried (see
