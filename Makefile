@@ -17,6 +17,9 @@ $(BIN)/alphatank: pyproject.toml constraints.txt
 
 install: $(BIN)/alphatank
 
+# One BLAS/OpenMP thread per test worker: two workers share the two cores.
+test: export OPENBLAS_NUM_THREADS = 1
+test: export OMP_NUM_THREADS = 1
 test: install
 	$(BIN)/ruff check .
 	$(BIN)/python -m pytest -q -n 2 --durations=15

@@ -6,9 +6,9 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+
 from alphatank.bots.registry import bot_from_spec, parse_bot_spec
 from alphatank.bots.runner import GameResult, play_game
-
 from alphatank.config import GameConfig
 from alphatank.mapspec import MapSpec
 from alphatank.match import Match

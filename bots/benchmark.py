@@ -5,9 +5,9 @@ from __future__ import annotations
 import time
 
 import numpy as np
+
 from alphatank.bots.registry import BOT_NAMES, make_bot
 from alphatank.bots.runner import seat_seeds
-
 from alphatank.config import GameConfig
 from alphatank.mapspec import load_map
 from alphatank.match import Match

@@ -6,9 +6,9 @@ import math
 from typing import TYPE_CHECKING
 
 import numpy as np
-from alphatank.bots.base import NONE, STOP, Bot, Evader, wrap
 
 from alphatank.ballistics import bank_angles, path_distances, predict_path, wall_faces
+from alphatank.bots.base import NONE, STOP, Bot, Evader, wrap
 
 if TYPE_CHECKING:
     from alphatank.match import Match

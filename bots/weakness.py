@@ -5,8 +5,8 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
-from alphatank.bots.base import Bot
 
+from alphatank.bots.base import Bot
 from alphatank.policy import NOOP
 
 if TYPE_CHECKING:

@@ -289,8 +289,11 @@ def test_arena_command_prints_matrix_and_rejects_unknown_bots(capsys):
                                           "--games", "2", "--max-steps", "150"]))
     out = capsys.readouterr().out
     assert rc == 0
-    rows = [ln for ln in out.splitlines() if ln.startswith(("aggressive", "random"))]
+    matrix, league = out.split("openskill")
+    rows = [ln for ln in matrix.splitlines() if ln.startswith(("aggressive", "random"))]
     assert len(rows) == 2 and all("[" in r and "%" in r for r in rows)
+    ratings = [ln.split() for ln in league.splitlines() if ln.startswith(("aggressive", "random"))]
+    assert [r[0] for r in ratings] == ["aggressive", "random"]  # the winner is rated first
     rc = arena_cmd.run(parser.parse_args(["--bots", "smart,terminator"]))
     err = capsys.readouterr().err
     assert rc == 2 and "terminator" in err and "'smart'" in err and "'dodge'" in err

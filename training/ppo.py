@@ -9,7 +9,6 @@ the learner's own generator, so a run is reproducible and resumable bit for bit.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -17,45 +16,11 @@ import torch
 from torch import nn
 
 from alphatank.training.buffers import RolloutBuffer, compute_gae
+from alphatank.training.hparams import PPOConfig
 from alphatank.training.normalize import ObsNormalizer, ReturnNormalizer
 
 NVEC = (3, 3, 2)  # rotate, move, fire — the one action layout (RULES.md)
 MASKED_LOGIT = -1e8  # exp() of this is exactly 0 in float32, and 0 * it stays finite
-
-
-@dataclass(frozen=True)
-class PPOConfig:
-    """PPO hyperparameters. Defaults: the paper's Table 7; the rest CleanRL's defaults."""
-
-    learning_rate: float = 3e-4
-    gamma: float = 0.99
-    gae_lambda: float = 0.95
-    clip_coef: float = 0.2
-    ent_coef: float = 0.01
-    vf_coef: float = 0.3
-    max_grad_norm: float = 0.3
-    num_steps: int = 512  # rollout length per stream
-    update_epochs: int = 60
-    # not in Table 7: CleanRL defaults
-    num_minibatches: int = 4
-    norm_adv: bool = True
-    clip_vloss: bool = True
-    anneal_lr: bool = False
-    target_kl: float | None = None
-    hidden: int = 128
-    norm_obs: bool = True
-    norm_reward: bool = True
-    obs_clip: float = 10.0
-    reward_clip: float = 10.0
-    adam_eps: float = 1e-5
-
-    def __post_init__(self) -> None:
-        for name in ("learning_rate", "num_steps", "update_epochs", "num_minibatches", "hidden"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"PPOConfig.{name} must be > 0, got {getattr(self, name)!r}")
-        for name in ("gamma", "gae_lambda"):
-            if not 0.0 <= getattr(self, name) <= 1.0:
-                raise ValueError(f"PPOConfig.{name} must be in [0, 1], got {getattr(self, name)}")
 
 
 def layer_init(layer: nn.Linear, std: float = math.sqrt(2), bias: float = 0.0) -> nn.Linear:

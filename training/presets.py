@@ -12,8 +12,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
-from alphatank.training.ppo import PPOConfig
-from alphatank.training.sac import SACConfig
+from alphatank.training.hparams import PPOConfig, SACConfig
 
 ALGOS = ("ppo", "sac")
 WANDB_MODES = ("offline", "online", "disabled")

@@ -9,7 +9,6 @@ tuning, and a cyclic replay buffer per learner. Defaults: Tables 8 and 9.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
@@ -19,6 +18,7 @@ import torch.nn.functional as F  # noqa: N812
 from torch import nn
 
 from alphatank.training.buffers import ReplayBuffer
+from alphatank.training.hparams import SACConfig
 from alphatank.training.normalize import ObsNormalizer
 from alphatank.training.ppo import NVEC
 
@@ -53,38 +53,6 @@ class ContinuousToDiscreteWrapper(gym.ActionWrapper):
 
     def action(self, action: np.ndarray) -> np.ndarray:
         return continuous_to_discrete(action, self.nvec)
-
-
-@dataclass(frozen=True)
-class SACConfig:
-    """SAC hyperparameters; defaults are the paper's Tables 8 and 9."""
-
-    policy_lr: float = 3e-4
-    q_lr: float = 3e-4
-    alpha_lr: float = 3e-4
-    gamma: float = 0.99
-    tau: float = 0.005
-    batch_size: int = 256
-    buffer_size: int = 1_000_000
-    start_steps: int = 1000  # uniform random actions before this many transitions
-    update_after: int = 1000
-    update_every: int = 50  # transitions between update rounds
-    utd_ratio: float = 1.0  # gradient steps per collected transition (update_every per round)
-    hidden: int = 256
-    autotune: bool = True
-    alpha: float = 0.2  # initial (or fixed, without autotune) entropy coefficient
-    target_entropy: float | None = None  # None: -action_dim
-    norm_obs: bool = True
-    obs_clip: float = 10.0
-    reward_scale: float = 1.0
-
-    def __post_init__(self) -> None:
-        for name in ("policy_lr", "q_lr", "alpha_lr", "batch_size", "buffer_size",
-                     "update_every", "utd_ratio", "hidden", "alpha", "reward_scale"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"SACConfig.{name} must be > 0, got {getattr(self, name)!r}")
-        if not 0 < self.tau <= 1:
-            raise ValueError(f"SACConfig.tau must be in (0, 1], got {self.tau}")
 
 
 class QNetwork(nn.Module):
