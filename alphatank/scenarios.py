@@ -83,6 +83,17 @@ class Seat:
             return f"checkpoint:{self.path}"
         return "learner"
 
+    def to_dict(self) -> dict[str, Any]:
+        """The ``[[seats]]`` entry that parses back to this seat."""
+        d: dict[str, Any] = {"team": self.team, "controller": self.controller}
+        if self.controller == "bot":
+            d.update(bot=self.bot, weakness=self.weakness, options=dict(self.options))
+        elif self.controller == "human":
+            d["keys"] = self.keys
+        elif self.controller == "checkpoint":
+            d["path"] = self.path
+        return d
+
 
 @dataclass(frozen=True)
 class Scenario:
@@ -124,6 +135,12 @@ class Scenario:
             return from_dict(RewardConfig, {**self.rewards, **overrides})
         except ConfigError as exc:
             raise ScenarioError(f"{self.source}: [rewards]: {exc}") from None
+
+    def to_dict(self) -> dict[str, Any]:
+        """A mapping :func:`parse_scenario` rebuilds this scenario from."""
+        return {"name": self.name, "description": self.description, "map": self.map,
+                "preset": self.preset, "observation": self.observation, "game": dict(self.game),
+                "rewards": dict(self.rewards), "seats": [s.to_dict() for s in self.seats]}
 
     def map_specs(self) -> list[MapSpec]:
         """Parsed maps, in ``maps`` order (an episode's map is drawn from these)."""

@@ -50,19 +50,7 @@ def scenario_to_dict(sc: Scenario) -> dict[str, Any]:
         map_value = str(Path(sc.maps[0]).resolve())
     else:
         map_value = str(Path(sc.maps[0]).resolve().parent)
-    seats = []
-    for s in sc.seats:
-        d: dict[str, Any] = {"team": s.team, "controller": s.controller}
-        if s.controller == "bot":
-            d.update(bot=s.bot, weakness=s.weakness, options=dict(s.options))
-        elif s.controller == "human":
-            d["keys"] = s.keys
-        elif s.controller == "checkpoint":
-            d["path"] = s.path
-        seats.append(d)
-    return {"name": sc.name, "description": sc.description, "map": map_value,
-            "preset": sc.preset, "observation": sc.observation, "game": dict(sc.game),
-            "rewards": dict(sc.rewards), "seats": seats}
+    return {**sc.to_dict(), "map": map_value}
 
 
 def _sha256(path: Path) -> str:

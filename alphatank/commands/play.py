@@ -165,7 +165,7 @@ def lineup_from_args(args: argparse.Namespace, humans: bool = True) -> Lineup:
     if args.scenario:
         sc = load_scenario(args.scenario)
         if game:
-            sc = parse_scenario({**_scenario_dict(sc), "game": {**sc.game, **game}},
+            sc = parse_scenario({**sc.to_dict(), "game": {**sc.game, **game}},
                                 source=sc.source)
     else:
         seats = args.seats or "human:wasd,bot:smart"
@@ -173,22 +173,6 @@ def lineup_from_args(args: argparse.Namespace, humans: bool = True) -> Lineup:
         default_map = "battlefield" if n <= 2 else "arena4" if n <= 4 else "arena8"
         sc = parse_seats(seats, args.map or default_map, game)
     return build_lineup(sc, args.checkpoint, args.stand_in, humans)
-
-
-def _scenario_dict(sc: Scenario) -> dict[str, Any]:
-    seats = []
-    for s in sc.seats:
-        d: dict[str, Any] = {"team": s.team, "controller": s.controller}
-        if s.controller == "bot":
-            d.update(bot=s.bot, weakness=s.weakness, options=dict(s.options))
-        elif s.controller == "human":
-            d["keys"] = s.keys
-        elif s.controller == "checkpoint":
-            d["path"] = s.path
-        seats.append(d)
-    return {"name": sc.name, "description": sc.description, "map": sc.map,
-            "preset": sc.preset, "observation": sc.observation, "game": dict(sc.game),
-            "rewards": dict(sc.rewards), "seats": seats}
 
 
 def start_episode(lineup: Lineup, seed: int) -> tuple[Match, int]:
