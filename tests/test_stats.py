@@ -58,3 +58,10 @@ def test_league_ranks_the_player_who_wins():
     assert rows[-1][0] == "weak"
     with pytest.raises(ValueError, match="outcome must be"):
         league.record(0, 1, 2)
+
+
+@pytest.mark.parametrize("n", [1, 7, 100, 200, 1000])
+def test_interval_always_contains_the_observed_rate(n):
+    for k in (0, n // 3, n):
+        lo, hi = wilson_interval(k, n)
+        assert lo <= k / n <= hi
