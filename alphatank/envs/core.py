@@ -284,3 +284,28 @@ class MatchSet:
     def map_name(self, e: int) -> str:
         return self.specs[int(self.map_index[e])].name
 
+
+
+class FirstMatchRenderer:
+    """Draws match 0 of a :class:`MatchSet` with its controllers' overlays. The pygame
+    renderer is made on the first ``render()`` (so ``render_mode=None`` never touches
+    pygame) and is not pickled."""
+
+    def __init__(self, core: MatchSet, mode: str, fps: float):
+        self.core, self.mode, self.fps = core, mode, fps
+        self._renderer: Any = None
+
+    def render(self) -> np.ndarray | None:
+        if self._renderer is None:
+            from alphatank.render import Renderer
+
+            self._renderer = Renderer(self.mode, fps=self.fps)
+        return self._renderer.render(self.core.matches[0], self.core.controllers[0])
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {**self.__dict__, "_renderer": None}

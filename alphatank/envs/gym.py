@@ -16,7 +16,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from alphatank.envs.core import MatchSet, action_space, check_actions
+from alphatank.envs.core import FirstMatchRenderer, MatchSet, action_space, check_actions
 from alphatank.match import Match
 from alphatank.observe import ObsLayout
 from alphatank.policy import Policy
@@ -63,7 +63,8 @@ class TankBattleEnv(gym.Env):
         self.observation_space = self.core.observation_space()
         self.action_space = action_space()
         self.metadata = {**self.metadata, "render_fps": self.core.game.tick_hz}
-        self._renderer: Any = None
+        self._drawer = (FirstMatchRenderer(self.core, render_mode, self.metadata["render_fps"])
+                        if render_mode is not None else None)
 
     @property
     def layout(self) -> ObsLayout:
@@ -107,17 +108,8 @@ class TankBattleEnv(gym.Env):
             gym.logger.warn("render() called with render_mode=None; pass render_mode= to "
                             f"the constructor ({RENDER_MODES})")
             return None
-        if self._renderer is None:
-            from alphatank.render import Renderer
-            self._renderer = Renderer(self.render_mode, fps=self.metadata["render_fps"])
-        return self._renderer.render(self.core.matches[0], self.core.controllers[0])
-
-    def __getstate__(self) -> dict[str, Any]:
-        state = self.__dict__.copy()
-        state["_renderer"] = None
-        return state
+        return self._drawer.render()
 
     def close(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        if self._drawer is not None:
+            self._drawer.close()

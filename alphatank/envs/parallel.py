@@ -18,7 +18,7 @@ from gymnasium import spaces
 from pettingzoo import AECEnv, ParallelEnv
 from pettingzoo.utils import parallel_to_aec
 
-from alphatank.envs.core import MatchSet, action_space, check_actions
+from alphatank.envs.core import FirstMatchRenderer, MatchSet, action_space, check_actions
 from alphatank.observe import ObsLayout
 from alphatank.policy import Policy
 from alphatank.rewards import TERMS
@@ -61,7 +61,8 @@ class TankBattleParallelEnv(ParallelEnv):
         self.metadata = {**self.metadata, "render_fps": self.core.game.tick_hz}
         self._rng = np.random.default_rng()
         self._actions = np.ones((1, len(self.seats), 3), dtype=np.int64)
-        self._renderer: Any = None
+        self._drawer = (FirstMatchRenderer(self.core, render_mode, self.metadata["render_fps"])
+                        if render_mode is not None else None)
 
     @property
     def layout(self) -> ObsLayout:
@@ -136,23 +137,18 @@ class TankBattleParallelEnv(ParallelEnv):
     def render(self) -> np.ndarray | None:
         if self.render_mode is None:
             return None
-        if self._renderer is None:
-            from alphatank.render import Renderer
-            self._renderer = Renderer(self.render_mode, fps=self.metadata["render_fps"])
-        return self._renderer.render(self.core.matches[0], self.core.controllers[0])
+        return self._drawer.render()
 
     def __getstate__(self) -> dict[str, Any]:
         """Configuration, spaces and seed stream; the live match is not carried (see
         :meth:`MatchSet.__getstate__`): reset after unpickling."""
         state = self.__dict__.copy()
         state["agents"] = []
-        state["_renderer"] = None
         return state
 
     def close(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        if self._drawer is not None:
+            self._drawer.close()
 
 
 def parallel_env(**kwargs: Any) -> TankBattleParallelEnv:
