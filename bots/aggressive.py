@@ -28,13 +28,10 @@ class AggressiveBot(Bot):
         self.range_frac, self.min_frac = range_frac, min_frac
 
     def decide(self, match: Match, seat: int) -> tuple[int, int, int]:
-        target = self.nearest(match, seat, self.enemies(match, seat))
-        if target < 0:
+        seen = self.engage(match, seat)
+        if seen is None:
             return NONE, STOP, 0
-        x, y = match.tank_xy[seat]
-        ex, ey = match.tank_xy[target]
-        dist = math.hypot(ex - x, ey - y)
-        heading = float(match.tank_angle[seat])
+        target, x, y, ex, ey, dist, heading = seen
         err = wrap(self.lead_angle(match, seat, target) - heading)
         rot = self.steer(err)
         move = STOP

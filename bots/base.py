@@ -9,7 +9,7 @@ screen, which is what ``rotate = 2`` does.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, ClassVar
+from typing import TYPE_CHECKING, ClassVar, NamedTuple
 
 import numpy as np
 
@@ -33,6 +33,18 @@ _NONE = np.zeros(0, dtype=np.int64)
 def wrap(a: float) -> float:
     """Angle wrapped to [-pi, pi)."""
     return (a + math.pi) % TAU - math.pi
+
+
+class Engagement(NamedTuple):
+    """A bot's view of its nearest live enemy this tick."""
+
+    target: int
+    x: float
+    y: float
+    ex: float
+    ey: float
+    dist: float
+    heading: float
 
 
 class Bot:
@@ -168,6 +180,17 @@ class Bot:
             if d < best_d:
                 best, best_d = k, d
         return best
+
+    def engage(self, match: Match, seat: int) -> Engagement | None:
+        """Nearest live enemy with both positions, its distance and this tank's heading;
+        None when no enemy is left."""
+        target = self.nearest(match, seat, self.enemies(match, seat))
+        if target < 0:
+            return None
+        x, y = match.tank_xy[seat]
+        ex, ey = match.tank_xy[target]
+        return Engagement(target, x, y, ex, ey, math.hypot(ex - x, ey - y),
+                          float(match.tank_angle[seat]))
 
     def can_fire(self, match: Match, seat: int) -> bool:
         """Whether a fire action this tick would spawn a bullet (cooldown ticks down

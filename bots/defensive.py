@@ -44,13 +44,10 @@ class DefensiveBot(Bot):
         return self._home[1]
 
     def decide(self, match: Match, seat: int) -> tuple[int, int, int]:
-        target = self.nearest(match, seat, self.enemies(match, seat))
-        if target < 0:
+        seen = self.engage(match, seat)
+        if seen is None:
             return NONE, STOP, 0
-        x, y = match.tank_xy[seat]
-        ex, ey = match.tank_xy[target]
-        heading = float(match.tank_angle[seat])
-        dist = math.hypot(ex - x, ey - y)
+        target, x, y, ex, ey, dist, heading = seen
         tolerance = math.atan2(0.6 * self.hit_radius, max(dist, 1.0))
         if self.evader is not None:
             threats = self.evader.threats(match, seat)

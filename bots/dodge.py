@@ -66,13 +66,10 @@ class DodgeBot(Bot):
         return self.steer(err), FORWARD if self._dir > 0 else BACK
 
     def decide(self, match: Match, seat: int) -> tuple[int, int, int]:
-        target = self.nearest(match, seat, self.enemies(match, seat))
-        if target < 0:
+        seen = self.engage(match, seat)
+        if seen is None:
             return NONE, STOP, 0
-        x, y = match.tank_xy[seat]
-        ex, ey = match.tank_xy[target]
-        heading = float(match.tank_angle[seat])
-        dist = math.hypot(ex - x, ey - y)
+        target, x, y, ex, ey, dist, heading = seen
         err = wrap(self.lead_angle(match, seat, target) - heading)
         tolerance = math.atan2(0.8 * self.hit_radius, max(dist, 1.0))
         threats = self.evader.threats(match, seat)
