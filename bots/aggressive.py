@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 from alphatank.bots.base import BACK, FORWARD, NONE, STOP, Bot, wrap
 
 if TYPE_CHECKING:
-    from alphatank.match import Match
+    from alphatank.sim.match import Match
 
 
 class AggressiveBot(Bot):

@@ -9,9 +9,9 @@ import numpy as np
 
 from alphatank.bots.registry import bot_from_spec, parse_bot_spec
 from alphatank.bots.runner import GameResult, play_game
-from alphatank.config import GameConfig
-from alphatank.mapspec import MapSpec
-from alphatank.match import Match
+from alphatank.sim.config import GameConfig
+from alphatank.sim.mapspec import MapSpec
+from alphatank.sim.match import Match
 from alphatank.stats import League, wilson_interval
 
 

@@ -13,12 +13,12 @@ from typing import TYPE_CHECKING, ClassVar, NamedTuple
 
 import numpy as np
 
-from alphatank.ballistics import path_hits, predict_path
-from alphatank.navigation import NavGrid, nav_grid
-from alphatank.world import WALLS_ONLY
+from alphatank.sim.ballistics import path_hits, predict_path
+from alphatank.sim.navigation import NavGrid, nav_grid
+from alphatank.sim.world import WALLS_ONLY
 
 if TYPE_CHECKING:
-    from alphatank.match import Match
+    from alphatank.sim.match import Match
 
 TAU = 2.0 * math.pi
 CCW, NONE, CW = 0, 1, 2

@@ -8,9 +8,9 @@ import numpy as np
 
 from alphatank.bots.registry import BOT_NAMES, make_bot
 from alphatank.bots.runner import seat_seeds
-from alphatank.config import GameConfig
-from alphatank.mapspec import load_map
-from alphatank.match import Match
+from alphatank.sim.config import GameConfig
+from alphatank.sim.mapspec import load_map
+from alphatank.sim.match import Match
 
 
 def bot_costs(map_name: str = "maze", ticks: int = 2000, seed: int = 0,

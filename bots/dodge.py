@@ -10,7 +10,7 @@ import numpy as np
 from alphatank.bots.base import BACK, DRIVE_RADIUS, FORWARD, NONE, STOP, Bot, Evader, wrap
 
 if TYPE_CHECKING:
-    from alphatank.match import Match
+    from alphatank.sim.match import Match
 
 
 class DodgeBot(Bot):

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING
 from alphatank.bots.base import Bot
 
 if TYPE_CHECKING:
-    from alphatank.match import Match
+    from alphatank.sim.match import Match
 
 
 class RandomBot(Bot):

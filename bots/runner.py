@@ -8,10 +8,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from alphatank.config import GameConfig
-from alphatank.mapspec import MapSpec
-from alphatank.match import Match
-from alphatank.policy import Policy
+from alphatank.sim.config import GameConfig
+from alphatank.sim.mapspec import MapSpec
+from alphatank.sim.match import Match
+from alphatank.sim.policy import Policy
 
 
 @dataclass(frozen=True)

@@ -7,11 +7,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from alphatank.ballistics import bank_angles, path_distances, predict_path, wall_faces
 from alphatank.bots.base import NONE, STOP, Bot, Evader, wrap
+from alphatank.sim.ballistics import bank_angles, path_distances, predict_path, wall_faces
 
 if TYPE_CHECKING:
-    from alphatank.match import Match
+    from alphatank.sim.match import Match
 
 GOLDEN = 0.6180339887498949
 

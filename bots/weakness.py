@@ -7,10 +7,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from alphatank.bots.base import Bot
-from alphatank.policy import NOOP
+from alphatank.sim.policy import NOOP
 
 if TYPE_CHECKING:
-    from alphatank.match import Match
+    from alphatank.sim.match import Match
 
 
 class Weakened:

@@ -6,7 +6,7 @@ import zlib
 import numpy as np
 import pytest
 
-from alphatank.ballistics import (
+from alphatank.sim.ballistics import (
     bank_angles,
     path_distances,
     path_hits,
@@ -14,10 +14,10 @@ from alphatank.ballistics import (
     predict_path,
     wall_faces,
 )
-from alphatank.config import GameConfig
-from alphatank.mapspec import load_map, shipped_maps
-from alphatank.navigation import nav_grid
-from alphatank.world import World
+from alphatank.sim.config import GameConfig
+from alphatank.sim.mapspec import load_map, shipped_maps
+from alphatank.sim.navigation import nav_grid
+from alphatank.sim.world import World
 
 
 def _random_poses(spec, rng, k):

@@ -23,11 +23,11 @@ from alphatank.bots.arena import run_arena
 from alphatank.bots.benchmark import bot_costs
 from alphatank.bots.runner import play_game
 from alphatank.commands import arena as arena_cmd
-from alphatank.config import GameConfig
-from alphatank.mapspec import load_map, parse_map
-from alphatank.match import Match
-from alphatank.navigation import nav_grid
-from alphatank.policy import NOOP, Policy
+from alphatank.sim.config import GameConfig
+from alphatank.sim.mapspec import load_map, parse_map
+from alphatank.sim.match import Match
+from alphatank.sim.navigation import nav_grid
+from alphatank.sim.policy import NOOP, Policy
 
 GAMES = 100  # seeds 0..99, chosen once; thresholds are the issue's
 CLASSES = {"random": RandomBot, "aggressive": AggressiveBot, "defensive": DefensiveBot,

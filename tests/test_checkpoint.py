@@ -9,8 +9,8 @@ import pytest
 import torch
 
 from alphatank.envs.core import MatchSet
-from alphatank.policy import Policy
-from alphatank.scenarios import parse_scenario
+from alphatank.game.scenarios import parse_scenario
+from alphatank.sim.policy import Policy
 from alphatank.training.checkpoint import CheckpointError, load_checkpoint, load_policy
 from alphatank.training.ppo import PPOConfig
 from alphatank.training.presets import LearnerSpec, TrainConfig

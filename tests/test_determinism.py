@@ -5,15 +5,15 @@ import sys
 
 import numpy as np
 
-from alphatank.config import game_config
-from alphatank.mapspec import load_map
-from alphatank.match import Match
+from alphatank.sim.config import game_config
+from alphatank.sim.mapspec import load_map
+from alphatank.sim.match import Match
 
 SCRIPT = """
 import numpy as np
-from alphatank.config import game_config
-from alphatank.mapspec import load_map
-from alphatank.match import Match
+from alphatank.sim.config import game_config
+from alphatank.sim.mapspec import load_map
+from alphatank.sim.match import Match
 
 def trajectory(seed, ticks=600, teams=("A", "A", "B", "B")):
     match = Match(game_config(), load_map("maze"), list(teams), seed=seed)

@@ -12,8 +12,8 @@ from pettingzoo.test import max_cycles_test, parallel_api_test, parallel_seed_te
 
 import alphatank.envs as envs
 from alphatank.envs import TankBattleEnv, parallel
-from alphatank.policy import NOOP
-from alphatank.scenarios import NoopPolicy, ScenarioError
+from alphatank.game.scenarios import NoopPolicy, ScenarioError
+from alphatank.sim.policy import NOOP
 
 
 @pytest.mark.parametrize("render_mode", [None, "rgb_array", "human"])

@@ -9,7 +9,7 @@ import torch
 
 from alphatank.bots import make_bot
 from alphatank.commands import eval as eval_cmd
-from alphatank.scenarios import parse_scenario
+from alphatank.game.scenarios import parse_scenario
 from alphatank.stats import wilson_interval
 from alphatank.training.evaluate import (
     EvalResult,

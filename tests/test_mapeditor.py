@@ -10,9 +10,9 @@ import numpy as np
 import pygame
 import pytest
 
-from alphatank.mapeditor import BAR_H, MapEditor
 from alphatank.mapgen import EditorModel, MapGenError
-from alphatank.mapspec import MapError, load_map, parse_map
+from alphatank.mapgen.editor import BAR_H, MapEditor
+from alphatank.sim.mapspec import MapError, load_map, parse_map
 
 CELL = 40
 

@@ -17,16 +17,13 @@ from alphatank.mapgen import (
     GenOptions,
     MapGenError,
     ascii_art,
-    components,
     generate,
     generate_from,
-    image,
     is_symmetric,
-    lines_clear,
     map_warnings,
-    open_sides,
 )
-from alphatank.mapspec import MapError, load_map, map_text, parse_map
+from alphatank.mapgen.generate import components, image, lines_clear, open_sides
+from alphatank.sim.mapspec import MapError, load_map, map_text, parse_map
 
 ROOT = Path(__file__).resolve().parents[1]
 _spec = importlib.util.spec_from_file_location("mapgen_cli", ROOT / "tools" / "mapgen.py")
@@ -259,7 +256,7 @@ def test_validate_ok_warnings_strict_and_folders(tmp_path, capsys):
 def test_preview_prints_ascii_and_draws_png_with_the_game_renderer(tmp_path, capsys):
     import pygame
 
-    from alphatank.render import FLOOR, WALL
+    from alphatank.ui.render import FLOOR, WALL
 
     png = tmp_path / "arena4.png"
     assert cli.main(["preview", "arena4", "--png", str(png), "--fire"]) == 0
@@ -319,7 +316,7 @@ def test_shipped_train_and_test_maps_are_valid_and_rebuildable(folder, count):
 
 def test_env_reset_samples_maps_from_a_folder_by_seed_and_names_them(tmp_path, capsys):
     from alphatank.envs import TankBattleEnv
-    from alphatank.scenarios import parse_scenario
+    from alphatank.game.scenarios import parse_scenario
 
     seats = [{"team": "A", "controller": "learner"},
              {"team": "B", "controller": "bot", "bot": "random"}]

@@ -5,7 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from alphatank.mapspec import MapError, load_map, map_text, merge_walls, parse_map, shipped_maps
+from alphatank.sim.mapspec import MapError, load_map, map_text, merge_walls, parse_map, shipped_maps
 
 GOOD = """\
 ; a comment line

@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from alphatank.config import ConfigError, GameConfig, RewardConfig, from_dict, game_config
-from alphatank.mapspec import load_map, parse_map
-from alphatank.match import Match
+from alphatank.sim.config import ConfigError, GameConfig, RewardConfig, from_dict, game_config
+from alphatank.sim.mapspec import load_map, parse_map
+from alphatank.sim.match import Match
 
 IDLE, FIRE = (1, 1, 0), (1, 1, 1)
 

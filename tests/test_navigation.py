@@ -5,10 +5,10 @@ from collections import deque
 import numpy as np
 import pytest
 
-from alphatank.config import GameConfig
-from alphatank.mapspec import load_map, parse_map, shipped_maps
-from alphatank.navigation import nav_grid
-from alphatank.world import World
+from alphatank.sim.config import GameConfig
+from alphatank.sim.mapspec import load_map, parse_map, shipped_maps
+from alphatank.sim.navigation import nav_grid
+from alphatank.sim.world import World
 
 
 def _random_spec(rng, rows, cols, density):

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from alphatank.envs.core import MatchSet
-from alphatank.observe import DEFAULT_RAY_LENGTH
-from alphatank.scenarios import parse_scenario
+from alphatank.game.observe import DEFAULT_RAY_LENGTH
+from alphatank.game.scenarios import parse_scenario
 
 W = H = 770.0
 DIAG = math.hypot(W, H)

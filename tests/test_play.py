@@ -19,9 +19,9 @@ import pytest
 
 from alphatank.commands import play
 from alphatank.commands.play import PlaySession, build_lineup, parse_seats
-from alphatank.human import KeyboardPolicy
-from alphatank.render import OVERLAYS
-from alphatank.scenarios import ScenarioError, load_scenario
+from alphatank.game.scenarios import ScenarioError, load_scenario
+from alphatank.ui.human import KeyboardPolicy
+from alphatank.ui.render import OVERLAYS
 
 
 def down(key: int) -> pygame.event.Event:

@@ -5,7 +5,7 @@ import pytest
 import torch
 
 from alphatank.envs.vector import VectorMatchEnv
-from alphatank.scenarios import parse_scenario
+from alphatank.game.scenarios import parse_scenario
 from alphatank.training.evaluate import evaluate_learners
 from alphatank.training.ppo import (
     PPO,

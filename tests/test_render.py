@@ -16,10 +16,10 @@ import numpy as np
 import pygame
 import pytest
 
-from alphatank.config import game_config
-from alphatank.mapspec import load_map
-from alphatank.match import Match
-from alphatank.render import (
+from alphatank.sim.config import game_config
+from alphatank.sim.mapspec import load_map
+from alphatank.sim.match import Match
+from alphatank.ui.render import (
     FLOOR,
     OVERLAYS,
     WALL,
@@ -197,10 +197,10 @@ def test_render_mode_none_never_initialises_display_or_mixer():
     code = """
 import pygame
 from alphatank.envs import parallel_env
-from alphatank.render import Renderer
-from alphatank.mapspec import load_map
-from alphatank.match import Match
-from alphatank.config import game_config
+from alphatank.ui.render import Renderer
+from alphatank.sim.mapspec import load_map
+from alphatank.sim.match import Match
+from alphatank.sim.config import game_config
 env = parallel_env(scenario="team", render_mode=None)
 env.reset(seed=0)
 for _ in range(5):

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from alphatank import rewards as R
-from alphatank.config import RewardConfig, game_config
 from alphatank.envs.core import MatchSet
 from alphatank.envs.vector import VectorMatchEnv
-from alphatank.match import Hit
-from alphatank.scenarios import parse_scenario
+from alphatank.game.scenarios import parse_scenario
+from alphatank.sim.config import RewardConfig, game_config
+from alphatank.sim.match import Hit
 
 T = R.T
 NOOP = (1, 1, 0)
@@ -45,7 +45,7 @@ def test_trajectory_eq15():
 
 
 def test_path_min_distance_agrees_with_ballistics():
-    from alphatank.ballistics import path_min_distance
+    from alphatank.sim.ballistics import path_min_distance
 
     rng = np.random.default_rng(0)
     for k in range(50):
@@ -216,7 +216,7 @@ def test_stationary_after_n_ticks_in_one_cell():
 def test_bfs_progress_per_cell_gained():
     ms = match_set(map_name="maze", bfs_progress=1.0)
     m = ms.matches[0]
-    from alphatank.navigation import nav_grid
+    from alphatank.sim.navigation import nav_grid
     nav = nav_grid(m.spec)
     total, start = 0.0, None
     for _ in range(60):

@@ -6,7 +6,7 @@ import torch
 
 from alphatank.envs.gym import TankBattleEnv
 from alphatank.envs.vector import VectorMatchEnv
-from alphatank.scenarios import parse_scenario
+from alphatank.game.scenarios import parse_scenario
 from alphatank.training.evaluate import evaluate_learners
 from alphatank.training.presets import LearnerSpec, TrainConfig
 from alphatank.training.runner import Trainer

@@ -9,11 +9,9 @@ import numpy as np
 import pytest
 
 from alphatank.bots import BOT_NAMES
-from alphatank.config import RewardConfig
 from alphatank.envs.core import MatchSet
 from alphatank.envs.vector import VectorMatchEnv
-from alphatank.policy import NOOP
-from alphatank.scenarios import (
+from alphatank.game.scenarios import (
     NoopPolicy,
     ScenarioError,
     Seat,
@@ -22,6 +20,8 @@ from alphatank.scenarios import (
     seat_policy,
     shipped_scenarios,
 )
+from alphatank.sim.config import RewardConfig
+from alphatank.sim.policy import NOOP
 
 TABLE6 = ("team", "pair", "team_vs_bot", "team_vs_bot_hard", "team_vs_def_bot", "bot_teams",
           "mixed_teams")

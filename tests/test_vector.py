@@ -11,7 +11,7 @@ from alphatank.envs.vector import (
     episode_seed,
     make_vector_env,
 )
-from alphatank.scenarios import NoopPolicy
+from alphatank.game.scenarios import NoopPolicy
 
 
 class ExplodingPolicy(NoopPolicy):

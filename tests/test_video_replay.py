@@ -25,14 +25,14 @@ import pytest
 from alphatank.bots import make_bot
 from alphatank.commands import record, replay
 from alphatank.commands.play import PlaySession, build_lineup, parse_seats, start_episode
-from alphatank.replay import (
+from alphatank.ui.replay import (
     ReplayError,
     ReplayRecorder,
     load_replay,
     save_replay,
     simulate,
 )
-from alphatank.video import record_match
+from alphatank.ui.video import record_match
 
 
 def _args(module, *argv: str) -> argparse.Namespace:
@@ -95,7 +95,7 @@ def test_replay_matches_the_live_match(tmp_path):
 
 
 def test_replay_is_identical_in_a_fresh_process(recorded):
-    code = ("import sys; from alphatank.replay import load_replay, simulate; "
+    code = ("import sys; from alphatank.ui.replay import load_replay, simulate; "
             "print(simulate(load_replay(sys.argv[1]), check=False).state_hash())")
     out = subprocess.run([sys.executable, "-c", code, str(recorded["replay"])],
                          capture_output=True, text=True, timeout=120)
@@ -208,7 +208,7 @@ def test_record_command_plays_human_seats_with_the_stand_in(tmp_path, capsys):
 def test_wandb_video_wraps_the_mp4(tmp_path):
     import wandb
 
-    from alphatank.video import wandb_video
+    from alphatank.ui.video import wandb_video
 
     lineup = build_lineup(parse_seats("smart,random", "open", {"max_steps": 10}))
     match, _ = start_episode(lineup, seed=0)

@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from alphatank.config import PRESETS, game_config, replace
-from alphatank.mapspec import load_map, parse_map, shipped_maps
-from alphatank.world import World, substeps_for
+from alphatank.sim.config import PRESETS, game_config, replace
+from alphatank.sim.mapspec import load_map, parse_map, shipped_maps
+from alphatank.sim.world import World, substeps_for
 
 
 def _world(spec, cfg, poses):

@@ -7,7 +7,7 @@
     python tools/mapgen.py edit maps/new.txt
 
 A thin command line over ``alphatank.mapgen`` (generators, warnings, editor model) and
-``alphatank.mapeditor`` (the pygame editor). Validation is the game's own loader.
+``alphatank.mapgen.editor`` (the pygame editor). Validation is the game's own loader.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from alphatank.mapgen import (
     generate_from,
     map_warnings,
 )
-from alphatank.mapspec import MapError, MapSpec, load_map, map_text
+from alphatank.sim.mapspec import MapError, MapSpec, load_map, map_text
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -193,9 +193,9 @@ def render_png(spec: MapSpec, path: Path, teams: list[str] | None = None, seed: 
     os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
     import pygame
 
-    from alphatank.config import game_config
-    from alphatank.match import Match
-    from alphatank.render import Renderer
+    from alphatank.sim.config import game_config
+    from alphatank.sim.match import Match
+    from alphatank.ui.render import Renderer
 
     teams = teams or _default_teams(max(2, len(spec.spawns)))
     match = Match(game_config(), spec, teams, seed=seed)
@@ -225,7 +225,7 @@ def cmd_preview(args: argparse.Namespace) -> int:
 
 
 def cmd_edit(args: argparse.Namespace) -> int:
-    from alphatank.mapeditor import MapEditor
+    from alphatank.mapgen.editor import MapEditor
 
     path = Path(args.map)
     if path.exists():

@@ -28,8 +28,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from alphatank.policy import NOOP
-from alphatank.scenarios import Scenario, ScenarioError, parse_scenario
+from alphatank.game.scenarios import Scenario, ScenarioError, parse_scenario
+from alphatank.sim.policy import NOOP
 from alphatank.training.learners import make_learner
 from alphatank.training.presets import LearnerSpec, TrainConfig
 
@@ -240,12 +240,12 @@ def load_checkpoint(path: str | Path) -> Checkpoint:
 
 
 class NetworkPolicy:
-    """Trained learners as a :class:`alphatank.policy.Policy` for any seat of any match
+    """Trained learners as a :class:`alphatank.sim.policy.Policy` for any seat of any match
     with the same number of tanks and observation size as their training scenario.
 
     The learner is picked per seat at :meth:`reset`: ``learner`` if given, else the one
     that trained in that scenario seat, else the first. Observations are built for the
-    seat with the env's own :class:`~alphatank.observe.ObservationBuilder`.
+    seat with the env's own :class:`~alphatank.game.observe.ObservationBuilder`.
     """
 
     def __init__(self, observation: dict[str, Any], learner_names: list[str],
@@ -276,7 +276,7 @@ class NetworkPolicy:
         raise NotImplementedError
 
     def reset(self, match: Any, seat: int, seed: int | None = None) -> None:
-        from alphatank.observe import ObservationBuilder, StateBatch
+        from alphatank.game.observe import ObservationBuilder, StateBatch
 
         self.learner = self.get_learner(self.name_for_seat(seat))
         self.rng = np.random.default_rng(seed)

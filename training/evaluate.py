@@ -22,8 +22,8 @@ from typing import Any
 import numpy as np
 
 from alphatank.envs.core import MatchSet
-from alphatank.policy import Policy
-from alphatank.scenarios import Scenario, Seat, load_scenario
+from alphatank.game.scenarios import Scenario, Seat, load_scenario
+from alphatank.sim.policy import Policy
 from alphatank.stats import wilson_interval
 from alphatank.training.checkpoint import Checkpoint, load_checkpoint
 

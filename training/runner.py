@@ -25,8 +25,8 @@ from typing import Any
 import numpy as np
 
 from alphatank.envs.vector import make_vector_env
-from alphatank.observe import slot_counts
-from alphatank.scenarios import Scenario, load_scenario
+from alphatank.game.observe import slot_counts
+from alphatank.game.scenarios import Scenario, load_scenario
 from alphatank.training.checkpoint import (
     Checkpoint,
     LivePolicy,

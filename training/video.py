@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from alphatank.policy import Policy
-from alphatank.scenarios import Scenario, Seat, load_scenario
+from alphatank.game.scenarios import Scenario, Seat, load_scenario
+from alphatank.sim.policy import Policy
 
 
 def record_policy_match(scenario: str | Scenario, policy: Policy, path: str | Path,
@@ -15,7 +15,7 @@ def record_policy_match(scenario: str | Scenario, policy: Policy, path: str | Pa
     scenario says, or ``opponents`` by seat) and write it as an H.264 MP4 at ``path``
     (every ``every``-th tick, real time, one second held at the end)."""
     from alphatank.envs.core import MatchSet
-    from alphatank.video import record_match
+    from alphatank.ui.video import record_match
 
     sc = load_scenario(scenario)
     seats: dict[int, Policy] = dict.fromkeys(sc.learner_seats, policy)

@@ -9,9 +9,9 @@ import time
 
 import numpy as np
 
-from alphatank.config import ConfigError, game_config
-from alphatank.mapspec import MapError, load_map
-from alphatank.match import Match
+from alphatank.sim.config import ConfigError, game_config
+from alphatank.sim.mapspec import MapError, load_map
+from alphatank.sim.match import Match
 
 DEFAULT_BOTS = "smart,aggressive,defensive,dodge,random"
 
@@ -56,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
     on_tick = None
     renderer = None
     if args.render:
-        from alphatank.render import DisplayUnavailable, Renderer
+        from alphatank.ui.render import DisplayUnavailable, Renderer
 
         renderer = Renderer("human", fps=args.fps, caption="AlphaTank arena")
 

@@ -9,9 +9,9 @@ import time
 
 import numpy as np
 
-from alphatank.config import game_config
-from alphatank.mapspec import load_map
-from alphatank.match import Match
+from alphatank.sim.config import game_config
+from alphatank.sim.mapspec import load_map
+from alphatank.sim.match import Match
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -69,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
         for name, us in costs.items():
             print(f"  {name:12s} {us:8.1f}")
     if args.render:
-        from alphatank.render import render_bench
+        from alphatank.ui.render import render_bench
 
         fps = render_bench()
         results["render_fps"] = fps

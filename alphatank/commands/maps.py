@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from alphatank.mapspec import MapError, load_map, map_text, shipped_maps
+from alphatank.sim.mapspec import MapError, load_map, map_text, shipped_maps
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -21,10 +21,11 @@ from typing import Any
 
 import numpy as np
 
-from alphatank.human import HUMAN_ORDER, LAYOUTS, KeyboardPolicy
-from alphatank.match import Match
-from alphatank.policy import Policy
-from alphatank.render import (
+from alphatank.game.scenarios import Scenario, ScenarioError, load_scenario, parse_scenario
+from alphatank.sim.match import Match
+from alphatank.sim.policy import Policy
+from alphatank.ui.human import HUMAN_ORDER, LAYOUTS, KeyboardPolicy
+from alphatank.ui.render import (
     DEFAULT_OVERLAYS,
     DIM_TEXT,
     TEXT,
@@ -35,8 +36,7 @@ from alphatank.render import (
     plural,
     team_color,
 )
-from alphatank.replay import ReplayRecorder, save_replay
-from alphatank.scenarios import Scenario, ScenarioError, load_scenario, parse_scenario
+from alphatank.ui.replay import ReplayRecorder, save_replay
 
 NO_DISPLAY_HELP = ("no display available for an interactive window{why}. Run `alphatank play` "
                    "on a desktop session (set DISPLAY or WAYLAND_DISPLAY and unset "

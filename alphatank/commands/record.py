@@ -12,10 +12,10 @@ import sys
 from pathlib import Path
 
 from alphatank.commands.play import add_lineup_arguments, lineup_from_args, start_episode
-from alphatank.render import parse_overlays
-from alphatank.replay import ReplayRecorder, save_replay
-from alphatank.scenarios import ScenarioError
-from alphatank.video import record_match
+from alphatank.game.scenarios import ScenarioError
+from alphatank.ui.render import parse_overlays
+from alphatank.ui.replay import ReplayRecorder, save_replay
+from alphatank.ui.video import record_match
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

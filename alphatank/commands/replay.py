@@ -14,10 +14,10 @@ import sys
 import time
 
 from alphatank.commands.play import NO_DISPLAY_HELP, Lineup, PlaySession
-from alphatank.policy import Policy
-from alphatank.render import DEFAULT_OVERLAYS, DisplayUnavailable, parse_overlays
-from alphatank.replay import Replay, ReplayError, ReplayPolicy, load_replay, simulate
-from alphatank.video import record_match
+from alphatank.sim.policy import Policy
+from alphatank.ui.render import DEFAULT_OVERLAYS, DisplayUnavailable, parse_overlays
+from alphatank.ui.replay import Replay, ReplayError, ReplayPolicy, load_replay, simulate
+from alphatank.ui.video import record_match
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

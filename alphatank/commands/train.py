@@ -60,7 +60,7 @@ def list_presets() -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from alphatank.scenarios import load_scenario
+    from alphatank.game.scenarios import load_scenario
     from alphatank.training.presets import with_algo_overrides
     from alphatank.training.runner import Trainer, resume_trainer
 

@@ -14,7 +14,7 @@ import gymnasium
 from alphatank.envs.gym import TankBattleEnv
 from alphatank.envs.parallel import TankBattleParallelEnv, env, parallel_env
 from alphatank.envs.vector import SubprocVectorMatchEnv, VectorMatchEnv, make_vector_env
-from alphatank.scenarios import load_scenario, shipped_scenarios
+from alphatank.game.scenarios import load_scenario, shipped_scenarios
 
 ENTRY_POINT = "alphatank.envs.gym:TankBattleEnv"
 

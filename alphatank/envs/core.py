@@ -24,11 +24,17 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from alphatank.match import Match
-from alphatank.observe import OBS_KINDS, GlobalState, ObservationBuilder, StateBatch, slot_counts
-from alphatank.policy import NOOP, Policy
-from alphatank.rewards import RewardTracker
-from alphatank.scenarios import Scenario, ScenarioError, Seat, load_scenario, seat_policy
+from alphatank.game.observe import (
+    OBS_KINDS,
+    GlobalState,
+    ObservationBuilder,
+    StateBatch,
+    slot_counts,
+)
+from alphatank.game.rewards import RewardTracker
+from alphatank.game.scenarios import Scenario, ScenarioError, Seat, load_scenario, seat_policy
+from alphatank.sim.match import Match
+from alphatank.sim.policy import NOOP, Policy
 
 ACTION_NVEC = np.array([3, 3, 2], dtype=np.int64)
 ACTION_HELP = "rotate 0..2 (0 ccw, 1 none, 2 cw), move 0..2 (0 back, 1 stop, 2 forward), fire 0..1"
@@ -297,7 +303,7 @@ class FirstMatchRenderer:
 
     def render(self) -> np.ndarray | None:
         if self._renderer is None:
-            from alphatank.render import Renderer
+            from alphatank.ui.render import Renderer
 
             self._renderer = Renderer(self.mode, fps=self.fps)
         return self._renderer.render(self.core.matches[0], self.core.controllers[0])

@@ -17,11 +17,11 @@ import gymnasium as gym
 import numpy as np
 
 from alphatank.envs.core import FirstMatchRenderer, MatchSet, action_space, check_actions
-from alphatank.match import Match
-from alphatank.observe import ObsLayout
-from alphatank.policy import Policy
-from alphatank.rewards import TERMS
-from alphatank.scenarios import Scenario, ScenarioError, load_scenario
+from alphatank.game.observe import ObsLayout
+from alphatank.game.rewards import TERMS
+from alphatank.game.scenarios import Scenario, ScenarioError, load_scenario
+from alphatank.sim.match import Match
+from alphatank.sim.policy import Policy
 
 RENDER_MODES = ["rgb_array", "human"]
 

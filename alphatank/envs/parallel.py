@@ -19,10 +19,10 @@ from pettingzoo import AECEnv, ParallelEnv
 from pettingzoo.utils import parallel_to_aec
 
 from alphatank.envs.core import FirstMatchRenderer, MatchSet, action_space, check_actions
-from alphatank.observe import ObsLayout
-from alphatank.policy import Policy
-from alphatank.rewards import TERMS
-from alphatank.scenarios import Scenario, load_scenario
+from alphatank.game.observe import ObsLayout
+from alphatank.game.rewards import TERMS
+from alphatank.game.scenarios import Scenario, load_scenario
+from alphatank.sim.policy import Policy
 
 RENDER_MODES = ["rgb_array", "human"]
 

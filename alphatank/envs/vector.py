@@ -24,10 +24,10 @@ import numpy as np
 from gymnasium import spaces
 
 from alphatank.envs.core import MatchSet, action_space, check_actions
-from alphatank.observe import ObsLayout
-from alphatank.policy import Policy
-from alphatank.rewards import TERMS
-from alphatank.scenarios import Scenario, load_scenario
+from alphatank.game.observe import ObsLayout
+from alphatank.game.rewards import TERMS
+from alphatank.game.scenarios import Scenario, load_scenario
+from alphatank.sim.policy import Policy
 
 
 def episode_seed(seed: int, env_id: int, episode: int) -> int:
@@ -88,7 +88,7 @@ class VectorMatchEnv:
         ``bot_names[i % len(bot_names)]`` (one name: all envs; several: a mixture for
         cycle learning). ``None`` restores the scenario's bots."""
         if bot_names is not None:
-            from alphatank.scenarios import bot_names as valid_names
+            from alphatank.game.scenarios import bot_names as valid_names
             valid = valid_names()
             bad = [b for b in bot_names if b not in valid]
             if bad or not bot_names:

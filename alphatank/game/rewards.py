@@ -1,0 +1,352 @@
+"""Reward terms (RULES.md, paper 3.2.3) as small pure functions, and a tracker.
+
+Every term is a function of one tick's events and state (plus, for the stateful
+penalties, a counter the :class:`RewardTracker` keeps per tank). Each returns the reward of
+that tick only, already scaled by its :class:`~alphatank.sim.config.RewardConfig` weight; a
+weight of 0 switches the term off (and skips its computation). Weights carry their sign:
+penalties are configured negative. The tracker returns a (envs, terms, tanks) array whose
+sum over terms is the per-step reward, in the order of :data:`TERMS`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from alphatank.sim.config import GameConfig, RewardConfig
+
+if TYPE_CHECKING:
+    from alphatank.game.observe import StateBatch
+    from alphatank.sim.match import Hit, Match
+
+TERMS = ("victory", "hit", "hit_penalty", "team_hit_penalty", "trajectory_hit",
+         "trajectory_distance", "bullet_close", "bullet_away", "wall_hit", "stationary",
+         "bfs_progress", "aim_streak", "control_change", "rotation")
+T = {name: k for k, name in enumerate(TERMS)}
+
+
+# ---- pure terms ---------------------------------------------------------------------
+
+def victory(team_index: np.ndarray, winner: int | None, weight: float) -> np.ndarray:
+    """``weight`` to every tank (alive or not) of the winning team; zeros on a draw."""
+    if winner is None:
+        return np.zeros(len(team_index))
+    return np.where(team_index == winner, weight, 0.0)
+
+
+def hits(events: Iterable[Hit], n: int, cfg: RewardConfig
+         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(hit, hit_penalty, team_hit_penalty) per tank. The victim of any hit gets
+    ``hit_penalty``; its shooter gets ``hit`` for an enemy, ``team_hit_penalty`` for a
+    teammate, nothing for a self-hit."""
+    hit, hurt, team = np.zeros(n), np.zeros(n), np.zeros(n)
+    for h in events:
+        hurt[h.victim] += cfg.hit_penalty
+        if not h.friendly:
+            hit[h.shooter] += cfg.hit
+        elif h.shooter != h.victim:
+            team[h.shooter] += cfg.team_hit_penalty
+    return hit, hurt, team
+
+
+def hit_radius(game: GameConfig) -> float:
+    """Closest approach at which a predicted path surely hits a tank."""
+    return game.bullet_radius + 0.5 * min(game.tank_width, game.tank_height)
+
+
+def trajectory(d: float, radius: float, cfg: RewardConfig) -> tuple[float, float]:
+    """(trajectory_hit, trajectory_distance) of a shot whose predicted path comes within
+    ``d`` px of an enemy (paper eq. 15): the hit weight when ``d <= radius``, else the
+    distance weight times ``1 - d / trajectory_close_px`` when ``d`` is below it."""
+    if d <= radius:
+        return cfg.trajectory_hit, 0.0
+    if d < cfg.trajectory_close_px:
+        return 0.0, cfg.trajectory_distance * (1.0 - d / cfg.trajectory_close_px)
+    return 0.0, 0.0
+
+
+def path_min_distance(path: np.ndarray, targets: np.ndarray) -> float:
+    """Closest approach of the polyline ``path`` (k, 2) to any of ``targets`` (m, 2).
+
+    Same result as :func:`alphatank.sim.ballistics.path_min_distance`; a scalar loop, because
+    a shot's path has a handful of legs and a match a handful of tanks, where this is
+    several times cheaper than the array version (it runs on every shot)."""
+    best = math.inf
+    pts = path.tolist()
+    tgs = targets.tolist()
+    for (ax, ay), (bx, by) in zip(pts, pts[1:], strict=False):
+        dx, dy = bx - ax, by - ay
+        len2 = dx * dx + dy * dy
+        for tx, ty in tgs:
+            rx, ry = tx - ax, ty - ay
+            u = 0.0 if len2 == 0.0 else min(1.0, max(0.0, (rx * dx + ry * dy) / len2))
+            ex, ey = rx - u * dx, ry - u * dy
+            best = min(best, ex * ex + ey * ey)
+    return math.sqrt(best)
+
+
+def bullet_progress(prev: np.ndarray, now: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(closer, farther) masks of bullets whose distance to the nearest enemy fell / rose
+    since the previous tick. NaN marks "no distance" (bullet not alive on that tick, or no
+    live enemy), so fresh and finished bullets compare neither way."""
+    return now < prev, now > prev
+
+
+def streak(count: np.ndarray, condition: np.ndarray) -> np.ndarray:
+    """Consecutive-tick counter: +1 while ``condition`` holds, 0 when it breaks."""
+    return np.where(condition, count + 1, 0)
+
+
+def wall_hit(count: np.ndarray, cfg: RewardConfig) -> np.ndarray:
+    """Escalating wall penalty (paper eq. 11): ``wall_hit`` for the first
+    ``wall_hit_low_ticks`` ticks of contact, then ``wall_hit_high_factor`` times it."""
+    w = cfg.wall_hit
+    return np.where(count == 0, 0.0,
+                    np.where(count <= cfg.wall_hit_low_ticks, w, w * cfg.wall_hit_high_factor))
+
+
+def stationary(count: np.ndarray, cfg: RewardConfig) -> np.ndarray:
+    """``stationary`` per tick once a tank has stayed in one grid cell for
+    ``stationary_ticks`` ticks (paper eq. 13)."""
+    return np.where(count >= cfg.stationary_ticks, cfg.stationary, 0.0)
+
+
+def bfs_progress(prev: np.ndarray, now: np.ndarray, cfg: RewardConfig) -> np.ndarray:
+    """``bfs_progress`` per grid cell of BFS path distance gained towards the nearest enemy
+    (the global half of paper eq. 14); 0 where either distance is unknown (< 0)."""
+    ok = (prev >= 0) & (now >= 0)
+    return np.where(ok, cfg.bfs_progress * (prev - now), 0.0)
+
+
+def aim_streak(count: np.ndarray, cfg: RewardConfig) -> np.ndarray:
+    """``aim_streak`` when the predicted path has hit an enemy for ``aim_streak_ticks``
+    consecutive ticks (paper eq. 17; the tracker then restarts the count)."""
+    return np.where(count >= cfg.aim_streak_ticks, cfg.aim_streak, 0.0)
+
+
+def control_change(counts: np.ndarray, cfg: RewardConfig) -> np.ndarray:
+    """``control_change`` for each action part (rotate, move, fire) that has changed on
+    ``control_change_ticks`` consecutive ticks (paper eq. 18). ``counts``: (..., 3)."""
+    return cfg.control_change * (counts >= cfg.control_change_ticks).sum(axis=-1)
+
+
+def rotation(turned_deg: np.ndarray, cfg: RewardConfig) -> np.ndarray:
+    """``rotation`` once a tank has turned ``rotation_limit_deg`` in total without moving
+    ``rotation_reset_px`` (paper eq. 19; the tracker then restarts the sum)."""
+    return np.where(turned_deg >= cfg.rotation_limit_deg, cfg.rotation, 0.0)
+
+
+# ---- tracker ------------------------------------------------------------------------
+
+def as_index(idx: np.ndarray) -> slice | np.ndarray:
+    """A slice for a contiguous ascending run of indices (basic indexing is several times
+    cheaper than fancy indexing on small arrays), else the array itself."""
+    idx = np.asarray(idx)
+    if idx.size and np.array_equal(idx, np.arange(idx[0], idx[0] + idx.size)):
+        return slice(int(idx[0]), int(idx[0]) + idx.size)
+    return idx
+
+
+class RewardTracker:
+    """Per-tank counters of the stateful terms for ``num_envs`` matches of one scenario,
+    and the per-step evaluation of every enabled term."""
+
+    def __init__(self, cfg: RewardConfig, game: GameConfig, teams: Sequence[str],
+                 num_envs: int, rewarded: Sequence[int] | None = None):
+        """``rewarded``: seats whose rewards are read (default all); the costly per-shot
+        and per-tank predictions (trajectory, aim streak) are skipped for the others."""
+        self.cfg, self.game = cfg, game
+        names = sorted(set(teams))
+        self.team_index = np.array([names.index(t) for t in teams])
+        n = self.n = len(teams)
+        cap = game.bullet_capacity
+        self.capacity = cap
+        self.rewarded = np.zeros(n, dtype=bool)
+        self.rewarded[list(range(n)) if rewarded is None else list(rewarded)] = True
+        E = num_envs
+        self.terms = np.zeros((E, len(TERMS), n))
+        self.radius = hit_radius(game)
+        owner = np.repeat(np.arange(n), cap)
+        # enemy[b, j]: tank j is an enemy of bullet b's owner.
+        self.enemy = self.team_index[owner][:, None] != self.team_index[None, :]
+        self.foe = self.team_index[:, None] != self.team_index[None, :]  # (n, n)
+        # Bullet slots of rewarded seats (only their progress is scored), NaN = none.
+        self.rw_seats = np.flatnonzero(self.rewarded)
+        self.rw_bullets = (self.rw_seats[:, None] * cap + np.arange(cap)).reshape(-1)
+        self.rw_enemy = self.enemy[self.rw_bullets]  # (nr, n)
+        self._rw_b, self._rw_s = as_index(self.rw_bullets), as_index(self.rw_seats)
+        self.bullet_prev = np.full((E, len(self.rw_bullets)), np.nan)
+        self.wall_count = np.zeros((E, n), dtype=np.int64)
+        self.still_count = np.zeros((E, n), dtype=np.int64)
+        self.last_cell = np.zeros((E, n, 2), dtype=np.int64)
+        self.bfs_prev = np.full((E, n), -1, dtype=np.int64)
+        self.aim_count = np.zeros((E, n), dtype=np.int64)
+        self.change_count = np.zeros((E, n, 3), dtype=np.int64)
+        self.last_action = np.ones((E, n, 3), dtype=np.int64)
+        self.turned = np.zeros((E, n))
+        self.last_angle = np.zeros((E, n))
+        self.anchor = np.zeros((E, n, 2))
+        on = {name: getattr(cfg, name) != 0 for name in TERMS}
+        self.on_progress = on["bullet_close"] or on["bullet_away"]
+        self.on_trajectory = on["trajectory_hit"] or on["trajectory_distance"]
+        self.on = on
+
+    def reset_env(self, e: int, match: Match) -> None:
+        """Start env ``e``'s counters for a new episode of ``match``."""
+        self.bullet_prev[e] = np.nan
+        self.wall_count[e] = 0
+        self.still_count[e] = 0
+        self.last_cell[e] = (match.tank_xy // match.spec.cell).astype(np.int64)[:, ::-1]
+        self.aim_count[e] = 0
+        self.change_count[e] = 0
+        self.last_action[e] = 1
+        self.turned[e] = 0.0
+        self.last_angle[e] = match.tank_angle
+        self.anchor[e] = match.tank_xy
+        self.bfs_prev[e] = self._bfs_distance(match) if self.on["bfs_progress"] else -1
+
+    def step(self, sl: slice, batch: StateBatch, matches: Sequence[Match],
+             actions: np.ndarray) -> np.ndarray:
+        """Terms of the tick just played by the envs ``sl`` (their state already gathered
+        into ``batch``); ``actions``: (E, n, 3) joint actions of that tick. Returns the
+        (E_sl, len(TERMS), n) view of this tick's terms."""
+        cfg = self.cfg
+        terms = self.terms[sl]
+        terms[...] = 0.0
+        for k, e in enumerate(range(len(matches))[sl]):
+            self._events(terms[k], matches[e])
+        alive = batch.alive[sl]
+        if self.on_progress:
+            self._progress(sl, batch, terms)
+        if self.on["wall_hit"]:
+            self.wall_count[sl] = streak(self.wall_count[sl], batch.wall[sl] & alive)
+            terms[:, T["wall_hit"]] = wall_hit(self.wall_count[sl], cfg)
+        if self.on["stationary"]:
+            cell = (batch.tank_xy[sl] // self._cell(sl, matches)).astype(np.int64)[..., ::-1]
+            same = (cell == self.last_cell[sl]).all(axis=-1) & alive
+            self.still_count[sl] = streak(self.still_count[sl], same)
+            self.last_cell[sl] = cell
+            terms[:, T["stationary"]] = stationary(self.still_count[sl], cfg)
+        if self.on["control_change"]:
+            act = actions[sl]
+            changed = (act != self.last_action[sl]) & alive[..., None]
+            self.change_count[sl] = streak(self.change_count[sl], changed)
+            self.last_action[sl] = act
+            terms[:, T["control_change"]] = control_change(self.change_count[sl], cfg)
+        if self.on["rotation"]:
+            self._rotation(sl, batch, terms)
+        if self.on["bfs_progress"]:
+            for k, e in enumerate(range(len(matches))[sl]):
+                now = self._bfs_distance(matches[e])
+                terms[k, T["bfs_progress"]] = bfs_progress(self.bfs_prev[e], now, cfg)
+                self.bfs_prev[e] = now
+        if self.on["aim_streak"]:
+            for k, e in enumerate(range(len(matches))[sl]):
+                aimed = self._aimed(matches[e])
+                count = streak(self.aim_count[e], aimed)
+                terms[k, T["aim_streak"]] = aim_streak(count, cfg)
+                self.aim_count[e] = np.where(count >= cfg.aim_streak_ticks, 0, count)
+        return terms
+
+    # ---- parts ----------------------------------------------------------------------
+
+    def _events(self, terms: np.ndarray, match: Match) -> None:
+        cfg, ev = self.cfg, match.events
+        if ev.hits:
+            hit, hurt, team = hits(ev.hits, self.n, cfg)
+            terms[T["hit"]] = hit
+            terms[T["hit_penalty"]] = hurt
+            terms[T["team_hit_penalty"]] = team
+        if ev.fired and self.on_trajectory:
+            for f in ev.fired:
+                if not self.rewarded[f.tank]:
+                    continue
+                th, td = trajectory(self._shot_distance(match, f.tank, f.bullet),
+                                    self.radius, cfg)
+                terms[T["trajectory_hit"], f.tank] += th
+                terms[T["trajectory_distance"], f.tank] += td
+        if match.done and cfg.victory:
+            win = None if match.winner is None else match.team_names.index(match.winner)
+            terms[T["victory"]] = victory(self.team_index, win, cfg.victory)
+
+    def _shot_distance(self, match: Match, tank: int, b: int) -> float:
+        """Closest approach of a just-fired bullet's predicted path to a live enemy."""
+        from alphatank.sim.ballistics import predict_path
+        w = match.world
+        if not w.bullet_active[b]:
+            return math.inf  # hit or gone within its first tick: the hit term scores it
+        enemies = match.alive & self.foe[tank]
+        if not enemies.any():
+            return math.inf
+        x, y = match.bullet_xy[b]
+        vx, vy = match.bullet_vel[b]
+        left = (w.bullet_expire[b] - w.substep) * w.step_len
+        path = predict_path(w, x, y, math.atan2(vy, vx), max_distance=left,
+                            max_bounces=self.game.bullet_max_bounces - int(w.bullet_bounces[b]))
+        return path_min_distance(path, match.tank_xy[enemies])
+
+    def _progress(self, sl: slice, batch: StateBatch, terms: np.ndarray) -> None:
+        """bullet_close / bullet_away: each live bullet of a rewarded seat closer to /
+        farther from its nearest live enemy than on the previous tick. A slot is only ever
+        re-fired after a tick in which it was inactive (NaN), so fresh bullets never
+        compare."""
+        prev = self.bullet_prev[sl]
+        act = batch.bullet_active[sl][:, self._rw_b]
+        if not act.any():
+            prev[...] = np.nan
+            return
+        d = batch.bullet_xy[sl][:, self._rw_b, None, :] - batch.tank_xy[sl][:, None]
+        dist = np.hypot(d[..., 0], d[..., 1])  # (E, nr, n)
+        ok = self.rw_enemy & batch.alive[sl][:, None, :]
+        now = np.fmin.reduce(np.where(ok, dist, np.nan), axis=-1)
+        now[~act] = np.nan
+        closer, farther = bullet_progress(prev, now)
+        E, cap = closer.shape[0], self.capacity
+        seats = self._rw_s
+        terms[:, T["bullet_close"], seats] = (
+            self.cfg.bullet_close * closer.reshape(E, -1, cap).sum(axis=-1))
+        terms[:, T["bullet_away"], seats] = (
+            self.cfg.bullet_away * farther.reshape(E, -1, cap).sum(axis=-1))
+        prev[...] = now
+
+    def _rotation(self, sl: slice, batch: StateBatch, terms: np.ndarray) -> None:
+        cfg = self.cfg
+        ang, xy, alive = batch.tank_angle[sl], batch.tank_xy[sl], batch.alive[sl]
+        self.turned[sl] += np.degrees(np.abs(ang - self.last_angle[sl])) * alive
+        self.last_angle[sl] = ang
+        moved = np.hypot(*(xy - self.anchor[sl]).transpose(2, 0, 1)) >= cfg.rotation_reset_px
+        self.turned[sl] = np.where(moved, 0.0, self.turned[sl])
+        self.anchor[sl] = np.where(moved[..., None], xy, self.anchor[sl])
+        pen = rotation(self.turned[sl], cfg)
+        terms[:, T["rotation"]] = pen
+        self.turned[sl] = np.where(pen != 0, 0.0, self.turned[sl])
+
+    @staticmethod
+    def _cell(sl: slice, matches: Sequence[Match]) -> np.ndarray:
+        return np.array([m.spec.cell for m in matches[sl]])[:, None, None]
+
+    def _bfs_distance(self, match: Match) -> np.ndarray:
+        """BFS cells from each tank to its nearest live enemy (-1: none reachable)."""
+        from alphatank.sim.navigation import nav_grid
+        nav = nav_grid(match.spec)
+        nodes = nav.nodes_of(match.tank_xy)
+        table = nav.dist_table[nodes[:, None], nodes[None, :]].astype(np.int64)
+        ok = self.foe & match.alive[None, :] & (table >= 0)
+        d = np.where(ok, table, np.iinfo(np.int64).max).min(axis=1)
+        return np.where(ok.any(axis=1), d, -1)
+
+    def _aimed(self, match: Match) -> np.ndarray:
+        """Per tank: does a bullet fired now have a predicted path through an enemy?"""
+        from alphatank.sim.ballistics import predict_path
+        out = np.zeros(self.n, dtype=bool)
+        w = match.world
+        for i in np.flatnonzero(match.alive & self.rewarded):
+            enemies = match.alive & self.foe[i]
+            if enemies.any():
+                mx, my = w.muzzle(int(i))
+                path = predict_path(w, mx, my, float(match.tank_angle[i]))
+                out[i] = path_min_distance(path, match.tank_xy[enemies]) <= self.radius
+        return out

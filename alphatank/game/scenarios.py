@@ -1,0 +1,361 @@
+"""Scenarios: who plays where. A scenario names the map, the preset, the observation and
+each seat (team + controller), and is stored as a TOML file.
+
+Format (see docs/environments.md)::
+
+    name = "vs_smart"
+    description = "1v1: one learner against the smart bot"
+    map = "battlefield"          # shipped map, a .txt path, or a folder of maps
+    preset = "paper"             # or "long_range"
+    observation = "paper"        # or "egocentric"
+    [game]                       # optional GameConfig overrides
+    max_steps = 1500
+    [rewards]                    # optional RewardConfig overrides
+    bullet_close = 0.0
+    [[seats]]
+    team = "A"
+    controller = "learner"
+    [[seats]]
+    team = "B"
+    controller = "bot"
+    bot = "smart"
+    weakness = 1.0               # optional, 0..1
+    options = { ricochet = false }   # optional bot options
+
+Controllers: ``learner`` (the env's caller acts), ``bot`` (``bot`` + ``weakness`` +
+``options``), ``human`` (``keys`` = wasd | arrows | ijkl; a NOOP unless a keyboard policy is
+supplied), ``checkpoint`` (``path`` = checkpoint folder). Relative map paths are resolved
+against the scenario file's folder. Every error names the file and the field.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from alphatank.sim.config import (
+    PRESETS,
+    ConfigError,
+    GameConfig,
+    RewardConfig,
+    from_dict,
+    game_config,
+)
+from alphatank.sim.mapspec import MapError, MapSpec, load_map, parse_map, shipped_maps
+from alphatank.sim.policy import NOOP, Policy
+
+CONTROLLERS = ("learner", "bot", "human", "checkpoint")
+OBSERVATIONS = ("paper", "egocentric")
+KEYSETS = ("wasd", "arrows", "ijkl")
+_TOP_KEYS = ("name", "description", "map", "preset", "observation", "game", "rewards", "seats")
+_SEAT_KEYS = ("team", "controller", "bot", "weakness", "options", "keys", "path")
+
+
+class ScenarioError(ValueError):
+    """A scenario file or value is invalid; the message names the file and the field."""
+
+
+@dataclass(frozen=True)
+class Seat:
+    """One tank slot: its team and who controls it."""
+
+    team: str
+    controller: str
+    bot: str | None = None
+    weakness: float = 1.0
+    options: dict[str, Any] = field(default_factory=dict)
+    keys: str | None = None
+    path: str | None = None
+
+    def describe(self) -> str:
+        """Short label, e.g. ``smart(w=0.5)``, ``learner``, ``human:wasd``."""
+        if self.controller == "bot":
+            opts = "".join(f",{k}={v}" for k, v in sorted(self.options.items()))
+            return f"{self.bot}(w={self.weakness:g}{opts})"
+        if self.controller == "human":
+            return f"human:{self.keys}"
+        if self.controller == "checkpoint":
+            return f"checkpoint:{self.path}"
+        return "learner"
+
+    def to_dict(self) -> dict[str, Any]:
+        """The ``[[seats]]`` entry that parses back to this seat."""
+        d: dict[str, Any] = {"team": self.team, "controller": self.controller}
+        if self.controller == "bot":
+            d.update(bot=self.bot, weakness=self.weakness, options=dict(self.options))
+        elif self.controller == "human":
+            d["keys"] = self.keys
+        elif self.controller == "checkpoint":
+            d["path"] = self.path
+        return d
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A validated scenario. ``maps`` holds one or more map sources (names or paths)."""
+
+    name: str
+    map: str
+    maps: tuple[str, ...]
+    seats: tuple[Seat, ...]
+    description: str = ""
+    preset: str = "paper"
+    observation: str = "paper"
+    game: dict[str, Any] = field(default_factory=dict)
+    rewards: dict[str, Any] = field(default_factory=dict)
+    source: str = "<dict>"
+
+    @property
+    def teams(self) -> list[str]:
+        return [s.team for s in self.seats]
+
+    @property
+    def learner_seats(self) -> list[int]:
+        return [i for i, s in enumerate(self.seats) if s.controller == "learner"]
+
+    @property
+    def team_mode(self) -> bool:
+        """True when some team has more than one tank (observations get team flags)."""
+        return len(set(self.teams)) < len(self.seats)
+
+    def game_config(self, **overrides: Any) -> GameConfig:
+        """The preset plus the scenario's [game] table plus ``overrides``."""
+        try:
+            return game_config(self.preset, **{**self.game, **overrides})
+        except ConfigError as exc:
+            raise ScenarioError(f"{self.source}: [game]: {exc}") from None
+
+    def reward_config(self, **overrides: Any) -> RewardConfig:
+        try:
+            return from_dict(RewardConfig, {**self.rewards, **overrides})
+        except ConfigError as exc:
+            raise ScenarioError(f"{self.source}: [rewards]: {exc}") from None
+
+    def to_dict(self) -> dict[str, Any]:
+        """A mapping :func:`parse_scenario` rebuilds this scenario from."""
+        return {"name": self.name, "description": self.description, "map": self.map,
+                "preset": self.preset, "observation": self.observation, "game": dict(self.game),
+                "rewards": dict(self.rewards), "seats": [s.to_dict() for s in self.seats]}
+
+    def map_specs(self) -> list[MapSpec]:
+        """Parsed maps, in ``maps`` order (an episode's map is drawn from these)."""
+        return [_load_map_cached(m) for m in self.maps]
+
+
+_MAP_CACHE: dict[str, MapSpec] = {}
+
+
+def _load_map_cached(source: str) -> MapSpec:
+    spec = _MAP_CACHE.get(source)
+    if spec is None:
+        if source.startswith("pkg:"):
+            res = resources.files("alphatank.maps").joinpath(source[4:])
+            spec = parse_map(res.read_text(encoding="utf-8"), f"maps/{source[4:]}",
+                             name=Path(source[4:]).stem)
+        else:
+            spec = load_map(source)
+        _MAP_CACHE[source] = spec
+    return spec
+
+
+def shipped_scenarios() -> list[str]:
+    """Names of the scenarios shipped with the package."""
+    root = resources.files("alphatank").joinpath("data", "scenarios")
+    return sorted(p.name[:-5] for p in root.iterdir() if p.name.endswith(".toml"))
+
+
+def load_scenario(name_or_path: str | Path | Scenario) -> Scenario:
+    """A shipped scenario by name (``"vs_smart"``) or any scenario TOML file by path."""
+    if isinstance(name_or_path, Scenario):
+        return name_or_path
+    path = Path(name_or_path)
+    if path.suffix == ".toml" or path.exists():
+        if not path.is_file():
+            raise ScenarioError(f"{path}: no such scenario file")
+        text, source, base = path.read_text(encoding="utf-8"), str(path), path.parent
+    else:
+        res = resources.files("alphatank").joinpath("data", "scenarios", f"{name_or_path}.toml")
+        if not res.is_file():
+            raise ScenarioError(f"unknown scenario {str(name_or_path)!r}; shipped scenarios: "
+                                f"{shipped_scenarios()} (or give a path to a .toml file)")
+        text, source, base = (res.read_text(encoding="utf-8"),
+                              f"scenarios/{name_or_path}.toml", None)
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"{source}: invalid TOML: {exc}") from None
+    return parse_scenario(data, source, base)
+
+
+def parse_scenario(data: dict[str, Any], source: str = "<dict>",
+                   base: Path | None = None) -> Scenario:
+    """Validate a scenario mapping (as read from TOML); errors name ``source`` and field."""
+
+    def fail(where: str, msg: str) -> ScenarioError:
+        return ScenarioError(f"{source}: {where}: {msg}")
+
+    unknown = sorted(set(data) - set(_TOP_KEYS))
+    if unknown:
+        raise fail(str(unknown[0]), f"unknown key; valid keys: {list(_TOP_KEYS)}")
+    for key in ("name", "map"):
+        if not isinstance(data.get(key), str) or not data[key]:
+            raise fail(key, "required, a non-empty string")
+    description = data.get("description", "")
+    if not isinstance(description, str):
+        raise fail("description", "must be a string")
+    preset = data.get("preset", "paper")
+    if preset not in PRESETS:
+        raise fail("preset", f"unknown preset {preset!r}; valid: {sorted(PRESETS)}")
+    observation = data.get("observation", "paper")
+    if observation not in OBSERVATIONS:
+        raise fail("observation", f"unknown observation {observation!r}; valid: "
+                   f"{list(OBSERVATIONS)}")
+    tables = {}
+    for key in ("game", "rewards"):
+        table = data.get(key, {})
+        if not isinstance(table, dict):
+            raise fail(f"[{key}]", "must be a table")
+        tables[key] = dict(table)
+    try:
+        game_config(preset, **tables["game"])
+    except (ConfigError, TypeError) as exc:
+        raise fail("[game]", str(exc)) from None
+    try:
+        from_dict(RewardConfig, tables["rewards"])
+    except (ConfigError, TypeError) as exc:
+        raise fail("[rewards]", str(exc)) from None
+
+    maps = _resolve_maps(data["map"], base, fail)
+    seats_data = data.get("seats")
+    if not isinstance(seats_data, list) or len(seats_data) < 2:
+        raise fail("seats", "need at least 2 [[seats]] entries")
+    seats = tuple(_parse_seat(s, i, fail) for i, s in enumerate(seats_data))
+    if len({s.team for s in seats}) < 2:
+        raise fail("seats", f"need at least 2 teams, got {sorted({s.team for s in seats})}")
+    for m in maps:
+        spec = _load_map_cached(m)
+        if len(spec.floor_cells()) < len(seats):
+            raise fail("map", f"map {spec.name!r} has {len(spec.floor_cells())} floor cells "
+                       f"for {len(seats)} seats")
+    return Scenario(name=data["name"], map=data["map"], maps=maps, seats=seats,
+                    description=description, preset=preset, observation=observation,
+                    game=tables["game"], rewards=tables["rewards"], source=source)
+
+
+def _resolve_maps(value: str, base: Path | None, fail: Any) -> tuple[str, ...]:
+    """Map sources for a ``map`` value: a shipped map or folder, or a file or folder path."""
+    candidates = []
+    path = Path(value)
+    if base is not None and not path.is_absolute():
+        candidates.append(base / path)
+    candidates.append(path)
+    for cand in candidates:
+        if cand.is_dir():
+            found = tuple(str(p) for p in sorted(cand.glob("*.txt")))
+            if not found:
+                raise fail("map", f"folder {str(cand)!r} holds no .txt maps")
+            return _checked(found, fail)
+        if cand.is_file():
+            return _checked((str(cand),), fail)
+    root = resources.files("alphatank.maps")
+    folder = root.joinpath(value)
+    if folder.is_dir():
+        found = tuple(f"pkg:{value}/{p.name}" for p in sorted(folder.iterdir(),
+                                                              key=lambda p: p.name)
+                      if p.name.endswith(".txt"))
+        if not found:
+            raise fail("map", f"shipped folder {value!r} holds no .txt maps")
+        return _checked(found, fail)
+    if root.joinpath(f"{value}.txt").is_file():
+        return _checked((f"pkg:{value}.txt",), fail)
+    raise fail("map", f"unknown map {value!r}; shipped maps: {shipped_maps()} "
+               "(or a path to a .txt map or a folder of maps)")
+
+
+def _checked(sources: tuple[str, ...], fail: Any) -> tuple[str, ...]:
+    for s in sources:
+        try:
+            _load_map_cached(s)
+        except MapError as exc:
+            raise fail("map", str(exc)) from None
+    return sources
+
+
+def _parse_seat(data: Any, i: int, fail: Any) -> Seat:
+    where = f"seats[{i}]"
+    if not isinstance(data, dict):
+        raise fail(where, "must be a table")
+    unknown = sorted(set(data) - set(_SEAT_KEYS))
+    if unknown:
+        raise fail(f"{where}.{unknown[0]}", f"unknown key; valid keys: {list(_SEAT_KEYS)}")
+    team = data.get("team")
+    if not isinstance(team, str) or not team:
+        raise fail(f"{where}.team", "required, a non-empty string like 'A'")
+    controller = data.get("controller")
+    if controller not in CONTROLLERS:
+        raise fail(f"{where}.controller", f"got {controller!r}; valid: {list(CONTROLLERS)}")
+    allowed = {"learner": set(), "bot": {"bot", "weakness", "options"}, "human": {"keys"},
+               "checkpoint": {"path"}}[controller] | {"team", "controller"}
+    extra = sorted(set(data) - allowed)
+    if extra:
+        raise fail(f"{where}.{extra[0]}", f"not used by a {controller!r} seat; its keys: "
+                   f"{sorted(allowed)}")
+    if controller == "bot":
+        names = bot_names()
+        bot = data.get("bot")
+        if bot not in names:
+            raise fail(f"{where}.bot", f"got {bot!r}; valid bots: {list(names)}")
+        weakness = data.get("weakness", 1.0)
+        if (isinstance(weakness, bool) or not isinstance(weakness, int | float)
+                or not 0.0 <= weakness <= 1.0):
+            raise fail(f"{where}.weakness", f"must be a number in [0, 1], got {weakness!r}")
+        options = data.get("options", {})
+        if not isinstance(options, dict):
+            raise fail(f"{where}.options", "must be a table of bot options")
+        return Seat(team, controller, bot=bot, weakness=float(weakness), options=dict(options))
+    if controller == "human":
+        keys = data.get("keys", "wasd")
+        if keys not in KEYSETS:
+            raise fail(f"{where}.keys", f"got {keys!r}; valid: {list(KEYSETS)}")
+        return Seat(team, controller, keys=keys)
+    if controller == "checkpoint":
+        path = data.get("path")
+        if not isinstance(path, str) or not path:
+            raise fail(f"{where}.path", "required, the checkpoint folder")
+        return Seat(team, controller, path=path)
+    return Seat(team, controller)
+
+
+def bot_names() -> tuple[str, ...]:
+    """Bot types that ``bot`` seats may name (from ``alphatank.bots``)."""
+    from alphatank.bots import BOT_NAMES
+    return tuple(BOT_NAMES)
+
+
+class NoopPolicy:
+    """A seat that does nothing (a human seat with no keyboard attached)."""
+
+    def reset(self, match: Any, seat: int, seed: int | None = None) -> None:
+        return None
+
+    def act(self, match: Any, seat: int) -> np.ndarray:
+        return NOOP
+
+
+def seat_policy(seat: Seat, seed: int | None = None) -> Policy | None:
+    """The controller of a non-learner seat: a bot, a loaded checkpoint, or a NOOP for a
+    human seat without keyboard. ``None`` for learner seats (the env's caller acts)."""
+    if seat.controller == "learner":
+        return None
+    if seat.controller == "bot":
+        from alphatank.bots import make_bot
+        return make_bot(seat.bot, weakness=seat.weakness, seed=seed, **seat.options)
+    if seat.controller == "checkpoint":
+        from alphatank.training.checkpoint import load_policy
+        return load_policy(seat.path)
+    return NoopPolicy()

@@ -1,0 +1,153 @@
+"""The editable map grid behind the pygame editor: paint, undo, redo, and a save that
+refuses invalid maps with the loader's own message."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from alphatank.mapgen.generate import MAX_SIZE, MapGenError
+from alphatank.sim.mapspec import GRID_CHARS, HEADER_KEYS, MapError, MapSpec, map_text, parse_map
+
+TOOLS = GRID_CHARS  # '#', '.', '1'..'8', '+', '-'
+
+
+@dataclass
+class EditorModel:
+    """An editable map grid with undo/redo; :meth:`save` writes only maps the game accepts."""
+
+    grid: np.ndarray  # (rows, cols) '<U1' characters from GRID_CHARS
+    header: dict[str, str] = field(default_factory=dict)
+    _undo: list[list[tuple[int, int, str, str]]] = field(default_factory=list, repr=False)
+    _redo: list[list[tuple[int, int, str, str]]] = field(default_factory=list, repr=False)
+    _stroke: list[tuple[int, int, str, str]] | None = field(default=None, repr=False)
+    dirty: bool = False
+
+    @classmethod
+    def blank(cls, rows: int, cols: int, name: str = "untitled") -> EditorModel:
+        """A floor grid inside a wall border."""
+        if not (3 <= rows <= MAX_SIZE and 3 <= cols <= MAX_SIZE):
+            raise MapGenError(f"map size must be in [3, {MAX_SIZE}] each way, got {rows}x{cols}")
+        grid = np.full((rows, cols), ".", dtype="<U1")
+        grid[[0, -1], :] = grid[:, [0, -1]] = "#"
+        return cls(grid, {"name": name})
+
+    @classmethod
+    def from_spec(cls, spec: MapSpec) -> EditorModel:
+        return cls.from_text(map_text(spec), spec.source)
+
+    @classmethod
+    def from_text(cls, text: str, source: str = "<string>") -> EditorModel:
+        """Open map text. A grid that only fails the reachability rule still opens (so it can
+        be fixed); anything the parser rejects earlier raises its MapError."""
+        try:
+            parse_map(text, source)
+        except MapError as err:
+            if "cannot be reached" not in err.message:
+                raise
+        header: dict[str, str] = {}
+        rows: list[str] = []
+        in_header = True
+        for ln in text.splitlines():
+            if ln.lstrip().startswith(";"):
+                continue
+            if in_header and ":" in ln and not rows:
+                key, value = (p.strip() for p in ln.split(":", 1))
+                header[key] = value
+            elif ln.strip():
+                in_header = False
+                rows.append(ln.rstrip())
+            elif header:
+                in_header = False
+        grid = np.array([list(r) for r in rows], dtype="<U1")
+        return cls(grid, header)
+
+    @classmethod
+    def from_file(cls, path: str | Path) -> EditorModel:
+        path = Path(path)
+        model = cls.from_text(path.read_text(encoding="utf-8"), str(path))
+        model.header.setdefault("name", path.stem)
+        return model
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (int(self.grid.shape[0]), int(self.grid.shape[1]))
+
+    def begin_stroke(self) -> None:
+        """Group the following paints into one undo step (a mouse drag)."""
+        self.end_stroke()
+        self._stroke = []
+
+    def end_stroke(self) -> None:
+        if self._stroke:
+            self._undo.append(self._stroke)
+            self._redo.clear()
+        self._stroke = None
+
+    def paint(self, row: int, col: int, tool: str) -> bool:
+        """Set one cell; a spawn digit moves that slot here. Returns whether anything changed."""
+        if tool not in TOOLS:
+            raise MapGenError(f"unknown tool {tool!r}; tools: {list(TOOLS)}")
+        if not (0 <= row < self.shape[0] and 0 <= col < self.shape[1]):
+            return False
+        if self.grid[row, col] == tool:
+            return False
+        changes = []
+        if tool.isdigit():
+            for r, c in np.argwhere(self.grid == tool):
+                changes.append((int(r), int(c), tool, "."))
+        changes.append((row, col, str(self.grid[row, col]), tool))
+        for r, c, _, new in changes:
+            self.grid[r, c] = new
+        if self._stroke is not None:
+            self._stroke.extend(changes)
+        else:
+            self._undo.append(changes)
+            self._redo.clear()
+        self.dirty = True
+        return True
+
+    def undo(self) -> bool:
+        """Revert the last paint or stroke; False when there is nothing to undo."""
+        self.end_stroke()
+        if not self._undo:
+            return False
+        changes = self._undo.pop()
+        for r, c, old, _ in reversed(changes):
+            self.grid[r, c] = old
+        self._redo.append(changes)
+        self.dirty = True
+        return True
+
+    def redo(self) -> bool:
+        self.end_stroke()
+        if not self._redo:
+            return False
+        changes = self._redo.pop()
+        for r, c, _, new in changes:
+            self.grid[r, c] = new
+        self._undo.append(changes)
+        self.dirty = True
+        return True
+
+    def text(self) -> str:
+        """The map file as it would be saved."""
+        head = [f"{k}: {self.header[k]}" for k in HEADER_KEYS if k in self.header]
+        head += [f"{k}: {v}" for k, v in self.header.items() if k not in HEADER_KEYS]
+        body = "\n".join("".join(row) for row in self.grid) + "\n"
+        return ("\n".join(head) + "\n\n" + body) if head else body
+
+    def check(self, source: str = "<editor>") -> MapSpec:
+        """Validate with the game's parser (raises its MapError)."""
+        return parse_map(self.text(), source, name=self.header.get("name"))
+
+    def save(self, path: str | Path) -> MapSpec:
+        """Write the map if the game accepts it; otherwise raise the loader's MapError."""
+        path = Path(path)
+        spec = parse_map(self.text(), str(path), name=path.stem)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(self.text(), encoding="utf-8")
+        self.dirty = False
+        return spec

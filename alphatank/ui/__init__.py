@@ -1,0 +1,1 @@
+"""Presentation: the pygame renderer, keyboard players, match videos and replays."""

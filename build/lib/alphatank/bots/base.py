@@ -1,0 +1,354 @@
+"""Shared machinery of the rule-based bots: seeding, steering, aiming, evasion.
+
+Every bot sees the full match state (privileged, no pixels) and returns one action per
+tick: rotate {0 ccw, 1 none, 2 cw}, move {0 back, 1 stop, 2 forward}, fire {0, 1}.
+Angles are radians with y pointing down, so a positive angle change is clockwise on
+screen, which is what ``rotate = 2`` does.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, ClassVar, NamedTuple
+
+import numpy as np
+
+from alphatank.sim.ballistics import path_hits, predict_path
+from alphatank.sim.navigation import NavGrid, nav_grid
+from alphatank.sim.world import WALLS_ONLY
+
+if TYPE_CHECKING:
+    from alphatank.sim.match import Match
+
+TAU = 2.0 * math.pi
+CCW, NONE, CW = 0, 1, 2
+BACK, STOP, FORWARD = 0, 1, 2
+MOVE_CONE = math.radians(35.0)  # drive only while the heading error is below this
+REVERSE_CONE = math.radians(110.0)  # reverse instead of turning round beyond this
+DRIVE_RADIUS = 16.0  # clearance used for straight driving legs (tank half-length + 1)
+ARRIVE_PX = 6.0
+_NONE = np.zeros(0, dtype=np.int64)
+
+
+def wrap(a: float) -> float:
+    """Angle wrapped to [-pi, pi)."""
+    return (a + math.pi) % TAU - math.pi
+
+
+class Engagement(NamedTuple):
+    """A bot's view of its nearest live enemy this tick."""
+
+    target: int
+    x: float
+    y: float
+    ex: float
+    ey: float
+    dist: float
+    heading: float
+
+
+class Bot:
+    """Base class: seeding, per-episode set-up and helpers. Subclasses implement
+    :meth:`decide` returning (rotate, move, fire)."""
+
+    name: ClassVar[str] = "bot"
+    guarded: ClassVar[bool] = True  # run the stuck watchdog (:meth:`guard`) on decisions
+
+    def __init__(self, seed: int | None = None):
+        self.seed = seed
+        self._seeder = np.random.default_rng(seed)
+        self.rng = np.random.default_rng(seed)
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(seed={self.seed!r})"
+
+    # ---- Policy protocol ------------------------------------------------------------
+
+    def reset(self, match: Match, seat: int, seed: int | None = None) -> None:
+        """New episode: fresh generator (from ``seed``, else the next draw of the bot's
+        own seed stream), map tables, and per-episode state."""
+        if seed is None:
+            seed = int(self._seeder.integers(2**63))
+        self.rng = np.random.default_rng(seed)
+        cfg = match.cfg
+        self.cfg = cfg
+        self.nav: NavGrid = nav_grid(match.spec)
+        self.turn_step = math.radians(cfg.rotation_speed) / cfg.tick_hz
+        self.hit_radius = cfg.tank_height / 2 + cfg.bullet_radius
+        self.muzzle_offset = cfg.tank_width / 2 + cfg.bullet_radius + 0.5
+        self.shot_range = cfg.bullet_max_distance
+        self._foes = [int(k) for k in np.flatnonzero(match.team_index != match.team_index[seat])]
+        self._route: tuple[int, int] | None = None
+        self._stuck_since = -1
+        self._stuck_pose = (0.0, 0.0, 0.0)
+        self._unstick_until = -1
+        self._unstick_move = BACK
+        self.on_reset(match, seat)
+
+    def act(self, match: Match, seat: int) -> np.ndarray:
+        if not match.alive[seat]:
+            return np.array((NONE, STOP, 0), dtype=np.int64)
+        self._route = None
+        rot, move, fire = self.decide(match, seat)
+        if self.guarded:
+            rot, move = self.guard(match, seat, rot, move)
+        return np.array((rot, move, fire), dtype=np.int64)
+
+    def planned_path(self, match: Match, seat: int) -> list[tuple[int, int]] | None:
+        """Grid cells of the BFS route the bot last steered along (for overlays)."""
+        if self._route is None or not match.alive[seat]:
+            return None
+        return [self.nav.cell_at(k) for k in self.nav.path_idx(*self._route)]
+
+    # ---- for subclasses -------------------------------------------------------------
+
+    def on_reset(self, match: Match, seat: int) -> None:
+        """Per-episode state of a subclass (called at the end of :meth:`reset`)."""
+
+    def decide(self, match: Match, seat: int) -> tuple[int, int, int]:
+        raise NotImplementedError
+
+    # ---- helpers --------------------------------------------------------------------
+
+    def steer(self, err: float) -> int:
+        """Rotate action reducing heading error ``err`` (target minus heading)."""
+        half = 0.5 * self.turn_step
+        if err > half:
+            return CW
+        if err < -half:
+            return CCW
+        return NONE
+
+    def drive(self, x: float, y: float, heading: float, tx: float, ty: float,
+              reverse: bool = True) -> tuple[int, int]:
+        """(rotate, move) that take a tank at (x, y, heading) towards (tx, ty), backing up
+        when the point is behind it; stops within ARRIVE_PX."""
+        dx, dy = tx - x, ty - y
+        if dx * dx + dy * dy < ARRIVE_PX * ARRIVE_PX:
+            return NONE, STOP
+        err = wrap(math.atan2(dy, dx) - heading)
+        move = FORWARD
+        if reverse and abs(err) > REVERSE_CONE:
+            err = wrap(err + math.pi)
+            move = BACK
+        if abs(err) > MOVE_CONE:
+            move = STOP
+        return self.steer(err), move
+
+    def away_point(self, x: float, y: float, fx: float, fy: float,
+                   reach: float = 50.0) -> tuple[float, float]:
+        """A point ``reach`` px from (x, y) away from (fx, fy), turned by up to 90 degrees
+        if needed to keep clear of walls."""
+        base = math.atan2(y - fy, x - fx)
+        turns = np.array([0.0, 0.25, -0.25, 0.5, -0.5]) * math.pi
+        ang = base + turns
+        pts = np.stack([x + reach * np.cos(ang), y + reach * np.sin(ang)], axis=1)
+        ok = self.nav.clearance(pts) > DRIVE_RADIUS + 4.0
+        i = int(np.argmax(ok)) if ok.any() else 0
+        return float(pts[i, 0]), float(pts[i, 1])
+
+    def route(self, match: Match, x: float, y: float, me: int, goal: int
+              ) -> tuple[float, float]:
+        """Next point to drive to on the BFS route from node ``me`` to node ``goal``: the
+        farthest path cell a straight leg from the tank reaches, else the next cell, else
+        the centre of the tank's own cell (so corners are turned from the cell centre)."""
+        nav = self.nav
+        self._route = (me, goal)
+        if me == goal:
+            gx, gy = nav.centers[me]
+            return float(gx), float(gy)
+        r = DRIVE_RADIUS - 2.0
+        for k in (nav.waypoint_idx(me, goal, DRIVE_RADIUS), nav.next_table[me, goal]):
+            gx, gy = nav.centers[k]
+            if k >= 0 and match.world.ray((x, y), (float(gx), float(gy)), r) is None:
+                return float(gx), float(gy)
+        gx, gy = nav.centers[me]
+        return float(gx), float(gy)
+
+    def enemies(self, match: Match, seat: int) -> list[int]:
+        """Live tanks on other teams (a handful: plain Python is cheapest)."""
+        alive = match.alive
+        return [k for k in self._foes if alive[k]]
+
+    def nearest(self, match: Match, seat: int, tanks: list[int]) -> int:
+        """Tank in ``tanks`` nearest in straight-line distance (-1 if none)."""
+        x, y = match.tank_xy[seat]
+        best, best_d = -1, math.inf
+        for k in tanks:
+            ex, ey = match.tank_xy[k]
+            d = (ex - x) ** 2 + (ey - y) ** 2
+            if d < best_d:
+                best, best_d = k, d
+        return best
+
+    def engage(self, match: Match, seat: int) -> Engagement | None:
+        """Nearest live enemy with both positions, its distance and this tank's heading;
+        None when no enemy is left."""
+        target = self.nearest(match, seat, self.enemies(match, seat))
+        if target < 0:
+            return None
+        x, y = match.tank_xy[seat]
+        ex, ey = match.tank_xy[target]
+        return Engagement(target, x, y, ex, ey, math.hypot(ex - x, ey - y),
+                          float(match.tank_angle[seat]))
+
+    def can_fire(self, match: Match, seat: int) -> bool:
+        """Whether a fire action this tick would spawn a bullet (cooldown ticks down
+        before firing; bullet limits follow buff/debuff zones)."""
+        return bool(match.cooldown[seat] <= 1
+                    and match.bullets_alive[seat] < match.bullet_limit(seat))
+
+    def lead_angle(self, match: Match, seat: int, target: int) -> float:
+        """Angle to shoot a straight bullet that meets ``target`` moving at its current
+        velocity (falls back to the direct angle when no intercept exists)."""
+        x, y = match.tank_xy[seat]
+        ex, ey = match.tank_xy[target]
+        vx, vy = match.tank_vel[target]
+        rx, ry = ex - x, ey - y
+        s, d0 = self.cfg.bullet_speed, self.muzzle_offset
+        # |r + v t| = d0 + s t  ->  (v.v - s^2) t^2 + 2 (r.v - d0 s) t + (r.r - d0^2) = 0
+        a = vx * vx + vy * vy - s * s
+        b = 2.0 * (rx * vx + ry * vy - d0 * s)
+        c = rx * rx + ry * ry - d0 * d0
+        disc = b * b - 4 * a * c
+        if a < 0 and disc >= 0:
+            t = (-b - math.sqrt(disc)) / (2 * a)
+            if t > 0:
+                return math.atan2(ry + vy * t, rx + vx * t)
+        return math.atan2(ry, rx)
+
+    def clear_shot(self, match: Match, seat: int, target: int) -> bool:
+        """A bullet-thick straight line from this tank to ``target`` misses every wall."""
+        x, y = match.tank_xy[seat]
+        tx, ty = match.tank_xy[target]
+        return self.clear(match, float(x), float(y), float(tx), float(ty),
+                          self.cfg.bullet_radius)
+
+    @staticmethod
+    def clear(match: Match, x0: float, y0: float, x1: float, y1: float, radius: float) -> bool:
+        """Quick thick line-of-sight test for aiming decisions (pymunk's space-level
+        segment query, ~3x cheaper than ``world.ray`` but it can miss a corner grazed only
+        by the rim, harmless at bullet radius). Driving legs use the exact ``world.ray``:
+        a tank-wide leg clips corners the thin segment's bounding box never reaches."""
+        return match.world.space.segment_query_first((x0, y0), (x1, y1), radius,
+                                                     WALLS_ONLY) is None
+
+    def shot_hits(self, match: Match, seat: int, heading: float | None = None,
+                  hit_radius: float | None = None, exact: bool = True
+                  ) -> tuple[bool, np.ndarray]:
+        """Predict a bullet fired now (ricochets included): (first tank it reaches is an
+        enemy, the predicted path). Teammates in the way make it False. ``exact=False``
+        uses the cheaper search-grade prediction (see ``predict_path``)."""
+        w = match.world
+        x, y = match.tank_xy[seat]
+        a = float(match.tank_angle[seat]) if heading is None else heading
+        d = self.muzzle_offset
+        path = predict_path(w, x + math.cos(a) * d, y + math.sin(a) * d, a, exact=exact)
+        others = np.flatnonzero(match.alive)
+        others = others[others != seat]
+        k = path_hits(path, match.tank_xy[others], self.hit_radius if hit_radius is None
+                      else hit_radius)
+        if k < 0:
+            return False, path
+        return bool(match.team_index[others[k]] != match.team_index[seat]), path
+
+    def guard(self, match: Match, seat: int, rot: int, move: int) -> tuple[int, int]:
+        """Stuck watchdog around a planned (rotate, move): if the tank has been told to
+        turn or drive for 20 ticks yet neither got 8 px anywhere nor turned 8 degrees
+        (pinned against a wall), drive towards the open side for 12 ticks."""
+        t = match.tick
+        if t < self._unstick_until:
+            return rot, self._unstick_move
+        if rot == NONE and move == STOP:
+            self._stuck_since = -1
+            return rot, move
+        x, y = match.tank_xy[seat]
+        a = float(match.tank_angle[seat])
+        sx, sy, sa = self._stuck_pose
+        if (self._stuck_since < 0 or (x - sx) ** 2 + (y - sy) ** 2 > 64.0
+                or abs(wrap(a - sa)) > 0.14):
+            self._stuck_since, self._stuck_pose = t, (float(x), float(y), a)
+            return rot, move
+        if t - self._stuck_since >= 20:
+            probe = np.array([[x + 30 * math.cos(a), y + 30 * math.sin(a)],
+                              [x - 30 * math.cos(a), y - 30 * math.sin(a)]])
+            ahead, behind = self.nav.clearance(probe)
+            self._unstick_move = FORWARD if ahead > behind else BACK
+            self._unstick_until = t + 12
+            self._stuck_since = -1
+            return rot, self._unstick_move
+        return rot, move
+
+
+class Evader:
+    """Dodges incoming bullets: picks, among the 9 (rotate, move) pairs, the one whose
+    short-horizon motion keeps the tank farthest from every threatening bullet and out
+    of walls. Only does work when a bullet that can hit the tank is closing in."""
+
+    def __init__(self, bot: Bot, match: Match, seat: int, horizon_ticks: int = 12,
+                 danger_px: float = 30.0):
+        cfg = match.cfg
+        self.bot, self.nav = bot, bot.nav
+        self.dt = cfg.dt
+        self.horizon = horizon_ticks
+        self.danger = danger_px + cfg.bullet_radius
+        self.wall_margin = cfg.tank_height / 2 + 1.0
+        k = np.arange(1, horizon_ticks + 1, dtype=np.float64)  # ticks ahead
+        rot = np.repeat(np.array([-1.0, 0.0, 1.0]), 3)  # candidate c = 3 * rot + move
+        move = np.tile(np.array([-1.0, 0.0, 1.0]), 3)
+        # Each candidate's path in the tank's own frame (heading 0), once: a tick's motion
+        # follows the heading at its start. At run time it is only rotated and shifted.
+        turn = rot[:, None] * bot.turn_step * (k[None, :] - 1)  # (9, K)
+        step = move[:, None] * cfg.tank_speed * self.dt
+        self.fwd = np.cumsum(np.cos(turn) * step, axis=1)  # (9, K) along the heading
+        self.side = np.cumsum(np.sin(turn) * step, axis=1)  # (9, K) clockwise of it
+        self.times = k * self.dt  # (K,) seconds
+        self.raster = bot.nav.clearance_map()  # distance to walls, 5 px raster
+        self.res = 5.0
+        # tanks whose bullets can hit this seat (own bullets never: grace, self_hit off)
+        can_hit = match.world.can_hit[:, seat].copy()
+        can_hit[seat] = False
+        self.shooters = [int(k) for k in np.flatnonzero(can_hit)]
+        self.shooter_mask = can_hit
+
+    def threats(self, match: Match, seat: int) -> np.ndarray:
+        """Indices of bullets that can hit ``seat`` and pass within danger soon."""
+        if not any(match.bullets_alive[k] for k in self.shooters):
+            return _NONE
+        active = np.flatnonzero(match.bullet_active)
+        active = active[self.shooter_mask[match.bullet_owner[active]]]
+        rel = match.bullet_xy[active] - match.tank_xy[seat]
+        vel = match.bullet_vel[active]
+        v2 = (vel * vel).sum(axis=1)
+        t = -(rel * vel).sum(axis=1) / np.maximum(v2, 1e-9)
+        miss = rel + vel * t[:, None]
+        close = (t > 0) & (t < self.times[-1] * 2) & ((miss * miss).sum(axis=1)
+                                                        < self.danger ** 2)
+        return active[close]
+
+    def evade(self, match: Match, seat: int, threats: np.ndarray,
+              aim_err: float = 0.0) -> tuple[int, int]:
+        """Best (rotate, move) against ``threats`` (bullet indices); among equally safe
+        choices, the one turning towards ``aim_err`` (radians to the bot's aim)."""
+        x, y = match.tank_xy[seat]
+        h = float(match.tank_angle[seat])
+        c, s = math.cos(h), math.sin(h)
+        px = x + c * self.fwd - s * self.side  # (9, K)
+        py = y + s * self.fwd + c * self.side
+        bxy = match.bullet_xy[threats]
+        bv = match.bullet_vel[threats]
+        bx = bxy[:, 0:1] + bv[:, 0:1] * self.times  # (T, K)
+        by = bxy[:, 1:2] + bv[:, 1:2] * self.times
+        dx = px[:, None, :] - bx[None]
+        dy = py[:, None, :] - by[None]
+        gap2 = (dx * dx + dy * dy).reshape(9, -1).min(axis=1)
+        score = np.sqrt(np.minimum(gap2, 4 * self.danger * self.danger))
+        h_r, w_r = self.raster.shape
+        r = np.minimum(np.maximum((py * (1 / self.res)).astype(np.intp), 0), h_r - 1)
+        q = np.minimum(np.maximum((px * (1 / self.res)).astype(np.intp), 0), w_r - 1)
+        wall = self.raster[r, q].min(axis=1)
+        score[wall < self.wall_margin] -= 2 * self.danger
+        turn = self.bot.steer(aim_err)
+        score[3 * turn:3 * turn + 3] += 0.5
+        best = int(np.argmax(score))
+        return best // 3, best % 3

@@ -1,0 +1,91 @@
+"""Bot factory: ``make_bot("smart", weakness=0.8, seed=1, ricochet=False)``."""
+
+from __future__ import annotations
+
+import inspect
+from typing import Any
+
+from alphatank.bots.aggressive import AggressiveBot
+from alphatank.bots.base import Bot
+from alphatank.bots.defensive import DefensiveBot
+from alphatank.bots.dodge import DodgeBot
+from alphatank.bots.random_bot import RandomBot
+from alphatank.bots.smart import SmartBot
+from alphatank.bots.weakness import Weakened
+
+BOTS: dict[str, type[Bot]] = {cls.name: cls for cls in
+                              (RandomBot, AggressiveBot, DefensiveBot, DodgeBot, SmartBot)}
+BOT_NAMES: tuple[str, ...] = tuple(BOTS)
+
+
+def bot_options(name: str) -> list[str]:
+    """Keyword options a bot takes besides ``seed`` (and the universal ``weakness``)."""
+    cls = _lookup(name)
+    return [p for p in inspect.signature(cls.__init__).parameters if p not in ("self", "seed")]
+
+
+def make_bot(name: str, weakness: float | None = None, seed: int | None = None,
+             **options: Any) -> Bot | Weakened:
+    """A fresh bot by name. A ``weakness`` (w in [0, 1]) wraps it in :class:`Weakened`,
+    whose ``weakness`` attribute a curriculum may change between episodes; ``options`` go
+    to the bot's constructor (e.g. ``ricochet=False`` for ``smart``)."""
+    cls = _lookup(name)
+    valid = bot_options(name)
+    unknown = sorted(set(options) - set(valid))
+    if unknown:
+        raise ValueError(f"bot {name!r} has no option(s) {unknown}; valid options: "
+                         f"{valid + ['weakness', 'seed']}")
+    bot = cls(seed=seed, **options)
+    if weakness is None:
+        return bot
+    return Weakened(bot, weakness, seed=seed)
+
+
+def parse_bot_spec(text: str) -> tuple[str, float | None, dict[str, Any]]:
+    """``NAME[:KEY=VALUE...][@WEAKNESS]`` -> (name, weakness, options), e.g.
+    ``"smart:ricochet=false@0.5"``. Values: true/false, numbers, else strings."""
+    body, at, weak = text.strip().partition("@")
+    name, *pairs = [p.strip() for p in body.split(":")]
+    _lookup(name)
+    options: dict[str, Any] = {}
+    for pair in pairs:
+        key, eq, value = pair.partition("=")
+        if not eq or not key.strip():
+            raise ValueError(f"bot spec {text!r}: option {pair!r} must be KEY=VALUE; "
+                             f"valid options of {name!r}: {bot_options(name)}")
+        options[key.strip()] = _value(value.strip())
+    weakness = None
+    if at:
+        try:
+            weakness = float(weak)
+        except ValueError:
+            raise ValueError(f"bot spec {text!r}: weakness after '@' must be a number in "
+                             f"[0, 1], got {weak!r}") from None
+    return name, weakness, options
+
+
+def bot_from_spec(text: str, seed: int | None = None) -> Bot | Weakened:
+    """:func:`make_bot` from a ``NAME[:KEY=VALUE...][@WEAKNESS]`` string."""
+    name, weakness, options = parse_bot_spec(text)
+    return make_bot(name, weakness=weakness, seed=seed, **options)
+
+
+def _value(text: str) -> Any:
+    low = text.lower()
+    if low in ("true", "yes", "on"):
+        return True
+    if low in ("false", "no", "off"):
+        return False
+    for cast in (int, float):
+        try:
+            return cast(text)
+        except ValueError:
+            pass
+    return text
+
+
+def _lookup(name: str) -> type[Bot]:
+    cls = BOTS.get(name)
+    if cls is None:
+        raise ValueError(f"unknown bot {name!r}; valid bots: {list(BOT_NAMES)}")
+    return cls

@@ -1,0 +1,40 @@
+"""``alphatank`` command line: one subcommand module per verb in ``alphatank.commands``."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+# verb -> module in alphatank.commands exposing add_arguments(parser) and run(args) -> int
+COMMANDS = {
+    "demo": "The main job: train PPO vs the aggressive bot, evaluate, record (runs/<name>/).",
+    "train": "Train PPO/SAC learners from a named preset (vs bots, self-play, teams).",
+    "eval": "Evaluate a checkpoint against bots: Table-3 layout with Wilson 95%% intervals.",
+    "play": "Play interactively: humans, bots and checkpoints in any seat.",
+    "record": "Record a headless match to MP4/GIF (and a replay file).",
+    "replay": "Re-simulate, render or record a replay file.",
+    "arena": "Play every pair of bots on both sides; win/draw/loss matrix.",
+    "bench": "Measure ticks/s of the match, env steps/s, bot and renderer cost.",
+    "maps": "List shipped maps or validate and print some.",
+}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="alphatank", description=__doc__)
+    sub = parser.add_subparsers(dest="command", required=True)
+    for verb, help_text in COMMANDS.items():
+        module = importlib.import_module(f"alphatank.commands.{verb}")
+        p = sub.add_parser(verb, help=help_text, description=help_text)
+        module.add_arguments(p)
+        p.set_defaults(_run=module.run)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    return int(args._run(args) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

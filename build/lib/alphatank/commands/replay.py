@@ -1,0 +1,93 @@
+"""``alphatank replay FILE``: re-simulate a saved match bit-identically.
+
+Without options it re-runs the match headless and checks the final state hash against the
+recording. ``--record OUT.mp4`` (and ``--gif``) renders it to video; ``--render`` plays it
+in a window at real-time speed (same keys as ``alphatank play``: P/Esc pause, R restart,
+V/T/B overlays).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+from alphatank.commands.play import NO_DISPLAY_HELP, Lineup, PlaySession
+from alphatank.sim.policy import Policy
+from alphatank.ui.render import DEFAULT_OVERLAYS, DisplayUnavailable, parse_overlays
+from alphatank.ui.replay import Replay, ReplayError, ReplayPolicy, load_replay, simulate
+from alphatank.ui.video import record_match
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("file", help="replay file (.npz) from `play --save-replay` or "
+                                "`record --replay`")
+    p.add_argument("--record", metavar="OUT.mp4", help="render the replay to an MP4")
+    p.add_argument("--gif", metavar="FILE", help="also write a GIF")
+    p.add_argument("--render", action="store_true", help="play it back in a window")
+    p.add_argument("--speed", type=float, default=1.0, help="playback speed for --render")
+    p.add_argument("--overlays", default=",".join(DEFAULT_OVERLAYS),
+                   help="aim,trajectory,bfs | all | none (default: aim,bfs)")
+    p.add_argument("--headless-test", action="store_true",
+                   help="allow --render with SDL_VIDEODRIVER=dummy (automated tests only)")
+    p.add_argument("--max-frames", type=int, help="stop --render after this many frames")
+
+
+def replay_lineup(replay: Replay) -> Lineup:
+    """A line-up whose every seat plays back the replay's actions."""
+    policies: list[Policy] = [ReplayPolicy(replay.actions) for _ in replay.teams]
+    labels = replay.labels or [str(i + 1) for i in range(len(replay.teams))]
+    return Lineup(None, policies, labels, replay.seats)
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        replay = load_replay(args.file)
+        overlays = parse_overlays(args.overlays)
+    except (ReplayError, ValueError) as exc:
+        print(f"alphatank replay: {exc}", file=sys.stderr)
+        return 2
+    who = ", ".join(f"{t}:{s}" for t, s in zip(replay.teams, replay.seats, strict=False))
+    print(f"{args.file}: {replay.scenario or 'match'} on {replay.map_name}, "
+          f"{replay.ticks} ticks, seats [{who}], recorded result: "
+          f"{'team ' + replay.winner + ' wins' if replay.winner else 'no winner'}")
+    try:
+        if args.record:
+            match = replay.new_match()
+            rec = record_match(match, [ReplayPolicy(replay.actions)] * match.n,
+                               mp4=args.record, gif=args.gif, overlays=overlays,
+                               labels=replay.labels or None, max_ticks=replay.ticks)
+            if rec.final_hash != replay.final_hash:
+                raise ReplayError(f"replay diverged: final state hash {rec.final_hash[:16]}"
+                                  f"... != recorded {replay.final_hash[:16]}...")
+            print(f"wrote {rec.mp4} ({rec.frames} frames)" + (f" and {rec.gif}" if rec.gif
+                                                              else ""))
+        if args.render:
+            return _render(replay, args, overlays)
+        if not args.record:
+            t0 = time.perf_counter()
+            match = simulate(replay)
+            print(f"re-simulated {match.tick} ticks in {time.perf_counter() - t0:.2f}s: "
+                  f"final state hash matches ({replay.final_hash[:16]}...)")
+    except ReplayError as exc:
+        print(f"alphatank replay: {exc}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _render(replay: Replay, args: argparse.Namespace, overlays: tuple[str, ...]) -> int:
+    if os.environ.get("SDL_VIDEODRIVER") == "dummy" and not args.headless_test:
+        print("alphatank replay: " + NO_DISPLAY_HELP.format(why=" (SDL_VIDEODRIVER=dummy)"),
+              file=sys.stderr)
+        return 2
+    tick_hz = replay.game_config().tick_hz
+    session = PlaySession(replay_lineup(replay), fps=tick_hz * args.speed, overlays=overlays,
+                          verbose=False, tick_limit=replay.ticks,
+                          new_match=lambda _seed: (replay.new_match(), replay.match_seed))
+    try:
+        session.run(max_frames=args.max_frames, caption=f"AlphaTank replay: {args.file}")
+    except DisplayUnavailable as exc:
+        print("alphatank replay: " + NO_DISPLAY_HELP.format(why=f" ({exc})"), file=sys.stderr)
+        return 2
+    return 0

@@ -1,0 +1,317 @@
+"""The engine under every env: ``num_envs`` matches of one scenario stepped together.
+
+:class:`MatchSet` owns the matches, the controllers of the seats its caller does not
+drive (bots, checkpoints, frozen policies, idle humans), one :class:`StateBatch`, the
+:class:`ObservationBuilder` and the :class:`RewardTracker`. A step plays one tick in every
+match, then computes rewards and observations for all of them with batched numpy.
+
+Rules shared by all envs:
+
+* Seeding: ``reset_env(e, seed)`` derives the map choice, the match seed and one seed per
+  seat from ``numpy.random.SeedSequence(seed)``; same seed + same actions => same episode.
+* Dead driven seats keep their slot: their actions are ignored and they still receive
+  rewards (e.g. their team's victory).
+* When no driven seat is alive but the match goes on (bots left in several teams), the
+  match is played out at once with the remaining controllers, so the episode ends on this
+  step with its real winner; the rewards of that play-out are added to this step.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from alphatank.game.observe import (
+    OBS_KINDS,
+    GlobalState,
+    ObservationBuilder,
+    StateBatch,
+    slot_counts,
+)
+from alphatank.game.rewards import RewardTracker
+from alphatank.game.scenarios import Scenario, ScenarioError, Seat, load_scenario, seat_policy
+from alphatank.sim.match import Match
+from alphatank.sim.policy import NOOP, Policy
+
+ACTION_NVEC = np.array([3, 3, 2], dtype=np.int64)
+ACTION_HELP = "rotate 0..2 (0 ccw, 1 none, 2 cw), move 0..2 (0 back, 1 stop, 2 forward), fire 0..1"
+
+
+def action_space() -> spaces.MultiDiscrete:
+    return spaces.MultiDiscrete(ACTION_NVEC)
+
+
+def check_actions(actions: Any, shape: tuple[int, ...], name_of: Any) -> np.ndarray:
+    """Validate an integer action array of ``shape`` (last axis 3); errors name the agent
+    (``name_of(index_tuple)``) and the allowed values. Returns an int64 array."""
+    arr = np.asarray(actions)
+    if arr.dtype == object or not (np.issubdtype(arr.dtype, np.integer)
+                                   or arr.dtype == np.bool_):
+        raise TypeError(f"actions must be integers ({ACTION_HELP}), got dtype {arr.dtype}")
+    if arr.shape != shape:
+        raise ValueError(f"actions must have shape {shape} (last axis: rotate, move, fire), "
+                         f"got {arr.shape}")
+    bad = (arr < 0) | (arr >= ACTION_NVEC)
+    if bad.any():
+        idx = tuple(int(i) for i in np.argwhere(bad)[0][:-1])
+        raise ValueError(f"{name_of(idx)}: action {arr[idx].tolist()} out of range; allowed: "
+                         f"{ACTION_HELP} (MultiDiscrete([3, 3, 2]))")
+    return arr.astype(np.int64, copy=False)
+
+
+class MatchSet:
+    """``num_envs`` matches of a scenario; the caller drives ``driven`` seats (default:
+    the scenario's learner seats) and the set plays every other seat."""
+
+    def __init__(self, scenario: str | Scenario, num_envs: int = 1, *,
+                 observation: str | None = None, game_overrides: Mapping | None = None,
+                 reward_overrides: Mapping | None = None,
+                 driven: Sequence[int] | None = None,
+                 seat_policies: Mapping[int, Policy] | None = None,
+                 env_ids: Sequence[int] | None = None):
+        sc = self.scenario = load_scenario(scenario)
+        if num_envs < 1:
+            raise ValueError(f"num_envs must be >= 1, got {num_envs}")
+        self.num_envs = E = num_envs
+        self.env_ids = list(range(E)) if env_ids is None else list(env_ids)
+        self.game = sc.game_config(**dict(game_overrides or {}))
+        self.reward_cfg = sc.reward_config(**dict(reward_overrides or {}))
+        self.specs = sc.map_specs()
+        self.kind = observation or sc.observation
+        if self.kind not in OBS_KINDS:
+            raise ScenarioError(f"observation {self.kind!r} is not one of {list(OBS_KINDS)}")
+        self.teams = sc.teams
+        self.n = n = len(sc.seats)
+        self.driven = list(sc.learner_seats if driven is None else driven)
+        for s in self.driven:
+            if not 0 <= s < n:
+                raise ScenarioError(f"{sc.source}: driven seat {s} out of range 0..{n - 1}")
+        self.seat_policies = dict(seat_policies or {})
+        for s in self.seat_policies:
+            if s in self.driven or not 0 <= s < n:
+                raise ScenarioError(f"{sc.source}: seat_policies names seat {s}; allowed: "
+                                    f"{[i for i in range(n) if i not in self.driven]}")
+        orphans = [s for s in sc.learner_seats
+                   if s not in self.driven and s not in self.seat_policies]
+        self.orphans = orphans  # learner seats nobody drives: need an opponent policy
+        self.opponent_policy: Policy | None = None
+        self.bot_override: list[str] | None = None
+        self.weakness: float | None = None
+        walls, buffs, debuffs = slot_counts(self.game, self.specs)
+        self.batch = StateBatch(self.game, n, E, walls, buffs, debuffs)
+        self.obs = ObservationBuilder(self.kind, self.batch, self.teams, self.driven,
+                                      team_flags=sc.team_mode)
+        self.global_state = GlobalState(self.batch, self.teams)
+        self.tracker = RewardTracker(self.reward_cfg, self.game, self.teams, E,
+                                     rewarded=self.driven)
+        self.matches: list[Match] = []
+        self.map_index = np.zeros(E, dtype=np.int64)
+        self.controllers: list[list[Policy | None]] = [[None] * n for _ in range(E)]
+        self._bots: list[dict[int, tuple[tuple, Policy]]] = [{} for _ in range(E)]
+        self._played: list[list[tuple[int, Policy]]] = [[] for _ in range(E)]
+        self.joint = np.ones((E, n, 3), dtype=np.int64)
+        self.driven_idx = np.array(self.driven, dtype=np.int64)
+        cap = self.game.bullet_capacity
+        self._driven_bullets = np.isin(np.arange(n * cap) // cap, self.driven_idx)
+        self.team_of = np.array([sc.seats[s].team for s in self.driven], dtype=object)
+
+    # ---- pickling -------------------------------------------------------------------
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Everything but the live matches and their controllers: pymunk's solver caches
+        do not survive pickling bit for bit, so an unpickled set must be reset (episodes
+        are reproducible from their seeds)."""
+        state = self.__dict__.copy()
+        state["matches"] = []
+        state["controllers"] = [[None] * self.n for _ in range(self.num_envs)]
+        state["_bots"] = [{} for _ in range(self.num_envs)]
+        state["_played"] = [[] for _ in range(self.num_envs)]
+        return state
+
+    # ---- spaces ---------------------------------------------------------------------
+
+    @property
+    def obs_dim(self) -> int:
+        return self.obs.layout.size
+
+    def observation_space(self) -> spaces.Box:
+        return spaces.Box(-1.0, 1.0, shape=(self.obs_dim,), dtype=np.float32)
+
+    def state_space(self) -> spaces.Box:
+        return spaces.Box(-1.0, 1.0, shape=(self.global_state.layout.size,), dtype=np.float32)
+
+    # ---- controllers ----------------------------------------------------------------
+
+    def seat_controller_spec(self, e: int, seat: int) -> Seat | Policy | None:
+        """Who plays ``seat`` in env ``e`` next episode: None (driven), a Policy object,
+        or the scenario Seat (possibly with bot type / weakness overridden)."""
+        if seat in self.driven:
+            return None
+        if seat in self.seat_policies:
+            return self.seat_policies[seat]
+        if self.opponent_policy is not None:
+            return self.opponent_policy
+        s = self.scenario.seats[seat]
+        if s.controller == "learner":
+            raise ScenarioError(
+                f"{self.scenario.source}: seats[{seat}] is a learner seat that this env does "
+                f"not drive (it drives seats {self.driven}); pass a Policy for seats "
+                f"{self.orphans} (seat_policies= or opponent_policy=)")
+        if s.controller == "bot" and (self.bot_override or self.weakness is not None):
+            bot = (self.bot_override[self.env_ids[e] % len(self.bot_override)]
+                   if self.bot_override else s.bot)
+            w = s.weakness if self.weakness is None else self.weakness
+            opts = s.options if bot == s.bot else {}
+            s = Seat(s.team, "bot", bot=bot, weakness=w, options=opts)
+        return s
+
+    def describe_opponents(self, e: int) -> str:
+        """Label of the seats this set plays in env ``e``, e.g. ``B:smart(w=1)``."""
+        parts = []
+        for seat in range(self.n):
+            c = self.seat_controller_spec(e, seat)
+            if c is None:
+                continue
+            label = c.describe() if isinstance(c, Seat) else f"policy:{type(c).__name__}"
+            parts.append(f"{self.teams[seat]}:{label}")
+        return ", ".join(parts) or "none"
+
+    def _controller(self, e: int, seat: int, seed: int) -> Policy | None:
+        spec = self.seat_controller_spec(e, seat)
+        if spec is None or not isinstance(spec, Seat):
+            return spec
+        key = (spec.controller, spec.bot, spec.weakness, tuple(sorted(spec.options.items())),
+               spec.keys, spec.path)
+        cached = self._bots[e].get(seat)
+        if cached is not None and cached[0] == key:
+            return cached[1]
+        pol = seat_policy(spec, seed)
+        self._bots[e][seat] = (key, pol)
+        return pol
+
+    # ---- episodes -------------------------------------------------------------------
+
+    def reset_env(self, e: int, seed: int) -> None:
+        """Start a new episode in env ``e``, everything derived from ``seed``."""
+        ss = np.random.SeedSequence(seed)
+        s_map, s_match, s_seats = ss.spawn(3)
+        k = 0
+        if len(self.specs) > 1:
+            k = int(np.random.default_rng(s_map).integers(len(self.specs)))
+        match_seed = int(s_match.generate_state(1, np.uint64)[0])
+        seat_seeds = [int(x) for x in s_seats.generate_state(self.n, np.uint64)]
+        spec = self.specs[k]
+        if e < len(self.matches) and self.matches[e].spec is spec:
+            m = self.matches[e]
+            m.reset(match_seed)
+        else:
+            m = Match(self.game, spec, self.teams, seed=match_seed)
+            if e < len(self.matches):
+                self.matches[e] = m
+            else:
+                self.matches.append(m)
+        self.map_index[e] = k
+        played = []
+        for seat in range(self.n):
+            ctrl = self._controller(e, seat, seat_seeds[seat])
+            self.controllers[e][seat] = ctrl
+            if ctrl is not None:
+                ctrl.reset(m, seat, seat_seeds[seat])
+                played.append((seat, ctrl))
+        self._played[e] = played
+        self.joint[e] = 1
+        b = self.batch
+        b.set_static(e, m)
+        b.gather(e, m)
+        self.obs.set_static(e)
+        self.tracker.reset_env(e, m)
+
+    def reset_all(self, seeds: Sequence[int]) -> np.ndarray:
+        for e, s in enumerate(seeds):
+            self.reset_env(e, int(s))
+        return self.obs.build()
+
+    # ---- stepping -------------------------------------------------------------------
+
+    def _tick(self, e: int, driven_actions: np.ndarray | None) -> None:
+        m, joint = self.matches[e], self.joint[e]
+        if driven_actions is not None:
+            joint[self.driven_idx] = driven_actions
+        else:
+            joint[self.driven_idx] = NOOP
+        alive = m.alive
+        for seat, ctrl in self._played[e]:
+            if alive[seat]:
+                joint[seat] = ctrl.act(m, seat)
+        m.step(joint)
+        self.batch.gather(e, m)
+
+    def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """One tick in every env. ``actions``: validated int (E, L, 3). Returns the
+        (E, len(TERMS), n) reward terms of this step and the (E, L, D) observations
+        (internal buffers: copy what you keep)."""
+        if len(self.matches) < self.num_envs:
+            raise RuntimeError("step() before reset() (an unpickled env must be reset)")
+        for e in range(self.num_envs):
+            self._tick(e, actions[e])
+        terms = self.tracker.step(slice(None), self.batch, self.matches, self.joint)
+        if len(self.driven):
+            for e, m in enumerate(self.matches):
+                if not m.done and not m.alive[self.driven_idx].any():
+                    self._play_out(e)
+        return terms, self.obs.build()
+
+    def _play_out(self, e: int) -> None:
+        """Finish env ``e``'s match without its (dead) driven seats; adds the rewards of
+        the remaining ticks to this step's terms. Only ticks where a driven seat's bullet
+        still flies, and the last one, can reward a dead driven seat: only those are
+        scored."""
+        acc = self.tracker.terms[e].copy()
+        m, sl = self.matches[e], slice(e, e + 1)
+        mine = self._driven_bullets
+        while not m.done:
+            self._tick(e, None)
+            if m.done or (m.bullet_active & mine).any():
+                acc += self.tracker.step(sl, self.batch, self.matches, self.joint)[0]
+        self.tracker.terms[e] = acc
+
+    def rewards(self, terms: np.ndarray) -> np.ndarray:
+        """(E, L) per-step rewards of the driven seats."""
+        return terms[:, :, self.driven_idx].sum(axis=1)
+
+    def outcome(self, e: int) -> list[str]:
+        """'win' / 'loss' / 'draw' of each driven seat in env ``e``'s finished match."""
+        w = self.matches[e].winner
+        return ["draw" if w is None else "win" if t == w else "loss" for t in self.team_of]
+
+    def map_name(self, e: int) -> str:
+        return self.specs[int(self.map_index[e])].name
+
+
+
+class FirstMatchRenderer:
+    """Draws match 0 of a :class:`MatchSet` with its controllers' overlays. The pygame
+    renderer is made on the first ``render()`` (so ``render_mode=None`` never touches
+    pygame) and is not pickled."""
+
+    def __init__(self, core: MatchSet, mode: str, fps: float):
+        self.core, self.mode, self.fps = core, mode, fps
+        self._renderer: Any = None
+
+    def render(self) -> np.ndarray | None:
+        if self._renderer is None:
+            from alphatank.ui.render import Renderer
+
+            self._renderer = Renderer(self.mode, fps=self.fps)
+        return self._renderer.render(self.core.matches[0], self.core.controllers[0])
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {**self.__dict__, "_renderer": None}

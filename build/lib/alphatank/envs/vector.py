@@ -1,0 +1,370 @@
+"""Batched vector env for training: many matches in one process, arrays in and out.
+
+:class:`VectorMatchEnv` steps ``num_envs`` matches of one scenario together; each match
+has ``num_learners`` (L) learner seats. Arrays: observations float32 (num_envs, L,
+obs_dim), actions int (num_envs, L, 3), rewards float32 (num_envs, L), terminated /
+truncated bool (num_envs,). Autoreset is SAME_STEP: an env whose episode ended is reset
+inside ``step``; ``info["final_obs"]`` holds its last observation and
+``info["episodes"]`` one summary dict per ended episode.
+
+:class:`SubprocVectorMatchEnv` has the same interface and, for the same seed, the same
+results bit for bit: worker processes each own a contiguous block of envs and exchange
+arrays through shared memory. :func:`make_vector_env` picks one by ``num_workers``.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import traceback
+from collections.abc import Mapping, Sequence
+from multiprocessing import shared_memory
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from alphatank.envs.core import MatchSet, action_space, check_actions
+from alphatank.game.observe import ObsLayout
+from alphatank.game.rewards import TERMS
+from alphatank.game.scenarios import Scenario, load_scenario
+from alphatank.sim.policy import Policy
+
+
+def episode_seed(seed: int, env_id: int, episode: int) -> int:
+    """Seed of episode ``episode`` of env ``env_id`` in a vector env seeded ``seed``."""
+    ss = np.random.SeedSequence(entropy=seed, spawn_key=(env_id, episode))
+    return int(ss.generate_state(1, np.uint64)[0])
+
+
+class VectorMatchEnv:
+    """``num_envs`` matches of ``scenario`` with every learner seat driven by the caller.
+
+    Dead learners keep their slot until their match ends (alive flag 0 in the
+    observation, actions ignored, rewards such as their team's victory still delivered).
+    """
+
+    def __init__(self, scenario: str | Scenario, num_envs: int, seed: int = 0,
+                 observation: str | None = None, game_overrides: dict | None = None,
+                 reward_overrides: dict | None = None, *,
+                 seat_policies: Mapping[int, Policy] | None = None,
+                 env_ids: Sequence[int] | None = None):
+        self.scenario = load_scenario(scenario)
+        self.core = MatchSet(self.scenario, num_envs, observation=observation,
+                             game_overrides=game_overrides, reward_overrides=reward_overrides,
+                             seat_policies=seat_policies, env_ids=env_ids)
+        core = self.core
+        self.num_envs = num_envs
+        self.num_learners = L = len(core.driven)
+        self.learner_seats = list(core.driven)
+        self.learner_teams = [self.scenario.seats[s].team for s in core.driven]
+        self.observation_space: spaces.Box = core.observation_space()
+        self.action_space: spaces.MultiDiscrete = action_space()
+        self.obs_dim = core.obs_dim
+        self.seed = int(seed)
+        self.env_ids = list(core.env_ids)
+        self._episode = np.zeros(num_envs, dtype=np.int64)
+        self._return = np.zeros((num_envs, L))
+        self._terms = np.zeros((num_envs, len(TERMS), L))
+        self._length = np.zeros(num_envs, dtype=np.int64)
+        self._started = False
+        self._shape = (num_envs, L, 3)
+
+    @property
+    def layout(self) -> ObsLayout:
+        """Index map of one learner's observation vector."""
+        return self.core.obs.layout
+
+    # ---- opponents (take effect from each env's next episode) -------------------------
+
+    def set_bot_weakness(self, weakness: float) -> None:
+        """Weakness (0..1) of every bot seat from the next episode on (curriculum)."""
+        if not 0.0 <= weakness <= 1.0:
+            raise ValueError(f"weakness must be in [0, 1], got {weakness!r}")
+        self.core.weakness = float(weakness)
+
+    def set_opponents(self, bot_names: Sequence[str] | None,
+                      weakness: float | None = None) -> None:
+        """Bot type of the bot seats from the next episode on: env ``i`` uses
+        ``bot_names[i % len(bot_names)]`` (one name: all envs; several: a mixture for
+        cycle learning). ``None`` restores the scenario's bots."""
+        if bot_names is not None:
+            from alphatank.game.scenarios import bot_names as valid_names
+            valid = valid_names()
+            bad = [b for b in bot_names if b not in valid]
+            if bad or not bot_names:
+                raise ValueError(f"unknown bot name(s) {bad or bot_names}; valid: {list(valid)}")
+            self.core.bot_override = list(bot_names)
+        else:
+            self.core.bot_override = None
+        if weakness is not None:
+            self.set_bot_weakness(weakness)
+
+    def set_opponent_policy(self, policy: Policy | None) -> None:
+        """A frozen Policy in every non-learner seat from the next episode on (self-play
+        against a snapshot); ``None`` restores the scenario's controllers."""
+        self.core.opponent_policy = policy
+
+    # ---- episodes -------------------------------------------------------------------
+
+    def _reset_env(self, e: int) -> None:
+        self.core.reset_env(e, episode_seed(self.seed, self.env_ids[e], int(self._episode[e])))
+        self._episode[e] += 1
+        self._return[e] = 0.0
+        self._terms[e] = 0.0
+        self._length[e] = 0
+
+    def reset(self, seed: int | None = None) -> np.ndarray:
+        """Reset every env. A new ``seed`` restarts the episode sequence; ``None``
+        continues it (fresh episodes). Returns (num_envs, L, obs_dim) float32."""
+        if seed is not None:
+            self.seed = int(seed)
+            self._episode[:] = 0
+        for e in range(self.num_envs):
+            self._reset_env(e)
+        self._started = True
+        return self.core.obs.build().copy()
+
+    def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                          dict[str, Any]]:
+        """One tick in every env, with SAME_STEP autoreset of ended envs."""
+        if not self._started:
+            raise RuntimeError("step() before reset()")
+        core = self.core
+        acts = check_actions(actions, self._shape, self._name)
+        terms, obs = core.step(acts)
+        lt = terms[:, :, core.driven_idx]  # (E, T, L)
+        rewards = lt.sum(axis=1)
+        self._return += rewards
+        self._terms += lt
+        self._length += 1
+        terminated = np.fromiter((m.terminated for m in core.matches), bool, self.num_envs)
+        truncated = np.fromiter((m.truncated for m in core.matches), bool, self.num_envs)
+        final_obs = np.zeros_like(obs)
+        episodes = []
+        done = np.flatnonzero(terminated | truncated)
+        if done.size:
+            final_obs[done] = obs[done]
+            for e in done:
+                e = int(e)
+                m = core.matches[e]
+                episodes.append({
+                    "env": self.env_ids[e], "return": self._return[e].copy(),
+                    "length": int(self._length[e]), "winner": m.winner,
+                    "outcome": core.outcome(e), "opponent": core.describe_opponents(e),
+                    "map": core.map_name(e),
+                    "terms": dict(zip(TERMS, self._terms[e].copy(), strict=True))})
+                self._reset_env(e)
+            obs = core.obs.build()
+        info = {"final_obs": final_obs, "episodes": episodes}
+        return obs.copy(), rewards.astype(np.float32), terminated, truncated, info
+
+    def _name(self, idx: tuple[int, ...]) -> str:
+        e, slot = idx
+        seat = self.learner_seats[slot]
+        return (f"env {self.env_ids[e]}, learner {slot} (seat {seat}, team "
+                f"{self.learner_teams[slot]})")
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_started"] = False  # the live matches are not carried: reset after unpickling
+        return state
+
+    def close(self) -> None:
+        """Nothing to release in-process (present for interface parity)."""
+
+
+# ---- worker processes ---------------------------------------------------------------
+
+class _Shared:
+    """Named shared-memory arrays of a subprocess vector env."""
+
+    def __init__(self, specs: dict[str, tuple[tuple[int, ...], str]],
+                 names: dict[str, str] | None = None):
+        self.mem: dict[str, shared_memory.SharedMemory] = {}
+        self.arr: dict[str, np.ndarray] = {}
+        for key, (shape, dtype) in specs.items():
+            size = max(1, int(np.prod(shape)) * np.dtype(dtype).itemsize)
+            if names is None:
+                mem = shared_memory.SharedMemory(create=True, size=size)
+            else:
+                mem = shared_memory.SharedMemory(name=names[key])
+            self.mem[key] = mem
+            self.arr[key] = np.ndarray(shape, dtype=dtype, buffer=mem.buf)
+
+    @property
+    def names(self) -> dict[str, str]:
+        return {k: m.name for k, m in self.mem.items()}
+
+    def close(self, unlink: bool) -> None:
+        self.arr.clear()
+        for m in self.mem.values():
+            m.close()
+            if unlink:
+                m.unlink()
+        self.mem.clear()
+
+
+def _worker(conn: Any, kwargs: dict, lo: int, hi: int, specs: dict, names: dict) -> None:
+    """Own envs lo..hi-1; answer commands from the parent until 'close'."""
+    shared = _Shared(specs, names)
+    a = shared.arr
+    try:
+        env = VectorMatchEnv(num_envs=hi - lo, env_ids=range(lo, hi), **kwargs)
+        conn.send(("ok", None))
+        while True:
+            cmd, arg = conn.recv()
+            if cmd == "step":
+                obs, rew, term, trunc, info = env.step(a["actions"][lo:hi])
+                a["obs"][lo:hi] = obs
+                a["rewards"][lo:hi] = rew
+                a["terminated"][lo:hi] = term
+                a["truncated"][lo:hi] = trunc
+                a["final_obs"][lo:hi] = info["final_obs"]
+                conn.send(("ok", info["episodes"]))
+            elif cmd == "reset":
+                a["obs"][lo:hi] = env.reset(arg)
+                conn.send(("ok", None))
+            elif cmd == "call":
+                name, args = arg
+                getattr(env, name)(*args)
+                conn.send(("ok", None))
+            elif cmd == "close":
+                conn.send(("ok", None))
+                break
+    except BaseException as exc:  # report any failure to the parent, then stop
+        conn.send(("error", f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}"))
+    finally:
+        shared.close(unlink=False)
+        conn.close()
+
+
+class SubprocVectorMatchEnv:
+    """:class:`VectorMatchEnv` split over ``num_workers`` processes (shared-memory arrays,
+    same interface, bit-identical results for the same seed). Workers start with
+    ``start_method`` ("spawn": safe next to torch threads; a script must then create the
+    env under ``if __name__ == "__main__":``). Frozen policies and ``seat_policies`` are
+    pickled to the workers."""
+
+    def __init__(self, scenario: str | Scenario, num_envs: int, seed: int = 0,
+                 observation: str | None = None, game_overrides: dict | None = None,
+                 reward_overrides: dict | None = None, *, num_workers: int = 2,
+                 seat_policies: Mapping[int, Policy] | None = None,
+                 start_method: str = "spawn"):
+        if not 1 <= num_workers <= num_envs:
+            raise ValueError(f"num_workers must be in 1..num_envs={num_envs}, "
+                             f"got {num_workers}")
+        probe = VectorMatchEnv(scenario, 1, seed, observation, game_overrides,
+                               reward_overrides, seat_policies=seat_policies)
+        self.scenario = probe.scenario
+        self.num_envs, self.num_learners = num_envs, probe.num_learners
+        self.learner_seats, self.learner_teams = probe.learner_seats, probe.learner_teams
+        self.observation_space, self.action_space = probe.observation_space, probe.action_space
+        self.obs_dim, self.layout, self.seed = probe.obs_dim, probe.layout, int(seed)
+        E, L, D = num_envs, self.num_learners, self.obs_dim
+        specs = {"obs": ((E, L, D), "float32"), "final_obs": ((E, L, D), "float32"),
+                 "rewards": ((E, L), "float32"), "terminated": ((E,), "bool"),
+                 "truncated": ((E,), "bool"), "actions": ((E, L, 3), "int64")}
+        self._shared = _Shared(specs)
+        kwargs = {"scenario": self.scenario, "seed": seed, "observation": observation,
+                  "game_overrides": game_overrides, "reward_overrides": reward_overrides,
+                  "seat_policies": seat_policies}
+        bounds = np.linspace(0, E, num_workers + 1).round().astype(int)
+        ctx = mp.get_context(start_method)
+        self._conns, self._procs = [], []
+        for lo, hi in zip(bounds[:-1], bounds[1:], strict=True):
+            parent, child = ctx.Pipe()
+            p = ctx.Process(target=_worker, args=(child, kwargs, int(lo), int(hi), specs,
+                                                  self._shared.names), daemon=True)
+            p.start()
+            child.close()
+            self._conns.append(parent)
+            self._procs.append(p)
+        self._closed = False
+        self._gather()
+        self._started = False
+
+    def _name(self, idx: tuple[int, ...]) -> str:
+        e, slot = idx
+        return (f"env {e}, learner {slot} (seat {self.learner_seats[slot]}, team "
+                f"{self.learner_teams[slot]})")
+
+    def _gather(self) -> list:
+        out = []
+        for conn in self._conns:
+            try:
+                status, payload = conn.recv()
+            except (EOFError, OSError):
+                status, payload = "error", (
+                    "the worker process exited without answering (with the 'spawn' start "
+                    "method a script must create the env under `if __name__ == "
+                    "\"__main__\":`)")
+            if status == "error":
+                self.close()
+                raise RuntimeError(f"vector env worker failed: {payload}")
+            out.append(payload)
+        return out
+
+    def _broadcast(self, cmd: str, arg: Any = None) -> list:
+        for conn in self._conns:
+            conn.send((cmd, arg))
+        return self._gather()
+
+    def set_bot_weakness(self, weakness: float) -> None:
+        if not 0.0 <= weakness <= 1.0:
+            raise ValueError(f"weakness must be in [0, 1], got {weakness!r}")
+        self._broadcast("call", ("set_bot_weakness", (weakness,)))
+
+    def set_opponents(self, bot_names: Sequence[str] | None,
+                      weakness: float | None = None) -> None:
+        self._broadcast("call", ("set_opponents", (bot_names, weakness)))
+
+    def set_opponent_policy(self, policy: Policy | None) -> None:
+        self._broadcast("call", ("set_opponent_policy", (policy,)))
+
+    def reset(self, seed: int | None = None) -> np.ndarray:
+        if seed is not None:
+            self.seed = int(seed)
+        self._broadcast("reset", seed)
+        self._started = True
+        return self._shared.arr["obs"].copy()
+
+    def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                          dict[str, Any]]:
+        if not self._started:
+            raise RuntimeError("step() before reset()")
+        a = self._shared.arr
+        a["actions"][...] = check_actions(actions, a["actions"].shape, self._name)
+        episodes = [ep for part in self._broadcast("step") for ep in part]
+        info = {"final_obs": a["final_obs"].copy(), "episodes": episodes}
+        return (a["obs"].copy(), a["rewards"].copy(), a["terminated"].copy(),
+                a["truncated"].copy(), info)
+
+    def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        for conn in self._conns:
+            try:
+                conn.send(("close", None))
+                conn.recv()
+            except (OSError, EOFError):
+                pass
+            conn.close()
+        for p in self._procs:
+            p.join(timeout=5)
+            if p.is_alive():
+                p.terminate()
+        self._shared.close(unlink=True)
+
+    def __del__(self) -> None:
+        if hasattr(self, "_closed"):
+            self.close()
+
+
+def make_vector_env(scenario: str | Scenario, num_envs: int, seed: int = 0,
+                    num_workers: int = 1, **kwargs: Any
+                    ) -> VectorMatchEnv | SubprocVectorMatchEnv:
+    """In-process env for ``num_workers == 1``, else worker processes (same results)."""
+    if num_workers <= 1:
+        return VectorMatchEnv(scenario, num_envs, seed, **kwargs)
+    return SubprocVectorMatchEnv(scenario, num_envs, seed, num_workers=num_workers, **kwargs)

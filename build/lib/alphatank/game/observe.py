@@ -1,0 +1,578 @@
+"""Per-agent observation vectors, built for many matches and agents at once.
+
+Two kinds (``OBS_KINDS``), both float32, clipped to [-1, 1], with a fixed size per
+scenario and an index map (:class:`ObsLayout`, feature name -> slice):
+
+``paper``       every component of the paper's Table 1 in map coordinates: own tank
+                (position, heading sin/cos, velocity, corners, wall contact, alive, plus
+                reload and bullets in flight), own bullets, every other tank (teammates first, then
+                enemies; position, relative position, distance, corners, velocity, ...),
+                other tanks' bullets nearest first (position, velocity, relative position,
+                distance), the map's wall rectangles, buff/debuff zone positions and
+                in-zone flags. Team scenarios add a ``team`` flag (1 = my team) to tanks
+                and bullets. Padded slots have ``mask`` 0 and zeros elsewhere.
+``egocentric``  the same entities in the tank's own frame (``fwd`` along the heading,
+                ``side`` to its right on screen) plus a ring of wall-distance rays, so
+                nothing depends on absolute map coordinates.
+
+Scales: map positions ``2 x / W - 1``; relative positions divided by ``max(W, H)``;
+distances by the map diagonal; tank velocities by ``tank_speed``; bullet velocities by
+``bullet_speed``; rays by ``ray_length``. :class:`StateBatch` gathers the arrays of all
+matches once per step (a few ``copyto`` per match); :class:`ObservationBuilder` then
+computes every observation with a fixed number of vectorised numpy calls into
+preallocated buffers.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from alphatank.sim.config import GameConfig
+from alphatank.sim.mapspec import MapSpec
+
+if TYPE_CHECKING:
+    from alphatank.sim.match import Match
+
+OBS_KINDS = ("paper", "egocentric")
+TANK_FIELDS = ("alive", "x", "y", "sin", "cos", "vx", "vy", "c0x", "c0y", "c1x", "c1y",
+               "c2x", "c2y", "c3x", "c3y", "wall")
+# Corner offsets in the tank frame (forward, right): front-left, front-right, back-right,
+# back-left on screen (y down); multiplied by (width/2, height/2).
+CORNERS = np.array([[1.0, -1.0], [1.0, 1.0], [-1.0, 1.0], [-1.0, -1.0]])
+DEFAULT_RAYS = 16
+DEFAULT_RAY_LENGTH = 350.0  # px: five cells of the default map
+
+
+@dataclass
+class ObsLayout:
+    """Index map of an observation vector: ``index[name]`` is a slice.
+
+    Scalar features are named ``block.field`` (``self.x``) or ``block[k].field``
+    (``tank[0].rel_x``, ``ray[3].dist``); whole blocks by their name (``self``,
+    ``tank[0]``, ``tank``, ``bullet``). ``layout["self.x"]`` returns the slice.
+    """
+
+    kind: str
+    size: int = 0
+    index: dict[str, slice] = field(default_factory=dict)
+    fields: list[str] = field(default_factory=list)  # scalar names in vector order
+    widths: dict[str, int] = field(default_factory=dict)  # block -> floats per slot
+
+    def __getitem__(self, name: str) -> slice:
+        try:
+            return self.index[name]
+        except KeyError:
+            raise KeyError(f"no observation feature {name!r} in the {self.kind} layout; "
+                           f"blocks: {self.blocks()}") from None
+
+    def __contains__(self, name: str) -> bool:
+        return name in self.index
+
+    def blocks(self) -> list[str]:
+        return [k for k in self.index if "." not in k and "[" not in k]
+
+    def add(self, block: str, count: int | None, names: Sequence[str]) -> slice:
+        """Append a block of ``count`` slots (None: a single unnumbered slot)."""
+        start = self.size
+        self.widths[block] = len(names)
+        for k in [None] if count is None else range(count):
+            head = block if k is None else f"{block}[{k}]"
+            s0 = self.size
+            for name in names:
+                self.index[f"{head}.{name}"] = slice(self.size, self.size + 1)
+                self.fields.append(f"{head}.{name}")
+                self.size += 1
+            if k is not None:
+                self.index[head] = slice(s0, self.size)
+        self.index[block] = slice(start, self.size)
+        return self.index[block]
+
+    def describe(self) -> str:
+        """Human-readable table of blocks and the fields of one slot."""
+        lines = [f"{self.kind} observation: {self.size} floats"]
+        for b in self.blocks():
+            sl = self.index[b]
+            names = [f.split(".", 1)[1] for f in self.fields[sl.start:sl.stop]]
+            lines.append(f"  {b:12s} [{sl.start:4d}:{sl.stop:4d}]  "
+                         f"{', '.join(dict.fromkeys(names))}")
+        return "\n".join(lines)
+
+
+class StateBatch:
+    """Arrays of ``num_envs`` matches of one scenario, filled once per step by
+    :meth:`gather` (dynamic state) and once per episode by :meth:`set_static`."""
+
+    def __init__(self, cfg: GameConfig, n: int, num_envs: int, max_walls: int,
+                 max_buffs: int, max_debuffs: int):
+        self._args = (cfg, n, num_envs, max_walls, max_buffs, max_debuffs)
+        self.cfg, self.n, self.num_envs = cfg, n, num_envs
+        cap = cfg.bullet_capacity
+        nb = n * cap
+        self.capacity, self.n_bullets = cap, nb
+        E = num_envs
+        self.raw = np.zeros((E, 2 * n + nb, 6))  # copy of world.state
+        self.tank_xy = self.raw[:, :n, 0:2]
+        self.tank_angle = self.raw[:, :n, 2]
+        self.tank_vel = self.raw[:, :n, 3:5]
+        self.bullet_xy = self.raw[:, n:n + nb, 0:2]
+        self.bullet_vel = self.raw[:, n:n + nb, 3:5]
+        self.flags = np.zeros((E, 4, n), dtype=bool)
+        self.alive, self.wall, self.in_buff, self.in_debuff = (self.flags[:, k] for k in range(4))
+        self.bullet_active = np.zeros((E, nb), dtype=bool)
+        self.counts = np.zeros((E, 2, n), dtype=np.int64)
+        self.cooldown, self.bullets_alive = self.counts[:, 0], self.counts[:, 1]
+        self.tick = np.zeros(E, dtype=np.int64)
+        # Per-episode statics.
+        self.size = np.ones((E, 2))  # map width, height (px)
+        self.walls = np.zeros((E, max_walls, 4))  # x0, y0, x1, y1 (px)
+        self.wall_mask = np.zeros((E, max_walls), dtype=bool)
+        self.ray_rects = np.zeros((E, max_walls + 4, 4))  # walls + outer boundary
+        self.zones = np.zeros((E, max_buffs + max_debuffs, 2))  # buff centres, then debuff
+        self.zone_mask = np.zeros((E, max_buffs + max_debuffs), dtype=bool)
+        self.max_buffs, self.max_debuffs = max_buffs, max_debuffs
+        # Normalisation constants of each env's map (set with the statics).
+        self.inv = np.ones((E, 1, 2))  # 2 / (W, H): positions -> [-1, 1]
+        self.scale = np.ones((E, 1, 1))  # 1 / max(W, H): relative positions
+        self.idiag = np.ones((E, 1, 1))  # 1 / diagonal: distances
+        self.corner_u = np.zeros((E, 1, 4, 2))  # normalised corner offsets (times cos)
+        self.corner_v = np.zeros((E, 1, 4, 2))  # (times sin)
+
+    def __reduce__(self) -> tuple:
+        """Pickle as a fresh batch (views into ``raw`` must stay views; contents are
+        refilled at the next reset)."""
+        return (type(self), self._args)
+
+    def gather(self, e: int, match: Match) -> None:
+        """Copy match ``e``'s dynamic arrays (one batch read already done by the world)."""
+        w = match.world
+        self.raw[e] = w.state
+        f = self.flags[e]
+        f[0] = match.alive
+        np.greater(w.wall_contacts, 0, out=f[1])
+        f[2] = match.in_buff
+        f[3] = match.in_debuff
+        self.bullet_active[e] = w.bullet_active
+        c = self.counts[e]
+        c[0] = match.cooldown
+        c[1] = match.bullets_alive
+        self.tick[e] = match.tick
+
+    def set_static(self, e: int, match: Match) -> None:
+        """Map size, wall rectangles and zone centres of match ``e``'s episode."""
+        spec = match.spec
+        g = self.cfg
+        self.size[e] = (spec.width, spec.height)
+        inv = 2.0 / self.size[e]
+        self.inv[e, 0] = inv
+        self.scale[e] = 1.0 / max(spec.width, spec.height)
+        self.idiag[e] = 1.0 / math.hypot(spec.width, spec.height)
+        dx, dy = CORNERS[:, 0] * (g.tank_width / 2), CORNERS[:, 1] * (g.tank_height / 2)
+        self.corner_u[e, 0] = np.stack([dx * inv[0], dy * inv[1]], axis=1)
+        self.corner_v[e, 0] = np.stack([-dy * inv[0], dx * inv[1]], axis=1)
+        rects = np.asarray(spec.wall_rects, dtype=np.float64).reshape(-1, 4)
+        k = len(rects)
+        self.walls[e] = 0.0
+        self.walls[e, :k] = rects
+        self.wall_mask[e] = False
+        self.wall_mask[e, :k] = True
+        t, W, H = spec.cell, spec.width, spec.height
+        boundary = np.array([(-t, -t, W + t, 0.0), (-t, H, W + t, H + t), (-t, 0.0, 0.0, H),
+                             (W, 0.0, W + t, H)])
+        # Unused ray slots repeat rectangles (a duplicate changes no minimum).
+        self.ray_rects[e] = np.resize(np.concatenate([rects, boundary]),
+                                      self.ray_rects[e].shape)
+        self.zones[e] = 0.0
+        self.zone_mask[e] = False
+        for j, cells in ((0, match.buffs), (self.max_buffs, match.debuffs)):
+            for i, cell in enumerate(cells):
+                self.zones[e, j + i] = spec.cell_center(cell)
+                self.zone_mask[e, j + i] = True
+
+
+def slot_counts(cfg: GameConfig, specs: Sequence[MapSpec]) -> tuple[int, int, int]:
+    """Most walls, buff and debuff zones over a scenario's maps (fixed padded sizes)."""
+    walls = max(len(s.wall_rects) for s in specs)
+    buffs = max(cfg.random_buff_zones if s.random_zones else len(s.buffs) for s in specs)
+    debuffs = max(cfg.random_debuff_zones if s.random_zones else len(s.debuffs) for s in specs)
+    return walls, buffs, debuffs
+
+
+class ObservationBuilder:
+    """Builds the observations of ``observers`` (seat indices) in every match of a
+    :class:`StateBatch`: ``build()`` returns the internal (E, L, obs_dim) float32 buffer."""
+
+    def __init__(self, kind: str, batch: StateBatch, teams: Sequence[str],
+                 observers: Sequence[int], team_flags: bool | None = None,
+                 rays: int = DEFAULT_RAYS, ray_length: float = DEFAULT_RAY_LENGTH):
+        if kind not in OBS_KINDS:
+            raise ValueError(f"unknown observation kind {kind!r}; valid: {list(OBS_KINDS)}")
+        n = len(teams)
+        if batch.n != n:
+            raise ValueError(f"batch has {batch.n} tanks, teams name {n}")
+        bad = [o for o in observers if not 0 <= o < n]
+        if bad:
+            raise ValueError(f"observer seats {bad} out of range 0..{n - 1}")
+        if rays < 1 or not ray_length > 0:
+            raise ValueError(f"rays must be >= 1 and ray_length > 0, got {rays}, {ray_length}")
+        self._args = (kind, batch, teams, observers, team_flags, rays, ray_length)
+        self.kind, self.batch, self.cfg = kind, batch, batch.cfg
+        self.teams = list(teams)
+        self.team_flags = (len(set(teams)) < n) if team_flags is None else team_flags
+        self.observers = np.asarray(observers, dtype=np.int64)
+        self.rays, self.ray_length = rays, float(ray_length)
+        E, L, cap = batch.num_envs, len(observers), batch.capacity
+        n_oth = n - 1
+        K = n_oth * cap
+        self.n_others, self.n_other_bullets = n_oth, K
+        team = np.array([self.teams.index(t) for t in self.teams])
+        # Other tanks per observer: teammates first, then enemies, each in seat order.
+        others = []
+        for o in self.observers:
+            mates = [j for j in range(n) if j != o and team[j] == team[o]]
+            foes = [j for j in range(n) if team[j] != team[o]]
+            others.append(mates + foes)
+        self.other_idx = np.array(others, dtype=np.int64).reshape(L, n_oth)
+        self.other_team = (team[self.other_idx] == team[self.observers][:, None]).astype(
+            np.float64)
+        self.own_bidx = self.observers[:, None] * cap + np.arange(cap)  # (L, cap)
+        self.other_bidx = (self.other_idx[:, :, None] * cap + np.arange(cap)).reshape(L, K)
+        self.other_bteam = np.repeat(self.other_team, cap, axis=1)  # (L, K)
+        self.layout = self._make_layout(n_oth, K, cap, batch)
+        self.out = np.zeros((E, L, self.layout.size), dtype=np.float32)
+        self._views()
+        self._ge = np.arange(E)[:, None, None]
+        self._gl = np.arange(L)[None, :, None]
+        self._tt = np.zeros((E, n, len(TANK_FIELDS)))
+        self._bt = np.zeros((E, batch.n_bullets, 4))
+        self._count_scale = np.array([1.0 / self.cfg.cooldown_ticks, 1.0 / cap])
+        self._ray_angles = np.arange(rays) * (2 * math.pi / rays)
+
+    def __reduce__(self) -> tuple:
+        return (type(self), self._args)
+
+    # ---- layout ---------------------------------------------------------------------
+
+    def _make_layout(self, n_oth: int, K: int, cap: int, batch: StateBatch) -> ObsLayout:
+        t = ("team",) if self.team_flags else ()
+        lay = ObsLayout(self.kind)
+        B, Dz = batch.max_buffs, batch.max_debuffs
+        if self.kind == "paper":
+            lay.add("self", None, TANK_FIELDS + ("reload", "bullets"))
+            lay.add("own_bullet", cap, ("mask", "x", "y", "vx", "vy"))
+            lay.add("tank", n_oth, t + TANK_FIELDS + ("rel_x", "rel_y", "dist"))
+            lay.add("bullet", K, ("mask",) + t + ("x", "y", "vx", "vy", "rel_x", "rel_y",
+                                                   "dist"))
+            lay.add("wall", batch.walls.shape[1], ("mask", "x0", "y0", "x1", "y1"))
+            lay.add("buff", B, ("mask", "x", "y"))
+            lay.add("debuff", Dz, ("mask", "x", "y"))
+            lay.add("zone", None, ("in_buff", "in_debuff"))
+        else:
+            lay.add("self", None, ("alive", "sin", "cos", "v_fwd", "v_side", "wall", "reload",
+                                   "bullets", "in_buff", "in_debuff"))
+            lay.add("ray", self.rays, ("dist",))
+            lay.add("tank", n_oth, t + ("alive", "fwd", "side", "dist", "sin", "cos", "v_fwd",
+                                        "v_side", "wall"))
+            lay.add("own_bullet", cap, ("mask", "fwd", "side", "v_fwd", "v_side", "dist"))
+            lay.add("bullet", K, ("mask",) + t + ("fwd", "side", "v_fwd", "v_side", "dist"))
+            lay.add("buff", B, ("mask", "fwd", "side", "dist"))
+            lay.add("debuff", Dz, ("mask", "fwd", "side", "dist"))
+        return lay
+
+    def _block(self, name: str, count: int) -> np.ndarray:
+        """(E, L, count, fields) view of a numbered block of the output buffer."""
+        E, L, _ = self.out.shape
+        return self.out[:, :, self.layout[name]].reshape(E, L, count, self.layout.widths[name])
+
+    def _views(self) -> None:
+        lay, cap = self.layout, self.batch.capacity
+        self.v_self = self.out[:, :, lay["self"]]
+        self.v_own = self._block("own_bullet", cap)
+        self.v_tank = self._block("tank", self.n_others)
+        self.v_bullet = self._block("bullet", self.n_other_bullets)
+        self.v_buff = self._block("buff", self.batch.max_buffs)
+        self.v_debuff = self._block("debuff", self.batch.max_debuffs)
+        self._tf = 1 if self.team_flags else 0  # offset of the first non-team field
+        if self.team_flags:
+            self.v_tank[..., 0] = self.other_team
+        if self.kind == "paper":
+            self.v_wall = self._block("wall", self.batch.walls.shape[1])
+            self.v_zone = self.out[:, :, lay["zone"]]
+        else:
+            self.v_ray = self.out[:, :, lay["ray"]]
+            self._ego_tables()
+
+    # ---- statics --------------------------------------------------------------------
+
+    def set_static(self, e: int) -> None:
+        """Write the per-episode blocks of env ``e`` (walls, zone positions in ``paper``)."""
+        if self.kind != "paper":
+            return
+        b = self.batch
+        inv = b.inv[e, 0]
+        m = b.wall_mask[e][:, None]
+        self.v_wall[e, :, :, 0] = b.wall_mask[e]
+        self.v_wall[e, :, :, 1:3] = (b.walls[e, :, 0:2] * inv - 1) * m
+        self.v_wall[e, :, :, 3:5] = (b.walls[e, :, 2:4] * inv - 1) * m
+        zones = (b.zones[e] * inv - 1) * b.zone_mask[e][:, None]
+        nbf = b.max_buffs
+        self.v_buff[e, :, :, 0] = b.zone_mask[e, :nbf]
+        self.v_buff[e, :, :, 1:] = zones[:nbf]
+        self.v_debuff[e, :, :, 0] = b.zone_mask[e, nbf:]
+        self.v_debuff[e, :, :, 1:] = zones[nbf:]
+
+    # ---- per step -------------------------------------------------------------------
+
+    def build(self) -> np.ndarray:
+        """Observations of all envs and observers from the batch's current state."""
+        if self.kind == "paper":
+            self._build_paper()
+        else:
+            self._build_ego()
+        np.minimum(self.out, 1.0, out=self.out)
+        np.maximum(self.out, -1.0, out=self.out)
+        return self.out
+
+    def _self_counts(self, out: np.ndarray) -> None:
+        """reload (cooldown / cooldown ticks) and bullets (in flight / capacity)."""
+        counts = self.batch.counts[:, :, self.observers]  # (E, 2, L)
+        np.multiply(counts.transpose(0, 2, 1), self._count_scale, out=out)
+
+    def _other_bullets(self, self_xy: np.ndarray) -> tuple[np.ndarray, ...] | None:
+        """Other tanks' bullets sorted nearest first: slot indices, relative xy and
+        distance (px), and the active mask; all (E, L, K[, 2]). None (and the block
+        zeroed) when no other bullet flies anywhere in the batch."""
+        b, bidx = self.batch, self.other_bidx
+        act = b.bullet_active[:, bidx]
+        if not act.any():
+            self.v_bullet[...] = 0.0
+            return None
+        rel = b.bullet_xy[:, bidx] - self_xy  # (E, L, K, 2)
+        dist = np.hypot(rel[..., 0], rel[..., 1])
+        order = np.where(act, dist, np.inf).argsort(axis=-1, kind="stable")
+        ge, gl = self._ge, self._gl
+        mask = act[ge, gl, order]
+        if self.team_flags:
+            np.multiply(self.other_bteam[gl, order], mask, out=self.v_bullet[..., 1])
+        return bidx[gl, order], rel[ge, gl, order], dist[ge, gl, order], mask
+
+    def _build_paper(self) -> None:
+        b, t = self.batch, self._tf
+        tt = tank_table(b, self._tt)
+        obs, oi = self.observers, self.other_idx
+        vs = self.v_self
+        vs[..., :16] = tt[:, obs]
+        self._self_counts(vs[..., 16:18])
+        # Other tanks.
+        vt = self.v_tank
+        vt[..., t:t + 16] = tt[:, oi]
+        self_xy = b.tank_xy[:, obs][:, :, None, :]  # (E, L, 1, 2)
+        rel = b.tank_xy[:, oi] - self_xy  # (E, L, O, 2)
+        np.multiply(rel, b.scale[..., None], out=vt[..., t + 16:t + 18])
+        np.multiply(np.hypot(rel[..., 0], rel[..., 1]), b.idiag, out=vt[..., t + 18])
+        # Own bullets in slot order; others nearest first; inactive slots zero.
+        bt = bullet_table(b, self._bt)
+        vo = self.v_own
+        vo[..., 0] = b.bullet_active[:, self.own_bidx]
+        vo[..., 1:5] = bt[:, self.own_bidx]
+        others = self._other_bullets(self_xy)
+        if others is not None:
+            sel, brel, bdist, mask = others
+            vb = self.v_bullet
+            vb[..., 0] = mask
+            vb[..., t + 1:t + 5] = bt[self._ge, sel]
+            k = mask * b.scale
+            np.multiply(brel, k[..., None], out=vb[..., t + 5:t + 7])
+            np.multiply(bdist, k * (b.idiag / b.scale), out=vb[..., t + 7])
+        self.v_zone[..., 0] = b.in_buff[:, obs]
+        self.v_zone[..., 1] = b.in_debuff[:, obs]
+
+    def _ego_tables(self) -> None:
+        """Column maps of the egocentric kind: every relative position (other tanks, own
+        bullets, other bullets, zones) and every velocity (tanks, own and other bullets)
+        is rotated in one batch, then scattered to its ``fwd``/``side``/``dist`` slots."""
+        lay = self.layout
+        no, cap, K = self.n_others, self.batch.capacity, self.n_other_bullets
+        B, Dz = self.batch.max_buffs, self.batch.max_debuffs
+        rel = ([f"tank[{j}]" for j in range(no)] + [f"own_bullet[{k}]" for k in range(cap)]
+               + [f"bullet[{k}]" for k in range(K)] + [f"buff[{k}]" for k in range(B)]
+               + [f"debuff[{k}]" for k in range(Dz)])
+        vel = rel[:no + cap + K]
+
+        def col(names: list[str], f: str) -> np.ndarray:
+            return np.array([lay[f"{n}.{f}"].start for n in names], dtype=np.int64)
+
+        self._rel_cols = (col(rel, "fwd"), col(rel, "side"), col(rel, "dist"))
+        self._vel_cols = (col(vel, "v_fwd"), col(vel, "v_side"))
+        E, L = self.out.shape[:2]
+        self._relv = np.zeros((E, L, len(rel), 2))
+        self._velv = np.zeros((E, L, len(vel), 2))
+        self._rmask = np.ones((E, L, len(rel)))
+        self._vmask = np.ones((E, L, len(vel)))
+        g = self.cfg
+        self._vscale = np.r_[np.full(no, 1.0 / g.tank_speed),
+                             np.full(cap + K, 1.0 / g.bullet_speed)]
+        self._seg = (no, no + cap, no + cap + K)  # ends of the tank / own / other-bullet groups
+
+    def _build_ego(self) -> None:
+        b, g, t = self.batch, self.cfg, self._tf
+        obs, oi = self.observers, self.other_idx
+        ang = b.tank_angle
+        sin, cos = np.sin(ang), np.cos(ang)
+        s, c = sin[:, obs], cos[:, obs]  # (E, L)
+        vs = self.v_self
+        vs[..., 0] = b.alive[:, obs]
+        vs[..., 1] = s
+        vs[..., 2] = c
+        v = b.tank_vel[:, obs] * (1.0 / g.tank_speed)  # (E, L, 2)
+        vs[..., 3] = v[..., 0] * c + v[..., 1] * s
+        vs[..., 4] = v[..., 1] * c - v[..., 0] * s
+        vs[..., 5] = b.wall[:, obs]
+        self._self_counts(vs[..., 6:8])
+        vs[..., 8] = b.in_buff[:, obs]
+        vs[..., 9] = b.in_debuff[:, obs]
+        xy = b.tank_xy[:, obs]
+        self_xy = xy[:, :, None, :]
+        self.v_ray[...] = self.ray_distances(xy, ang[:, obs]) / self.ray_length
+        # Other tanks: scalars.
+        vt = self.v_tank
+        vt[..., t] = b.alive[:, oi]
+        so, co = sin[:, oi], cos[:, oi]
+        s3, c3 = s[..., None], c[..., None]
+        vt[..., t + 4] = so * c3 - co * s3  # sin(their heading - mine)
+        vt[..., t + 5] = co * c3 + so * s3
+        vt[..., t + 8] = b.wall[:, oi]
+        # Every relative position and velocity, then one rotation.
+        o, oc, ock = self._seg
+        relv, velv, rm, vm = self._relv, self._velv, self._rmask, self._vmask
+        np.subtract(b.tank_xy[:, oi], self_xy, out=relv[:, :, :o])
+        np.subtract(b.bullet_xy[:, self.own_bidx], self_xy, out=relv[:, :, o:oc])
+        np.subtract(b.zones[:, None], self_xy, out=relv[:, :, ock:])
+        velv[:, :, :o] = b.tank_vel[:, oi]
+        velv[:, :, o:oc] = b.bullet_vel[:, self.own_bidx]
+        act = b.bullet_active[:, self.own_bidx]
+        rm[:, :, o:oc] = act
+        vm[:, :, o:oc] = act
+        rm[:, :, ock:] = b.zone_mask[:, None, :]
+        others = self._other_bullets(self_xy)
+        if others is None:
+            rm[:, :, oc:ock] = 0.0
+            vm[:, :, oc:ock] = 0.0
+        else:
+            sel, brel, _, mask = others
+            relv[:, :, oc:ock] = brel
+            velv[:, :, oc:ock] = b.bullet_vel[self._ge, sel]
+            rm[:, :, oc:ock] = mask
+            vm[:, :, oc:ock] = mask
+            self.v_bullet[..., 0] = mask
+        out = self.out
+        fc, sc_, dc = self._rel_cols
+        k = rm * b.scale
+        out[..., fc] = (relv[..., 0] * c3 + relv[..., 1] * s3) * k
+        out[..., sc_] = (relv[..., 1] * c3 - relv[..., 0] * s3) * k
+        out[..., dc] = np.hypot(relv[..., 0], relv[..., 1]) * (rm * b.idiag)
+        vf, vsd = self._vel_cols
+        k = vm * self._vscale
+        out[..., vf] = (velv[..., 0] * c3 + velv[..., 1] * s3) * k
+        out[..., vsd] = (velv[..., 1] * c3 - velv[..., 0] * s3) * k
+        self.v_own[..., 0] = act
+        self.v_buff[..., 0] = b.zone_mask[:, None, :b.max_buffs]
+        self.v_debuff[..., 0] = b.zone_mask[:, None, b.max_buffs:]
+
+    def ray_distances(self, xy: np.ndarray, angle: np.ndarray) -> np.ndarray:
+        """(E, L, R) px to the nearest wall rectangle along ``rays`` directions from each
+        observer (heading first, then clockwise on screen), by exact slab intersection;
+        capped at ``ray_length``. ``xy``: (E, L, 2), ``angle``: (E, L)."""
+        b = self.batch
+        a = angle[..., None] + self._ray_angles  # (E, L, R)
+        dx, dy = np.cos(a), np.sin(a)
+        # 1 / direction, with axis-parallel rays nudged off zero (no division by zero).
+        ix = (1.0 / np.where(np.abs(dx) < 1e-12, 1e-12, dx))[..., None]
+        iy = (1.0 / np.where(np.abs(dy) < 1e-12, 1e-12, dy))[..., None]
+        rr = b.ray_rects[:, None, None, :, :]  # (E, 1, 1, W, 4)
+        ox = xy[..., 0][..., None, None]
+        oy = xy[..., 1][..., None, None]
+        tx0, tx1 = (rr[..., 0] - ox) * ix, (rr[..., 2] - ox) * ix
+        ty0, ty1 = (rr[..., 1] - oy) * iy, (rr[..., 3] - oy) * iy
+        tmin = np.maximum(np.minimum(tx0, tx1), np.minimum(ty0, ty1))
+        tmax = np.minimum(np.maximum(tx0, tx1), np.maximum(ty0, ty1))
+        near = np.maximum(tmin, 0.0)
+        d = np.where(tmax >= near, near, np.inf).min(axis=-1)
+        return np.minimum(d, self.ray_length, out=d)
+
+
+def tank_table(b: StateBatch, out: np.ndarray) -> np.ndarray:
+    """(E, n, len(TANK_FIELDS)) normalised absolute features of every tank."""
+    out[..., 0] = b.alive
+    xy = out[..., 1:3]
+    np.multiply(b.tank_xy, b.inv, out=xy)
+    xy -= 1.0
+    s, c = out[..., 3], out[..., 4]
+    np.sin(b.tank_angle, out=s)
+    np.cos(b.tank_angle, out=c)
+    np.multiply(b.tank_vel, 1.0 / b.cfg.tank_speed, out=out[..., 5:7])
+    corners = out[..., 7:15].reshape(out.shape[0], -1, 4, 2)
+    np.multiply(c[..., None, None], b.corner_u, out=corners)
+    corners += s[..., None, None] * b.corner_v
+    corners += xy[:, :, None, :]
+    out[..., 15] = b.wall
+    return out
+
+
+def bullet_table(b: StateBatch, out: np.ndarray) -> np.ndarray:
+    """(E, n_bullets, 4) normalised x, y, vx, vy of every bullet slot; 0 when inactive."""
+    xy = out[..., 0:2]
+    np.multiply(b.bullet_xy, b.inv, out=xy)
+    xy -= 1.0
+    np.multiply(b.bullet_vel, 1.0 / b.cfg.bullet_speed, out=out[..., 2:4])
+    out *= b.bullet_active[..., None]
+    return out
+
+
+class GlobalState:
+    """Centralised-critic state of every match in a :class:`StateBatch`: all tanks
+    (``TANK_FIELDS`` + team), all bullet slots, zones (kind +1 buff, -1 debuff) and the
+    episode's elapsed fraction. ``layout`` is its index map."""
+
+    def __init__(self, batch: StateBatch, teams: Sequence[str]):
+        self._args = (batch, teams)
+        self.batch = batch
+        n, nb = batch.n, batch.n_bullets
+        names = sorted(set(teams))
+        self.team = np.array([names.index(t) for t in teams]) / max(1, len(names) - 1)
+        Z = batch.zones.shape[1]
+        lay = ObsLayout("state")
+        lay.add("tank", n, TANK_FIELDS + ("team",))
+        lay.add("bullet", nb, ("mask", "x", "y", "vx", "vy"))
+        lay.add("zone", Z, ("mask", "kind", "x", "y"))
+        lay.add("time", None, ("t",))
+        self.layout = lay
+        E = batch.num_envs
+        self.out = np.zeros((E, lay.size), dtype=np.float32)
+        self._tt = np.zeros((E, n, len(TANK_FIELDS)))
+        self._bt = np.zeros((E, nb, 4))
+        self._tank = self.out[:, lay["tank"]].reshape(E, n, lay.widths["tank"])
+        self._bullet = self.out[:, lay["bullet"]].reshape(E, nb, lay.widths["bullet"])
+        self._zone = self.out[:, lay["zone"]].reshape(E, Z, lay.widths["zone"])
+        self._kind = np.where(np.arange(Z) < batch.max_buffs, 1.0, -1.0)
+
+    def __reduce__(self) -> tuple:
+        return (type(self), self._args)
+
+    def build(self) -> np.ndarray:
+        b = self.batch
+        self._tank[..., :-1] = tank_table(b, self._tt)
+        self._tank[..., -1] = self.team
+        self._bullet[..., 0] = b.bullet_active
+        self._bullet[..., 1:] = bullet_table(b, self._bt)
+        zm = b.zone_mask
+        self._zone[..., 0] = zm
+        self._zone[..., 1] = self._kind * zm
+        self._zone[..., 2:4] = (b.zones * b.inv - 1.0) * zm[..., None]
+        self.out[:, -1] = b.tick / b.cfg.max_steps
+        np.clip(self.out, -1.0, 1.0, out=self.out)
+        return self.out

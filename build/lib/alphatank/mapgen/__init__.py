@@ -1,0 +1,17 @@
+"""Map generation, lint and editing (the logic behind ``tools/mapgen.py``)."""
+
+from alphatank.mapgen.generate import (
+    ALGORITHMS,
+    SYMMETRIES,
+    GenOptions,
+    MapGenError,
+    generate,
+    generate_from,
+    is_symmetric,
+)
+from alphatank.mapgen.lint import MapWarning, ascii_art, check_map, describe, map_warnings
+from alphatank.mapgen.model import EditorModel
+
+__all__ = ["ALGORITHMS", "SYMMETRIES", "EditorModel", "GenOptions", "MapGenError",
+           "MapWarning", "ascii_art", "check_map", "describe", "generate", "generate_from",
+           "is_symmetric", "map_warnings"]

@@ -1,0 +1,266 @@
+"""Maze maps: text format parser, validation and wall merging.
+
+Format (RULES.md): optional ``key: value`` header lines, a blank line, then the grid, one
+character per cell: ``#`` wall, ``.`` floor, ``1``-``8`` spawn of tank slot N, ``+`` buff
+zone, ``-`` debuff zone. Lines starting with ``;`` are comments.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+GRID_CHARS = "#.12345678+-"
+HEADER_KEYS = ("name", "cell", "description", "zones", "author")
+DEFAULT_CELL = 70.0
+
+
+class MapError(ValueError):
+    """A map file is malformed; names the file, line and column (1-based)."""
+
+    def __init__(self, message: str, source: str = "<string>", line: int = 0, col: int = 0):
+        self.message, self.source, self.line, self.col = message, source, line, col
+        where = source
+        if line:
+            where += f":{line}"
+            if col:
+                where += f":{col}"
+        super().__init__(f"{where}: {message}")
+
+
+@dataclass(frozen=True)
+class MapSpec:
+    """A parsed, validated map. Cells are (row, col); pixels are (x, y) with y down."""
+
+    name: str
+    walls: np.ndarray  # (rows, cols) bool
+    spawns: dict[int, tuple[int, int]]  # slot (1-based) -> cell
+    buffs: tuple[tuple[int, int], ...]
+    debuffs: tuple[tuple[int, int], ...]
+    cell: float = DEFAULT_CELL
+    description: str = ""
+    random_zones: bool = False
+    source: str = "<string>"
+    wall_rects: tuple[tuple[float, float, float, float], ...] = field(default=())
+
+    @property
+    def rows(self) -> int:
+        return int(self.walls.shape[0])
+
+    @property
+    def cols(self) -> int:
+        return int(self.walls.shape[1])
+
+    @property
+    def width(self) -> float:
+        return self.cols * self.cell
+
+    @property
+    def height(self) -> float:
+        return self.rows * self.cell
+
+    def cell_center(self, cell: tuple[int, int]) -> tuple[float, float]:
+        r, c = cell
+        return ((c + 0.5) * self.cell, (r + 0.5) * self.cell)
+
+    def floor_cells(self) -> list[tuple[int, int]]:
+        return [(int(r), int(c)) for r, c in zip(*np.nonzero(~self.walls), strict=True)]
+
+    def min_wall_thickness(self) -> float:
+        """Thinnest wall dimension in px (a cell, or thinner if a map defines thin walls)."""
+        return self.cell
+
+
+def merge_walls(walls: np.ndarray) -> list[tuple[int, int, int, int]]:
+    """Cover wall cells with few axis-aligned rectangles (r0, c0, r1, c1), end-exclusive.
+
+    Greedy: take the first uncovered wall cell in row-major order, extend right as far as
+    possible, then down while the whole run is wall and uncovered.
+    """
+    todo = walls.copy()
+    rows, cols = todo.shape
+    rects = []
+    for r in range(rows):
+        c = 0
+        while c < cols:
+            if not todo[r, c]:
+                c += 1
+                continue
+            c1 = c
+            while c1 < cols and todo[r, c1]:
+                c1 += 1
+            r1 = r + 1
+            while r1 < rows and todo[r1, c:c1].all():
+                r1 += 1
+            todo[r:r1, c:c1] = False
+            rects.append((r, c, r1, c1))
+            c = c1
+    return rects
+
+
+def reachable_from(walls: np.ndarray, start: tuple[int, int]) -> np.ndarray:
+    """Boolean grid of floor cells reachable from ``start`` over 4-neighbours."""
+    rows, cols = walls.shape
+    seen = np.zeros_like(walls, dtype=bool)
+    seen[start] = True
+    queue = deque([start])
+    while queue:
+        r, c = queue.popleft()
+        for nr, nc in ((r - 1, c), (r + 1, c), (r, c - 1), (r, c + 1)):
+            if 0 <= nr < rows and 0 <= nc < cols and not walls[nr, nc] and not seen[nr, nc]:
+                seen[nr, nc] = True
+                queue.append((nr, nc))
+    return seen
+
+
+def parse_map(text: str, source: str = "<string>", name: str | None = None) -> MapSpec:
+    """Parse and validate map text; raises MapError naming source, line and column."""
+    lines = text.splitlines()
+    header: dict[str, str] = {}
+    grid: list[tuple[int, str]] = []  # (1-based line number, row text)
+    i = 0
+    content = [(n + 1, ln.rstrip("\r")) for n, ln in enumerate(lines)
+               if not ln.lstrip().startswith(";")]
+    # Header: lines with ':' before the first blank line.
+    while i < len(content) and not content[i][1].strip():
+        i += 1
+    if i < len(content) and ":" in content[i][1]:
+        while i < len(content) and content[i][1].strip():
+            lineno, ln = content[i]
+            if ":" not in ln:
+                raise MapError("header line must be 'key: value' (end the header with a blank "
+                               "line before the grid)", source, lineno, 1)
+            key, value = (p.strip() for p in ln.split(":", 1))
+            if key not in HEADER_KEYS:
+                raise MapError(f"unknown header key {key!r}; valid keys: {list(HEADER_KEYS)}",
+                               source, lineno, 1)
+            if key in header:
+                raise MapError(f"duplicate header key {key!r}", source, lineno, 1)
+            header[key] = value
+            i += 1
+    while i < len(content) and not content[i][1].strip():
+        i += 1
+    for lineno, ln in content[i:]:
+        row = ln.rstrip()
+        if not row:
+            if grid:
+                grid.append((lineno, ""))
+            continue
+        grid.append((lineno, row))
+    while grid and not grid[-1][1]:
+        grid.pop()
+    if not grid:
+        raise MapError("empty map: no grid rows", source, len(lines) or 1, 0)
+    width = len(grid[0][1])
+    for lineno, row in grid:
+        if not row:
+            raise MapError("blank line inside the grid", source, lineno, 1)
+        if len(row) != width:
+            raise MapError(f"ragged row: {len(row)} cells, expected {width} like the first row",
+                           source, lineno, min(len(row), width) + 1)
+
+    cell = DEFAULT_CELL
+    if "cell" in header:
+        try:
+            cell = float(header["cell"])
+        except ValueError:
+            cell = -1.0
+        if not cell > 0:
+            raise MapError(f"header 'cell' must be a positive number of px, got "
+                           f"{header['cell']!r}", source, _header_line(content, "cell"), 1)
+    zones = header.get("zones", "")
+    if zones not in ("", "random", "fixed"):
+        raise MapError(f"header 'zones' must be 'random' or 'fixed', got {zones!r}",
+                       source, _header_line(content, "zones"), 1)
+
+    walls = np.zeros((len(grid), width), dtype=bool)
+    spawns: dict[int, tuple[int, int]] = {}
+    spawn_where: dict[int, tuple[int, int]] = {}
+    buffs, debuffs = [], []
+    for r, (lineno, row) in enumerate(grid):
+        for c, ch in enumerate(row):
+            if ch not in GRID_CHARS:
+                raise MapError(f"unknown character {ch!r}; allowed: '#' wall, '.' floor, "
+                               "'1'-'8' spawn, '+' buff, '-' debuff", source, lineno, c + 1)
+            if ch == "#":
+                walls[r, c] = True
+            elif ch.isdigit():
+                slot = int(ch)
+                if slot in spawns:
+                    pl, pc = spawn_where[slot]
+                    raise MapError(f"duplicate spawn {slot} (first at line {pl}, column {pc})",
+                                   source, lineno, c + 1)
+                spawns[slot] = (r, c)
+                spawn_where[slot] = (lineno, c + 1)
+            elif ch == "+":
+                buffs.append((r, c))
+            elif ch == "-":
+                debuffs.append((r, c))
+    if walls.all():
+        raise MapError("map has no floor cells", source, grid[0][0], 1)
+
+    if spawns:
+        first = min(spawns)
+        reach = reachable_from(walls, spawns[first])
+        for slot, rc in sorted(spawns.items()):
+            if not reach[rc]:
+                lineno, col = spawn_where[slot]
+                raise MapError(f"spawn {slot} cannot be reached from spawn {first}",
+                               source, lineno, col)
+    rects = tuple((c0 * cell, r0 * cell, c1 * cell, r1 * cell)
+                  for r0, c0, r1, c1 in merge_walls(walls))
+    return MapSpec(
+        name=header.get("name") or name or Path(source).stem,
+        walls=walls, spawns=spawns, buffs=tuple(buffs), debuffs=tuple(debuffs), cell=cell,
+        description=header.get("description", ""), random_zones=zones == "random",
+        source=source, wall_rects=rects)
+
+
+def _header_line(content: list[tuple[int, str]], key: str) -> int:
+    for lineno, ln in content:
+        if ln.split(":", 1)[0].strip() == key:
+            return lineno
+    return 0
+
+
+def map_text(spec: MapSpec) -> str:
+    """Serialise a MapSpec back to the text format (round-trips through parse_map)."""
+    chars = np.where(spec.walls, "#", ".").astype("<U1")
+    for cells, ch in ((spec.buffs, "+"), (spec.debuffs, "-")):
+        for r, c in cells:
+            chars[r, c] = ch
+    for slot, (r, c) in spec.spawns.items():
+        chars[r, c] = str(slot)
+    head = [f"name: {spec.name}"]
+    if spec.cell != DEFAULT_CELL:
+        head.append(f"cell: {spec.cell:g}")
+    if spec.description:
+        head.append(f"description: {spec.description}")
+    if spec.random_zones:
+        head.append("zones: random")
+    return "\n".join(head) + "\n\n" + "\n".join("".join(row) for row in chars) + "\n"
+
+
+def shipped_maps() -> list[str]:
+    """Names of the maps shipped with the package."""
+    root = resources.files("alphatank.maps")
+    return sorted(p.name[:-4] for p in root.iterdir() if p.name.endswith(".txt"))
+
+
+def load_map(name_or_path: str | Path) -> MapSpec:
+    """Load a shipped map by name (``"maze"``) or any map file by path."""
+    path = Path(name_or_path)
+    if path.suffix == ".txt" or path.exists():
+        if not path.is_file():
+            raise MapError("no such map file", str(path))
+        return parse_map(path.read_text(encoding="utf-8"), str(path), name=path.stem)
+    res = resources.files("alphatank.maps").joinpath(f"{name_or_path}.txt")
+    if not res.is_file():
+        raise MapError(f"unknown map {str(name_or_path)!r}; shipped maps: {shipped_maps()} "
+                       "(or give a path to a .txt file)", str(name_or_path))
+    return parse_map(res.read_text(encoding="utf-8"), f"maps/{name_or_path}.txt",
+                     name=str(name_or_path))

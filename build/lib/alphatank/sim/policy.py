@@ -1,0 +1,27 @@
+"""The one interface every seat controller implements: bots, checkpoints, human keys."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from alphatank.sim.match import Match
+
+
+@runtime_checkable
+class Policy(Protocol):
+    """Chooses one seat's action each tick from a read-only view of the match.
+
+    ``act`` returns an int array of shape (3,): rotate {0 ccw, 1 none, 2 cw},
+    move {0 back, 1 stop, 2 forward}, fire {0, 1}. ``reset`` is called at the start of
+    every episode with a seed derived from the episode's seed.
+    """
+
+    def reset(self, match: Match, seat: int, seed: int | None = None) -> None: ...
+
+    def act(self, match: Match, seat: int) -> np.ndarray: ...
+
+
+NOOP = np.array([1, 1, 0], dtype=np.int64)

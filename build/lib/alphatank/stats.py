@@ -1,0 +1,53 @@
+"""Small statistics helpers shared by the arena, evaluation and training reports."""
+
+from __future__ import annotations
+
+import math
+
+
+def wilson_interval(successes: float, n: int, z: float = 1.96) -> tuple[float, float]:
+    """Wilson score interval for a binomial proportion ``successes / n``.
+
+    Returns ``(lo, hi)`` within [0, 1]; ``(0.0, 1.0)`` when ``n == 0`` (nothing known).
+    ``successes`` may be fractional (e.g. wins + draws / 2). ``z=1.96`` gives 95 %.
+    """
+    if n < 0:
+        raise ValueError(f"wilson_interval: n must be >= 0, got {n}")
+    if not 0 <= successes <= n:
+        raise ValueError(f"wilson_interval: successes must be in [0, n={n}], got {successes}")
+    if z <= 0:
+        raise ValueError(f"wilson_interval: z must be > 0, got {z}")
+    if n == 0:
+        return (0.0, 1.0)
+    p = successes / n
+    z2 = z * z
+    denom = 1.0 + z2 / n
+    centre = (p + z2 / (2 * n)) / denom
+    half = z * math.sqrt(p * (1 - p) / n + z2 / (4 * n * n)) / denom
+    # Rounding can leave an endpoint a hair inside p at p = 0 or 1; the interval holds p.
+    return (max(0.0, min(p, centre - half)), min(1.0, max(p, centre + half)))
+
+
+class League:
+    """openskill (Plackett-Luce) ratings of players from a stream of 1-vs-1 results."""
+
+    def __init__(self, names: list[str]):
+        from openskill.models import PlackettLuce
+
+        self.model = PlackettLuce()
+        self.names = list(names)
+        self.ratings = [self.model.rating(name=n) for n in self.names]
+
+    def record(self, i: int, j: int, outcome: int) -> None:
+        """Player i against player j: outcome +1 (i won), 0 (draw) or -1 (j won)."""
+        if outcome not in (-1, 0, 1):
+            raise ValueError(f"outcome must be -1, 0 or 1, got {outcome!r}")
+        ranks = [0, 0] if outcome == 0 else ([0, 1] if outcome > 0 else [1, 0])
+        [[a], [b]] = self.model.rate([[self.ratings[i]], [self.ratings[j]]], ranks=ranks)
+        self.ratings[i], self.ratings[j] = a, b
+
+    def table(self) -> list[tuple[str, float, float, float]]:
+        """(name, mu, sigma, ordinal = mu - 3 sigma), best ordinal first."""
+        rows = [(n, r.mu, r.sigma, r.ordinal()) for n, r in zip(self.names, self.ratings,
+                                                                strict=True)]
+        return sorted(rows, key=lambda row: -row[3])

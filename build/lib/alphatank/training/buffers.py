@@ -1,0 +1,129 @@
+"""Rollout storage with GAE for PPO, and the cyclic replay buffer for SAC.
+
+Conventions (SAME_STEP autoreset vector envs): row ``t`` holds the observation an action
+was chosen from, that action, and the reward / ``terminated`` / ``truncated`` flags the
+env returned for it. When row ``t`` ended an episode the next row already belongs to the
+new episode, so GAE never crosses it: a termination contributes no future value, a
+truncation is bootstrapped with ``V(final_obs)`` stored in ``bootstrap[t]``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+
+def compute_gae(rewards: torch.Tensor, values: torch.Tensor, terminated: torch.Tensor,
+                truncated: torch.Tensor, bootstrap: torch.Tensor, last_values: torch.Tensor,
+                gamma: float, lam: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """Generalised advantage estimates and returns, shape (T, B) each.
+
+    ``rewards``, ``values``, ``terminated``, ``truncated``, ``bootstrap``: (T, B);
+    ``last_values``: (B,) = V of the observation after the last row. A row that is both
+    terminated and truncated counts as terminated (no bootstrap).
+    """
+    num_steps = rewards.shape[0]
+    advantages = torch.zeros_like(rewards)
+    term = terminated.to(rewards.dtype)
+    ended = torch.clamp(term + truncated.to(rewards.dtype), max=1.0)
+    last_gae = torch.zeros_like(last_values)
+    for t in reversed(range(num_steps)):
+        following = last_values if t == num_steps - 1 else values[t + 1]
+        # ended: the value after this step is V(final_obs) for truncations, 0 for terminations
+        next_value = following * (1.0 - ended[t]) + bootstrap[t] * (1.0 - term[t]) * ended[t]
+        delta = rewards[t] + gamma * next_value - values[t]
+        last_gae = delta + gamma * lam * (1.0 - ended[t]) * last_gae
+        advantages[t] = last_gae
+    return advantages, advantages + values
+
+
+class RolloutBuffer:
+    """Preallocated PPO rollout of ``num_steps`` rows for ``num_streams`` (env, seat) streams."""
+
+    def __init__(self, num_steps: int, num_streams: int, obs_dim: int, mask_dim: int = 0):
+        t, b = num_steps, num_streams
+        self.num_steps, self.num_streams = t, b
+        self.obs = torch.zeros((t, b, obs_dim), dtype=torch.float32)
+        self.actions = torch.zeros((t, b, 3), dtype=torch.int64)
+        self.logprobs = torch.zeros((t, b), dtype=torch.float32)
+        self.values = torch.zeros((t, b), dtype=torch.float32)
+        self.rewards = torch.zeros((t, b), dtype=torch.float32)
+        self.terminated = torch.zeros((t, b), dtype=torch.float32)
+        self.truncated = torch.zeros((t, b), dtype=torch.float32)
+        self.bootstrap = torch.zeros((t, b), dtype=torch.float32)
+        self.active = torch.ones((t, b), dtype=torch.bool)
+        self.masks = torch.ones((t, b, mask_dim), dtype=torch.bool) if mask_dim else None
+        self.step = 0
+
+    @property
+    def full(self) -> bool:
+        return self.step >= self.num_steps
+
+    def clear(self) -> None:
+        self.step = 0
+        self.bootstrap.zero_()
+
+
+class ReplayBuffer:
+    """Fixed-size cyclic buffer of (s, a, r, s', d); the newest transitions overwrite the
+    oldest. Stores raw observations (normalised at sampling time with current statistics)."""
+
+    def __init__(self, capacity: int, obs_dim: int, act_dim: int):
+        if capacity <= 0:
+            raise ValueError(f"replay capacity must be > 0, got {capacity}")
+        self.capacity = int(capacity)
+        self.obs = np.zeros((capacity, obs_dim), dtype=np.float32)
+        self.next_obs = np.zeros((capacity, obs_dim), dtype=np.float32)
+        self.actions = np.zeros((capacity, act_dim), dtype=np.float32)
+        self.rewards = np.zeros(capacity, dtype=np.float32)
+        self.dones = np.zeros(capacity, dtype=np.float32)
+        self.pos = 0
+        self.size = 0
+
+    def __len__(self) -> int:
+        return self.size
+
+    def add(self, obs: np.ndarray, actions: np.ndarray, rewards: np.ndarray,
+            next_obs: np.ndarray, dones: np.ndarray) -> None:
+        """Append a batch of transitions (first axis = transitions), wrapping around."""
+        n = obs.shape[0]
+        if n > self.capacity:  # keep only the newest ``capacity``
+            obs, actions, rewards, next_obs, dones = (
+                a[-self.capacity:] for a in (obs, actions, rewards, next_obs, dones))
+            n = self.capacity
+        idx = (self.pos + np.arange(n)) % self.capacity
+        self.obs[idx] = obs
+        self.actions[idx] = actions
+        self.rewards[idx] = rewards
+        self.next_obs[idx] = next_obs
+        self.dones[idx] = dones
+        self.pos = int((self.pos + n) % self.capacity)
+        self.size = min(self.size + n, self.capacity)
+
+    def sample(self, batch_size: int, rng: np.random.Generator
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Uniform sample with replacement: (obs, actions, rewards, next_obs, dones)."""
+        if self.size == 0:
+            raise ValueError("cannot sample from an empty replay buffer")
+        idx = rng.integers(0, self.size, size=batch_size)
+        return (self.obs[idx], self.actions[idx], self.rewards[idx], self.next_obs[idx],
+                self.dones[idx])
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The filled part plus the write position, for saving with a checkpoint."""
+        n = self.size
+        return {"obs": self.obs[:n], "next_obs": self.next_obs[:n], "actions": self.actions[:n],
+                "rewards": self.rewards[:n], "dones": self.dones[:n],
+                "pos": np.array(self.pos), "capacity": np.array(self.capacity)}
+
+    def load_arrays(self, data: dict[str, np.ndarray]) -> None:
+        n = int(data["obs"].shape[0])
+        if int(data["capacity"]) != self.capacity or n > self.capacity:
+            raise ValueError(f"replay buffer capacity mismatch: saved {int(data['capacity'])}, "
+                             f"configured {self.capacity}")
+        if data["obs"].shape[1:] != self.obs.shape[1:]:
+            raise ValueError(f"replay buffer observation shape mismatch: saved "
+                             f"{data['obs'].shape[1:]}, expected {self.obs.shape[1:]}")
+        for key in ("obs", "next_obs", "actions", "rewards", "dones"):
+            getattr(self, key)[:n] = data[key]
+        self.size, self.pos = n, int(data["pos"])

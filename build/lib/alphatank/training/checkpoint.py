@@ -1,0 +1,346 @@
+"""Checkpoints: one directory per save, written atomically, loadable as a Policy anywhere.
+
+Layout of ``<run>/checkpoints/step_<N>/``::
+
+    meta.json           format/version, train config, scenario, observation layout,
+                        learners (algo, seats, hyperparameters), progress, RNG states,
+                        schedule state, SHA-256 of every other file
+    <learner>.pt        weights, optimiser state, normalisers, random generator states
+                        (plain tensors and dicts: ``torch.load(weights_only=True)``)
+    <learner>.replay.npz  SAC replay buffer (for exact resume; ``allow_pickle=False``)
+
+A save writes everything into a temporary sibling directory and ``os.replace``-s it into
+place, then updates ``<run>/latest`` (a one-line file, also replaced atomically). Every
+load problem raises :class:`CheckpointError` naming the file and what is wrong.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from alphatank.game.scenarios import Scenario, ScenarioError, parse_scenario
+from alphatank.sim.policy import NOOP
+from alphatank.training.learners import make_learner
+from alphatank.training.presets import LearnerSpec, TrainConfig
+
+FORMAT = "alphatank-checkpoint"
+VERSION = 1
+
+
+class CheckpointError(RuntimeError):
+    """A checkpoint is missing, corrupt, truncated or does not fit; names file and cause."""
+
+
+def scenario_to_dict(sc: Scenario) -> dict[str, Any]:
+    """A mapping :func:`parse_scenario` rebuilds ``sc`` from (maps as absolute paths
+    unless shipped)."""
+    if all(m.startswith("pkg:") for m in sc.maps):
+        map_value = sc.map
+    elif len(sc.maps) == 1:
+        map_value = str(Path(sc.maps[0]).resolve())
+    else:
+        map_value = str(Path(sc.maps[0]).resolve().parent)
+    return {**sc.to_dict(), "map": map_value}
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _write_atomic_text(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, path)
+
+
+def save_checkpoint(run_dir: str | Path, tag: str, meta: dict[str, Any],
+                    states: dict[str, dict[str, Any]],
+                    arrays: dict[str, dict[str, np.ndarray]] | None = None,
+                    keep: int = 0) -> Path:
+    """Write ``<run_dir>/checkpoints/<tag>`` atomically and point ``<run_dir>/latest`` at
+    it. ``states``: learner name -> torch state dict; ``arrays``: learner name -> arrays
+    for ``<name>.replay.npz``. ``keep`` > 0 prunes all but the newest ``keep`` saves."""
+    root = Path(run_dir) / "checkpoints"
+    root.mkdir(parents=True, exist_ok=True)
+    final = root / tag
+    tmp = root / f".{tag}.tmp-{os.getpid()}"
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    tmp.mkdir()
+    files: dict[str, str] = {}
+    for name, state in states.items():
+        torch.save(state, tmp / f"{name}.pt")
+        files[f"{name}.pt"] = _sha256(tmp / f"{name}.pt")
+    for name, arrs in (arrays or {}).items():
+        np.savez(tmp / f"{name}.replay.npz", **arrs)
+        files[f"{name}.replay.npz"] = _sha256(tmp / f"{name}.replay.npz")
+    meta = {"format": FORMAT, "version": VERSION, "saved_at": time.time(), **meta,
+            "files": files}
+    (tmp / "meta.json").write_text(json.dumps(meta, indent=1), encoding="utf-8")
+    if final.exists():  # re-saving a tag: move the old one aside first (rename is atomic)
+        old = root / f".{tag}.old-{os.getpid()}"
+        os.replace(final, old)
+        os.replace(tmp, final)
+        shutil.rmtree(old)
+    else:
+        os.replace(tmp, final)
+    _write_atomic_text(Path(run_dir) / "latest", f"checkpoints/{tag}\n")
+    if keep > 0:
+        saves = sorted((p for p in root.iterdir() if p.is_dir() and not p.name.startswith(".")),
+                       key=lambda p: p.stat().st_mtime)
+        for old in saves[:-keep]:
+            if old != final:
+                shutil.rmtree(old, ignore_errors=True)
+    return final
+
+
+def resolve_checkpoint_dir(path: str | Path) -> Path:
+    """A checkpoint directory from a checkpoint path or a run directory (its ``latest``)."""
+    p = Path(path)
+    if not p.exists():
+        raise CheckpointError(f"{p}: no such checkpoint or run directory")
+    if p.is_file():
+        raise CheckpointError(f"{p}: expected a checkpoint directory (with meta.json), "
+                              f"got a file")
+    if (p / "meta.json").exists():
+        return p
+    latest = p / "latest"
+    if latest.is_file():
+        target = p / latest.read_text(encoding="utf-8").strip()
+        if not (target / "meta.json").exists():
+            raise CheckpointError(f"{latest}: points at {target}, which holds no meta.json")
+        return target
+    raise CheckpointError(f"{p}: not a checkpoint (no meta.json) and not a run directory "
+                          f"(no 'latest' file)")
+
+
+@dataclass
+class Checkpoint:
+    """A validated checkpoint on disk (meta read; tensors loaded on demand)."""
+
+    path: Path
+    meta: dict[str, Any]
+
+    @property
+    def train_config(self) -> TrainConfig:
+        try:
+            return TrainConfig.from_dict(self.meta["train_config"])
+        except (ValueError, KeyError, TypeError) as exc:
+            raise CheckpointError(f"{self.path / 'meta.json'}: train_config: {exc}") from None
+
+    @property
+    def scenario(self) -> Scenario:
+        try:
+            return parse_scenario(self.meta["scenario"], f"{self.path / 'meta.json'}:scenario")
+        except ScenarioError as exc:
+            raise CheckpointError(str(exc)) from None
+
+    @property
+    def learner_specs(self) -> list[LearnerSpec]:
+        try:
+            return [LearnerSpec.from_dict(d) for d in self.meta["learners"]]
+        except (ValueError, KeyError, TypeError) as exc:
+            raise CheckpointError(f"{self.path / 'meta.json'}: learners: {exc}") from None
+
+    @property
+    def obs_dim(self) -> int:
+        return int(self.meta["observation"]["obs_dim"])
+
+    def learner_names(self) -> list[str]:
+        return [d["name"] for d in self.meta["learners"]]
+
+    def state(self, name: str) -> dict[str, Any]:
+        """``torch.load(weights_only=True)`` of learner ``name``'s file, errors explained."""
+        if name not in self.learner_names():
+            raise CheckpointError(f"{self.path}: no learner {name!r}; learners: "
+                                  f"{self.learner_names()}")
+        file = self.path / f"{name}.pt"
+        self._check_file(file)
+        try:
+            return torch.load(file, map_location="cpu", weights_only=True)
+        except Exception as exc:  # torch raises many types for damaged files
+            first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+            raise CheckpointError(f"{file}: cannot be loaded (corrupt or not a checkpoint "
+                                  f"file): {type(exc).__name__}: {first}") from None
+
+    def replay(self, name: str) -> dict[str, np.ndarray] | None:
+        file = self.path / f"{name}.replay.npz"
+        if f"{name}.replay.npz" not in self.meta.get("files", {}):
+            return None
+        self._check_file(file)
+        try:
+            with np.load(file, allow_pickle=False) as data:
+                return {k: data[k] for k in data.files}
+        except Exception as exc:
+            raise CheckpointError(f"{file}: cannot be read: {type(exc).__name__}: {exc}") from None
+
+    def _check_file(self, file: Path) -> None:
+        want = self.meta.get("files", {}).get(file.name)
+        if not file.is_file():
+            raise CheckpointError(f"{file}: missing from the checkpoint")
+        if want is not None and _sha256(file) != want:
+            raise CheckpointError(f"{file}: corrupt or truncated (SHA-256 differs from the one "
+                                  f"recorded in meta.json; size {file.stat().st_size} bytes)")
+
+    def load_learner(self, name: str, num_streams: int = 1, weights_only: bool = False,
+                     seed: int = 0) -> Any:
+        """A PPO/SAC learner rebuilt from its spec with this checkpoint's state."""
+        specs = {s.name: s for s in self.learner_specs}
+        if name not in specs:
+            raise CheckpointError(f"{self.path}: no learner {name!r}; learners: {list(specs)}")
+        spec = specs[name]
+        learner = make_learner(spec, self.obs_dim, num_streams, seed)
+        state = self.state(name)
+        try:
+            learner.load_state_dict(state, weights_only=weights_only)
+        except (RuntimeError, KeyError, ValueError) as exc:
+            first = str(exc).strip().splitlines()[0]
+            raise CheckpointError(f"{self.path / (name + '.pt')}: does not fit a {spec.algo} "
+                                  f"learner with obs_dim {self.obs_dim} and its saved config: "
+                                  f"{type(exc).__name__}: {first}") from None
+        return learner
+
+
+def load_checkpoint(path: str | Path) -> Checkpoint:
+    """Open and validate a checkpoint directory (or a run directory's latest save)."""
+    ckpt_dir = resolve_checkpoint_dir(path)
+    meta_file = ckpt_dir / "meta.json"
+    try:
+        meta = json.loads(meta_file.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as exc:
+        raise CheckpointError(f"{meta_file}: invalid JSON (line {exc.lineno}, column "
+                              f"{exc.colno}): {exc.msg}; the checkpoint is corrupt or "
+                              f"truncated") from None
+    except UnicodeDecodeError:
+        raise CheckpointError(f"{meta_file}: not UTF-8 text; the checkpoint is corrupt") from None
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        raise CheckpointError(f"{meta_file}: not an alphatank checkpoint (format "
+                              f"{meta.get('format') if isinstance(meta, dict) else None!r})")
+    if meta.get("version") != VERSION:
+        raise CheckpointError(f"{meta_file}: checkpoint version {meta.get('version')!r}, this "
+                              f"alphatank reads version {VERSION}")
+    for key in ("train_config", "scenario", "observation", "learners", "files"):
+        if key not in meta:
+            raise CheckpointError(f"{meta_file}: missing field {key!r}")
+    return Checkpoint(ckpt_dir, meta)
+
+
+class NetworkPolicy:
+    """Trained learners as a :class:`alphatank.sim.policy.Policy` for any seat of any match
+    with the same number of tanks and observation size as their training scenario.
+
+    The learner is picked per seat at :meth:`reset`: ``learner`` if given, else the one
+    that trained in that scenario seat, else the first. Observations are built for the
+    seat with the env's own :class:`~alphatank.game.observe.ObservationBuilder`.
+    """
+
+    def __init__(self, observation: dict[str, Any], learner_names: list[str],
+                 learner: str | None = None, deterministic: bool = False,
+                 source: str = "policy"):
+        if learner is not None and learner not in learner_names:
+            raise CheckpointError(f"{source}: no learner {learner!r}; learners: "
+                                  f"{learner_names}")
+        self.source, self.names = source, list(learner_names)
+        self.learner_name, self.deterministic = learner, deterministic
+        self.kind, self.obs_dim = observation["kind"], int(observation["obs_dim"])
+        self.slots = (int(observation["max_walls"]), int(observation["max_buffs"]),
+                      int(observation["max_debuffs"]))
+        self.team_flags = bool(observation["team_flags"])
+        self.seat_learner = {int(k): v for k, v in observation["seat_learner"].items()}
+        self.n_tanks = int(observation["tanks"])
+        self._builders: dict[tuple, Any] = {}
+        self.rng = np.random.default_rng(0)
+        self.learner: Any = None
+        self.builder: Any = None
+
+    def name_for_seat(self, seat: int) -> str:
+        if self.learner_name is not None:
+            return self.learner_name
+        return self.seat_learner.get(seat, self.names[0])
+
+    def get_learner(self, name: str) -> Any:
+        raise NotImplementedError
+
+    def reset(self, match: Any, seat: int, seed: int | None = None) -> None:
+        from alphatank.game.observe import ObservationBuilder, StateBatch
+
+        self.learner = self.get_learner(self.name_for_seat(seat))
+        self.rng = np.random.default_rng(seed)
+        key = (match.cfg, tuple(match.teams), seat)
+        if key not in self._builders:
+            walls, buffs, debuffs = self.slots
+            need = len(match.spec.wall_rects)
+            if self.kind == "paper" and need > walls:
+                raise CheckpointError(
+                    f"{self.source}: trained with room for {walls} wall rectangles in its "
+                    f"'paper' observation; map {match.spec.name!r} has {need}")
+            batch = StateBatch(match.cfg, match.n, 1, walls, buffs, debuffs)
+            builder = ObservationBuilder(self.kind, batch, match.teams, [seat],
+                                         team_flags=self.team_flags)
+            if builder.layout.size != self.obs_dim:
+                raise CheckpointError(
+                    f"{self.source}: expects {self.obs_dim} observation features "
+                    f"({self.kind}, {self.n_tanks} tanks); seat {seat} of this match "
+                    f"({match.n} tanks, teams {match.teams}) gives {builder.layout.size}")
+            self._builders[key] = builder
+        self.builder = builder = self._builders[key]
+        builder.batch.set_static(0, match)
+        builder.batch.gather(0, match)
+        builder.set_static(0)
+
+    def act(self, match: Any, seat: int) -> np.ndarray:
+        if not match.alive[seat]:
+            return NOOP.copy()
+        self.builder.batch.gather(0, match)
+        obs = self.builder.build()[0]
+        return self.learner.policy_actions(obs, self.deterministic, self.rng)[0]
+
+
+class LivePolicy(NetworkPolicy):
+    """In-memory learners of a running training (videos, evaluation during training)."""
+
+    def __init__(self, learners: dict[str, Any], observation: dict[str, Any],
+                 learner: str | None = None, deterministic: bool = False):
+        super().__init__(observation, list(learners), learner, deterministic, "training")
+        self.learners = learners
+
+    def get_learner(self, name: str) -> Any:
+        return self.learners[name]
+
+
+class CheckpointPolicy(NetworkPolicy):
+    """A checkpoint's learners as a Policy (all weights loaded and checked up front)."""
+
+    def __init__(self, ckpt: Checkpoint, learner: str | None = None,
+                 deterministic: bool = False):
+        super().__init__(ckpt.meta["observation"], ckpt.learner_names(), learner,
+                         deterministic, str(ckpt.path))
+        self.ckpt = ckpt
+        wanted = [learner] if learner is not None else ckpt.learner_names()
+        self.learners = {name: ckpt.load_learner(name, weights_only=True) for name in wanted}
+
+    def get_learner(self, name: str) -> Any:
+        return self.learners[name]
+
+    def __repr__(self) -> str:
+        return f"CheckpointPolicy({str(self.ckpt.path)!r}, learners={list(self.learners)})"
+
+
+def load_policy(path: str | Path, learner: str | None = None,
+                deterministic: bool = False) -> CheckpointPolicy:
+    """A checkpoint (directory, or a run directory's latest) as a Policy for any seat."""
+    return CheckpointPolicy(load_checkpoint(path), learner, deterministic)

@@ -1,0 +1,124 @@
+"""Run logging: wandb (offline by default, files under the run folder, no account needed),
+optional TensorBoard, and always a plain ``metrics.jsonl`` the learning-curve plot reads.
+
+Metric names follow the house convention: ``charts/*``, ``losses/*``, ``eval/*``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from alphatank.training.presets import WANDB_MODES
+
+
+class RunLogger:
+    """Fans metrics out to wandb, TensorBoard and ``<run_dir>/metrics.jsonl``."""
+
+    def __init__(self, run_dir: str | Path, config: dict[str, Any], name: str,
+                 wandb_mode: str = "offline", project: str = "alphatank",
+                 tensorboard: bool = False, run_id: str | None = None):
+        if wandb_mode not in WANDB_MODES:
+            raise ValueError(f"wandb mode must be one of {WANDB_MODES}, got {wandb_mode!r}")
+        self.run_dir = Path(run_dir)
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        self._jsonl = open(self.run_dir / "metrics.jsonl", "a", encoding="utf-8")  # noqa: SIM115
+        self.wandb_run = None
+        self.run_id = run_id
+        if wandb_mode != "disabled":
+            import wandb
+            os.environ.setdefault("WANDB_SILENT", "true")
+            self.wandb_run = wandb.init(project=project, name=name, dir=str(self.run_dir),
+                                        mode=wandb_mode, config=config, id=run_id,
+                                        resume="allow" if run_id else None, reinit=True)
+            self.run_id = self.wandb_run.id
+        self.tb = None
+        if tensorboard:
+            try:
+                from torch.utils.tensorboard import SummaryWriter
+            except ImportError as exc:
+                raise RuntimeError("TensorBoard logging needs the 'tensorboard' package: "
+                                   "pip install tensorboard (or run without --tensorboard)"
+                                   ) from exc
+            self.tb = SummaryWriter(str(self.run_dir / "tensorboard"))
+
+    def log(self, metrics: dict[str, float], step: int) -> None:
+        clean = {k: float(v) for k, v in metrics.items()
+                 if isinstance(v, int | float) and math.isfinite(float(v))}
+        self._jsonl.write(json.dumps({"step": int(step), **clean}) + "\n")
+        self._jsonl.flush()
+        if self.wandb_run is not None:
+            self.wandb_run.log(clean, step=int(step))
+        if self.tb is not None:
+            for k, v in clean.items():
+                self.tb.add_scalar(k, v, int(step))
+
+    def video(self, path: str | Path, step: int, key: str = "media/match") -> None:
+        """Attach an MP4 already written to disk."""
+        if self.wandb_run is not None:
+            import wandb
+            self.wandb_run.log({key: wandb.Video(str(path), format="mp4")}, step=int(step))
+
+    def close(self) -> None:
+        self._jsonl.close()
+        if self.wandb_run is not None:
+            self.wandb_run.finish()
+            self.wandb_run = None
+        if self.tb is not None:
+            self.tb.close()
+
+
+def read_metrics(run_dir: str | Path) -> list[dict[str, float]]:
+    """Rows of ``metrics.jsonl`` (empty if the run logged nothing yet)."""
+    path = Path(run_dir) / "metrics.jsonl"
+    if not path.is_file():
+        return []
+    with open(path, encoding="utf-8") as f:
+        return [json.loads(line) for line in f if line.strip()]
+
+
+def plot_learning_curve(run_dir: str | Path, out: str | Path | None = None,
+                        evals: list[tuple[int, float, float, float]] | None = None) -> Path:
+    """PNG of the win rate (last-100-episode window, per opponent when there are several;
+    ``eval/win_rate`` points and ``evals`` = (step, rate, ci_low, ci_high) with their
+    intervals) and the episode return against env steps."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = read_metrics(run_dir)
+    out = Path(out) if out else Path(run_dir) / "learning_curve.png"
+    keys = {k for r in rows for k in r}
+    per_opp = sorted(k for k in keys if k.startswith("charts/win_rate_vs/"))
+    lines = sorted(k for k in keys if k.startswith("charts/win_rate") and
+                   not k.startswith("charts/win_rate_vs/"))
+    if len(per_opp) > 1:
+        lines += per_opp
+    fig, (ax_w, ax_r) = plt.subplots(1, 2, figsize=(11, 4))
+    for key in lines:
+        pts = [(r["step"], r[key]) for r in rows if key in r]
+        ax_w.plot(*zip(*pts, strict=True), label=key.replace("charts/", "train "), lw=1.2)
+    points = [(r["step"], r["eval/win_rate"], r["eval/win_ci_low"], r["eval/win_ci_high"])
+              for r in rows if "eval/win_rate" in r] + list(evals or [])
+    if points:
+        x, y, lo, hi = (np.array(v) for v in zip(*points, strict=True))
+        ax_w.errorbar(x, y, yerr=[y - lo, hi - y], fmt="o", color="black", capsize=3,
+                      markersize=4, label="evaluation (Wilson 95%)")
+    for key in sorted(k for k in keys if k.startswith("charts/episode_return")):
+        pts = [(r["step"], r[key]) for r in rows if key in r]
+        ax_r.plot(*zip(*pts, strict=True), label=key.replace("charts/", ""))
+    ax_w.set(xlabel="env steps", ylabel="win rate", ylim=(-0.02, 1.02), title="Win rate")
+    ax_r.set(xlabel="env steps", ylabel="return", title="Episode return (last 100)")
+    for ax in (ax_w, ax_r):
+        ax.grid(alpha=0.3)
+        if ax.lines:
+            ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out

@@ -1,0 +1,307 @@
+"""PPO (clipped surrogate, GAE, minibatches) for one learner over many (env, seat) streams.
+
+Network and defaults follow the paper's Table 7 (CleanRL-style): separate actor and
+critic MLPs of two 128-unit tanh layers, one categorical head per action dimension.
+Rollout inference runs on a numpy mirror of the network with Gumbel-max sampling from
+the learner's own generator, so a run is reproducible and resumable bit for bit.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import torch
+from torch import nn
+
+from alphatank.training.buffers import RolloutBuffer, compute_gae
+from alphatank.training.hparams import PPOConfig
+from alphatank.training.normalize import ObsNormalizer, ReturnNormalizer
+
+NVEC = (3, 3, 2)  # rotate, move, fire — the one action layout (RULES.md)
+MASKED_LOGIT = -1e8  # exp() of this is exactly 0 in float32, and 0 * it stays finite
+
+
+def layer_init(layer: nn.Linear, std: float = math.sqrt(2), bias: float = 0.0) -> nn.Linear:
+    nn.init.orthogonal_(layer.weight, std)
+    nn.init.constant_(layer.bias, bias)
+    return layer
+
+
+def mlp(inp: int, hidden: int, out: int, out_std: float, act: type[nn.Module]) -> nn.Sequential:
+    return nn.Sequential(layer_init(nn.Linear(inp, hidden)), act(),
+                         layer_init(nn.Linear(hidden, hidden)), act(),
+                         layer_init(nn.Linear(hidden, out), std=out_std))
+
+
+class ActorCritic(nn.Module):
+    """Table 7: critic obs->128->128->1, actor obs->128->128->sum(nvec) logits (tanh)."""
+
+    def __init__(self, obs_dim: int, hidden: int = 128, nvec: tuple[int, ...] = NVEC):
+        super().__init__()
+        self.nvec = tuple(nvec)
+        self.critic = mlp(obs_dim, hidden, 1, 1.0, nn.Tanh)
+        self.actor = mlp(obs_dim, hidden, sum(self.nvec), 0.01, nn.Tanh)
+
+    def value(self, obs: torch.Tensor) -> torch.Tensor:
+        return self.critic(obs).squeeze(-1)
+
+    def logits(self, obs: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
+        logits = self.actor(obs)
+        if mask is not None:
+            logits = logits.masked_fill(~mask, MASKED_LOGIT)
+        return logits
+
+
+def head_log_probs(logits: torch.Tensor, nvec: tuple[int, ...]) -> list[torch.Tensor]:
+    return [torch.log_softmax(part, dim=-1) for part in torch.split(logits, nvec, dim=-1)]
+
+
+def evaluate_actions(logits: torch.Tensor, actions: torch.Tensor, nvec: tuple[int, ...]
+                     ) -> tuple[torch.Tensor, torch.Tensor]:
+    """Summed log-probability and entropy (both (B,)) of given actions."""
+    logps = head_log_probs(logits, nvec)
+    logprob = sum(lp.gather(-1, actions[:, i:i + 1]).squeeze(-1) for i, lp in enumerate(logps))
+    entropy = sum(-(lp.exp() * lp).sum(-1) for lp in logps)
+    return logprob, entropy
+
+
+class NumpyActorCritic:
+    """Float32 numpy copy of an :class:`ActorCritic` for rollout and play inference: a
+    handful of BLAS calls instead of dozens of small torch ops (the hot path). The first
+    actor and critic layers are fused into one matrix product. ``sync`` after updates."""
+
+    def __init__(self, net: ActorCritic):
+        self.sync(net)
+
+    def sync(self, net: ActorCritic) -> None:
+        def wt(layer: nn.Module) -> np.ndarray:
+            return np.ascontiguousarray(layer.weight.detach().numpy().T, dtype=np.float32)
+
+        def bias(layer: nn.Module) -> np.ndarray:
+            return layer.bias.detach().numpy().astype(np.float32)
+
+        a, c = net.actor, net.critic
+        self.hidden = a[0].out_features
+        self.w1 = np.ascontiguousarray(np.concatenate([wt(a[0]), wt(c[0])], axis=1))
+        self.b1 = np.concatenate([bias(a[0]), bias(c[0])])
+        self.wa2, self.ba2, self.wc2, self.bc2 = wt(a[2]), bias(a[2]), wt(c[2]), bias(c[2])
+        self.wa3, self.ba3, self.wc3, self.bc3 = wt(a[4]), bias(a[4]), wt(c[4]), bias(c[4])
+
+    def forward(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Logits (B, sum(nvec)) and values (B,) for normalised float32 observations."""
+        h = np.tanh(x @ self.w1 + self.b1)
+        ha = np.tanh(h[:, :self.hidden] @ self.wa2 + self.ba2)
+        hc = np.tanh(h[:, self.hidden:] @ self.wc2 + self.bc2)
+        return ha @ self.wa3 + self.ba3, (hc @ self.wc3 + self.bc3)[:, 0]
+
+
+def np_sample(logits: np.ndarray, nvec: tuple[int, ...], rng: np.random.Generator,
+              deterministic: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Actions (B, len(nvec)) int64 and their summed log-probabilities (B,) float32 from
+    logits (B, sum(nvec)): Gumbel-max sampling from ``rng`` (or the most likely choice).
+    :func:`evaluate_actions` computes the same log-probabilities in torch."""
+    b = logits.shape[0]
+    rows = np.arange(b)
+    actions = np.empty((b, len(nvec)), dtype=np.int64)
+    logprob = np.zeros(b, dtype=np.float32)
+    if not deterministic:
+        u = np.maximum(rng.random(logits.shape, dtype=np.float32), np.float32(1e-20))
+        scores = logits - np.log(-np.log(u))
+    off = 0
+    for i, n in enumerate(nvec):
+        part = logits[:, off:off + n]
+        top = part.max(axis=1)
+        lse = top + np.log(np.exp(part - top[:, None]).sum(axis=1))
+        a = (part if deterministic else scores[:, off:off + n]).argmax(axis=1)
+        actions[:, i] = a
+        logprob += part[rows, a] - lse
+        off += n
+    return actions, logprob
+
+
+class PPO:
+    """One PPO learner controlling ``num_streams`` = num_envs x its seats.
+
+    Per env step the runner calls :meth:`act` with the streams' raw observations, then
+    :meth:`observe` with rewards and episode flags; when :attr:`ready`, :meth:`update`.
+    """
+
+    algo = "ppo"
+
+    def __init__(self, obs_dim: int, num_streams: int, cfg: PPOConfig | None = None,
+                 seed: int = 0, mask_dim: int = 0):
+        self.cfg = cfg = cfg or PPOConfig()
+        self.obs_dim, self.num_streams = obs_dim, num_streams
+        with torch.random.fork_rng(devices=[]):
+            torch.manual_seed(seed)
+            self.net = ActorCritic(obs_dim, cfg.hidden)
+        self.nvec = self.net.nvec
+        self.optimizer = torch.optim.Adam(self.net.parameters(), lr=cfg.learning_rate,
+                                          eps=cfg.adam_eps)
+        self.generator = torch.Generator().manual_seed(seed)  # minibatch order
+        self.np_rng = np.random.default_rng(seed)  # action sampling
+        self.mirror = NumpyActorCritic(self.net)
+        self.obs_norm = ObsNormalizer(obs_dim, cfg.norm_obs, cfg.obs_clip)
+        self.ret_norm = ReturnNormalizer(num_streams, cfg.gamma, cfg.norm_reward, cfg.reward_clip)
+        self.buffer = RolloutBuffer(cfg.num_steps, num_streams, obs_dim, mask_dim)
+        self.updates = 0
+        self.total_updates = 0  # set by the runner for learning-rate annealing
+
+    # ---- acting -----------------------------------------------------------------------
+
+    def act(self, obs: np.ndarray, masks: np.ndarray | None = None) -> np.ndarray:
+        """Sample actions (num_streams, 3) for raw observations and record the step."""
+        buf = self.buffer
+        t = buf.step
+        x = self.obs_norm(obs, update=True)
+        logits, values = self.mirror.forward(x)
+        if masks is not None:
+            masks = np.asarray(masks, dtype=bool)
+            logits[~masks] = MASKED_LOGIT
+            if buf.masks is not None:
+                buf.masks[t] = torch.from_numpy(masks)
+        actions, logprob = np_sample(logits, self.nvec, self.np_rng)
+        buf.obs[t] = torch.from_numpy(x)
+        buf.actions[t] = torch.from_numpy(actions)
+        buf.logprobs[t] = torch.from_numpy(logprob)
+        buf.values[t] = torch.from_numpy(values)
+        return actions
+
+    def observe(self, next_obs: np.ndarray, rewards: np.ndarray, terminated: np.ndarray,
+                truncated: np.ndarray, final_obs: np.ndarray | None = None,
+                active: np.ndarray | None = None) -> None:
+        """Record the outcome of the last :meth:`act`: rewards (B,), flags (B,), the final
+        observations of ended streams (rows of ``final_obs``; others ignored) and which
+        streams' actions counted (``active``, e.g. False for dead tanks). ``next_obs`` is
+        unused (PPO reads it at the next :meth:`act`); it keeps one learner interface."""
+        del next_obs
+        buf = self.buffer
+        t = buf.step
+        ended = np.logical_or(terminated, truncated)
+        buf.rewards[t] = torch.from_numpy(self.ret_norm(rewards, ended))
+        buf.terminated[t] = torch.from_numpy(np.asarray(terminated, dtype=np.float32))
+        buf.truncated[t] = torch.from_numpy(np.asarray(truncated, dtype=np.float32))
+        buf.active[t] = True if active is None else torch.from_numpy(np.asarray(active, bool))
+        boot = np.flatnonzero(np.logical_and(truncated, np.logical_not(terminated)))
+        if boot.size:
+            if final_obs is None:
+                raise ValueError("truncated streams need final_obs to bootstrap from")
+            values = self.mirror.forward(self.obs_norm(final_obs[boot]))[1]
+            buf.bootstrap[t, torch.from_numpy(boot)] = torch.from_numpy(values)
+        buf.step += 1
+
+    @property
+    def ready(self) -> bool:
+        return self.buffer.full
+
+    # ---- learning ---------------------------------------------------------------------
+
+    def update(self, next_obs: np.ndarray) -> dict[str, float]:
+        """One PPO update on the full rollout; ``next_obs`` follows its last row."""
+        cfg, buf, net = self.cfg, self.buffer, self.net
+        if not buf.full:
+            raise RuntimeError(f"rollout has {buf.step}/{buf.num_steps} steps; update when ready")
+        if cfg.anneal_lr and self.total_updates > 0:
+            frac = max(0.0, 1.0 - self.updates / self.total_updates)
+            self.optimizer.param_groups[0]["lr"] = frac * cfg.learning_rate
+        with torch.no_grad():
+            last_values = torch.from_numpy(self.mirror.forward(self.obs_norm(next_obs))[1])
+            advantages, returns = compute_gae(buf.rewards, buf.values, buf.terminated,
+                                              buf.truncated, buf.bootstrap, last_values,
+                                              cfg.gamma, cfg.gae_lambda)
+        n = buf.num_steps * buf.num_streams
+        b_obs = buf.obs.reshape(n, -1)
+        b_actions = buf.actions.reshape(n, -1)
+        b_logprobs, b_values = buf.logprobs.reshape(n), buf.values.reshape(n)
+        b_adv, b_ret = advantages.reshape(n), returns.reshape(n)
+        b_active = buf.active.reshape(n).float()
+        b_masks = buf.masks.reshape(n, -1) if buf.masks is not None else None
+        mb_size = max(1, n // cfg.num_minibatches)
+        stats: dict[str, list[float]] = {k: [] for k in
+                                         ("policy_loss", "value_loss", "entropy", "approx_kl",
+                                          "clipfrac")}
+        epochs_run = 0
+        for _ in range(cfg.update_epochs):
+            perm = torch.randperm(n, generator=self.generator)
+            approx_kl = torch.zeros(())
+            for start in range(0, n - mb_size + 1, mb_size):
+                idx = perm[start:start + mb_size]
+                mask = b_masks[idx] if b_masks is not None else None
+                logprob, entropy = evaluate_actions(net.logits(b_obs[idx], mask),
+                                                    b_actions[idx], self.nvec)
+                value = net.value(b_obs[idx])
+                act_w = b_active[idx]
+                n_act = act_w.sum().clamp(min=1.0)
+                log_ratio = logprob - b_logprobs[idx]
+                ratio = log_ratio.exp()
+                with torch.no_grad():
+                    approx_kl = (((ratio - 1) - log_ratio) * act_w).sum() / n_act
+                    clipfrac = (((ratio - 1.0).abs() > cfg.clip_coef).float() * act_w).sum() / n_act
+                adv = b_adv[idx]
+                if cfg.norm_adv:
+                    mean = (adv * act_w).sum() / n_act
+                    std = (((adv - mean) ** 2 * act_w).sum() / n_act).sqrt()
+                    adv = (adv - mean) / (std + 1e-8)
+                pg = torch.max(-adv * ratio,
+                               -adv * torch.clamp(ratio, 1 - cfg.clip_coef, 1 + cfg.clip_coef))
+                pg_loss = (pg * act_w).sum() / n_act
+                if cfg.clip_vloss:
+                    v_clipped = b_values[idx] + torch.clamp(value - b_values[idx],
+                                                            -cfg.clip_coef, cfg.clip_coef)
+                    v_loss = 0.5 * torch.max((value - b_ret[idx]) ** 2,
+                                             (v_clipped - b_ret[idx]) ** 2).mean()
+                else:
+                    v_loss = 0.5 * ((value - b_ret[idx]) ** 2).mean()
+                ent = (entropy * act_w).sum() / n_act
+                loss = pg_loss - cfg.ent_coef * ent + cfg.vf_coef * v_loss
+                self.optimizer.zero_grad(set_to_none=True)
+                loss.backward()
+                nn.utils.clip_grad_norm_(net.parameters(), cfg.max_grad_norm)
+                self.optimizer.step()
+                for key, val in (("policy_loss", pg_loss), ("value_loss", v_loss),
+                                 ("entropy", ent), ("approx_kl", approx_kl),
+                                 ("clipfrac", clipfrac)):
+                    stats[key].append(float(val.detach()))
+            epochs_run += 1
+            if cfg.target_kl is not None and float(approx_kl) > cfg.target_kl:
+                break
+        var_y = float(b_ret.var())
+        explained = float("nan") if var_y == 0 else 1.0 - float((b_ret - b_values).var()) / var_y
+        self.updates += 1
+        buf.clear()
+        self.mirror.sync(net)
+        out = {f"losses/{k}": float(np.mean(v)) for k, v in stats.items() if v}
+        out.update({"losses/explained_variance": explained, "losses/epochs": float(epochs_run),
+                    "charts/learning_rate": float(self.optimizer.param_groups[0]["lr"])})
+        return out
+
+    # ---- inference and persistence ------------------------------------------------------
+
+    def policy_actions(self, obs: np.ndarray, deterministic: bool = False,
+                       rng: np.random.Generator | None = None) -> np.ndarray:
+        """Actions for raw observations (B, obs_dim) with frozen statistics and no
+        recording; ``rng`` (default: the learner's own) draws the samples."""
+        logits, _ = self.mirror.forward(self.obs_norm(np.atleast_2d(obs)))
+        return np_sample(logits, self.nvec, rng or self.np_rng, deterministic)[0]
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"net": self.net.state_dict(), "optimizer": self.optimizer.state_dict(),
+                "obs_norm": self.obs_norm.state_dict(), "ret_norm": self.ret_norm.state_dict(),
+                "generator": self.generator.get_state(),
+                "np_rng": self.np_rng.bit_generator.state,
+                "updates": torch.tensor(self.updates)}
+
+    def load_state_dict(self, state: dict[str, Any], weights_only: bool = False) -> None:
+        """Restore a learner; ``weights_only`` restores just what inference needs."""
+        self.net.load_state_dict(state["net"])
+        self.mirror.sync(self.net)
+        self.obs_norm.load_state_dict(state["obs_norm"])
+        if weights_only:
+            return
+        self.optimizer.load_state_dict(state["optimizer"])
+        self.ret_norm.load_state_dict(state["ret_norm"])
+        self.generator.set_state(state["generator"])
+        self.np_rng.bit_generator.state = state["np_rng"]
+        self.updates = int(state["updates"])

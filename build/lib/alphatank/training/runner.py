@@ -1,0 +1,362 @@
+"""The multi-learner training loop over the batched vector env.
+
+Any number of independent learners (PPO or SAC, each with its own parameters) drive the
+scenario's learner seats; bots, schedules or frozen policies fill the rest. One
+iteration = ``rollout_steps`` vector steps; PPO learners update when their rollout is
+full, SAC learners on their own replay schedule. Checkpoints, evaluation, videos and
+logging happen at iteration boundaries.
+
+A checkpoint is an episode boundary: right after saving, every match restarts from a
+seed derived from ``(seed, iteration)``. A run resumed from that checkpoint does the same,
+so its next update equals the uninterrupted run's bit for bit (in-progress episodes are
+cut there and bootstrapped like any time-limit truncation).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import time
+from collections import deque
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from alphatank.envs.vector import make_vector_env
+from alphatank.game.observe import slot_counts
+from alphatank.game.scenarios import Scenario, load_scenario
+from alphatank.training.checkpoint import (
+    Checkpoint,
+    LivePolicy,
+    load_checkpoint,
+    save_checkpoint,
+    scenario_to_dict,
+)
+from alphatank.training.learners import make_learner
+from alphatank.training.logging import RunLogger
+from alphatank.training.ppo import NVEC
+from alphatank.training.presets import TrainConfig, default_learners
+from alphatank.training.schedules import make_schedule
+from alphatank.training.threads import limit_threads
+
+WINDOW = 100  # episodes in the rolling win-rate / return windows
+
+
+def derive_seed(*parts: int) -> int:
+    return int(np.random.SeedSequence(list(parts)).generate_state(1, np.uint64)[0] >> 1)
+
+
+def opponent_key(label: str) -> str:
+    """'B:aggressive(w=1), B:smart(w=0.5)' -> 'aggressive+smart' (for per-opponent stats)."""
+    names = re.findall(r"([A-Za-z_]+)\(", label)
+    return "+".join(sorted(set(names))) if names else re.sub(r"[^A-Za-z0-9_+]", "_", label)
+
+
+class Trainer:
+    """Runs a :class:`TrainConfig` in ``run_dir``. ``env`` (a vector env) and
+    ``scenario`` may be given instead of being built from ``cfg.scenario``.
+
+    ``action_mask``: optional hook ``f(obs (E, L, D)) -> bool (E, L, 8)`` over the
+    concatenated choices (rotate 3, move 3, fire 2); PPO learners never sample a masked
+    choice and their losses use the same masks.
+    """
+
+    def __init__(self, cfg: TrainConfig, run_dir: str | Path, env: Any = None,
+                 resume: Checkpoint | None = None, progress: bool = True,
+                 wandb_id: str | None = None,
+                 action_mask: Callable[[np.ndarray], np.ndarray] | None = None,
+                 scenario: Scenario | None = None):
+        self.cfg = cfg
+        self.action_mask = action_mask
+        self.run_dir = Path(run_dir)
+        self.progress = progress
+        limit_threads(cfg.torch_threads)
+        # an injected env brings its own scenario (tests use custom maps); a resumed run
+        # uses the one saved in its checkpoint
+        self.scenario: Scenario = (scenario or getattr(env, "scenario", None)
+                                   or load_scenario(cfg.scenario))
+        n_learners = len(self.scenario.learner_seats)
+        specs = cfg.learners or default_learners(n_learners)
+        self.specs = specs = list(specs)
+        owned = sorted(s for spec in specs for s in spec.seats)
+        if owned != list(range(n_learners)):
+            raise ValueError(f"learners must drive each of the scenario's {n_learners} learner "
+                             f"seats exactly once; they drive {owned} "
+                             f"({[(s.name, list(s.seats)) for s in specs]})")
+        self.env = env if env is not None else make_vector_env(
+            self.scenario, cfg.num_envs, seed=cfg.seed, num_workers=cfg.num_workers,
+            observation=cfg.observation, game_overrides=cfg.game or None,
+            reward_overrides=cfg.rewards or None)
+        try:
+            self._setup(specs, resume, wandb_id)
+        except BaseException:
+            if env is None:  # do not leave worker processes behind
+                self.env.close()
+            raise
+
+    def _setup(self, specs: list, resume: Checkpoint | None, wandb_id: str | None) -> None:
+        cfg, env = self.cfg, self.env
+        self.E, self.L, self.D = env.num_envs, env.num_learners, env.obs_dim
+        self.cols = {spec.name: list(spec.seats) for spec in specs}
+        mask_dim = sum(NVEC) if self.action_mask is not None else 0
+        self.learners = {spec.name: make_learner(spec, self.D, self.E * len(spec.seats),
+                                                 derive_seed(cfg.seed, k), mask_dim)
+                         for k, spec in enumerate(specs)}
+        ppo_steps = [spec.ppo.num_steps for spec in specs if spec.algo == "ppo"]
+        self.rollout_steps = cfg.rollout_steps or (max(ppo_steps) if ppo_steps else 512)
+        bad = [n for n in ppo_steps if self.rollout_steps % n]
+        if bad:
+            raise ValueError(f"rollout_steps {self.rollout_steps} must be a multiple of every "
+                             f"PPO learner's num_steps ({ppo_steps})")
+        steps_per_iter = self.rollout_steps * self.E
+        self.total_iterations = max(1, math.ceil(cfg.total_steps / steps_per_iter))
+        for spec in specs:
+            if spec.algo == "ppo":
+                self.learners[spec.name].total_updates = (
+                    self.total_iterations * self.rollout_steps // spec.ppo.num_steps)
+        layout = getattr(env, "layout", None)
+        self.alive_col = (layout["self.alive"].start
+                          if layout is not None and "self.alive" in layout else None)
+        self.victory = (env.core.reward_cfg.victory if hasattr(env, "core")
+                        else self.scenario.reward_config(**cfg.rewards).victory)
+        self.schedule = make_schedule(cfg.schedule, cfg.total_steps, cfg.seed)
+        game = self.scenario.game_config(**cfg.game)
+        walls, buffs, debuffs = slot_counts(game, self.scenario.map_specs())
+        seat_learner = {}
+        for spec in specs:
+            for col in spec.seats:
+                seat_learner[str(env.learner_seats[col])] = spec.name
+        self.observation_meta = {
+            "kind": cfg.observation or self.scenario.observation, "obs_dim": self.D,
+            "max_walls": walls, "max_buffs": buffs, "max_debuffs": debuffs,
+            "team_flags": self.scenario.team_mode, "seat_learner": seat_learner,
+            "tanks": len(self.scenario.seats)}
+        self.global_step = 0
+        self.iteration = 0
+        self.episodes = 0
+        self.elapsed = 0.0
+        self.outcomes = {n: deque(maxlen=WINDOW) for n in self.learners}
+        self.returns = {n: deque(maxlen=WINDOW) for n in self.learners}
+        self.lengths: deque[int] = deque(maxlen=WINDOW)
+        self.by_opponent: dict[str, dict[str, deque[float]]] = {n: {} for n in self.learners}
+        if resume is not None:
+            self._restore(resume)
+        self.logger = RunLogger(self.run_dir, cfg.to_dict(), cfg.name, cfg.wandb, cfg.project,
+                                cfg.tensorboard, run_id=wandb_id)
+        self.actions = np.ones((self.E, self.L, 3), dtype=np.int64)
+        self.history: list[dict[str, float]] = []
+
+    # ---- persistence ------------------------------------------------------------------
+
+    def _restore(self, ckpt: Checkpoint) -> None:
+        names = ckpt.learner_names()
+        if sorted(names) != sorted(self.learners):
+            raise ValueError(f"{ckpt.path}: learners {names} do not match this run's "
+                             f"{sorted(self.learners)}")
+        if ckpt.obs_dim != self.D:
+            raise ValueError(f"{ckpt.path}: obs_dim {ckpt.obs_dim}, the env gives {self.D}")
+        for name, learner in self.learners.items():
+            from alphatank.training.checkpoint import CheckpointError
+            try:
+                learner.load_state_dict(ckpt.state(name))
+            except (RuntimeError, ValueError, KeyError) as exc:
+                if isinstance(exc, CheckpointError):
+                    raise
+                raise CheckpointError(f"{ckpt.path / (name + '.pt')}: does not fit learner "
+                                      f"{name!r}: {str(exc).splitlines()[0]}") from None
+            replay = ckpt.replay(name)
+            if replay is not None and hasattr(learner, "replay"):
+                learner.replay.load_arrays(replay)
+        prog = ckpt.meta["progress"]
+        self.global_step, self.iteration = int(prog["global_step"]), int(prog["iteration"])
+        self.episodes, self.elapsed = int(prog["episodes"]), float(prog["elapsed"])
+        self.schedule.load_state_dict(ckpt.meta.get("schedule", {}))
+        for name, outs in ckpt.meta.get("windows", {}).get("outcomes", {}).items():
+            self.outcomes[name].extend(outs)
+        for name, rets in ckpt.meta.get("windows", {}).get("returns", {}).items():
+            self.returns[name].extend(rets)
+
+    def save(self) -> Path:
+        meta = {
+            "train_config": self.cfg.to_dict(),
+            "scenario": scenario_to_dict(self.scenario),
+            "observation": self.observation_meta,
+            "learners": [{**spec.to_dict(),
+                          "scenario_seats": [self.env.learner_seats[c] for c in spec.seats]}
+                         for spec in self.specs],
+            "progress": {"global_step": self.global_step, "iteration": self.iteration,
+                         "episodes": self.episodes, "elapsed": self.elapsed},
+            "schedule": self.schedule.state_dict(),
+            "windows": {"outcomes": {n: list(d) for n, d in self.outcomes.items()},
+                        "returns": {n: [float(x) for x in d] for n, d in self.returns.items()}},
+            "wandb_id": self.logger.run_id,
+        }
+        states = {n: lr.state_dict() for n, lr in self.learners.items()}
+        arrays = {n: lr.replay.arrays() for n, lr in self.learners.items()
+                  if hasattr(lr, "replay")}
+        return save_checkpoint(self.run_dir, f"step_{self.global_step:010d}", meta, states,
+                               arrays, keep=self.cfg.keep_checkpoints)
+
+    def policy(self, deterministic: bool = False) -> LivePolicy:
+        """The current learners as a Policy (for videos and matches in any seat)."""
+        return LivePolicy(self.learners, self.observation_meta, deterministic=deterministic)
+
+    # ---- the loop ---------------------------------------------------------------------
+
+    def _segment_reset(self) -> np.ndarray:
+        """Restart every match from seeds derived from (seed, iteration)."""
+        for lr in self.learners.values():
+            if hasattr(lr, "ret_norm"):
+                lr.ret_norm.returns[:] = 0.0
+        return self.env.reset(seed=derive_seed(self.cfg.seed, self.iteration, 7))
+
+    def _record_episode(self, ep: dict[str, Any], rewards: np.ndarray, scale: float) -> None:
+        self.episodes += 1
+        self.lengths.append(int(ep["length"]))
+        key = opponent_key(str(ep.get("opponent", "")))
+        outcome = ep["outcome"]
+        for name, cols in self.cols.items():
+            out = outcome[cols[0]]
+            score = 1.0 if out == "win" else 0.0
+            self.outcomes[name].append(score)
+            self.returns[name].append(float(np.mean(ep["return"][cols])))
+            self.by_opponent[name].setdefault(key, deque(maxlen=WINDOW)).append(score)
+        self.schedule.record(str(ep.get("opponent", "")), outcome[0])
+        if scale < 1.0:
+            env_row = int(ep["env"])
+            for col, out in enumerate(outcome):
+                if out == "win":
+                    rewards[env_row, col] -= (1.0 - scale) * self.victory
+
+    def _collect(self, obs: np.ndarray) -> tuple[np.ndarray, dict[str, float]]:
+        """One iteration of ``rollout_steps`` vector steps (updates included)."""
+        metrics: dict[str, float] = {}
+        E, D = self.E, self.D
+        for _ in range(self.rollout_steps):
+            masks = self.action_mask(obs) if self.action_mask is not None else None
+            for name, learner in self.learners.items():
+                cols = self.cols[name]
+                x = obs[:, cols].reshape(-1, D)
+                m = masks[:, cols].reshape(-1, masks.shape[-1]) if masks is not None else None
+                self.actions[:, cols] = learner.act(x, m).reshape(E, len(cols), 3)
+            next_obs, rewards, term, trunc, info = self.env.step(self.actions)
+            if info["episodes"]:
+                scale = self.schedule.victory_scale(self.global_step)
+                for ep in info["episodes"]:
+                    self._record_episode(ep, rewards, scale)
+            final = info["final_obs"]
+            for name, learner in self.learners.items():
+                cols = self.cols[name]
+                k = len(cols)
+                active = (obs[:, cols, self.alive_col].reshape(-1) > 0.5
+                          if self.alive_col is not None else None)
+                nxt = next_obs[:, cols].reshape(-1, D)
+                learner.observe(nxt, rewards[:, cols].reshape(-1), np.repeat(term, k),
+                                np.repeat(trunc, k), final[:, cols].reshape(-1, D), active)
+                if learner.ready:
+                    for key, val in learner.update(nxt).items():
+                        metrics[f"{key}/{name}" if len(self.learners) > 1 else key] = val
+            obs = next_obs
+            self.global_step += E
+        return obs, metrics
+
+    def _window_metrics(self) -> dict[str, float]:
+        m: dict[str, float] = {}
+        multi = len(self.learners) > 1
+        for name in self.learners:
+            sfx = f"/{name}" if multi else ""
+            if self.outcomes[name]:
+                m[f"charts/win_rate{sfx}"] = float(np.mean(self.outcomes[name]))
+                m[f"charts/episode_return{sfx}"] = float(np.mean(self.returns[name]))
+            for opp, d in self.by_opponent[name].items():
+                m[f"charts/win_rate_vs/{opp}{sfx}"] = float(np.mean(d))
+        if self.lengths:
+            m["charts/episode_length"] = float(np.mean(self.lengths))
+        m["charts/episodes"] = float(self.episodes)
+        return m
+
+    def evaluate(self, games: int) -> dict[str, float]:
+        """Win rate of the current learners against the scenario's own opponents."""
+        from alphatank.training.evaluate import evaluate_learners
+        res = evaluate_learners(self.learners, self.observation_meta,
+                                {s.name: s.algo for s in self.specs}, self.scenario, [None],
+                                games=games, seed=derive_seed(self.cfg.seed, 99),
+                                num_envs=min(16, games), game_overrides=self.cfg.game,
+                                reward_overrides=self.cfg.rewards)[0]
+        lo, hi = res.interval
+        return {"eval/win_rate": res.win_rate, "eval/win_ci_low": lo, "eval/win_ci_high": hi,
+                "eval/draw_rate": res.draws / res.games}
+
+    def record_video(self, path: Path) -> Path | None:
+        """An MP4 of one match of the current learners (None if video is unavailable)."""
+        from alphatank.training.video import record_policy_match
+        return record_policy_match(self.scenario, self.policy(), path,
+                                   seed=derive_seed(self.cfg.seed, self.iteration, 3),
+                                   game_overrides=self.cfg.game)
+
+    def train(self) -> dict[str, Any]:
+        """Run until ``total_steps`` (or ``time_limit_s``); returns a summary."""
+        cfg = self.cfg
+        bar = None
+        if self.progress:
+            from tqdm import tqdm
+            bar = tqdm(total=cfg.total_steps, initial=min(self.global_step, cfg.total_steps),
+                       unit="step", unit_scale=True, dynamic_ncols=True, desc=cfg.name)
+        obs = self._segment_reset()
+        start = time.perf_counter() - self.elapsed
+        try:
+            while self.global_step < cfg.total_steps:
+                sched = self.schedule.apply(self.env, self.global_step)
+                t0, s0 = time.perf_counter(), self.global_step
+                obs, metrics = self._collect(obs)
+                self.iteration += 1
+                dt = time.perf_counter() - t0
+                self.elapsed = time.perf_counter() - start
+                metrics.update(sched)
+                metrics.update(self._window_metrics())
+                metrics["charts/sps"] = (self.global_step - s0) / dt
+                metrics["charts/iteration"] = float(self.iteration)
+                metrics["charts/elapsed_s"] = self.elapsed
+                last = self.global_step >= cfg.total_steps or (
+                    cfg.time_limit_s and self.elapsed >= cfg.time_limit_s)
+                if cfg.eval_every and (self.iteration % cfg.eval_every == 0 or last):
+                    metrics.update(self.evaluate(cfg.eval_games))
+                if cfg.video_every and self.iteration % cfg.video_every == 0:
+                    video = self.record_video(self.run_dir / "videos" /
+                                              f"step_{self.global_step:010d}.mp4")
+                    if video is not None:
+                        self.logger.video(video, self.global_step)
+                self.logger.log(metrics, self.global_step)
+                self.history.append({"step": self.global_step, **metrics})
+                if bar is not None:
+                    bar.update(min(self.global_step, cfg.total_steps) - bar.n)
+                    win = metrics.get("charts/win_rate",
+                                      next((v for k, v in metrics.items()
+                                            if k.startswith("charts/win_rate/")), float("nan")))
+                    bar.set_postfix(sps=f"{metrics['charts/sps']:.0f}", win=f"{win:.2f}",
+                                    it=self.iteration, refresh=False)
+                if last or (cfg.checkpoint_every and self.iteration % cfg.checkpoint_every == 0):
+                    self.save()
+                    if last:
+                        break
+                    obs = self._segment_reset()
+        finally:
+            if bar is not None:
+                bar.close()
+            self.logger.close()
+            self.env.close()
+        return {"run_dir": str(self.run_dir), "global_step": self.global_step,
+                "iterations": self.iteration, "episodes": self.episodes,
+                "elapsed_s": self.elapsed, **self._window_metrics()}
+
+
+def resume_trainer(path: str | Path, progress: bool = True, env: Any = None,
+                   **overrides: Any) -> Trainer:
+    """A :class:`Trainer` continuing the run saved at ``path`` (checkpoint or run dir);
+    ``overrides`` change run settings such as ``total_steps``."""
+    ckpt = load_checkpoint(path)
+    cfg = ckpt.train_config.with_overrides(**overrides)
+    return Trainer(cfg, ckpt.path.parent.parent, env=env, resume=ckpt, progress=progress,
+                   wandb_id=ckpt.meta.get("wandb_id"), scenario=ckpt.scenario)

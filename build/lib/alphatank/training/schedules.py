@@ -1,0 +1,206 @@
+"""Opponent schedules (paper 3.4.5-3.4.6): curriculum by bot weakness, cycle over a bot pool.
+
+A schedule decides, between episodes, which bots fill the non-learner seats and how
+strong they are. The runner calls :meth:`OpponentSchedule.record` for every finished
+episode, :meth:`OpponentSchedule.apply` after every rollout (it pushes changes to the
+vector env, which applies them from each env's next episode) and multiplies the victory
+reward by :meth:`OpponentSchedule.victory_scale`.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections import deque
+from typing import Any, Protocol
+
+import numpy as np
+
+SHAPES = ("linear", "sigmoid")
+CYCLE_MODES = ("fixed", "random", "adaptive")
+
+
+class ScheduledEnv(Protocol):
+    def set_bot_weakness(self, weakness: float) -> None: ...
+
+    def set_opponents(self, bot_names: list[str], weakness: float | None = None) -> None: ...
+
+
+class OpponentSchedule:
+    """No schedule: the scenario's opponents, unchanged. Base class of the others."""
+
+    kind = "none"
+
+    def apply(self, env: ScheduledEnv, step: int) -> dict[str, float]:
+        """Push the setting for env step ``step`` to ``env``; returns metrics to log."""
+        return {}
+
+    def record(self, opponent: str, outcome: str) -> None:
+        """One finished episode against ``opponent``: ``win``, ``loss`` or ``draw``."""
+
+    def victory_scale(self, step: int) -> float:
+        return 1.0
+
+    def state_dict(self) -> dict[str, Any]:
+        return {}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Restore from :meth:`state_dict` (JSON-able)."""
+
+
+class CurriculumSchedule(OpponentSchedule):
+    """Bot weakness (probability of acting each tick) from ``start`` to ``end`` over
+    ``steps`` env steps, linearly or along a sigmoid (paper 3.4.6: 0.1 -> 0.8)."""
+
+    kind = "curriculum"
+
+    def __init__(self, steps: int, start: float = 0.1, end: float = 0.8,
+                 shape: str = "linear", steepness: float = 10.0):
+        if shape not in SHAPES:
+            raise ValueError(f"curriculum shape must be one of {SHAPES}, got {shape!r}")
+        for name, w in (("start", start), ("end", end)):
+            if not 0.0 <= w <= 1.0:
+                raise ValueError(f"curriculum {name} weakness must be in [0, 1], got {w}")
+        if steps <= 0 or steepness <= 0:
+            raise ValueError(f"curriculum steps and steepness must be > 0, got {steps}, "
+                             f"{steepness}")
+        self.steps, self.start, self.end = int(steps), float(start), float(end)
+        self.shape, self.steepness = shape, float(steepness)
+        self._applied: float | None = None
+
+    def weakness(self, step: int) -> float:
+        p = min(max(step / self.steps, 0.0), 1.0)
+        if self.shape == "sigmoid":
+            k = self.steepness
+
+            def sig(x: float) -> float:
+                return 1.0 / (1.0 + math.exp(-x))
+
+            lo, hi = sig(-k / 2), sig(k / 2)
+            p = (sig(k * (p - 0.5)) - lo) / (hi - lo)
+        return self.start + (self.end - self.start) * p
+
+    def apply(self, env: ScheduledEnv, step: int) -> dict[str, float]:
+        w = round(self.weakness(step), 4)
+        if w != self._applied:
+            env.set_bot_weakness(w)
+            self._applied = w
+        return {"schedule/weakness": w}
+
+    def state_dict(self) -> dict[str, Any]:
+        return {}  # a pure function of the step; re-applied on resume
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self._applied = None
+
+
+class CycleSchedule(OpponentSchedule):
+    """Rotate the opponent through a bot pool every ``interval`` env steps (paper 3.4.5).
+
+    ``fixed`` cycles in order, ``random`` draws uniformly, ``adaptive`` draws with
+    probability growing with (1 - rolling win rate) against each bot. Win rates use the
+    last ``window`` episodes per bot; a bot is mastered at ``target`` win rate (with at
+    least ``window // 2`` games). Victory reward scale: the mastered fraction during the
+    first ``mastery_phase`` env steps, afterwards 1 only when every bot is mastered.
+    ``scale_victory=False`` keeps the full victory reward.
+    """
+
+    kind = "cycle"
+
+    def __init__(self, pool: list[str], mode: str = "fixed", interval: int = 50_000,
+                 window: int = 50, target: float = 0.6, mastery_phase: int = 500_000,
+                 scale_victory: bool = True, weakness: float | None = None, seed: int = 0):
+        if not pool:
+            raise ValueError("cycle schedule needs a non-empty bot pool")
+        if mode not in CYCLE_MODES:
+            raise ValueError(f"cycle mode must be one of {CYCLE_MODES}, got {mode!r}")
+        if interval <= 0 or window <= 0:
+            raise ValueError(f"cycle interval and window must be > 0, got {interval}, {window}")
+        self.pool, self.mode, self.interval = list(pool), mode, int(interval)
+        self.window, self.target, self.mastery_phase = int(window), float(target), mastery_phase
+        self.scale_victory, self.weakness = scale_victory, weakness
+        self.rng = np.random.default_rng(seed)
+        self.results: dict[str, deque[float]] = {b: deque(maxlen=self.window) for b in pool}
+        self.current = self.pool[0]
+        self.phase = -1  # index of the interval the current opponent was chosen for
+        self.switches = 0
+        self._pushed: str | None = None  # opponent last sent to the env
+
+    def win_rate(self, bot: str) -> float:
+        res = self.results[bot]
+        return float(np.mean(res)) if res else 0.0
+
+    def mastered(self, bot: str) -> bool:
+        return (len(self.results[bot]) >= max(1, self.window // 2)
+                and self.win_rate(bot) >= self.target)
+
+    def _choose(self) -> str:
+        if self.mode == "fixed":
+            return self.pool[self.switches % len(self.pool)]
+        if self.mode == "random":
+            return self.pool[int(self.rng.integers(len(self.pool)))]
+        need = np.array([1.0 - self.win_rate(b) + 0.05 for b in self.pool])
+        return self.pool[int(self.rng.choice(len(self.pool), p=need / need.sum()))]
+
+    def apply(self, env: ScheduledEnv, step: int) -> dict[str, float]:
+        phase = step // self.interval
+        if phase != self.phase:
+            self.current = self._choose()
+            self.phase = phase
+            self.switches += 1
+        if self._pushed != self.current:
+            env.set_opponents([self.current], weakness=self.weakness)
+            self._pushed = self.current
+        metrics = {f"schedule/win_rate/{b}": self.win_rate(b) for b in self.pool}
+        metrics["schedule/opponent_index"] = float(self.pool.index(self.current))
+        metrics["schedule/victory_scale"] = self.victory_scale(step)
+        return metrics
+
+    def record(self, opponent: str, outcome: str) -> None:
+        """``opponent``: a bot name or an env label such as ``B:dodge(w=1)``."""
+        names = set(re.findall(r"([A-Za-z_]+)\(", opponent)) or {opponent}
+        for bot in self.pool:
+            if bot in names:
+                self.results[bot].append(1.0 if outcome == "win" else 0.0)
+
+    def victory_scale(self, step: int) -> float:
+        if not self.scale_victory:
+            return 1.0
+        done = sum(self.mastered(b) for b in self.pool)
+        if step < self.mastery_phase:
+            return done / len(self.pool)
+        return 1.0 if done == len(self.pool) else 0.0
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"results": {b: list(r) for b, r in self.results.items()},
+                "current": self.current, "phase": self.phase, "switches": self.switches,
+                "rng": self.rng.bit_generator.state}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        for bot, res in state["results"].items():
+            if bot in self.results:
+                self.results[bot].extend(res)
+        self.current, self.phase = state["current"], int(state["phase"])
+        self.switches = int(state["switches"])
+        self.rng.bit_generator.state = state["rng"]
+        self._pushed = None  # a fresh env needs the current opponent again
+
+
+def make_schedule(spec: dict[str, Any], total_steps: int, seed: int = 0) -> OpponentSchedule:
+    """Build a schedule from a preset's ``schedule`` mapping (``kind`` + parameters)."""
+    spec = dict(spec or {})
+    kind = spec.pop("kind", "none")
+    try:
+        if kind == "none":
+            if spec:
+                raise TypeError(f"unexpected keys {sorted(spec)}")
+            return OpponentSchedule()
+        if kind == "curriculum":
+            spec.setdefault("steps", total_steps)
+            return CurriculumSchedule(**spec)
+        if kind == "cycle":
+            spec.setdefault("seed", seed)
+            return CycleSchedule(**spec)
+    except TypeError as exc:
+        raise ValueError(f"schedule {kind!r}: {exc}") from None
+    raise ValueError(f"unknown schedule kind {kind!r}; valid: none, curriculum, cycle")
