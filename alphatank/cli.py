@@ -1,31 +1,58 @@
-"""``alphatank`` command line: one subcommand module per verb in ``alphatank.commands``."""
+"""``alphatank`` command line: one subcommand module per verb in ``alphatank.commands``.
+
+Errors are handled here once for every verb: bad input (any
+:class:`~alphatank.errors.InputError`: config, map, scenario, replay, checkpoint, ...) and
+files that cannot be read or written (``OSError``) print one line,
+``alphatank VERB: error: MESSAGE``, and exit with status 2; so do bad arguments. A reader
+that closes the pipe early (``alphatank maps | head -n 1``) ends the command quietly with
+status 141, as a program killed by SIGPIPE. ``ALPHATANK_TRACEBACK=1`` re-raises instead
+(for debugging).
+"""
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
+from typing import NoReturn
+
+from alphatank import __version__
+from alphatank.errors import InputError, one_line
 
 # verb -> module in alphatank.commands exposing add_arguments(parser) and run(args) -> int
 COMMANDS = {
     "demo": "The main job: train PPO vs the aggressive bot, evaluate, record (runs/<name>/).",
     "train": "Train PPO/SAC learners from a named preset (vs bots, self-play, teams).",
-    "eval": "Evaluate a checkpoint against bots: Table-3 layout with Wilson 95%% intervals.",
+    "eval": "Evaluate a checkpoint against bots: Table-3 layout with Wilson 95% intervals.",
     "play": "Play interactively: humans, bots and checkpoints in any seat.",
     "record": "Record a headless match to MP4/GIF (and a replay file).",
     "replay": "Re-simulate, render or record a replay file.",
     "arena": "Play every pair of bots on both sides; win/draw/loss matrix.",
-    "bench": "Measure ticks/s of the match, env steps/s, bot and renderer cost.",
+    "bench": "Measure ticks/s of the match, env steps/s, bot and renderer cost; --soak.",
     "maps": "List shipped maps or validate and print some.",
 }
+EXIT_BAD_INPUT = 2
+EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE, what a shell reports for a program killed by it
+
+
+class Parser(argparse.ArgumentParser):
+    """An ArgumentParser whose errors are one line: what is wrong and where to look."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="alphatank", description=__doc__)
-    sub = parser.add_subparsers(dest="command", required=True)
+    parser = Parser(prog="alphatank", description=__doc__.split("\n\n")[0],
+                    formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--version", action="version", version=f"alphatank {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="VERB",
+                                parser_class=Parser)
     for verb, help_text in COMMANDS.items():
         module = importlib.import_module(f"alphatank.commands.{verb}")
-        p = sub.add_parser(verb, help=help_text, description=help_text)
+        # help strings are %-formatted by argparse, descriptions are printed as they are
+        p = sub.add_parser(verb, help=help_text.replace("%", "%%"), description=help_text)
         module.add_arguments(p)
         p.set_defaults(_run=module.run)
     return parser
@@ -33,7 +60,28 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    return int(args._run(args) or 0)
+    try:
+        return int(args._run(args) or 0)
+    except BrokenPipeError:
+        return broken_pipe_exit()
+    except (InputError, OSError) as exc:
+        if os.environ.get("ALPHATANK_TRACEBACK"):
+            raise
+        print(f"alphatank {args.command}: error: {one_line(exc)}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+
+
+def broken_pipe_exit() -> int:
+    """The reader of stdout went away: point stdout at /dev/null so the interpreter's final
+    flush does not raise again, and report SIGPIPE's status."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):  # stdout is not a real file (tests capture it)
+        pass
+    finally:
+        os.close(devnull)
+    return EXIT_BROKEN_PIPE
 
 
 if __name__ == "__main__":

@@ -12,6 +12,7 @@ from alphatank.bots.dodge import DodgeBot
 from alphatank.bots.random_bot import RandomBot
 from alphatank.bots.smart import SmartBot
 from alphatank.bots.weakness import Weakened
+from alphatank.sim.config import check_value
 
 BOTS: dict[str, type[Bot]] = {cls.name: cls for cls in
                               (RandomBot, AggressiveBot, DefensiveBot, DodgeBot, SmartBot)}
@@ -31,10 +32,18 @@ def make_bot(name: str, weakness: float | None = None, seed: int | None = None,
     to the bot's constructor (e.g. ``ricochet=False`` for ``smart``)."""
     cls = _lookup(name)
     valid = bot_options(name)
-    unknown = sorted(set(options) - set(valid))
+    unknown = sorted(set(options) - set(valid), key=str)
     if unknown:
         raise ValueError(f"bot {name!r} has no option(s) {unknown}; valid options: "
                          f"{valid + ['weakness', 'seed']}")
+    params = inspect.signature(cls.__init__).parameters
+    for key, value in options.items():
+        default = params[key].default
+        kind = type(default)
+        if kind in (bool, int, float):
+            _, reason = check_value((kind,), value)
+            if reason is not None:
+                raise ValueError(f"bot {name!r} option {key}: {reason}")
     bot = cls(seed=seed, **options)
     if weakness is None:
         return bot

@@ -18,6 +18,8 @@ import sys
 from fractions import Fraction
 from pathlib import Path
 
+from alphatank.cli import Parser, broken_pipe_exit
+from alphatank.errors import InputError, one_line
 from alphatank.mapgen import (
     ALGORITHMS,
     SYMMETRIES,
@@ -242,9 +244,9 @@ def cmd_edit(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="mapgen.py", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    sub = parser.add_subparsers(dest="command", required=True)
+    parser = Parser(prog="mapgen.py", description=__doc__,
+                    formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
 
     p = sub.add_parser("generate", help="write one seeded map")
     _add_gen_options(p, lists=False)
@@ -291,9 +293,12 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args.run(args))
-    except (MapGenError, FileExistsError, argparse.ArgumentTypeError) as err:
-        print(f"error: {err}", file=sys.stderr)
+    except BrokenPipeError:
+        return broken_pipe_exit()
+    except (InputError, OSError, argparse.ArgumentTypeError) as err:
+        print(f"error: {one_line(err)}", file=sys.stderr)
         return 2
+
 
 
 if __name__ == "__main__":

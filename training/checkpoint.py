@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from alphatank.errors import InputError
 from alphatank.game.scenarios import Scenario, ScenarioError, parse_scenario
 from alphatank.sim.policy import NOOP
 from alphatank.training.learners import make_learner
@@ -37,7 +38,7 @@ FORMAT = "alphatank-checkpoint"
 VERSION = 1
 
 
-class CheckpointError(RuntimeError):
+class CheckpointError(InputError, RuntimeError):
     """A checkpoint is missing, corrupt, truncated or does not fit; names file and cause."""
 
 

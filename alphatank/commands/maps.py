@@ -1,27 +1,54 @@
-"""``alphatank maps``: list shipped maps, or check and print given ones."""
+"""``alphatank maps``: list shipped maps (and the map folders ``train/``, ``test/``), or
+check and print given ones."""
 
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
-from alphatank.sim.mapspec import MapError, load_map, map_text, shipped_maps
+from alphatank.sim.mapspec import (
+    MapError,
+    load_map,
+    map_text,
+    shipped_map_folders,
+    shipped_maps,
+)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("maps", nargs="*", metavar="MAP",
-                   help="map names or .txt paths to validate and print (default: list all)")
+                   help="map names, .txt paths or folders (a shipped one like 'train', or a "
+                        "path) to validate and print (default: list all)")
+
+
+def _expand(items: list[str]) -> list[str]:
+    """Folders (paths or shipped folder names) expand to their maps; the rest stay."""
+    out: list[str] = []
+    for item in items:
+        path = Path(item)
+        if path.is_dir():
+            out += sorted(str(f) for f in path.glob("*.txt")) or [item]  # empty: an error
+        elif item.strip("/") in shipped_map_folders():
+            out += shipped_maps(item.strip("/"))
+        else:
+            out.append(item)
+    return out
 
 
 def run(args: argparse.Namespace) -> int:
     if not args.maps:
-        print(f"{'name':14s} {'size':>7s} {'spawns':>6s}  description")
-        for name in shipped_maps():
+        print(f"{'name':18s} {'size':>7s} {'spawns':>6s}  description")
+        folders = shipped_map_folders()
+        for name in shipped_maps() + [m for f in folders for m in shipped_maps(f)]:
             spec = load_map(name)
-            print(f"{name:14s} {spec.cols:>3d}x{spec.rows:<3d} {len(spec.spawns):>6d}  "
+            print(f"{name:18s} {spec.cols:>3d}x{spec.rows:<3d} {len(spec.spawns):>6d}  "
                   f"{spec.description}")
+        for folder in folders:
+            print(f"folder {folder}/: {len(shipped_maps(folder))} maps (a scenario's "
+                  f"map = \"{folder}\" draws one per episode)")
         return 0
     status = 0
-    for name in args.maps:
+    for name in _expand(args.maps):
         try:
             spec = load_map(name)
         except MapError as err:

@@ -38,6 +38,7 @@ from typing import Any
 
 import numpy as np
 
+from alphatank.errors import InputError
 from alphatank.sim.config import (
     PRESETS,
     ConfigError,
@@ -46,7 +47,15 @@ from alphatank.sim.config import (
     from_dict,
     game_config,
 )
-from alphatank.sim.mapspec import MapError, MapSpec, load_map, parse_map, shipped_maps
+from alphatank.sim.mapspec import (
+    MapError,
+    MapSpec,
+    decode_text,
+    load_map,
+    parse_map,
+    read_text,
+    shipped_maps,
+)
 from alphatank.sim.policy import NOOP, Policy
 
 CONTROLLERS = ("learner", "bot", "human", "checkpoint")
@@ -56,7 +65,7 @@ _TOP_KEYS = ("name", "description", "map", "preset", "observation", "game", "rew
 _SEAT_KEYS = ("team", "controller", "bot", "weakness", "options", "keys", "path")
 
 
-class ScenarioError(ValueError):
+class ScenarioError(InputError, ValueError):
     """A scenario file or value is invalid; the message names the file and the field."""
 
 
@@ -126,15 +135,17 @@ class Scenario:
     def game_config(self, **overrides: Any) -> GameConfig:
         """The preset plus the scenario's [game] table plus ``overrides``."""
         try:
-            return game_config(self.preset, **{**self.game, **overrides})
+            return game_config(self.preset, where=f"{self.source}: [game]",
+                               **{**self.game, **overrides})
         except ConfigError as exc:
-            raise ScenarioError(f"{self.source}: [game]: {exc}") from None
+            raise ScenarioError(str(exc)) from None
 
     def reward_config(self, **overrides: Any) -> RewardConfig:
         try:
-            return from_dict(RewardConfig, {**self.rewards, **overrides})
+            return from_dict(RewardConfig, {**self.rewards, **overrides},
+                             where=f"{self.source}: [rewards]")
         except ConfigError as exc:
-            raise ScenarioError(f"{self.source}: [rewards]: {exc}") from None
+            raise ScenarioError(str(exc)) from None
 
     def to_dict(self) -> dict[str, Any]:
         """A mapping :func:`parse_scenario` rebuilds this scenario from."""
@@ -155,8 +166,8 @@ def _load_map_cached(source: str) -> MapSpec:
     if spec is None:
         if source.startswith("pkg:"):
             res = resources.files("alphatank.maps").joinpath(source[4:])
-            spec = parse_map(res.read_text(encoding="utf-8"), f"maps/{source[4:]}",
-                             name=Path(source[4:]).stem)
+            spec = parse_map(decode_text(res.read_bytes(), f"maps/{source[4:]}"),
+                             f"maps/{source[4:]}", name=Path(source[4:]).stem)
         else:
             spec = load_map(source)
         _MAP_CACHE[source] = spec
@@ -177,7 +188,11 @@ def load_scenario(name_or_path: str | Path | Scenario) -> Scenario:
     if path.suffix == ".toml" or path.exists():
         if not path.is_file():
             raise ScenarioError(f"{path}: no such scenario file")
-        text, source, base = path.read_text(encoding="utf-8"), str(path), path.parent
+        try:
+            text = read_text(path)
+        except ValueError as exc:
+            raise ScenarioError(str(exc)) from None
+        source, base = str(path), path.parent
     else:
         res = resources.files("alphatank").joinpath("data", "scenarios", f"{name_or_path}.toml")
         if not res.is_file():
@@ -193,8 +208,13 @@ def load_scenario(name_or_path: str | Path | Scenario) -> Scenario:
 
 
 def parse_scenario(data: dict[str, Any], source: str = "<dict>",
-                   base: Path | None = None) -> Scenario:
-    """Validate a scenario mapping (as read from TOML); errors name ``source`` and field."""
+                   base: Path | None = None, check_paths: bool = True) -> Scenario:
+    """Validate a scenario mapping (as read from TOML); errors name ``source`` and field.
+    Bot options are checked by building the bot; checkpoint seat paths (resolved against
+    ``base`` first, like maps) must exist unless ``check_paths`` is False (a scenario
+    stored in a checkpoint, whose opponents' folders may since have moved)."""
+    if not isinstance(data, dict):
+        raise ScenarioError(f"{source}: a scenario must be a table, got {type(data).__name__}")
 
     def fail(where: str, msg: str) -> ScenarioError:
         return ScenarioError(f"{source}: {where}: {msg}")
@@ -222,26 +242,25 @@ def parse_scenario(data: dict[str, Any], source: str = "<dict>",
             raise fail(f"[{key}]", "must be a table")
         tables[key] = dict(table)
     try:
-        game_config(preset, **tables["game"])
-    except (ConfigError, TypeError) as exc:
-        raise fail("[game]", str(exc)) from None
-    try:
-        from_dict(RewardConfig, tables["rewards"])
-    except (ConfigError, TypeError) as exc:
-        raise fail("[rewards]", str(exc)) from None
+        game_config(preset, where=f"{source}: [game]", **tables["game"])
+        from_dict(RewardConfig, tables["rewards"], where=f"{source}: [rewards]")
+    except ConfigError as exc:
+        raise ScenarioError(str(exc)) from None
 
     maps = _resolve_maps(data["map"], base, fail)
     seats_data = data.get("seats")
     if not isinstance(seats_data, list) or len(seats_data) < 2:
         raise fail("seats", "need at least 2 [[seats]] entries")
-    seats = tuple(_parse_seat(s, i, fail) for i, s in enumerate(seats_data))
+    seats = tuple(_parse_seat(s, i, fail, base, check_paths)
+                  for i, s in enumerate(seats_data))
     if len({s.team for s in seats}) < 2:
         raise fail("seats", f"need at least 2 teams, got {sorted({s.team for s in seats})}")
     for m in maps:
         spec = _load_map_cached(m)
-        if len(spec.floor_cells()) < len(seats):
-            raise fail("map", f"map {spec.name!r} has {len(spec.floor_cells())} floor cells "
-                       f"for {len(seats)} seats")
+        room = spec.tank_room(len(seats))
+        if room < len(seats):
+            raise fail("map", f"map {spec.name!r} has room for {room} tank(s) (free floor "
+                       f"reachable from its spawns), the scenario has {len(seats)} seats")
     return Scenario(name=data["name"], map=data["map"], maps=maps, seats=seats,
                     description=description, preset=preset, observation=observation,
                     game=tables["game"], rewards=tables["rewards"], source=source)
@@ -286,7 +305,8 @@ def _checked(sources: tuple[str, ...], fail: Any) -> tuple[str, ...]:
     return sources
 
 
-def _parse_seat(data: Any, i: int, fail: Any) -> Seat:
+def _parse_seat(data: Any, i: int, fail: Any, base: Path | None = None,
+                check_paths: bool = True) -> Seat:
     where = f"seats[{i}]"
     if not isinstance(data, dict):
         raise fail(where, "must be a table")
@@ -317,6 +337,11 @@ def _parse_seat(data: Any, i: int, fail: Any) -> Seat:
         options = data.get("options", {})
         if not isinstance(options, dict):
             raise fail(f"{where}.options", "must be a table of bot options")
+        from alphatank.bots import make_bot
+        try:
+            make_bot(bot, **options)
+        except (ValueError, TypeError) as exc:
+            raise fail(f"{where}.options", str(exc)) from None
         return Seat(team, controller, bot=bot, weakness=float(weakness), options=dict(options))
     if controller == "human":
         keys = data.get("keys", "wasd")
@@ -327,8 +352,25 @@ def _parse_seat(data: Any, i: int, fail: Any) -> Seat:
         path = data.get("path")
         if not isinstance(path, str) or not path:
             raise fail(f"{where}.path", "required, the checkpoint folder")
+        if check_paths:
+            found = _checkpoint_folder(path, base)
+            if found is None:
+                raise fail(f"{where}.path", f"no checkpoint at {path!r}: give a checkpoint "
+                           "folder (holding meta.json) or a run folder (holding 'latest')"
+                           + (f", absolute or relative to {base}" if base else ""))
+            path = found
         return Seat(team, controller, path=path)
     return Seat(team, controller)
+
+
+def _checkpoint_folder(path: str, base: Path | None) -> str | None:
+    """``path`` as found (relative to ``base`` first, then as given) if it is a checkpoint
+    or run folder, else None."""
+    p = Path(path)
+    for cand in ([base / p] if base is not None and not p.is_absolute() else []) + [p]:
+        if (cand / "meta.json").is_file() or (cand / "latest").is_file():
+            return str(cand)
+    return None
 
 
 def bot_names() -> tuple[str, ...]:

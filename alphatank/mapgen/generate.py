@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from alphatank.errors import InputError
 from alphatank.sim.mapspec import (
     MapSpec,
     parse_map,
@@ -30,7 +31,7 @@ _ATTEMPTS = 20  # generation attempts before falling back to an empty arena
 _PAIR_CHUNK = 1 << 18  # segment x wall pairs per numpy chunk in line-of-fire tests
 
 
-class MapGenError(ValueError):
+class MapGenError(InputError, ValueError):
     """A generator option is out of range; the message names the option and allowed values."""
 
 

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from alphatank.mapgen.generate import components, lines_clear, open_sides, segment_cells
-from alphatank.sim.mapspec import MapSpec, load_map, map_text
+from alphatank.sim.mapspec import MapError, MapSpec, decode_text, load_map, map_text, read_text
 
 
 @dataclass(frozen=True)
@@ -100,14 +100,19 @@ def map_warnings(spec: MapSpec, text: str | None = None,
 
 def check_map(name_or_path: str | Path, teams: Sequence[str] | None = None
               ) -> tuple[MapSpec, list[MapWarning]]:
-    """Load a map with the game's loader (raising its MapError) and lint it."""
+    """Load a map with the game's loader (raising its MapError) and lint it; with
+    ``teams``, MapError too if the map has no room for that many tanks."""
     spec = load_map(name_or_path)
+    if teams and spec.tank_room(len(teams)) < len(teams):
+        raise MapError(f"room for {spec.tank_room(len(teams))} tank(s) (free floor reachable "
+                       f"from the spawns), --teams {''.join(teams)} asks for {len(teams)}",
+                       spec.source)
     path = Path(name_or_path)
     if path.is_file():
-        text = path.read_text(encoding="utf-8")
+        text = read_text(path)
     else:
-        text = resources.files("alphatank.maps").joinpath(f"{name_or_path}.txt").read_text(
-            encoding="utf-8")
+        text = decode_text(resources.files("alphatank.maps").joinpath(
+            f"{name_or_path}.txt").read_bytes())
     return spec, map_warnings(spec, text, teams)
 
 
@@ -138,8 +143,9 @@ def ascii_art(spec: MapSpec, show_fire: bool = False) -> str:
 def describe(spec: MapSpec) -> str:
     """One line: size, wall share, spawns and zones."""
     inner = spec.walls[1:-1, 1:-1]
+    walls = f"{inner.mean():.0%} interior walls" if inner.size else "no interior"
     zones = ("random" if spec.random_zones
              else f"{len(spec.buffs)} buff, {len(spec.debuffs)} debuff")
     return (f"{spec.name}: {spec.rows} rows x {spec.cols} cols of {spec.cell:g} px, "
-            f"{inner.mean():.0%} interior walls, {len(spec.spawns)} spawn slot(s), "
+            f"{walls}, {len(spec.spawns)} spawn slot(s), "
             f"zones {zones}")

@@ -9,7 +9,15 @@ from pathlib import Path
 import numpy as np
 
 from alphatank.mapgen.generate import MAX_SIZE, MapGenError
-from alphatank.sim.mapspec import GRID_CHARS, HEADER_KEYS, MapError, MapSpec, map_text, parse_map
+from alphatank.sim.mapspec import (
+    GRID_CHARS,
+    HEADER_KEYS,
+    MapError,
+    MapSpec,
+    map_text,
+    parse_map,
+    read_text,
+)
 
 TOOLS = GRID_CHARS  # '#', '.', '1'..'8', '+', '-'
 
@@ -26,13 +34,14 @@ class EditorModel:
     dirty: bool = False
 
     @classmethod
-    def blank(cls, rows: int, cols: int, name: str = "untitled") -> EditorModel:
-        """A floor grid inside a wall border."""
+    def blank(cls, rows: int, cols: int, name: str | None = None) -> EditorModel:
+        """A floor grid inside a wall border (without a ``name``, :meth:`save` names the
+        map after its file)."""
         if not (3 <= rows <= MAX_SIZE and 3 <= cols <= MAX_SIZE):
             raise MapGenError(f"map size must be in [3, {MAX_SIZE}] each way, got {rows}x{cols}")
         grid = np.full((rows, cols), ".", dtype="<U1")
         grid[[0, -1], :] = grid[:, [0, -1]] = "#"
-        return cls(grid, {"name": name})
+        return cls(grid, {"name": name} if name else {})
 
     @classmethod
     def from_spec(cls, spec: MapSpec) -> EditorModel:
@@ -67,7 +76,11 @@ class EditorModel:
     @classmethod
     def from_file(cls, path: str | Path) -> EditorModel:
         path = Path(path)
-        model = cls.from_text(path.read_text(encoding="utf-8"), str(path))
+        try:
+            text = read_text(path)
+        except ValueError as exc:
+            raise MapError(str(exc).removeprefix(f"{path}: "), str(path)) from None
+        model = cls.from_text(text, str(path))
         model.header.setdefault("name", path.stem)
         return model
 
@@ -144,8 +157,10 @@ class EditorModel:
         return parse_map(self.text(), source, name=self.header.get("name"))
 
     def save(self, path: str | Path) -> MapSpec:
-        """Write the map if the game accepts it; otherwise raise the loader's MapError."""
+        """Write the map if the game accepts it; otherwise raise the loader's MapError. A
+        map without a name is named after the file's stem."""
         path = Path(path)
+        self.header.setdefault("name", path.stem)
         spec = parse_map(self.text(), str(path), name=path.stem)
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(self.text(), encoding="utf-8")

@@ -1,63 +1,143 @@
 """Game and reward configuration dataclasses (defaults: the paper's Table 5).
 
 Speeds are given per second and converted to per-tick values with ``tick_hz``.
-Unknown keys are errors that list the valid ones (see :func:`from_dict`).
+Every field is checked once, when a config is built (:func:`check_fields`, run by
+``__post_init__``): its type from the annotation (``bool`` must be true or false, ``int``
+an integer and not a bool, ``float`` a finite number; ints are accepted for floats) and,
+where declared next to the field with :func:`bounded`, its range. A field added later is
+covered by its type automatically. Unknown keys are errors that list the valid ones (see
+:func:`from_dict`); errors name the field (``[game].friendly_fire: must be true or false,
+got 'no'``), and the callers that read files prefix the file.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass, fields
+import numbers
+import types
+import typing
+from dataclasses import dataclass, field, fields
 from typing import Any, TypeVar
+
+from alphatank.errors import InputError
 
 T = TypeVar("T")
 
 
-class ConfigError(ValueError):
-    """A configuration value or key is not allowed."""
+class ConfigError(InputError, ValueError):
+    """A configuration value or key is not allowed. ``key`` is the offending field (None for
+    errors about the whole config) and ``reason`` the message without a location."""
+
+    def __init__(self, message: str, key: str | None = None, reason: str | None = None):
+        super().__init__(message)
+        self.key, self.reason = key, reason if reason is not None else message
+
+
+def bounded(default: Any, lo: float | None = None, hi: float | None = None) -> Any:
+    """A dataclass field with an allowed closed range ``[lo, hi]`` (None: unbounded)."""
+    return field(default=default, metadata={"range": (lo, hi)})
+
+
+def _fmt(v: Any) -> str:
+    return f"{v:g}" if isinstance(v, float) else str(v)
+
+
+def _kinds(tp: Any) -> tuple[type, ...]:
+    """The classes an annotation admits (``X | None`` -> (X, NoneType))."""
+    if isinstance(tp, types.UnionType) or typing.get_origin(tp) is typing.Union:
+        return tuple(k for arg in typing.get_args(tp) for k in _kinds(arg))
+    return (tp,) if isinstance(tp, type) else ()
+
+
+def check_value(kinds: tuple[type, ...], value: Any, rng: tuple[Any, Any] | None = None
+                ) -> tuple[Any, str | None]:
+    """(normalised value, None) if ``value`` fits the types ``kinds`` and the range
+    ``rng``, else (value, reason)."""
+    if value is None and type(None) in kinds:
+        return value, None
+    kind = next((k for k in kinds if k is not type(None)), None)
+    if kind is bool:
+        if isinstance(value, bool):
+            return value, None
+        return value, f"must be true or false, got {value!r}"
+    if kind is int:
+        if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+            return value, f"must be an integer, got {value!r}"
+        value = int(value)
+    elif kind is float:
+        if isinstance(value, bool) or not isinstance(value, numbers.Real):
+            return value, f"must be a number, got {value!r}"
+        value = float(value)
+        if not math.isfinite(value):
+            return value, f"must be a finite number, got {value!r}"
+    elif kind is str:
+        if not isinstance(value, str):
+            return value, f"must be a string, got {value!r}"
+    elif kind is not None and not isinstance(value, kind):
+        return value, f"must be a {kind.__name__}, got {value!r}"
+    if rng is not None:
+        lo, hi = rng
+        if (lo is not None and value < lo) or (hi is not None and value > hi):
+            lo_s = "-inf" if lo is None else _fmt(lo)
+            hi_s = "inf" if hi is None else _fmt(hi)
+            return value, f"must be in [{lo_s}, {hi_s}], got {value!r}"
+    return value, None
+
+
+_HINTS: dict[type, dict[str, Any]] = {}
+
+
+def check_fields(obj: Any) -> None:
+    """Check (and normalise: int -> float for float fields) every field of the frozen
+    dataclass ``obj`` against its annotation and declared range; ConfigError names the
+    first bad field."""
+    cls = type(obj)
+    hints = _HINTS.get(cls)
+    if hints is None:
+        hints = _HINTS[cls] = typing.get_type_hints(cls)
+    for f in fields(obj):
+        value, reason = check_value(_kinds(hints[f.name]), getattr(obj, f.name),
+                                    f.metadata.get("range"))
+        if reason is not None:
+            raise ConfigError(f"{cls.__name__}.{f.name}: {reason}", f.name, reason)
+        object.__setattr__(obj, f.name, value)
 
 
 @dataclass(frozen=True)
 class GameConfig:
-    """Rules and physics settings of a match."""
+    """Rules and physics settings of a match. Ranges (inclusive) keep every setting
+    physical and every tick's work bounded: e.g. bullet speed <= 10,000 px/s keeps the
+    physics substeps per tick in the tens on the smallest allowed cells."""
 
-    tick_hz: int = 30
-    tank_width: float = 30.0
-    tank_height: float = 24.0
-    tank_speed: float = 120.0  # px/s
-    rotation_speed: float = 90.0  # deg/s (3 deg per tick at 30 Hz, Table 5)
-    bullet_speed: float = 300.0  # px/s; 2.5x the tank speed
-    bullet_radius: float = 3.0
-    bullet_max_bounces: int = 6
-    bullet_max_distance: float = 300.0  # px
-    max_bullets: int = 6
-    bullet_cooldown_ms: float = 300.0
-    buff_cooldown_factor: float = 0.5  # cooldown multiplier inside a buff zone
-    buff_max_bullets: int = 10
-    debuff_max_bullets: int = 1
-    random_buff_zones: int = 2
-    random_debuff_zones: int = 2
+    tick_hz: int = bounded(30, 1, 240)
+    tank_width: float = bounded(30.0, 1.0, 500.0)
+    tank_height: float = bounded(24.0, 1.0, 500.0)
+    tank_speed: float = bounded(120.0, 1.0, 2000.0)  # px/s
+    rotation_speed: float = bounded(90.0, 1.0, 3600.0)  # deg/s (3 deg per tick at 30 Hz)
+    bullet_speed: float = bounded(300.0, 1.0, 10000.0)  # px/s; 2.5x the tank speed
+    bullet_radius: float = bounded(3.0, 0.5, 50.0)
+    bullet_max_bounces: int = bounded(6, 0, 1000)
+    bullet_max_distance: float = bounded(300.0, 1.0, 1e7)  # px
+    max_bullets: int = bounded(6, 0, 64)
+    bullet_cooldown_ms: float = bounded(300.0, 0.0, 60000.0)
+    buff_cooldown_factor: float = bounded(0.5, 0.0, 10.0)  # cooldown multiplier in a buff zone
+    buff_max_bullets: int = bounded(10, 0, 64)
+    debuff_max_bullets: int = bounded(1, 0, 64)
+    random_buff_zones: int = bounded(2, 0, 64)
+    random_debuff_zones: int = bounded(2, 0, 64)
     friendly_fire: bool = True
     self_hit: bool = False
-    self_hit_grace_ms: float = 150.0
+    self_hit_grace_ms: float = bounded(150.0, 0.0, 60000.0)
     immortal: bool = False  # the paper's TERMINATE_TIME training mode: hits score, nobody dies
-    max_steps: int = 1200
+    max_steps: int = bounded(1200, 1, 10_000_000)
 
     def __post_init__(self) -> None:
-        positive = ("tick_hz", "tank_width", "tank_height", "tank_speed", "rotation_speed",
-                    "bullet_speed", "bullet_radius", "bullet_max_distance", "max_steps")
-        for name in positive:
-            if not getattr(self, name) > 0:
-                raise ConfigError(f"GameConfig.{name} must be > 0, got {getattr(self, name)!r}")
-        for name in ("bullet_max_bounces", "max_bullets", "buff_max_bullets", "debuff_max_bullets",
-                     "random_buff_zones", "random_debuff_zones"):
-            if getattr(self, name) < 0:
-                raise ConfigError(f"GameConfig.{name} must be >= 0, got {getattr(self, name)!r}")
+        check_fields(self)
         if self.bullet_speed <= self.tank_speed:
-            raise ConfigError(
-                f"GameConfig.bullet_speed ({self.bullet_speed}) must exceed tank_speed "
-                f"({self.tank_speed}): bullets are faster than tanks in every preset")
+            reason = (f"({_fmt(self.bullet_speed)}) must exceed tank_speed "
+                      f"({_fmt(self.tank_speed)}): bullets are faster than tanks in every preset")
+            raise ConfigError(f"GameConfig.bullet_speed {reason}", "bullet_speed", reason)
 
     @property
     def dt(self) -> float:
@@ -84,7 +164,8 @@ class GameConfig:
 
 @dataclass(frozen=True)
 class RewardConfig:
-    """Weights of every reward term; 0 switches a term off (Table 5 defaults)."""
+    """Weights of every reward term; 0 switches a term off (Table 5 defaults). Weights
+    may be any finite number; counts and distances have ranges."""
 
     victory: float = 200.0
     hit: float = 50.0  # to the shooter
@@ -92,22 +173,26 @@ class RewardConfig:
     team_hit_penalty: float = -5.0  # to a shooter who hits a teammate
     trajectory_hit: float = 40.0
     trajectory_distance: float = 10.0
-    trajectory_close_px: float = 70.0  # D_thresh: within this, a fired shot is rewarded
+    # D_thresh: a fired shot whose predicted path passes within this is rewarded
+    trajectory_close_px: float = bounded(70.0, 1.0, 100000.0)
     bullet_close: float = 0.01
     bullet_away: float = -0.02
     wall_hit: float = 0.0  # escalating: weight, then wall_hit_high_factor x weight
-    wall_hit_low_ticks: int = 10
-    wall_hit_high_factor: float = 5.0
+    wall_hit_low_ticks: int = bounded(10, 0, 10_000_000)
+    wall_hit_high_factor: float = bounded(5.0, 0.0, 1000.0)
     stationary: float = 0.0
-    stationary_ticks: int = 20
+    stationary_ticks: int = bounded(20, 1, 10_000_000)
     bfs_progress: float = 0.0  # per cell of BFS path distance gained to the nearest enemy
     aim_streak: float = 0.0
-    aim_streak_ticks: int = 5
+    aim_streak_ticks: int = bounded(5, 1, 10_000_000)
     control_change: float = 0.0
-    control_change_ticks: int = 5
+    control_change_ticks: int = bounded(5, 1, 10_000_000)
     rotation: float = 0.0
-    rotation_limit_deg: float = 360.0
-    rotation_reset_px: float = 35.0
+    rotation_limit_deg: float = bounded(360.0, 1.0, 1e9)
+    rotation_reset_px: float = bounded(35.0, 0.0, 100000.0)
+
+    def __post_init__(self) -> None:
+        check_fields(self)
 
 
 PRESETS: dict[str, dict[str, Any]] = {
@@ -118,21 +203,30 @@ PRESETS: dict[str, dict[str, Any]] = {
 
 
 def from_dict(cls: type[T], data: dict[str, Any], where: str = "") -> T:
-    """Build a config dataclass from a mapping, rejecting unknown keys by name."""
+    """Build a config dataclass from a mapping, rejecting unknown keys by name. Errors
+    read ``<where>.<field>: <reason>`` (``where`` defaults to the class name)."""
+    if not isinstance(data, dict):
+        raise ConfigError(f"{where or cls.__name__}: must be a table of settings, got "
+                          f"{type(data).__name__}")
     valid = {f.name for f in fields(cls)}  # type: ignore[arg-type]
-    unknown = sorted(set(data) - valid)
+    unknown = sorted(set(data) - valid, key=str)
     if unknown:
         loc = f"{where}: " if where else ""
         raise ConfigError(
             f"{loc}unknown {cls.__name__} key(s) {unknown}; valid keys: {sorted(valid)}")
-    return cls(**data)
+    try:
+        return cls(**data)
+    except ConfigError as exc:
+        if not where or exc.key is None:
+            raise
+        raise ConfigError(f"{where}.{exc.key}: {exc.reason}", exc.key, exc.reason) from None
 
 
-def game_config(preset: str = "paper", **overrides: Any) -> GameConfig:
-    """GameConfig from a named preset plus overrides."""
+def game_config(preset: str = "paper", where: str = "", **overrides: Any) -> GameConfig:
+    """GameConfig from a named preset plus overrides (errors prefixed with ``where``)."""
     if preset not in PRESETS:
         raise ConfigError(f"unknown preset {preset!r}; valid presets: {sorted(PRESETS)}")
-    return from_dict(GameConfig, {**PRESETS[preset], **overrides}, where=f"preset {preset!r}")
+    return from_dict(GameConfig, {**PRESETS[preset], **overrides}, where=where)
 
 
 def replace(cfg: T, **changes: Any) -> T:

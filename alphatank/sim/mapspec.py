@@ -14,12 +14,38 @@ from pathlib import Path
 
 import numpy as np
 
+from alphatank.errors import InputError
+
 GRID_CHARS = "#.12345678+-"
 HEADER_KEYS = ("name", "cell", "description", "zones", "author")
 DEFAULT_CELL = 70.0
+CELL_RANGE = (16.0, 400.0)  # px per cell: tanks (30 x 24 px) need room, worlds stay drawable
+MAX_GRID = 128  # cells each way
 
 
-class MapError(ValueError):
+def read_text(path: str | Path) -> str:
+    """A text file's contents as UTF-8 (a leading byte-order mark dropped); ValueError
+    naming the file, and the offset of the first bad byte, for anything else."""
+    try:
+        raw = Path(path).read_bytes()
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    return decode_text(raw, str(path))
+
+
+def decode_text(raw: bytes, source: str = "<bytes>") -> str:
+    """``raw`` decoded as UTF-8 without a byte-order mark; ValueError naming ``source``."""
+    try:
+        return raw.decode("utf-8").removeprefix("\ufeff")
+    except UnicodeDecodeError as exc:
+        kind = ("UTF-16" if raw[:2] in (b"\xff\xfe", b"\xfe\xff")
+                else "binary" if b"\x00" in raw[:1024] else "not UTF-8")
+        raise ValueError(f"{source}: not a UTF-8 text file ({kind}: byte "
+                         f"0x{raw[exc.start]:02x} at offset {exc.start}); save it as "
+                         "UTF-8") from None
+
+
+class MapError(InputError, ValueError):
     """A map file is malformed; names the file, line and column (1-based)."""
 
     def __init__(self, message: str, source: str = "<string>", line: int = 0, col: int = 0):
@@ -74,6 +100,25 @@ class MapSpec:
         """Thinnest wall dimension in px (a cell, or thinner if a map defines thin walls)."""
         return self.cell
 
+    def free_cells_in(self, area: np.ndarray, taken: set[tuple[int, int]] = frozenset()
+                      ) -> int:
+        """Floor cells of the boolean grid ``area`` that are neither zones nor ``taken``."""
+        zones = set(self.buffs) | set(self.debuffs) | set(taken)
+        return sum(1 for r, c in zip(*np.nonzero(area & ~self.walls), strict=True)
+                   if (int(r), int(c)) not in zones)
+
+    def tank_room(self, n: int) -> int:
+        """How many of ``n`` tanks a match can place (as :class:`~alphatank.sim.match.Match`
+        does): the spawns of slots 1..n, plus free floor (no zone, no such spawn) reachable
+        from the first of them; without such spawns, the roomiest floor area."""
+        used = {self.spawns[s] for s in range(1, n + 1) if s in self.spawns}
+        if used:
+            first = self.spawns[min(s for s in self.spawns if s <= n)]
+            areas = [reachable_from(self.walls, first)]
+        else:
+            areas = floor_areas(self.walls)
+        return max(len(used) + self.free_cells_in(a, used) for a in areas)
+
 
 def merge_walls(walls: np.ndarray) -> list[tuple[int, int, int, int]]:
     """Cover wall cells with few axis-aligned rectangles (r0, c0, r1, c1), end-exclusive.
@@ -117,9 +162,21 @@ def reachable_from(walls: np.ndarray, start: tuple[int, int]) -> np.ndarray:
     return seen
 
 
+def floor_areas(walls: np.ndarray) -> list[np.ndarray]:
+    """Boolean grids of the 4-connected floor areas (largest first)."""
+    todo = ~walls
+    areas = []
+    while todo.any():
+        r, c = np.argwhere(todo)[0]
+        area = reachable_from(walls, (int(r), int(c)))
+        todo &= ~area
+        areas.append(area)
+    return sorted(areas, key=lambda a: -int(a.sum()))
+
+
 def parse_map(text: str, source: str = "<string>", name: str | None = None) -> MapSpec:
     """Parse and validate map text; raises MapError naming source, line and column."""
-    lines = text.splitlines()
+    lines = text.removeprefix("\ufeff").splitlines()
     header: dict[str, str] = {}
     grid: list[tuple[int, str]] = []  # (1-based line number, row text)
     i = 0
@@ -163,15 +220,20 @@ def parse_map(text: str, source: str = "<string>", name: str | None = None) -> M
             raise MapError(f"ragged row: {len(row)} cells, expected {width} like the first row",
                            source, lineno, min(len(row), width) + 1)
 
+    if len(grid) > MAX_GRID or width > MAX_GRID:
+        raise MapError(f"grid of {len(grid)} x {width} cells; at most {MAX_GRID} each way",
+                       source, grid[0][0], 1)
     cell = DEFAULT_CELL
     if "cell" in header:
         try:
             cell = float(header["cell"])
         except ValueError:
             cell = -1.0
-        if not cell > 0:
-            raise MapError(f"header 'cell' must be a positive number of px, got "
-                           f"{header['cell']!r}", source, _header_line(content, "cell"), 1)
+        lo, hi = CELL_RANGE
+        if not lo <= cell <= hi:
+            raise MapError(f"header 'cell' must be a positive number of px in [{lo:g}, "
+                           f"{hi:g}], got {header['cell']!r}", source,
+                           _header_line(content, "cell"), 1)
     zones = header.get("zones", "")
     if zones not in ("", "random", "fixed"):
         raise MapError(f"header 'zones' must be 'random' or 'fixed', got {zones!r}",
@@ -213,11 +275,20 @@ def parse_map(text: str, source: str = "<string>", name: str | None = None) -> M
                                source, lineno, col)
     rects = tuple((c0 * cell, r0 * cell, c1 * cell, r1 * cell)
                   for r0, c0, r1, c1 in merge_walls(walls))
-    return MapSpec(
+    spec = MapSpec(
         name=header.get("name") or name or Path(source).stem,
         walls=walls, spawns=spawns, buffs=tuple(buffs), debuffs=tuple(debuffs), cell=cell,
         description=header.get("description", ""), random_zones=zones == "random",
         source=source, wall_rects=rects)
+    if spawns:
+        top = max(spawns)
+        room = spec.tank_room(top)
+        if room < top:
+            lineno, col = spawn_where[top]
+            raise MapError(f"spawn slots go up to {top} but only {room} tank(s) fit: too "
+                           f"few free floor cells (no zone) reachable from spawn {min(spawns)}",
+                           source, lineno, col)
+    return spec
 
 
 def _header_line(content: list[tuple[int, str]], key: str) -> int:
@@ -245,19 +316,36 @@ def map_text(spec: MapSpec) -> str:
     return "\n".join(head) + "\n\n" + "\n".join("".join(row) for row in chars) + "\n"
 
 
-def shipped_maps() -> list[str]:
-    """Names of the maps shipped with the package."""
+def shipped_maps(folder: str | None = None) -> list[str]:
+    """Names of the maps shipped with the package (in its top folder, or in ``folder``,
+    e.g. ``"train"``: then named ``"train/maze_0000"``, as :func:`load_map` takes them)."""
     root = resources.files("alphatank.maps")
-    return sorted(p.name[:-4] for p in root.iterdir() if p.name.endswith(".txt"))
+    if folder is not None:
+        root = root.joinpath(folder)
+    prefix = f"{folder}/" if folder else ""
+    return sorted(prefix + p.name[:-4] for p in root.iterdir() if p.name.endswith(".txt"))
+
+
+def shipped_map_folders() -> list[str]:
+    """Folders of shipped maps (``train``, ``test``): a scenario's ``map`` may name one."""
+    root = resources.files("alphatank.maps")
+    return sorted(p.name for p in root.iterdir()
+                  if p.is_dir() and any(q.name.endswith(".txt") for q in p.iterdir()))
 
 
 def load_map(name_or_path: str | Path) -> MapSpec:
     """Load a shipped map by name (``"maze"``) or any map file by path."""
     path = Path(name_or_path)
     if path.suffix == ".txt" or path.exists():
+        if path.is_dir():
+            raise MapError("is a folder, not a map file (.txt)", str(path))
         if not path.is_file():
             raise MapError("no such map file", str(path))
-        return parse_map(path.read_text(encoding="utf-8"), str(path), name=path.stem)
+        try:
+            text = read_text(path)
+        except ValueError as exc:
+            raise MapError(str(exc).removeprefix(f"{path}: "), str(path)) from None
+        return parse_map(text, str(path), name=path.stem)
     res = resources.files("alphatank.maps").joinpath(f"{name_or_path}.txt")
     if not res.is_file():
         raise MapError(f"unknown map {str(name_or_path)!r}; shipped maps: {shipped_maps()} "

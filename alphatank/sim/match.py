@@ -16,7 +16,7 @@ from typing import NamedTuple
 import numpy as np
 
 from alphatank.sim.config import GameConfig
-from alphatank.sim.mapspec import MapSpec, reachable_from
+from alphatank.sim.mapspec import MapSpec, floor_areas, reachable_from
 from alphatank.sim.world import World
 
 
@@ -173,12 +173,18 @@ class Match:
         used = {c for c in cells if c is not None}
         anchor = next((c for c in cells if c is not None), None)
         floor = spec.floor_cells()
+        missing = [i for i, c in enumerate(cells) if c is None]
         if anchor is None:
             anchor = floor[int(self.rng.integers(len(floor)))]
+            if spec.free_cells_in(reachable_from(spec.walls, anchor)) < len(missing):
+                # a pocket too small for the tanks: draw again in a roomy floor area
+                roomy = [c for area in floor_areas(spec.walls)
+                         if spec.free_cells_in(area) >= len(missing) for c in floor if area[c]]
+                if roomy:
+                    anchor = roomy[int(self.rng.integers(len(roomy)))]
         reach = reachable_from(spec.walls, anchor)
         free = [c for c in floor if reach[c] and c not in used
                 and c not in spec.buffs and c not in spec.debuffs]
-        missing = [i for i, c in enumerate(cells) if c is None]
         if len(free) < len(missing):
             raise ValueError(f"map {spec.name!r} has room for {len(free) + len(used)} tanks, "
                              f"{self.n} requested")

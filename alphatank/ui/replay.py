@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from alphatank.errors import InputError
 from alphatank.sim.config import ConfigError, GameConfig, from_dict
 from alphatank.sim.mapspec import MapError, MapSpec, map_text, parse_map
 from alphatank.sim.match import Match
@@ -32,7 +33,7 @@ _META_KEYS = ("format", "version", "seed", "match_seed", "scenario", "seats", "m
               "map_text", "config", "teams", "labels", "ticks", "final_hash", "winner")
 
 
-class ReplayError(ValueError):
+class ReplayError(InputError, ValueError):
     """A replay file is missing, corrupt, or does not re-simulate to its recorded end."""
 
 
