@@ -17,3 +17,7 @@ def one_line(exc: BaseException) -> str:
     """An exception's message on one line (continuation lines joined with ' | ')."""
     text = " | ".join(part.strip() for part in str(exc).strip().splitlines() if part.strip())
     return text or type(exc).__name__
+
+
+class MissingPackageError(InputError, RuntimeError):
+    """An optional package that a requested feature needs is not installed."""

@@ -12,7 +12,13 @@ from alphatank.bots.dodge import DodgeBot
 from alphatank.bots.random_bot import RandomBot
 from alphatank.bots.smart import SmartBot
 from alphatank.bots.weakness import Weakened
+from alphatank.errors import InputError
 from alphatank.sim.config import check_value
+
+
+class BotError(InputError, ValueError):
+    """An unknown bot, option or option value; the message lists the valid ones."""
+
 
 BOTS: dict[str, type[Bot]] = {cls.name: cls for cls in
                               (RandomBot, AggressiveBot, DefensiveBot, DodgeBot, SmartBot)}
@@ -34,8 +40,8 @@ def make_bot(name: str, weakness: float | None = None, seed: int | None = None,
     valid = bot_options(name)
     unknown = sorted(set(options) - set(valid), key=str)
     if unknown:
-        raise ValueError(f"bot {name!r} has no option(s) {unknown}; valid options: "
-                         f"{valid + ['weakness', 'seed']}")
+        raise BotError(f"bot {name!r} has no option(s) {unknown}; valid options: "
+                       f"{valid + ['weakness', 'seed']}")
     params = inspect.signature(cls.__init__).parameters
     for key, value in options.items():
         default = params[key].default
@@ -43,7 +49,7 @@ def make_bot(name: str, weakness: float | None = None, seed: int | None = None,
         if kind in (bool, int, float):
             _, reason = check_value((kind,), value)
             if reason is not None:
-                raise ValueError(f"bot {name!r} option {key}: {reason}")
+                raise BotError(f"bot {name!r} option {key}: {reason}")
     bot = cls(seed=seed, **options)
     if weakness is None:
         return bot
@@ -60,7 +66,7 @@ def parse_bot_spec(text: str) -> tuple[str, float | None, dict[str, Any]]:
     for pair in pairs:
         key, eq, value = pair.partition("=")
         if not eq or not key.strip():
-            raise ValueError(f"bot spec {text!r}: option {pair!r} must be KEY=VALUE; "
+            raise BotError(f"bot spec {text!r}: option {pair!r} must be KEY=VALUE; "
                              f"valid options of {name!r}: {bot_options(name)}")
         options[key.strip()] = _value(value.strip())
     weakness = None
@@ -68,7 +74,7 @@ def parse_bot_spec(text: str) -> tuple[str, float | None, dict[str, Any]]:
         try:
             weakness = float(weak)
         except ValueError:
-            raise ValueError(f"bot spec {text!r}: weakness after '@' must be a number in "
+            raise BotError(f"bot spec {text!r}: weakness after '@' must be a number in "
                              f"[0, 1], got {weak!r}") from None
     return name, weakness, options
 
@@ -96,5 +102,5 @@ def _value(text: str) -> Any:
 def _lookup(name: str) -> type[Bot]:
     cls = BOTS.get(name)
     if cls is None:
-        raise ValueError(f"unknown bot {name!r}; valid bots: {list(BOT_NAMES)}")
+        raise BotError(f"unknown bot {name!r}; valid bots: {list(BOT_NAMES)}")
     return cls

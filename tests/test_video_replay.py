@@ -170,7 +170,7 @@ def test_corrupt_replay_files_give_clear_errors(recorded, tmp_path):
     with pytest.raises(ReplayError, match="out of range"):
         load_replay(bad)
     with zipfile.ZipFile(recorded["replay"]) as z:
-        assert sorted(z.namelist()) == ["actions.npy", "meta.npy"]
+        assert sorted(z.namelist()) == ["actions.npy", "meta.npy", "routes.npy"]
 
 
 def test_save_is_atomic_and_readable(recorded, tmp_path):

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 import shutil
 import time
@@ -30,6 +31,7 @@ import torch
 
 from alphatank.errors import InputError
 from alphatank.game.scenarios import Scenario, ScenarioError, parse_scenario
+from alphatank.sim.config import check_value
 from alphatank.sim.policy import NOOP
 from alphatank.training.learners import make_learner
 from alphatank.training.presets import LearnerSpec, TrainConfig
@@ -144,18 +146,19 @@ class Checkpoint:
             raise CheckpointError(f"{self.path / 'meta.json'}: train_config: {exc}") from None
 
     @property
-    def scenario(self) -> Scenario:
-        try:
-            return parse_scenario(self.meta["scenario"], f"{self.path / 'meta.json'}:scenario")
-        except ScenarioError as exc:
-            raise CheckpointError(str(exc)) from None
-
-    @property
     def learner_specs(self) -> list[LearnerSpec]:
         try:
             return [LearnerSpec.from_dict(d) for d in self.meta["learners"]]
         except (ValueError, KeyError, TypeError) as exc:
             raise CheckpointError(f"{self.path / 'meta.json'}: learners: {exc}") from None
+
+    @property
+    def scenario(self) -> Scenario:
+        try:
+            return parse_scenario(self.meta["scenario"], f"{self.path / 'meta.json'}:scenario",
+                                  check_paths=False)
+        except ScenarioError as exc:
+            raise CheckpointError(str(exc)) from None
 
     @property
     def obs_dim(self) -> int:
@@ -172,11 +175,19 @@ class Checkpoint:
         file = self.path / f"{name}.pt"
         self._check_file(file)
         try:
-            return torch.load(file, map_location="cpu", weights_only=True)
+            state = torch.load(file, map_location="cpu", weights_only=True)
         except Exception as exc:  # torch raises many types for damaged files
             first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
             raise CheckpointError(f"{file}: cannot be loaded (corrupt or not a checkpoint "
                                   f"file): {type(exc).__name__}: {first}") from None
+        if not isinstance(state, dict):
+            raise CheckpointError(f"{file}: not a learner state (a {type(state).__name__}, "
+                                  "expected a dict of tensors)")
+        bad = non_finite(state)
+        if bad is not None:
+            raise CheckpointError(f"{file}: tensor {bad!r} holds NaN or infinite values; "
+                                  "the training diverged or the file was altered")
+        return state
 
     def replay(self, name: str) -> dict[str, np.ndarray] | None:
         file = self.path / f"{name}.replay.npz"
@@ -185,9 +196,13 @@ class Checkpoint:
         self._check_file(file)
         try:
             with np.load(file, allow_pickle=False) as data:
-                return {k: data[k] for k in data.files}
+                arrays = {k: data[k] for k in data.files}
         except Exception as exc:
             raise CheckpointError(f"{file}: cannot be read: {type(exc).__name__}: {exc}") from None
+        bad = non_finite(arrays)
+        if bad is not None:
+            raise CheckpointError(f"{file}: array {bad!r} holds NaN or infinite values")
+        return arrays
 
     def _check_file(self, file: Path) -> None:
         want = self.meta.get("files", {}).get(file.name)
@@ -237,7 +252,72 @@ def load_checkpoint(path: str | Path) -> Checkpoint:
     for key in ("train_config", "scenario", "observation", "learners", "files"):
         if key not in meta:
             raise CheckpointError(f"{meta_file}: missing field {key!r}")
+    _check_meta(meta, meta_file)
     return Checkpoint(ckpt_dir, meta)
+
+
+# meta.json fields read outside the train config: key -> (types, range)
+_OBSERVATION_FIELDS: dict[str, tuple[tuple[type, ...], tuple[Any, Any] | None]] = {
+    "kind": ((str,), None), "obs_dim": ((int,), (1, 10**7)),
+    "max_walls": ((int,), (0, 10**6)), "max_buffs": ((int,), (0, 10**6)),
+    "max_debuffs": ((int,), (0, 10**6)), "team_flags": ((bool,), None),
+    "tanks": ((int,), (2, 10**4)), "seat_learner": ((dict,), None)}
+_PROGRESS_FIELDS = {"global_step": ((int,), (0, None)), "iteration": ((int,), (0, None)),
+                    "episodes": ((int,), (0, None)), "elapsed": ((float,), (0, None))}
+
+
+def _check_meta(meta: dict[str, Any], meta_file: Path) -> None:
+    """Type-check the meta fields that loading reads; CheckpointError names the field."""
+    def fail(where: str, why: str) -> CheckpointError:
+        return CheckpointError(f"{meta_file}: {where}: {why}")
+
+    for key, table in (("observation", _OBSERVATION_FIELDS), ("progress", _PROGRESS_FIELDS)):
+        data = meta.get(key, {} if key == "progress" else None)
+        if not isinstance(data, dict):
+            raise fail(key, f"must be an object, got {data!r}")
+        for name, (kinds, rng) in table.items():
+            if name not in data:
+                if key == "observation":
+                    raise fail(f"{key}.{name}", "missing")
+                continue
+            _, why = check_value(kinds, data[name], rng)
+            if why is not None:
+                raise fail(f"{key}.{name}", why)
+    seat_learner = meta["observation"]["seat_learner"]
+    if not all(isinstance(k, str) and k.isdigit() and isinstance(v, str)
+               for k, v in seat_learner.items()):
+        raise fail("observation.seat_learner", "must map seat numbers to learner names, "
+                   f"got {seat_learner!r}")
+    learners = meta["learners"]
+    if (not isinstance(learners, list) or not learners
+            or not all(isinstance(d, dict) and isinstance(d.get("name"), str) and d["name"]
+                       for d in learners)):
+        raise fail("learners", "must be a non-empty list of objects with a 'name'")
+    files = meta["files"]
+    if not isinstance(files, dict) or not all(
+            isinstance(k, str) and "/" not in k and "\\" not in k and isinstance(v, str)
+            for k, v in files.items()):
+        raise fail("files", "must map file names in the checkpoint folder to SHA-256 digests")
+
+
+def non_finite(state: Any, prefix: str = "") -> str | None:
+    """Dotted name of the first floating-point tensor or array in ``state`` (nested dicts,
+    lists) holding NaN or infinity, else None."""
+    if isinstance(state, torch.Tensor):
+        ok = not state.is_floating_point() or bool(torch.isfinite(state).all())
+        return None if ok else prefix or "<tensor>"
+    if isinstance(state, np.ndarray):
+        ok = state.dtype.kind != "f" or bool(np.isfinite(state).all())
+        return None if ok else prefix or "<array>"
+    if isinstance(state, float):
+        return None if math.isfinite(state) else prefix or "<number>"
+    items = (state.items() if isinstance(state, dict)
+             else enumerate(state) if isinstance(state, list | tuple) else ())
+    for key, value in items:
+        bad = non_finite(value, f"{prefix}.{key}" if prefix else str(key))
+        if bad is not None:
+            return bad
+    return None
 
 
 class NetworkPolicy:

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from alphatank.errors import MissingPackageError
 from alphatank.training.presets import WANDB_MODES
 
 
@@ -25,6 +26,13 @@ class RunLogger:
                  tensorboard: bool = False, run_id: str | None = None):
         if wandb_mode not in WANDB_MODES:
             raise ValueError(f"wandb mode must be one of {WANDB_MODES}, got {wandb_mode!r}")
+        if tensorboard:  # before anything is created for the run
+            try:
+                from torch.utils.tensorboard import SummaryWriter
+            except ImportError:
+                raise MissingPackageError(
+                    "TensorBoard logging needs the 'tensorboard' package: pip install "
+                    "tensorboard (or run without --tensorboard)") from None
         self.run_dir = Path(run_dir)
         self.run_dir.mkdir(parents=True, exist_ok=True)
         self._jsonl = open(self.run_dir / "metrics.jsonl", "a", encoding="utf-8")  # noqa: SIM115
@@ -39,12 +47,6 @@ class RunLogger:
             self.run_id = self.wandb_run.id
         self.tb = None
         if tensorboard:
-            try:
-                from torch.utils.tensorboard import SummaryWriter
-            except ImportError as exc:
-                raise RuntimeError("TensorBoard logging needs the 'tensorboard' package: "
-                                   "pip install tensorboard (or run without --tensorboard)"
-                                   ) from exc
             self.tb = SummaryWriter(str(self.run_dir / "tensorboard"))
 
     def log(self, metrics: dict[str, float], step: int) -> None:

@@ -9,6 +9,7 @@ import time
 
 import numpy as np
 
+from alphatank.commands.argtypes import positive_float, positive_int
 from alphatank.sim.config import ConfigError, game_config
 from alphatank.sim.mapspec import MapError, load_map
 from alphatank.sim.match import Match
@@ -21,24 +22,24 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="comma-separated bots, each NAME[:KEY=VALUE...][@WEAKNESS], e.g. "
                         "'smart,smart:ricochet=false,random@0.5' (default: %(default)s)")
     p.add_argument("--map", default="maze", help="shipped map name or .txt path")
-    p.add_argument("--games", type=int, default=20,
+    p.add_argument("--games", type=positive_int, default=20,
                    help="games per pair, sides alternating (default: %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="first match seed")
     p.add_argument("--preset", default="paper", help="game preset (paper, long_range)")
     p.add_argument("--max-steps", type=int, default=None,
                    help="ticks before a game is a draw (default: the preset's)")
     p.add_argument("--render", action="store_true", help="show every game in a window")
-    p.add_argument("--fps", type=float, default=60.0, help="frame rate with --render")
+    p.add_argument("--fps", type=positive_float, default=60.0, help="frame rate with --render")
 
 
 def run(args: argparse.Namespace) -> int:
     from alphatank.bots.arena import run_arena
-    from alphatank.bots.registry import parse_bot_spec
+    from alphatank.bots.registry import bot_from_spec
 
     specs = [s.strip() for s in args.bots.split(",") if s.strip()]
     try:
         for s in specs:
-            parse_bot_spec(s)
+            bot_from_spec(s)  # names, options and their types, weakness
         spec = load_map(args.map)
         overrides = {} if args.max_steps is None else {"max_steps": args.max_steps}
         cfg = game_config(args.preset, **overrides)

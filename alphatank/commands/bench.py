@@ -9,6 +9,9 @@ import time
 
 import numpy as np
 
+from alphatank.commands.argtypes import positive_int
+from alphatank.commands.benchsoak import DEFAULT_SOAK_SCENARIOS, soak
+from alphatank.game.scenarios import ScenarioError
 from alphatank.sim.config import game_config
 from alphatank.sim.mapspec import load_map
 from alphatank.sim.match import Match
@@ -16,13 +19,24 @@ from alphatank.sim.match import Match
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--map", default="maze", help="map name or path (default: maze)")
-    p.add_argument("--ticks", type=int, default=5000, help="ticks per run (default: 5000)")
-    p.add_argument("--repeats", type=int, default=5, help="runs per setting; median reported")
+    p.add_argument("--ticks", type=positive_int, default=5000,
+                   help="ticks per run (default: 5000)")
+    p.add_argument("--repeats", type=positive_int, default=5,
+                   help="runs per setting; median reported")
     p.add_argument("--preset", default="paper", help="game preset (paper, long_range)")
     p.add_argument("--env", action="store_true", help="also measure env steps/s")
     p.add_argument("--bots", action="store_true", help="also measure bot decision cost")
     p.add_argument("--render", action="store_true", help="also measure renderer fps")
     p.add_argument("--json", metavar="FILE", help="write the figures as JSON")
+    p.add_argument("--soak", action="store_true",
+                   help="instead: soak test, --steps random-action env steps over --scenarios "
+                        "with RSS sampled; fails on memory growth or NaN (see benchsoak)")
+    p.add_argument("--steps", type=int, default=1_000_000,
+                   help="env steps of the soak, split over the scenarios (default: 10^6)")
+    p.add_argument("--scenarios", default=",".join(DEFAULT_SOAK_SCENARIOS),
+                   help="comma-separated soak scenarios (default: %(default)s)")
+    p.add_argument("--sample-every", type=positive_int, default=10_000, metavar="N",
+                   help="soak: memory sample every N steps (default: %(default)s)")
 
 
 def match_ticks_per_second(map_name: str, teams: list[str], ticks: int, seed: int = 0,
@@ -46,6 +60,8 @@ def match_ticks_per_second(map_name: str, teams: list[str], ticks: int, seed: in
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.soak:
+        return _soak(args)
     results: dict[str, object] = {}
     print(f"bare match on {args.map!r} ({args.preset}), tanks firing constantly, "
           f"{args.ticks} ticks x {args.repeats} runs (median):")
@@ -74,7 +90,28 @@ def run(args: argparse.Namespace) -> int:
         fps = render_bench()
         results["render_fps"] = fps
         print(f"renderer 4v4 with overlays: {fps:,.0f} frames/s")
-    if args.json:
-        with open(args.json, "w", encoding="utf-8") as f:
-            json.dump(results, f, indent=2)
+    _write_json(args.json, results)
     return 0
+
+
+def _soak(args: argparse.Namespace) -> int:
+    from alphatank.game.scenarios import load_scenario
+
+    scenarios = [s.strip() for s in args.scenarios.split(",") if s.strip()]
+    if not scenarios:
+        raise ScenarioError(f"--scenarios: need at least one scenario, got {args.scenarios!r}")
+    for name in scenarios:
+        if not load_scenario(name).learner_seats:
+            raise ScenarioError(f"--scenarios: {name!r} has no learner seat to step")
+    if args.steps < len(scenarios) or args.sample_every < 1:
+        raise ScenarioError(f"--steps must be >= {len(scenarios)} (one per scenario) and "
+                            f"--sample-every >= 1, got {args.steps} and {args.sample_every}")
+    ok, figures = soak(scenarios, args.steps, args.sample_every)
+    _write_json(args.json, figures)
+    return 0 if ok else 1
+
+
+def _write_json(path: str | None, figures: dict) -> None:
+    if path:
+        with open(path, "w", encoding="utf-8") as f:
+            json.dump(figures, f, indent=2)

@@ -8,14 +8,18 @@ import argparse
 import time
 from pathlib import Path
 
+from alphatank.commands.argtypes import positive_float, positive_int
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--name", help="run name (default: demo-<date>-<time>)")
     p.add_argument("--runs", default="runs", help="folder of runs (default: runs)")
-    p.add_argument("--minutes", type=float, default=8.0,
+    p.add_argument("--minutes", type=positive_float, default=8.0,
                    help="training budget in minutes (default: 8; the whole job stays < 10)")
-    p.add_argument("--games", type=int, default=100, help="evaluation games (default: 100)")
-    p.add_argument("--workers", type=int, default=2, help="env worker processes (default: 2)")
+    p.add_argument("--games", type=positive_int, default=100,
+                   help="evaluation games (default: 100)")
+    p.add_argument("--workers", type=positive_int, default=2,
+                   help="env worker processes (default: 2)")
     p.add_argument("--wandb", default="offline", choices=("offline", "online", "disabled"))
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 

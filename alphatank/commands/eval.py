@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import argparse
 
+from alphatank.commands.argtypes import positive_int
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("checkpoints", nargs="+", metavar="CHECKPOINT",
@@ -12,13 +14,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--vs", default="",
                    help="comma-separated bots to play (e.g. smart,aggressive,dodge,defensive); "
                         "default: the opponents of each checkpoint's scenario")
-    p.add_argument("--games", type=int, default=100, help="games per row (default: 100)")
+    p.add_argument("--games", type=positive_int, default=100, help="games per row (default: 100)")
     p.add_argument("--scenario", help="play in this scenario instead of the checkpoint's own")
     p.add_argument("--team", help="team the checkpoint plays (default: its first learner's)")
     p.add_argument("--weakness", type=float, help="bot weakness 0..1 (default: as trained)")
     p.add_argument("--greedy", action="store_true", help="most likely actions, no sampling")
     p.add_argument("--seed", type=int, default=0, help="seed of the game sequence")
-    p.add_argument("--num-envs", type=int, default=16, help="matches played at once")
+    p.add_argument("--num-envs", type=positive_int, default=16, help="matches played at once")
     p.add_argument("--csv", metavar="FILE", help="also write the rows as CSV")
     p.add_argument("--json", metavar="FILE", help="also write the rows as JSON")
 

@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from alphatank.commands.argtypes import positive_float, positive_int
 from alphatank.game.scenarios import Scenario, ScenarioError, load_scenario, parse_scenario
 from alphatank.sim.match import Match
 from alphatank.sim.policy import Policy
@@ -68,7 +69,7 @@ def parse_seats(text: str, map_name: str, game: dict[str, Any] | None = None) ->
         seat: dict[str, Any] = {"team": team}
         if kind in BOT_NAMES:
             kind, arg = "bot", kind
-        where = f"--seats item {k + 1} {item!r}"
+        where = f"--seats[{k}] {item!r}"  # seats count from 0, as in scenarios and envs
         if kind == "human":
             seat.update(controller="human", keys=arg or HUMAN_ORDER[min(humans, 2)])
             humans += 1
@@ -151,7 +152,7 @@ def build_lineup(sc: Scenario, checkpoint: str | None = None, stand_in: str = "s
         else:
             policies.append(make_bot(stand_in))
             labels.append(stand_in)
-            notes.append(f"seat {i + 1} ({desc}) is played by the {stand_in!r} bot")
+            notes.append(f"seat {i} ({desc}) is played by the {stand_in!r} bot")
             desc = f"{stand_in}(for {desc})"
         descs.append(desc)
     return Lineup(sc, policies, labels, descs, keyboards, notes)
@@ -199,7 +200,7 @@ def summary_lines(match: Match, lineup_labels: Sequence[str], shots: np.ndarray
     out = []
     for i in range(match.n):
         state = "alive" if match.alive[i] else "destroyed"
-        out.append((f"{i + 1}. {lineup_labels[i]} (team {match.teams[i]}): "
+        out.append((f"seat {i}: {lineup_labels[i]} (team {match.teams[i]}): "
                     f"{plural(int(match.score[i]), 'hit')}, {plural(int(shots[i]), 'shot')}, "
                     f"{state}", team_color(int(match.team_index[i]))))
     return out
@@ -272,7 +273,8 @@ class PlaySession:
         sc = self.lineup.scenario
         self.recorder = ReplayRecorder(
             self.match, match_seed=match_seed, seed=seed, scenario=sc.name if sc else None,
-            seats=self.lineup.seats, labels=self.lineup.labels)
+            seats=self.lineup.seats, labels=self.lineup.labels,
+            policies=self.lineup.policies)
         self.actions = np.ones((self.match.n, 3), dtype=np.int64)
         self.shots = np.zeros(self.match.n, dtype=np.int64)
         self.finished = False
@@ -447,13 +449,14 @@ def add_lineup_arguments(p: argparse.ArgumentParser) -> None:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_lineup_arguments(p)
-    p.add_argument("--fps", type=float, default=60.0, help="frames per second (default: 60)")
-    p.add_argument("--scale", type=float, help="window scale (default: fit the screen)")
+    p.add_argument("--fps", type=positive_float, default=60.0,
+                   help="frames per second (default: 60)")
+    p.add_argument("--scale", type=positive_float, help="window scale (default: fit the screen)")
     p.add_argument("--save-replay", metavar="FILE",
                    help="save each match as a replay (FILE, FILE-2, ...)")
     p.add_argument("--headless-test", action="store_true",
                    help="allow SDL_VIDEODRIVER=dummy (automated tests only)")
-    p.add_argument("--max-frames", type=int, help="stop after this many frames")
+    p.add_argument("--max-frames", type=positive_int, help="stop after this many frames")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -11,6 +11,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from alphatank.commands.argtypes import non_negative_float, positive_float, positive_int
 from alphatank.commands.play import add_lineup_arguments, lineup_from_args, start_episode
 from alphatank.game.scenarios import ScenarioError
 from alphatank.ui.render import parse_overlays
@@ -20,15 +21,16 @@ from alphatank.ui.video import record_match
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_lineup_arguments(p)
-    p.add_argument("--out", default="match.mp4", help="MP4 to write (default: match.mp4)")
+    p.add_argument("-o", "--out", default="match.mp4",
+                   help="MP4 to write (default: match.mp4)")
     p.add_argument("--gif", metavar="FILE", help="also write a GIF (half size, 15 fps)")
     p.add_argument("--replay", metavar="FILE", help="also save the match as a replay file")
-    p.add_argument("--every", type=int, default=1,
+    p.add_argument("--every", type=positive_int, default=1,
                    help="draw every N-th tick (default: 1, a frame per tick)")
-    p.add_argument("--fps", type=float, help="video frame rate (default: real time)")
-    p.add_argument("--hold", type=float, default=0.0,
+    p.add_argument("--fps", type=positive_float, help="video frame rate (default: real time)")
+    p.add_argument("--hold", type=non_negative_float, default=0.0,
                    help="seconds to hold the final frame (default: 0)")
-    p.add_argument("--scale", type=float, default=1.0, help="video scale (default: 1)")
+    p.add_argument("--scale", type=positive_float, default=1.0, help="video scale (default: 1)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -45,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
     if args.replay:
         recorder = ReplayRecorder(match, match_seed=match_seed, seed=args.seed,
                                   scenario=lineup.scenario.name, seats=lineup.seats,
-                                  labels=lineup.labels)
+                                  labels=lineup.labels, policies=lineup.policies)
     rec = record_match(match, lineup.policies, mp4=Path(args.out), gif=args.gif,
                        fps=args.fps, every=args.every, hold_s=args.hold, overlays=overlays,
                        labels=lineup.labels, scale=args.scale, recorder=recorder)

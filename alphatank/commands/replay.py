@@ -13,10 +13,11 @@ import os
 import sys
 import time
 
+from alphatank.commands.argtypes import positive_float, positive_int
 from alphatank.commands.play import NO_DISPLAY_HELP, Lineup, PlaySession
 from alphatank.sim.policy import Policy
 from alphatank.ui.render import DEFAULT_OVERLAYS, DisplayUnavailable, parse_overlays
-from alphatank.ui.replay import Replay, ReplayError, ReplayPolicy, load_replay, simulate
+from alphatank.ui.replay import Replay, ReplayError, check_end, load_replay, simulate
 from alphatank.ui.video import record_match
 
 
@@ -26,18 +27,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--record", metavar="OUT.mp4", help="render the replay to an MP4")
     p.add_argument("--gif", metavar="FILE", help="also write a GIF")
     p.add_argument("--render", action="store_true", help="play it back in a window")
-    p.add_argument("--speed", type=float, default=1.0, help="playback speed for --render")
+    p.add_argument("--speed", type=positive_float, default=1.0, help="playback speed for --render")
     p.add_argument("--overlays", default=",".join(DEFAULT_OVERLAYS),
                    help="aim,trajectory,bfs | all | none (default: aim,bfs)")
     p.add_argument("--headless-test", action="store_true",
                    help="allow --render with SDL_VIDEODRIVER=dummy (automated tests only)")
-    p.add_argument("--max-frames", type=int, help="stop --render after this many frames")
+    p.add_argument("--max-frames", type=positive_int, help="stop --render after this many frames")
 
 
 def replay_lineup(replay: Replay) -> Lineup:
     """A line-up whose every seat plays back the replay's actions."""
-    policies: list[Policy] = [ReplayPolicy(replay.actions) for _ in replay.teams]
-    labels = replay.labels or [str(i + 1) for i in range(len(replay.teams))]
+    policies: list[Policy] = list(replay.policies())
+    labels = replay.labels or [str(i) for i in range(len(replay.teams))]
     return Lineup(None, policies, labels, replay.seats)
 
 
@@ -55,12 +56,10 @@ def run(args: argparse.Namespace) -> int:
     try:
         if args.record:
             match = replay.new_match()
-            rec = record_match(match, [ReplayPolicy(replay.actions)] * match.n,
-                               mp4=args.record, gif=args.gif, overlays=overlays,
-                               labels=replay.labels or None, max_ticks=replay.ticks)
-            if rec.final_hash != replay.final_hash:
-                raise ReplayError(f"replay diverged: final state hash {rec.final_hash[:16]}"
-                                  f"... != recorded {replay.final_hash[:16]}...")
+            rec = record_match(match, replay.policies(), mp4=args.record, gif=args.gif,
+                               overlays=overlays, labels=replay.labels or None,
+                               max_ticks=replay.ticks)
+            check_end(replay, match)
             print(f"wrote {rec.mp4} ({rec.frames} frames)" + (f" and {rec.gif}" if rec.gif
                                                               else ""))
         if args.render:
@@ -69,7 +68,8 @@ def run(args: argparse.Namespace) -> int:
             t0 = time.perf_counter()
             match = simulate(replay)
             print(f"re-simulated {match.tick} ticks in {time.perf_counter() - t0:.2f}s: "
-                  f"final state hash matches ({replay.final_hash[:16]}...)")
+                  f"final state hash matches ({replay.final_hash[:16]}...), and so does the "
+                  f"result ({'team ' + match.winner + ' wins' if match.winner else 'no winner'})")
     except ReplayError as exc:
         print(f"alphatank replay: {exc}", file=sys.stderr)
         return 1

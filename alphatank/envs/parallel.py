@@ -21,7 +21,7 @@ from pettingzoo.utils import parallel_to_aec
 from alphatank.envs.core import FirstMatchRenderer, MatchSet, action_space, check_actions
 from alphatank.game.observe import ObsLayout
 from alphatank.game.rewards import TERMS
-from alphatank.game.scenarios import Scenario, load_scenario
+from alphatank.game.scenarios import Scenario, ScenarioError, load_scenario
 from alphatank.sim.policy import Policy
 
 RENDER_MODES = ["rgb_array", "human"]
@@ -43,6 +43,11 @@ class TankBattleParallelEnv(ParallelEnv):
             raise ValueError(f"render_mode must be one of {RENDER_MODES} or None, "
                              f"got {render_mode!r}")
         self.scenario = sc = load_scenario(scenario)
+        if not sc.learner_seats:
+            raise ScenarioError(f"{sc.source}: no learner seats, so no PettingZoo agents (the "
+                                "agents are a scenario's controller = \"learner\" seats); "
+                                "watch a bots-only scenario with VectorMatchEnv or "
+                                "`alphatank record --scenario`")
         overrides = dict(game_overrides or {})
         if max_cycles is not None:
             overrides["max_steps"] = int(max_cycles)
@@ -95,6 +100,9 @@ class TankBattleParallelEnv(ParallelEnv):
     def step(self, actions: Mapping[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
         if not self.agents:
             raise RuntimeError("step() with no live agents; call reset()")
+        if not isinstance(actions, Mapping):
+            raise TypeError(f"step() takes a dict agent -> action (MultiDiscrete([3, 3, 2])) "
+                            f"for the live agents {self.agents}, got {type(actions).__name__}")
         unknown = [a for a in actions if a not in self.agents]
         if unknown:
             raise ValueError(f"actions for unknown or finished agent(s) {unknown}; live "

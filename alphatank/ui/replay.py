@@ -2,18 +2,30 @@
 
 A replay re-simulates bit-identically: same GameConfig, same map text, same teams, same
 match seed and the same (ticks, n_tanks, 3) int8 actions give the same final state hash
-(:meth:`alphatank.sim.match.Match.state_hash`), which the file stores and :func:`simulate`
-checks. Files are ``.npz`` archives (``actions`` plus a JSON ``meta`` record), written
-atomically (temporary file + ``os.replace``) and loaded without pickle.
+(:meth:`alphatank.sim.match.Match.state_hash`) and the same winner, which the file
+stores and :func:`simulate` checks. The bots' planned routes ride along (``routes``), so
+a replay's video shows the same path overlay as the original recording.
+
+Files are ``.npz`` archives (``actions``, ``routes`` and a JSON ``meta`` record), written
+atomically (temporary file + ``os.replace``) and loaded without pickle. A replay from
+someone else is untrusted input: :func:`load_replay` bounds the archive's sizes, checks
+the type and range of every meta field (the config through GameConfig's own ranges), caps
+the physics work a re-simulation may take (:data:`MAX_SUBSTEPS`), and checks ``digest``, a
+SHA-256 over the map text, config, seats, teams, actions, routes and recorded outcome
+(every meta field and array), so an edit anywhere in the file is caught even where it
+would not change the re-simulation.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import os
+import re
 import tempfile
 import zipfile
+import zlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,15 +34,23 @@ from typing import Any
 import numpy as np
 
 from alphatank.errors import InputError
-from alphatank.sim.config import ConfigError, GameConfig, from_dict
+from alphatank.sim.config import ConfigError, GameConfig, check_value, from_dict
 from alphatank.sim.mapspec import MapError, MapSpec, map_text, parse_map
 from alphatank.sim.match import Match
 from alphatank.sim.policy import NOOP
+from alphatank.sim.world import substeps_for
 
 FORMAT = "alphatank-replay"
-VERSION = 1
+VERSION = 2  # 2: routes, digest, checked winner (version 1 files: record them again)
 _META_KEYS = ("format", "version", "seed", "match_seed", "scenario", "seats", "map_name",
-              "map_text", "config", "teams", "labels", "ticks", "final_hash", "winner")
+              "map_text", "config", "teams", "labels", "ticks", "final_hash", "winner",
+              "digest")
+MAX_SUBSTEPS = 5_000_000  # physics substeps a re-simulation may take (ticks x substeps)
+MAX_TANKS = 64
+MAX_META_BYTES = 8 << 20
+MAX_ARRAY_BYTES = 256 << 20
+_HEX64 = re.compile(r"[0-9a-f]{64}")
+_U64 = (0, 2**64 - 1)
 
 
 class ReplayError(InputError, ValueError):
@@ -53,6 +73,9 @@ class Replay:
     scenario: str | None = None  # scenario name or source, if the match came from one
     seats: list[str] = field(default_factory=list)  # seat descriptions, e.g. "bot:smart"
     labels: list[str] = field(default_factory=list)  # names drawn over the tanks
+    # (ticks, n_tanks, 4) int16: each seat's planned route (start row, col, goal row, col)
+    # when its actions of that tick were chosen; -1 where the seat had none.
+    routes: np.ndarray | None = None
 
     @property
     def ticks(self) -> int:
@@ -68,22 +91,75 @@ class Replay:
         """A fresh Match in the replay's initial state."""
         return Match(self.game_config(), self.map_spec(), self.teams, seed=self.match_seed)
 
+    def policies(self) -> list[ReplayPolicy]:
+        """One playback controller per seat (actions and planned routes)."""
+        return [ReplayPolicy(self.actions, self.routes) for _ in self.teams]
+
+    def meta(self) -> dict[str, Any]:
+        """The JSON record stored beside the arrays (``digest`` included)."""
+        meta = {"format": FORMAT, "version": VERSION, "seed": self.seed,
+                "match_seed": self.match_seed, "scenario": self.scenario,
+                "seats": list(self.seats), "map_name": self.map_name,
+                "map_text": self.map_text, "config": self.config, "teams": list(self.teams),
+                "labels": list(self.labels), "ticks": self.ticks,
+                "final_hash": self.final_hash, "winner": self.winner}
+        return {**meta, "digest": content_digest(meta, self.arrays())}
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        routes = self.routes
+        if routes is None:
+            routes = np.full((*self.actions.shape[:2], 4), -1, dtype=np.int16)
+        return {"actions": np.ascontiguousarray(self.actions, dtype=np.int8),
+                "routes": np.ascontiguousarray(routes, dtype=np.int16)}
+
+
+def content_digest(meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> str:
+    """SHA-256 over every meta field but ``digest`` (canonical JSON) and every array
+    (name, dtype, shape, bytes)."""
+    h = hashlib.sha256()
+    body = {k: v for k, v in meta.items() if k != "digest"}
+    h.update(json.dumps(body, sort_keys=True, separators=(",", ":")).encode("utf-8"))
+    for name in sorted(arrays):
+        arr = np.ascontiguousarray(arrays[name])
+        h.update(f"|{name}|{arr.dtype.str}|{arr.shape}|".encode())
+        h.update(arr.tobytes())
+    return h.hexdigest()
+
+
+def planned_route(policy: object, match: Match, seat: int) -> tuple[int, int, int, int]:
+    """(start row, col, goal row, col) of the path a bot plans to drive, or -1s."""
+    own = getattr(policy, "planned_path", None)
+    cells = own(match, seat) if callable(own) else None
+    if not cells or len(cells) < 2:
+        return (-1, -1, -1, -1)
+    (r0, c0), (r1, c1) = cells[0], cells[-1]
+    return (int(r0), int(c0), int(r1), int(c1))
+
 
 class ReplayRecorder:
     """Collects the actions of one episode; call :meth:`record` with each tick's actions
-    right before ``match.step`` and :meth:`finish` once the episode is over."""
+    right before ``match.step`` and :meth:`finish` once the episode is over. With
+    ``policies`` (one per seat), each bot's planned route is recorded too."""
 
     def __init__(self, match: Match, *, match_seed: int, seed: int | None = None,
                  scenario: str | None = None, seats: Sequence[str] = (),
-                 labels: Sequence[str] = ()):
+                 labels: Sequence[str] = (), policies: Sequence[object] | None = None):
         if match.tick != 0:
             raise ValueError(f"start recording at tick 0 (match is at tick {match.tick})")
         self.match, self.match_seed, self.seed = match, match_seed, seed
         self.scenario, self.seats, self.labels = scenario, list(seats), list(labels)
+        self.policies = list(policies) if policies is not None else None
         self._actions: list[np.ndarray] = []
+        self._routes: list[np.ndarray] = []
 
     def record(self, actions: np.ndarray) -> None:
         self._actions.append(np.asarray(actions, dtype=np.int8).copy())
+        m = self.match
+        routes = np.full((m.n, 4), -1, dtype=np.int16)
+        if self.policies is not None:
+            for seat in np.flatnonzero(m.alive):
+                routes[seat] = planned_route(self.policies[seat], m, int(seat))
+        self._routes.append(routes)
 
     def finish(self) -> Replay:
         m = self.match
@@ -92,18 +168,21 @@ class ReplayRecorder:
                              f"is at tick {m.tick}: call record() before every step()")
         actions = (np.stack(self._actions) if self._actions
                    else np.zeros((0, m.n, 3), dtype=np.int8))
+        routes = (np.stack(self._routes) if self._routes
+                  else np.zeros((0, m.n, 4), dtype=np.int16))
         return Replay(match_seed=self.match_seed, map_name=m.spec.name,
                       map_text=map_text(m.spec), config=dataclasses.asdict(m.cfg),
                       teams=list(m.teams), actions=actions, final_hash=m.state_hash(),
                       winner=m.winner, seed=self.seed, scenario=self.scenario,
-                      seats=self.seats, labels=self.labels)
+                      seats=self.seats, labels=self.labels, routes=routes)
 
 
 class ReplayPolicy:
-    """Plays back one seat of a replay (so replays run through the same loops as bots)."""
+    """Plays back one seat of a replay (so replays run through the same loops as bots);
+    its :meth:`planned_path` is the route the seat's bot had planned at that tick."""
 
-    def __init__(self, actions: np.ndarray):
-        self.actions = actions
+    def __init__(self, actions: np.ndarray, routes: np.ndarray | None = None):
+        self.actions, self.routes = actions, routes
 
     def reset(self, match: Match, seat: int, seed: int | None = None) -> None:
         return None
@@ -113,21 +192,28 @@ class ReplayPolicy:
             return NOOP.copy()
         return self.actions[match.tick, seat].astype(np.int64)
 
+    def planned_path(self, match: Match, seat: int) -> list[tuple[int, int]] | None:
+        """Cells of the route drawn after tick ``match.tick`` (chosen with its actions)."""
+        t = match.tick - 1
+        if self.routes is None or not 0 <= t < len(self.routes) or not match.alive[seat]:
+            return None
+        r0, c0, r1, c1 = (int(v) for v in self.routes[t, seat])
+        if r0 < 0:
+            return None
+        from alphatank.sim.navigation import nav_grid
+
+        return nav_grid(match.spec).path((r0, c0), (r1, c1)) or None
+
 
 def save_replay(replay: Replay, path: str | Path) -> Path:
     """Write ``replay`` to ``path`` atomically; returns the path."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    meta = {"format": FORMAT, "version": VERSION, "seed": replay.seed,
-            "match_seed": replay.match_seed, "scenario": replay.scenario,
-            "seats": replay.seats, "map_name": replay.map_name, "map_text": replay.map_text,
-            "config": replay.config, "teams": replay.teams, "labels": replay.labels,
-            "ticks": replay.ticks, "final_hash": replay.final_hash, "winner": replay.winner}
-    blob = np.frombuffer(json.dumps(meta).encode("utf-8"), dtype=np.uint8)
+    blob = np.frombuffer(json.dumps(replay.meta()).encode("utf-8"), dtype=np.uint8)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as f:
-            np.savez_compressed(f, actions=replay.actions.astype(np.int8), meta=blob)
+            np.savez_compressed(f, **replay.arrays(), meta=blob)
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600 files
@@ -138,59 +224,156 @@ def save_replay(replay: Replay, path: str | Path) -> Path:
     return path
 
 
-def load_replay(path: str | Path) -> Replay:
-    """Read a replay file; ReplayError names the file and what is wrong."""
-    path = Path(path)
-    if not path.is_file():
-        raise ReplayError(f"{path}: no such replay file")
+def _read_archive(path: Path) -> tuple[dict[str, np.ndarray], Any]:
+    """The arrays and the decoded meta of a replay archive; sizes bounded before reading."""
     try:
+        with zipfile.ZipFile(path) as zf:
+            sizes = {i.filename: i.file_size for i in zf.infolist()}
+        for name, size in sizes.items():
+            cap = MAX_META_BYTES if name == "meta.npy" else MAX_ARRAY_BYTES
+            if size > cap:
+                raise ReplayError(f"{path}: member {name!r} unpacks to {size:,} bytes; a "
+                                  f"replay member may hold at most {cap:,}")
         with np.load(path, allow_pickle=False) as z:
             missing = [k for k in ("actions", "meta") if k not in z.files]
             if missing:
                 raise ReplayError(f"{path}: not a replay file: missing {missing} "
                                   f"(found {z.files})")
-            actions = z["actions"]
-            meta = json.loads(z["meta"].tobytes().decode("utf-8"))
+            arrays = {k: z[k] for k in z.files if k != "meta"}
+            raw = z["meta"]
+        if raw.dtype != np.uint8 or raw.ndim != 1:
+            raise ReplayError(f"{path}: meta must be UTF-8 JSON bytes, got {raw.dtype} "
+                              f"{raw.shape}")
+        meta = json.loads(raw.tobytes().decode("utf-8"))
     except ReplayError:
         raise
-    except (zipfile.BadZipFile, ValueError, OSError, EOFError, KeyError,
-            UnicodeDecodeError) as exc:
+    except (zipfile.BadZipFile, zlib.error, ValueError, OSError, EOFError, KeyError,
+            UnicodeDecodeError, NotImplementedError, RecursionError) as exc:
+        first = (str(exc).strip().splitlines() or [""])[0]
         raise ReplayError(f"{path}: not a readable replay file (corrupt or another format): "
-                          f"{type(exc).__name__}: {exc}") from None
+                          f"{type(exc).__name__}: {first}") from None
+    return arrays, meta
+
+
+def load_replay(path: str | Path) -> Replay:
+    """Read and check a replay file; ReplayError names the file, the field and what is
+    allowed (see the module doc for what is checked)."""
+    path = Path(path)
+    if not path.is_file():
+        raise ReplayError(f"{path}: no such replay file")
+    arrays, meta = _read_archive(path)
+
+    def fail(where: str, why: str) -> ReplayError:
+        return ReplayError(f"{path}: {where}: {why}")
+
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         raise ReplayError(f"{path}: not an AlphaTank replay (meta.format is not {FORMAT!r})")
     if meta.get("version") != VERSION:
-        raise ReplayError(f"{path}: replay version {meta.get('version')!r} is not supported "
-                          f"(this AlphaTank reads version {VERSION})")
+        raise ReplayError(f"{path}: replay version {meta.get('version')!r} is not supported: "
+                          f"this AlphaTank reads version {VERSION} (record the match again)")
     missing = [k for k in _META_KEYS if k not in meta]
     if missing:
         raise ReplayError(f"{path}: replay meta lacks field(s) {missing}")
+    for key, kinds, rng in (("seed", (int, type(None)), _U64), ("match_seed", (int,), _U64),
+                            ("scenario", (str, type(None)), None), ("map_name", (str,), None),
+                            ("map_text", (str,), None), ("ticks", (int,), (0, None)),
+                            ("final_hash", (str,), None), ("digest", (str,), None),
+                            ("winner", (str, type(None)), None)):
+        _, why = check_value(kinds, meta[key], rng)
+        if why is not None:
+            raise fail(f"meta.{key}", why)
+    for key in ("final_hash", "digest"):
+        if not _HEX64.fullmatch(meta[key]):
+            raise fail(f"meta.{key}", "must be 64 lowercase hex digits (a SHA-256)")
     teams = meta["teams"]
-    if actions.dtype != np.int8 or actions.ndim != 3 or actions.shape[1:] != (len(teams), 3):
-        raise ReplayError(f"{path}: actions must be int8 of shape (ticks, {len(teams)}, 3), "
-                          f"got {actions.dtype} {actions.shape}")
-    if actions.shape[0] != meta["ticks"]:
-        raise ReplayError(f"{path}: meta.ticks is {meta['ticks']} but the file holds "
-                          f"{actions.shape[0]} ticks of actions")
-    if actions.size and ((actions < 0).any() or (actions > [2, 2, 1]).any()):
-        raise ReplayError(f"{path}: actions out of range (rotate 0..2, move 0..2, fire 0..1)")
-    replay = Replay(match_seed=int(meta["match_seed"]), map_name=meta["map_name"],
-                    map_text=meta["map_text"], config=meta["config"], teams=list(teams),
-                    actions=actions, final_hash=meta["final_hash"], winner=meta["winner"],
-                    seed=meta["seed"], scenario=meta["scenario"], seats=list(meta["seats"]),
-                    labels=list(meta["labels"]))
+    if (not isinstance(teams, list) or not 2 <= len(teams) <= MAX_TANKS
+            or not all(isinstance(t, str) and t for t in teams)):
+        raise fail("meta.teams", f"must be a list of 2 to {MAX_TANKS} team names, got "
+                   f"{teams!r}"[:300])
+    if len(set(teams)) < 2:
+        raise fail("meta.teams", f"need at least 2 different teams, got {teams!r}")
+    n = len(teams)
+    for key in ("seats", "labels"):
+        val = meta[key]
+        if (not isinstance(val, list) or len(val) not in (0, n)
+                or not all(isinstance(v, str) for v in val)):
+            raise fail(f"meta.{key}", f"must be a list of {n} strings (one per seat) or "
+                       "empty")
+    if meta["winner"] is not None and meta["winner"] not in teams:
+        raise fail("meta.winner", f"must be one of the teams {sorted(set(teams))} or null, "
+                   f"got {meta['winner']!r}")
+    if not isinstance(meta["config"], dict):
+        raise fail("meta.config", "must be an object of GameConfig settings")
     try:
-        replay.game_config()
-        replay.map_spec()
-    except (ConfigError, MapError, TypeError) as exc:
-        raise ReplayError(f"{path}: {exc}") from None
-    return replay
+        cfg = from_dict(GameConfig, meta["config"], where=f"{path}: meta.config")
+        spec = parse_map(meta["map_text"], f"{path}: meta.map_text", name=meta["map_name"])
+    except (ConfigError, MapError) as exc:
+        raise ReplayError(str(exc)) from None
+    if spec.tank_room(n) < n:
+        raise fail("meta.map_text", f"map has room for {spec.tank_room(n)} tanks, the "
+                   f"replay has {n}")
+    ticks = meta["ticks"]
+    if ticks > cfg.max_steps:
+        raise fail("meta.ticks", f"{ticks} ticks exceed the config's max_steps "
+                   f"({cfg.max_steps})")
+    work = ticks * substeps_for(cfg, spec.min_wall_thickness())
+    if work > MAX_SUBSTEPS:
+        raise fail("meta.config", f"re-simulating {ticks:,} ticks would take {work:,} physics "
+                   f"substeps; a replay may ask for at most {MAX_SUBSTEPS:,}")
+    actions = arrays.get("actions")
+    if actions.dtype != np.int8 or actions.ndim != 3 or actions.shape[1:] != (n, 3):
+        raise fail("actions", f"must be int8 of shape (ticks, {n}, 3), got {actions.dtype} "
+                   f"{actions.shape}")
+    if actions.shape[0] != ticks:
+        raise fail("meta.ticks", f"is {ticks} but the file holds {actions.shape[0]} ticks of "
+                   "actions")
+    if actions.size and ((actions < 0).any() or (actions > [2, 2, 1]).any()):
+        raise fail("actions", "out of range (rotate 0..2, move 0..2, fire 0..1)")
+    routes = arrays.get("routes")
+    if routes is None or routes.dtype != np.int16 or routes.shape != (ticks, n, 4):
+        raise fail("routes", f"must be int16 of shape ({ticks}, {n}, 4), got "
+                   f"{None if routes is None else (routes.dtype, routes.shape)}")
+    none = (routes == -1).all(axis=-1)
+    rows, cols = spec.rows, spec.cols
+    inside = ((routes[..., 0::2] >= 0) & (routes[..., 0::2] < rows)
+              & (routes[..., 1::2] >= 0) & (routes[..., 1::2] < cols)).all(axis=-1)
+    if not (none | inside).all():
+        raise fail("routes", f"cells must lie in the {rows} x {cols} grid (or be -1)")
+    extra = sorted(set(arrays) - {"actions", "routes"})
+    if extra:
+        raise fail("arrays", f"unexpected member(s) {extra}; a replay holds actions, routes "
+                   "and meta")
+    if content_digest(meta, {"actions": actions, "routes": routes}) != meta["digest"]:
+        raise fail("meta.digest", "does not match the file's contents: the replay was "
+                   "altered or damaged after it was saved")
+    return Replay(match_seed=meta["match_seed"], map_name=meta["map_name"],
+                  map_text=meta["map_text"], config=meta["config"], teams=list(teams),
+                  actions=actions, final_hash=meta["final_hash"], winner=meta["winner"],
+                  seed=meta["seed"], scenario=meta["scenario"], seats=list(meta["seats"]),
+                  labels=list(meta["labels"]), routes=routes)
+
+
+def check_end(replay: Replay, match: Match) -> None:
+    """ReplayError unless ``match`` (re-simulated) ended as the replay says: same final
+    state hash and the same winner."""
+    got = match.state_hash()
+    if got != replay.final_hash:
+        raise ReplayError(f"replay diverged: final state hash {got[:16]}... != recorded "
+                          f"{replay.final_hash[:16]}... after {match.tick} ticks")
+    if match.winner != replay.winner:
+        raise ReplayError(f"replay diverged: the re-simulated winner is "
+                          f"{_result(match.winner)}, the file claims {_result(replay.winner)}")
+
+
+def _result(winner: str | None) -> str:
+    return f"team {winner}" if winner is not None else "no winner"
 
 
 def simulate(replay: Replay, on_tick: Callable[[Match], None] | None = None,
              check: bool = True) -> Match:
     """Re-run a replay from its seed; ``on_tick(match)`` sees the initial state and every
-    tick after it. With ``check``, ReplayError if the end state differs from the recording."""
+    tick after it. With ``check``, ReplayError if the end state or the winner differs from
+    the recording (:func:`check_end`)."""
     match = replay.new_match()
     if on_tick is not None:
         on_tick(match)
@@ -201,7 +384,6 @@ def simulate(replay: Replay, on_tick: Callable[[Match], None] | None = None,
         match.step(replay.actions[t])
         if on_tick is not None:
             on_tick(match)
-    if check and match.state_hash() != replay.final_hash:
-        raise ReplayError(f"replay diverged: final state hash {match.state_hash()[:16]}... "
-                          f"!= recorded {replay.final_hash[:16]}... after {match.tick} ticks")
+    if check:
+        check_end(replay, match)
     return match

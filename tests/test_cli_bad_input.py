@@ -1,0 +1,400 @@
+"""Every CLI verb against bad arguments and bad files: a non-zero exit, one error line that
+names the file or field (and what is allowed), and never a traceback.
+
+The matrix is data: add a verb's cases to ``CASES`` (argv with ``{name}`` placeholders for
+the files of the ``files`` fixture, then fragments the error line must contain). Most
+cases run in-process through ``alphatank.cli.main`` / ``tools/mapgen.py``'s ``main``; a
+few run as real subprocesses (pipes, exit statuses, the interpreter's own error output).
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import os
+import shutil
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from alphatank.cli import main
+from alphatank.training.ppo import PPOConfig
+from alphatank.training.presets import LearnerSpec, TrainConfig
+from alphatank.training.runner import Trainer
+from alphatank.ui.replay import ReplayRecorder, save_replay
+
+ROOT = Path(__file__).resolve().parents[1]
+GOOD_MAP = "name: m\n\n#####\n#1..#\n#.#.#\n#..2#\n#####\n"
+SCENARIO = ('name = "t"\nmap = "open"\n[[seats]]\nteam = "A"\ncontroller = "learner"\n'
+            '[[seats]]\nteam = "B"\ncontroller = "bot"\nbot = "random"\n')
+
+
+def _spec() -> object:
+    spec = importlib.util.spec_from_file_location("mapgen_tool", ROOT / "tools" / "mapgen.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+MAPGEN = _spec()
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory) -> dict[str, str]:
+    """Bad files of every kind, and a few good ones to spoil."""
+    d = tmp_path_factory.mktemp("bad")
+    out: dict[str, str] = {"dir": str(d), "missing": str(d / "nope.txt")}
+
+    def put(name: str, data: bytes | str) -> None:
+        p = d / name
+        p.write_bytes(data if isinstance(data, bytes) else data.encode("utf-8"))
+        out[name.replace(".", "_")] = str(p)
+
+    put("empty.txt", b"")
+    put("binary.txt", bytes(range(256)) * 4)
+    put("latin1.txt", "name: caf\xe9\n\n#####\n#1.2#\n#####\n".encode("latin-1"))
+    put("utf16.txt", "name: x\n\n#####\n#1.2#\n#####\n".encode("utf-16"))
+    put("cellinf.txt", "cell: inf\n\n#####\n#1.2#\n#####\n")
+    put("cellsmall.txt", "cell: 0.001\n\n#####\n#1.2#\n#####\n")
+    put("noroom.txt", "#####\n#1.+#\n###4#\n#####\n")
+    put("good.txt", GOOD_MAP)
+    put("empty.toml", b"")
+    put("binary.toml", bytes(range(256)))
+    put("ff.toml", SCENARIO + '[game]\nfriendly_fire = "no"\n')
+    put("steps.toml", SCENARIO + "[game]\nmax_steps = true\n")
+    put("victory.toml", SCENARIO + "[rewards]\nvictory = nan\n")
+    put("botopt.toml", SCENARIO.replace('bot = "random"', 'bot = "random"\n'
+                                        'options = { hold_min = 2.5 }'))
+    put("ckptseat.toml", SCENARIO.replace('controller = "bot"\nbot = "random"',
+                                          'controller = "checkpoint"\npath = "gone"'))
+    put("empty.npz", b"")
+    put("binary.npz", bytes(range(256)) * 8)
+    (d / "emptydir").mkdir()
+    out["emptydir"] = str(d / "emptydir")
+
+    # A real replay, then spoiled copies.
+    from alphatank.commands.play import build_lineup, parse_seats, start_episode
+    from alphatank.ui.video import record_match
+
+    lineup = build_lineup(parse_seats("smart,random", "open", {"max_steps": 60}))
+    match, match_seed = start_episode(lineup, 1)
+    rec = ReplayRecorder(match, match_seed=match_seed, seed=1, policies=lineup.policies)
+    record_match(match, lineup.policies, recorder=rec)
+    replay = rec.finish()
+    good = save_replay(replay, d / "good.npz")
+    out["good_npz"] = str(good)
+    raw = good.read_bytes()
+    put("truncated.npz", raw[: len(raw) // 2])
+    flipped = bytearray(raw)
+    with zipfile.ZipFile(good) as z:
+        info = z.getinfo("actions.npy")
+    head = info.header_offset
+    name_len, extra_len = (int.from_bytes(raw[head + k:head + k + 2], "little") for k in (26, 28))
+    flipped[head + 30 + name_len + extra_len + info.compress_size // 2] ^= 0xFF  # deflate data
+    put("flipped.npz", bytes(flipped))
+
+    def spoiled(name: str, **meta_changes: object) -> None:
+        with np.load(good) as z:
+            arrays = {k: z[k] for k in z.files}
+        meta = json.loads(arrays.pop("meta").tobytes())
+        meta.update(meta_changes)
+        blob = np.frombuffer(json.dumps(meta).encode(), np.uint8)
+        np.savez_compressed(d / name, meta=blob, **arrays)
+        out[name.replace(".", "_")] = str(d / name)
+
+    spoiled("v1.npz", version=1)
+    spoiled("seed.npz", match_seed=-5)
+    spoiled("teamsnull.npz", teams=None)
+    spoiled("teamsAA.npz", teams=["A", "A"])
+    spoiled("winner.npz", winner="B" if replay.winner != "B" else "A")
+    spoiled("fast.npz", config={**replay.config, "bullet_speed": 3e9})
+    spoiled("maptext.npz", map_text=replay.map_text + "\n; an edit the simulation ignores\n")
+
+    # A real (untrained) checkpoint, then spoiled copies.
+    cfg = TrainConfig(name="ck", scenario="vs_aggressive", total_steps=64, num_envs=2,
+                      num_workers=1, seed=0, wandb="disabled", checkpoint_every=0,
+                      game={"max_steps": 30},
+                      learners=(LearnerSpec("ppo", "ppo", (0,),
+                                            ppo=PPOConfig(num_steps=16, update_epochs=1)),))
+    trainer = Trainer(cfg, d / "run", progress=False)
+    ckpt = trainer.save()
+    trainer.env.close()
+    out["run"], out["ckpt"] = str(d / "run"), str(ckpt)
+
+    def ckpt_copy(name: str) -> Path:
+        dst = d / name
+        shutil.copytree(ckpt, dst)
+        out[name] = str(dst)
+        return dst
+
+    meta = json.loads((ckpt / "meta.json").read_text())
+    bad = ckpt_copy("ckpt_v99")
+    (bad / "meta.json").write_text(json.dumps({**meta, "version": 99}))
+    bad = ckpt_copy("ckpt_cut")
+    (bad / "meta.json").write_text((ckpt / "meta.json").read_text()[:200])
+    bad = ckpt_copy("ckpt_objdim")
+    (bad / "meta.json").write_text(json.dumps(
+        {**meta, "observation": {**meta["observation"], "obs_dim": "abc"}}))
+    bad = ckpt_copy("ckpt_nan")
+    state = torch.load(bad / "ppo.pt", weights_only=True)
+    first = next(k for k, v in state["net"].items() if v.is_floating_point())
+    state["net"][first][0] = float("nan")
+    torch.save(state, bad / "ppo.pt")
+    from alphatank.training.checkpoint import _sha256
+
+    (bad / "meta.json").write_text(json.dumps(
+        {**meta, "files": {"ppo.pt": _sha256(bad / "ppo.pt")}}))
+    out["nan_tensor"] = f"net.{first}"
+    (d / "runs_empty").mkdir()
+    out["runs_empty"] = str(d / "runs_empty")
+    return out
+
+
+# (id, argv, fragments the one error line must contain). {name} -> files[name].
+CASES = [
+    # top level
+    ("no-verb", [], ["VERB"]),
+    ("unknown-verb", ["fly"], ["invalid choice", "maps"]),
+    # maps
+    ("maps-missing", ["maps", "{missing}"], ["{missing}", "no such map file"]),
+    ("maps-empty", ["maps", "{empty_txt}"], ["{empty_txt}", "empty map"]),
+    ("maps-binary", ["maps", "{binary_txt}"], ["{binary_txt}", "UTF-8"]),
+    ("maps-latin1", ["maps", "{latin1_txt}"], ["{latin1_txt}", "UTF-8"]),
+    ("maps-utf16", ["maps", "{utf16_txt}"], ["{utf16_txt}", "UTF-16"]),
+    ("maps-cell-inf", ["maps", "{cellinf_txt}"], ["{cellinf_txt}:1", "'cell'", "[16, 400]"]),
+    ("maps-cell-tiny", ["maps", "{cellsmall_txt}"], ["{cellsmall_txt}:1", "'cell'"]),
+    ("maps-no-room", ["maps", "{noroom_txt}"], ["{noroom_txt}:3", "only 3 tank(s) fit"]),
+    ("maps-folder", ["maps", "{emptydir}"], ["{emptydir}", "folder"]),
+    ("maps-wrong-kind", ["maps", "{good_npz}"], ["{good_npz}", "UTF-8"]),
+    # bench
+    ("bench-map", ["bench", "--map", "{missing}"], ["{missing}", "no such map file"]),
+    ("bench-ticks", ["bench", "--ticks", "many"], ["--ticks", "integer >= 1", "'many'"]),
+    ("bench-preset", ["bench", "--preset", "fast"], ["unknown preset 'fast'", "long_range"]),
+    ("bench-soak-scn", ["bench", "--soak", "--scenarios", "nosuch"],
+     ["nosuch", "shipped scenarios"]),
+    ("bench-soak-bots", ["bench", "--soak", "--scenarios", "bot_teams"],
+     ["bot_teams", "no learner seat"]),
+    ("bench-soak-steps", ["bench", "--soak", "--steps", "0"], ["--steps", ">= 3"]),
+    # arena
+    ("arena-bot", ["arena", "--bots", "smart,genius"], ["genius", "valid bots"]),
+    ("arena-bot-option", ["arena", "--bots", "smart:ricochet=maybe,random"],
+     ["ricochet", "true or false"]),
+    ("arena-map", ["arena", "--map", "{binary_txt}"], ["{binary_txt}", "UTF-8"]),
+    ("arena-games", ["arena", "--games", "0"], ["--games", ">= 1"]),
+    ("arena-steps", ["arena", "--max-steps", "0"], ["max_steps", "[1, 10000000]"]),
+    ("arena-preset", ["arena", "--preset", "fast"], ["unknown preset 'fast'"]),
+    # replay
+    ("replay-missing", ["replay", "{missing}"], ["{missing}", "no such replay file"]),
+    ("replay-empty", ["replay", "{empty_npz}"], ["{empty_npz}", "not a readable replay"]),
+    ("replay-binary", ["replay", "{binary_npz}"], ["{binary_npz}", "not a readable replay"]),
+    ("replay-truncated", ["replay", "{truncated_npz}"], ["{truncated_npz}", "not a readable"]),
+    ("replay-flipped-byte", ["replay", "{flipped_npz}"], ["{flipped_npz}"]),
+    ("replay-wrong-kind", ["replay", "{good_txt}"], ["{good_txt}", "not a readable"]),
+    ("replay-v1", ["replay", "{v1_npz}"], ["{v1_npz}", "version 1", "version 2"]),
+    ("replay-seed", ["replay", "{seed_npz}"], ["{seed_npz}", "meta.match_seed", "-5"]),
+    ("replay-teams-null", ["replay", "{teamsnull_npz}"], ["{teamsnull_npz}", "meta.teams"]),
+    ("replay-teams-AA", ["replay", "{teamsAA_npz}"], ["meta.teams", "2 different teams"]),
+    ("replay-winner", ["replay", "{winner_npz}"], ["{winner_npz}", "digest"]),
+    ("replay-fast", ["replay", "{fast_npz}"], ["meta.config.bullet_speed", "[1, 10000]"]),
+    ("replay-map-edit", ["replay", "{maptext_npz}"], ["{maptext_npz}", "meta.digest"]),
+    ("replay-speed", ["replay", "{good_npz}", "--render", "--headless-test", "--speed", "0"],
+     ["--speed", "> 0"]),
+    ("replay-overlay", ["replay", "{good_npz}", "--overlays", "xray"], ["xray", "aim"]),
+    # record
+    ("record-scenario-missing", ["record", "--scenario", "{dir}/none.toml"],
+     ["none.toml", "no such scenario file"]),
+    ("record-scenario-empty", ["record", "--scenario", "{empty_toml}"],
+     ["{empty_toml}", "name"]),
+    ("record-scenario-binary", ["record", "--scenario", "{binary_toml}"],
+     ["{binary_toml}", "UTF-8"]),
+    ("record-friendly-fire", ["record", "--scenario", "{ff_toml}"],
+     ["{ff_toml}", "[game].friendly_fire", "true or false", "'no'"]),
+    ("record-max-steps-bool", ["record", "--scenario", "{steps_toml}"],
+     ["[game].max_steps", "integer", "True"]),
+    ("record-victory-nan", ["record", "--scenario", "{victory_toml}"],
+     ["[rewards].victory", "finite"]),
+    ("record-bot-option", ["record", "--scenario", "{botopt_toml}"],
+     ["seats[1].options", "hold_min", "integer"]),
+    ("record-ckpt-seat", ["record", "--scenario", "{ckptseat_toml}"],
+     ["seats[1].path", "no checkpoint"]),
+    ("record-seats", ["record", "--seats", "human,genius"], ["--seats[1]", "genius"]),
+    ("record-map", ["record", "--seats", "smart,random", "--map", "{utf16_txt}"],
+     ["{utf16_txt}", "UTF-16"]),
+    ("record-ckpt-missing", ["record", "--checkpoint", "{missing}", "--seats", "learner,smart"],
+     ["{missing}", "no such checkpoint"]),
+    ("record-ckpt-seats", ["record", "--checkpoint", "{run}", "--seats", "learner,smart,random",
+                           "--map", "open"], ["{ckpt}", "observation features"]),
+    ("record-ckpt-map", ["record", "--checkpoint", "{run}", "--seats", "learner,smart",
+                         "--map", "arena4"], ["{ckpt}", "wall rectangles", "arena4"]),
+    ("record-ckpt-version", ["record", "--checkpoint", "{ckpt_v99}", "--seats", "learner,smart"],
+     ["{ckpt_v99}", "version 99"]),
+    ("record-ckpt-nan", ["record", "--checkpoint", "{ckpt_nan}", "--seats", "learner,smart"],
+     ["{ckpt_nan}", "{nan_tensor}", "NaN"]),
+    ("record-overlays", ["record", "--overlays", "xray", "--seats", "smart,random"], ["xray"]),
+    ("record-out-dir", ["record", "--seats", "smart,random", "--max-steps", "3",
+                        "-o", "{good_txt}/x.mp4"], ["{good_txt}"]),
+    ("record-max-steps", ["record", "--seats", "smart,random", "--max-steps", "-4"],
+     ["max_steps", "[1, 10000000]"]),
+    # play (under the dummy video driver: --headless-test lets it get to the real checks)
+    ("play-scenario", ["play", "--headless-test", "--scenario", "{ff_toml}"],
+     ["[game].friendly_fire"]),
+    ("play-ckpt-seats", ["play", "--headless-test", "--checkpoint", "{run}", "--seats",
+                         "learner,smart,random", "--map", "open"], ["observation features"]),
+    ("play-ckpt-meta", ["play", "--headless-test", "--checkpoint", "{ckpt_objdim}",
+                        "--seats", "human,learner"], ["{ckpt_objdim}", "obs_dim", "'abc'"]),
+    ("play-seats", ["play", "--headless-test", "--seats", "human@0.5,smart"], ["@weakness"]),
+    ("play-fps", ["play", "--headless-test", "--seats", "smart,random", "--fps", "0"],
+     ["--fps", "> 0"]),
+    # eval
+    ("eval-missing", ["eval", "{missing}"], ["{missing}", "no such checkpoint"]),
+    ("eval-empty-dir", ["eval", "{emptydir}"], ["{emptydir}", "not a checkpoint"]),
+    ("eval-file", ["eval", "{good_txt}"], ["{good_txt}", "got a file"]),
+    ("eval-truncated", ["eval", "{ckpt_cut}"], ["{ckpt_cut}", "invalid JSON"]),
+    ("eval-version", ["eval", "{ckpt_v99}"], ["version 99"]),
+    ("eval-meta-type", ["eval", "{ckpt_objdim}"], ["observation.obs_dim", "'abc'"]),
+    ("eval-nan", ["eval", "{ckpt_nan}"], ["{nan_tensor}", "NaN"]),
+    ("eval-games", ["eval", "{run}", "--games", "0"], ["--games", "integer >= 1", "'0'"]),
+    ("eval-vs", ["eval", "{run}", "--vs", "genius", "--games", "1"], ["genius"]),
+    ("eval-scenario", ["eval", "{run}", "--scenario", "{binary_toml}"], ["UTF-8"]),
+    # train
+    ("train-resume-missing", ["train", "--resume", "{dir}/runs/nosuch"],
+     ["nosuch", "no such checkpoint or run directory"]),
+    ("train-resume-empty", ["train", "--resume", "{runs_empty}"],
+     ["{runs_empty}", "not a run directory"]),
+    ("train-resume-version", ["train", "--resume", "{ckpt_v99}"], ["version 99"]),
+    ("train-resume-nan", ["train", "--resume", "{ckpt_nan}", "--wandb", "disabled",
+                          "--no-progress"], ["{nan_tensor}", "NaN"]),
+    ("train-preset", ["train", "--preset", "nosuch"], ["nosuch"]),
+    ("train-tensorboard", ["train", "--runs", "{dir}/tbruns", "--tensorboard", "--wandb",
+                           "disabled", "--total-steps", "32", "--num-envs", "2",
+                           "--no-progress"], ["tensorboard"]),
+    ("train-steps", ["train", "--total-steps", "many"], ["--total-steps", "invalid int"]),
+    # demo
+    ("demo-minutes", ["demo", "--minutes", "-1"], ["--minutes", "> 0", "'-1'"]),
+    ("demo-wandb", ["demo", "--wandb", "cloud"], ["--wandb", "invalid choice"]),
+]
+
+MAPGEN_CASES = [
+    ("mapgen-validate-missing", ["validate", "{missing}"], ["{missing}", "no such map"]),
+    ("mapgen-validate-binary", ["validate", "{binary_txt}"], ["{binary_txt}", "UTF-8"]),
+    ("mapgen-validate-cell", ["validate", "{cellinf_txt}"], ["'cell'", "[16, 400]"]),
+    ("mapgen-validate-room", ["validate", "{good_txt}", "--teams", "ABCDEFGHIJKL"],
+     ["{good_txt}", "room for"]),
+    ("mapgen-preview-utf16", ["preview", "{utf16_txt}", "--no-png"], ["UTF-16"]),
+    ("mapgen-generate-size", ["generate", "--size", "big"], ["size", "ROWSxCOLS", "'big'"]),
+    ("mapgen-generate-alg", ["generate", "--algorithm", "spiral"], ["--algorithm", "maze"]),
+    ("mapgen-batch-count", ["batch", "--count", "0", "--out", "{dir}/gen"], ["--count", ">= 1"]),
+    ("mapgen-edit-binary", ["edit", "{binary_txt}"], ["{binary_txt}", "UTF-8"]),
+    ("mapgen-no-verb", [], ["required"]),
+]
+
+# Cases that would need a machine with `tensorboard` absent to fail: skip where present.
+HAS_TENSORBOARD = importlib.util.find_spec("tensorboard") is not None
+
+
+def _fill(items: list[str], files: dict[str, str]) -> list[str]:
+    return [s.format(**files) for s in items]
+
+
+def _check(rc: int, out: str, err: str, fragments: list[str]) -> None:
+    """Non-zero exit, no traceback, and one error line: stderr's only line, or (for verbs
+    that report on stdout) stdout's last line."""
+    text = out + err
+    assert "Traceback" not in text, text
+    assert rc != 0, text
+    err_lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(err_lines) <= 1, f"want one error line on stderr, got:\n{err}"
+    line = err_lines[0] if err_lines else [ln for ln in out.splitlines() if ln.strip()][-1]
+    for frag in fragments:
+        assert frag in line, f"{frag!r} not in {line!r}"
+
+
+def _run_main(entry, argv: list[str], capsys) -> tuple[int, str, str]:
+    try:
+        rc = entry(argv)
+    except SystemExit as exc:  # argparse
+        rc = exc.code if isinstance(exc.code, int) else 1
+    captured = capsys.readouterr()
+    return rc, captured.out, captured.err
+
+
+@pytest.mark.parametrize(("argv", "fragments"), [c[1:] for c in CASES], ids=[c[0] for c in CASES])
+def test_cli_bad_input(files, capsys, argv, fragments, monkeypatch, tmp_path):
+    if "--tensorboard" in argv and HAS_TENSORBOARD:
+        pytest.skip("tensorboard is installed here")
+    monkeypatch.chdir(tmp_path)
+    rc, out, err = _run_main(main, _fill(argv, files), capsys)
+    _check(rc, out, err, _fill(fragments, files))
+
+
+@pytest.mark.parametrize(("argv", "fragments"), [c[1:] for c in MAPGEN_CASES],
+                         ids=[c[0] for c in MAPGEN_CASES])
+def test_mapgen_bad_input(files, capsys, argv, fragments):
+    rc, out, err = _run_main(MAPGEN.main, _fill(argv, files), capsys)
+    _check(rc, out, err, _fill(fragments, files))
+
+
+def _env() -> dict[str, str]:
+    return {**os.environ, "SDL_VIDEODRIVER": "dummy", "PYGAME_HIDE_SUPPORT_PROMPT": "1"}
+
+
+@pytest.mark.parametrize(("argv", "fragments"), [
+    (["replay", "{flipped_npz}"], ["{flipped_npz}"]),
+    (["maps", "{latin1_txt}"], ["{latin1_txt}", "UTF-8"]),
+    (["train", "--resume", "{dir}/runs/nosuch"], ["no such checkpoint"]),
+], ids=["replay-flipped", "maps-latin1", "train-resume"])
+def test_real_processes_fail_in_one_line(files, argv, fragments):
+    proc = subprocess.run([sys.executable, "-m", "alphatank.cli", *_fill(argv, files)],
+                          capture_output=True, text=True, env=_env(), timeout=120)
+    _check(proc.returncode, proc.stdout, proc.stderr, _fill(fragments, files))
+
+
+def test_mapgen_tool_process_fails_in_one_line(files):
+    proc = subprocess.run([sys.executable, str(ROOT / "tools" / "mapgen.py"), "validate",
+                           files["utf16_txt"]], capture_output=True, text=True, env=_env(),
+                          timeout=120)
+    _check(proc.returncode, proc.stdout, proc.stderr, [files["utf16_txt"], "UTF-16"])
+
+
+def test_closed_pipe_is_quiet():
+    """`alphatank maps | head -n 1`: the first line, then a quiet exit (status 141)."""
+    proc = subprocess.run(f"{sys.executable} -m alphatank.cli maps | head -n 1; "
+                          "echo status=${PIPESTATUS[0]}", shell=True, executable="/bin/bash",
+                          capture_output=True, text=True, env=_env(), timeout=120)
+    assert proc.stdout.splitlines()[0].startswith("name")
+    assert proc.stdout.splitlines()[-1] == "status=141"
+    assert proc.stderr == ""
+
+
+def test_version_and_help(capsys):
+    from alphatank import __version__
+
+    with pytest.raises(SystemExit) as info:
+        main(["--version"])
+    assert info.value.code == 0 and capsys.readouterr().out.strip() == f"alphatank {__version__}"
+    with pytest.raises(SystemExit):
+        main(["eval", "--help"])
+    out = capsys.readouterr().out
+    assert "95% intervals" in out and "%%" not in out
+
+
+def test_record_accepts_dash_o(files, tmp_path, capsys):
+    out = tmp_path / "m.mp4"
+    assert main(["record", "--seats", "smart,random", "--map", "open", "--max-steps", "5",
+                 "-o", str(out)]) == 0
+    assert out.stat().st_size > 0
+    assert "seat" not in capsys.readouterr().err
+
+
+def test_maps_lists_shipped_folders(capsys):
+    assert main(["maps"]) == 0
+    out = capsys.readouterr().out
+    assert "train/maze_0000" in out and "test/maze_0009" in out
+    assert "folder train/" in out and "folder test/" in out
+    assert main(["maps", "test"]) == 0
+    assert capsys.readouterr().out.count(": ok,") == 4
