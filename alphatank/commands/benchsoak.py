@@ -5,10 +5,10 @@ Each scenario runs in one env the way a user makes it: ``gymnasium.make`` for sc
 with one learner seat, the PettingZoo parallel env for the others. Memory is sampled every
 ``every`` steps, after a full garbage collection, as the resident set size (RSS,
 ``/proc/self/statm``) and, where glibc provides ``mallinfo2``, as the C heap bytes in use
-(allocator holes and trimming make RSS lag or hide a leak; the heap in use does not). Growth is the least-squares slope of the
-samples after the warm-up (the first ``warmup`` share of each scenario's steps), in MB per
-10^6 steps; the soak passes when RSS grows by less than ``limit_mb`` per 10^6 steps in
-every scenario and no value was NaN or infinite.
+(allocator holes and trimming make RSS lag or hide a leak; the heap in use does not).
+Growth is the least-squares slope of the samples after the warm-up (the first ``warmup``
+share of each scenario's steps), in MB per 10^6 steps; the soak passes when RSS grows by
+less than ``limit_mb`` per 10^6 steps in every scenario and no value was NaN or infinite.
 """
 
 from __future__ import annotations

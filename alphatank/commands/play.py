@@ -160,7 +160,7 @@ def build_lineup(sc: Scenario, checkpoint: str | None = None, stand_in: str = "s
 
 def lineup_from_args(args: argparse.Namespace, humans: bool = True) -> Lineup:
     """The line-up a ``play``/``record`` command line asks for."""
-    game = {"max_steps": args.max_steps} if getattr(args, "max_steps", None) else {}
+    game = {"max_steps": args.max_steps} if getattr(args, "max_steps", None) is not None else {}
     if args.scenario and args.seats:
         raise ScenarioError("give either --scenario or --seats, not both")
     if args.scenario:

@@ -656,7 +656,7 @@ def render_bench(map_name: str = "arena8", per_team: int = 4, frames: int = 300,
     from alphatank.sim.match import Match
 
     teams = ["A"] * per_team + ["B"] * per_team
-    cfg = game_config("paper", immortal=True, max_steps=10**9)
+    cfg = game_config("paper", immortal=True, max_steps=frames + 10)
     match = Match(cfg, load_map(map_name), teams, seed=seed)
     rng = np.random.default_rng(seed)
     renderer = Renderer("rgb_array", overlays=overlays)
