@@ -188,6 +188,7 @@ CASES = [
     ("arena-games", ["arena", "--games", "0"], ["--games", ">= 1"]),
     ("arena-steps", ["arena", "--max-steps", "0"], ["max_steps", "[1, 10000000]"]),
     ("arena-preset", ["arena", "--preset", "fast"], ["unknown preset 'fast'"]),
+    ("arena-seed", ["arena", "--seed", "-1"], ["--seed", "[0, 2^63)", "'-1'"]),
     # replay
     ("replay-missing", ["replay", "{missing}"], ["{missing}", "no such replay file"]),
     ("replay-empty", ["replay", "{empty_npz}"], ["{empty_npz}", "not a readable replay"]),
@@ -235,6 +236,7 @@ CASES = [
      ["{ckpt_v99}", "version 99"]),
     ("record-ckpt-nan", ["record", "--checkpoint", "{ckpt_nan}", "--seats", "learner,smart"],
      ["{ckpt_nan}", "{nan_tensor}", "NaN"]),
+    ("record-seed", ["record", "--seats", "smart,random", "--seed", "-1"], ["--seed", "2^63"]),
     ("record-overlays", ["record", "--overlays", "xray", "--seats", "smart,random"], ["xray"]),
     ("record-out-dir", ["record", "--seats", "smart,random", "--max-steps", "3",
                         "-o", "{good_txt}/x.mp4"], ["{good_txt}"]),
@@ -260,6 +262,7 @@ CASES = [
     ("eval-nan", ["eval", "{ckpt_nan}"], ["{nan_tensor}", "NaN"]),
     ("eval-games", ["eval", "{run}", "--games", "0"], ["--games", "integer >= 1", "'0'"]),
     ("eval-vs", ["eval", "{run}", "--vs", "genius", "--games", "1"], ["genius"]),
+    ("eval-seed", ["eval", "{run}", "--seed", "x"], ["--seed", "'x'"]),
     ("eval-scenario", ["eval", "{run}", "--scenario", "{binary_toml}"], ["UTF-8"]),
     # train
     ("train-resume-missing", ["train", "--resume", "{dir}/runs/nosuch"],
@@ -273,6 +276,7 @@ CASES = [
     ("train-tensorboard", ["train", "--runs", "{dir}/tbruns", "--tensorboard", "--wandb",
                            "disabled", "--total-steps", "32", "--num-envs", "2",
                            "--no-progress"], ["tensorboard"]),
+    ("train-seed", ["train", "--seed", "-1"], ["--seed", "[0, 2^63)"]),
     ("train-steps", ["train", "--total-steps", "many"], ["--total-steps", "invalid int"]),
     # demo
     ("demo-minutes", ["demo", "--minutes", "-1"], ["--minutes", "> 0", "'-1'"]),

@@ -9,7 +9,7 @@ import time
 
 import numpy as np
 
-from alphatank.commands.argtypes import positive_float, positive_int
+from alphatank.commands.argtypes import positive_float, positive_int, seed
 from alphatank.sim.config import ConfigError, game_config
 from alphatank.sim.mapspec import MapError, load_map
 from alphatank.sim.match import Match
@@ -24,7 +24,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--map", default="maze", help="shipped map name or .txt path")
     p.add_argument("--games", type=positive_int, default=20,
                    help="games per pair, sides alternating (default: %(default)s)")
-    p.add_argument("--seed", type=int, default=0, help="first match seed")
+    p.add_argument("--seed", type=seed, default=0, help="first match seed")
     p.add_argument("--preset", default="paper", help="game preset (paper, long_range)")
     p.add_argument("--max-steps", type=int, default=None,
                    help="ticks before a game is a draw (default: the preset's)")

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from alphatank.commands.argtypes import positive_int
+from alphatank.commands.argtypes import positive_int, seed
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -19,7 +19,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--team", help="team the checkpoint plays (default: its first learner's)")
     p.add_argument("--weakness", type=float, help="bot weakness 0..1 (default: as trained)")
     p.add_argument("--greedy", action="store_true", help="most likely actions, no sampling")
-    p.add_argument("--seed", type=int, default=0, help="seed of the game sequence")
+    p.add_argument("--seed", type=seed, default=0, help="seed of the game sequence")
     p.add_argument("--num-envs", type=positive_int, default=16, help="matches played at once")
     p.add_argument("--csv", metavar="FILE", help="also write the rows as CSV")
     p.add_argument("--json", metavar="FILE", help="also write the rows as JSON")

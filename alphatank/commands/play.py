@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from alphatank.commands.argtypes import positive_float, positive_int
+from alphatank.commands.argtypes import positive_float, positive_int, seed
 from alphatank.game.scenarios import Scenario, ScenarioError, load_scenario, parse_scenario
 from alphatank.sim.match import Match
 from alphatank.sim.policy import Policy
@@ -441,7 +441,7 @@ def add_lineup_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--checkpoint", help="checkpoint that plays the scenario's learner seats")
     p.add_argument("--stand-in", default="smart",
                    help="bot for learner seats when no --checkpoint is given (default: smart)")
-    p.add_argument("--seed", type=int, default=0, help="episode seed (default: 0)")
+    p.add_argument("--seed", type=seed, default=0, help="episode seed (default: 0)")
     p.add_argument("--max-steps", type=int, help="episode length limit in ticks")
     p.add_argument("--overlays", default=",".join(DEFAULT_OVERLAYS),
                    help="aim,trajectory,bfs | all | none (default: aim,bfs)")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from alphatank.commands.argtypes import seed
 from alphatank.training.presets import PRESETS, WANDB_MODES, get_preset
 
 
@@ -19,7 +20,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--total-steps", type=int, help="env steps to train in total")
     p.add_argument("--num-envs", type=int, help="matches stepped together")
     p.add_argument("--workers", type=int, help="env worker processes (2 uses both cores)")
-    p.add_argument("--seed", type=int, help="run seed")
+    p.add_argument("--seed", type=seed, help="run seed")
     p.add_argument("--time-limit", type=float, metavar="S",
                    help="stop (with a checkpoint) after S seconds of training")
     p.add_argument("--checkpoint-every", type=int, metavar="N", help="iterations per save")
