@@ -179,7 +179,8 @@ CASES = [
      ["nosuch", "shipped scenarios"]),
     ("bench-soak-bots", ["bench", "--soak", "--scenarios", "bot_teams"],
      ["bot_teams", "no learner seat"]),
-    ("bench-soak-steps", ["bench", "--soak", "--steps", "0"], ["--steps", ">= 3"]),
+    ("bench-soak-steps", ["bench", "--soak", "--steps", "2"], ["--steps", ">= 3"]),
+    ("bench-soak-every", ["bench", "--soak", "--sample-every", "0"], ["--sample-every", ">= 1"]),
     # arena
     ("arena-bot", ["arena", "--bots", "smart,genius"], ["genius", "valid bots"]),
     ("arena-bot-option", ["arena", "--bots", "smart:ricochet=maybe,random"],

@@ -118,8 +118,9 @@ def _make_env(scenario: str, seed: int) -> tuple[Any, Callable[[np.ndarray], tup
     from alphatank.envs import gym_id, parallel_env
     from alphatank.game.scenarios import load_scenario
 
-    if len(load_scenario(scenario).learner_seats) == 1 and gym_id(scenario) in gymnasium.registry:
-        env = gymnasium.make(gym_id(scenario))
+    if len(load_scenario(scenario).learner_seats) == 1:
+        env = (gymnasium.make(gym_id(scenario)) if gym_id(scenario) in gymnasium.registry
+               else gymnasium.make("AlphaTank/TankBattle-v0", scenario=scenario))
         env.reset(seed=seed)
 
         def step(acts: np.ndarray) -> tuple:
@@ -148,10 +149,12 @@ def _make_env(scenario: str, seed: int) -> tuple[Any, Callable[[np.ndarray], tup
 def soak_scenario(scenario: str, steps: int, every: int = 10_000, warmup: float = 0.2,
                   seed: int = 0, report: Callable[[str], None] | None = None) -> SoakResult:
     """Run ``steps`` random-action steps of ``scenario`` in one env; see the module doc."""
+    from alphatank.game.scenarios import load_scenario
+
     env, step = _make_env(scenario, seed)
     rng = np.random.default_rng(seed)
-    n = 8  # learners at most in a shipped scenario; extra columns are ignored
-    actions = rng.integers(0, [3, 3, 2], size=(4096, n, 3))
+    learners = len(load_scenario(scenario).learner_seats)
+    actions = rng.integers(0, [3, 3, 2], size=(4096, learners, 3))  # drawn once, cycled
     res = SoakResult(scenario, steps, 0, 0.0, warmup_steps=int(steps * warmup))
     read_heap = heap_mb or (lambda: math.nan)
     t0 = time.perf_counter()
