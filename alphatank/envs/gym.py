@@ -26,6 +26,29 @@ from alphatank.sim.policy import Policy
 RENDER_MODES = ["rgb_array", "human"]
 
 
+def single_learner_seat(sc: Scenario, learner_seat: int | None,
+                        seat_policies: Mapping[int, Policy] | None,
+                        opponent_policy: Policy | None) -> int:
+    """The learner seat a one-learner env drives (default: the scenario's first); the
+    scenario's other learner seats need a Policy (``seat_policies`` or
+    ``opponent_policy``). Errors name the scenario file and what is allowed."""
+    learners = sc.learner_seats
+    if not learners:
+        raise ScenarioError(f"{sc.source}: TankBattle needs a learner seat; this scenario "
+                            "has none (watch it with the PettingZoo or vector env)")
+    seat = learners[0] if learner_seat is None else learner_seat
+    if seat not in learners:
+        raise ScenarioError(f"{sc.source}: learner_seat {seat} is not a learner seat; "
+                            f"learner seats: {learners}")
+    orphans = [s for s in learners if s != seat and s not in (seat_policies or {})]
+    if orphans and opponent_policy is None:
+        raise ScenarioError(
+            f"{sc.source}: learner seats {orphans} have no controller: pass "
+            "seat_policies={seat: policy} or opponent_policy=policy, or use the "
+            "PettingZoo env to drive them all")
+    return seat
+
+
 class TankBattleEnv(gym.Env):
     """One learner against (or beside) bots and frozen policies."""
 
@@ -38,14 +61,7 @@ class TankBattleEnv(gym.Env):
                  reward_overrides: Mapping[str, Any] | None = None,
                  render_mode: str | None = None):
         sc = load_scenario(scenario)
-        learners = sc.learner_seats
-        if not learners:
-            raise ScenarioError(f"{sc.source}: TankBattle needs a learner seat; this scenario "
-                                "has none (watch it with the PettingZoo or vector env)")
-        seat = learners[0] if learner_seat is None else learner_seat
-        if seat not in learners:
-            raise ScenarioError(f"{sc.source}: learner_seat {seat} is not a learner seat; "
-                                f"learner seats: {learners}")
+        seat = single_learner_seat(sc, learner_seat, seat_policies, opponent_policy)
         if render_mode is not None and render_mode not in RENDER_MODES:
             raise ValueError(f"render_mode must be one of {RENDER_MODES} or None, "
                              f"got {render_mode!r}")
@@ -53,11 +69,6 @@ class TankBattleEnv(gym.Env):
                              reward_overrides=reward_overrides, driven=[seat],
                              seat_policies=seat_policies)
         self.core.opponent_policy = opponent_policy
-        if self.core.orphans and opponent_policy is None:
-            raise ScenarioError(
-                f"{sc.source}: learner seats {self.core.orphans} have no controller: pass "
-                "seat_policies={seat: policy} or opponent_policy=policy, or use the "
-                "PettingZoo env to drive them all")
         self.scenario, self.seat = sc, seat
         self.render_mode = render_mode
         self.observation_space = self.core.observation_space()
