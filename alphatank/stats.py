@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 
+from alphatank.extras import require
+
 
 def wilson_interval(successes: float, n: int, z: float = 1.96) -> tuple[float, float]:
     """Wilson score interval for a binomial proportion ``successes / n``.
@@ -32,6 +34,7 @@ class League:
     """openskill (Plackett-Luce) ratings of players from a stream of 1-vs-1 results."""
 
     def __init__(self, names: list[str]):
+        require("train", "openskill ratings")
         from openskill.models import PlackettLuce
 
         self.model = PlackettLuce()

@@ -57,6 +57,7 @@ def test_save_layout_is_complete_and_atomic(trained):
     ck = load_checkpoint(trained)  # run dir resolves to the latest save
     assert ck.meta["progress"]["global_step"] == 3 * ITER
     assert set(ck.meta["files"]) == {"ppo.pt"}
+    assert ck.meta["env"] == "AlphaTank/VsAggressive-v0"  # the env (and version) trained on
     assert ck.scenario.name == "vs_aggressive" and ck.train_config.num_envs == E
     state = torch.load(ck.path / "ppo.pt", weights_only=True)
     assert {"net", "optimizer", "obs_norm", "ret_norm", "generator"} <= set(state)

@@ -24,7 +24,9 @@ from typing import Any
 
 import numpy as np
 
+from alphatank.envs.ids import env_id
 from alphatank.envs.vector import make_vector_env
+from alphatank.extras import require
 from alphatank.game.observe import slot_counts
 from alphatank.game.scenarios import Scenario, load_scenario
 from alphatank.training.checkpoint import (
@@ -98,6 +100,8 @@ class Trainer:
 
     def _setup(self, specs: list, resume: Checkpoint | None, wandb_id: str | None) -> None:
         cfg, env = self.cfg, self.env
+        if cfg.video_every:
+            require("video", "training videos (video_every)")
         self.E, self.L, self.D = env.num_envs, env.num_learners, env.obs_dim
         self.cols = {spec.name: list(spec.seats) for spec in specs}
         mask_dim = sum(NVEC) if self.action_mask is not None else 0
@@ -192,6 +196,7 @@ class Trainer:
             "windows": {"outcomes": {n: list(d) for n, d in self.outcomes.items()},
                         "returns": {n: [float(x) for x in d] for n, d in self.returns.items()}},
             "wandb_id": self.logger.run_id,
+            "env": env_id(self.scenario),
         }
         states = {n: lr.state_dict() for n, lr in self.learners.items()}
         arrays = {n: lr.replay.arrays() for n, lr in self.learners.items()

@@ -8,6 +8,8 @@ import argparse
 import time
 from pathlib import Path
 
+from alphatank.extras import require
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--name", help="run name (default: demo-<date>-<time>)")
@@ -21,6 +23,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    require("video", "alphatank demo")  # before minutes of training, not after
     from alphatank.training.evaluate import (
         evaluate_checkpoint,
         format_table,

@@ -1,11 +1,41 @@
 """Gymnasium env: one learner seat of a scenario; the env plays every other seat.
 
-``gymnasium.make("AlphaTank/TankBattle-v0", scenario="vs_smart")`` (ids in
-:mod:`alphatank.envs`). Other learner seats of the scenario need a Policy
-(``seat_policies={seat: policy}`` or ``opponent_policy=`` for every non-learner seat).
-Observation: ``Box(-1, 1, (obs_dim,), float32)`` (index map: ``env.unwrapped.layout``);
-action: ``MultiDiscrete([3, 3, 2])``. ``info["reward_terms"]`` breaks the step's reward
-down by term; the last step's info adds ``winner`` and ``outcome``.
+``gymnasium.make("AlphaTank/TankBattle-v0", scenario="vs_smart")`` or a scenario's own id
+(``AlphaTank/VsSmart-v0``; all ids in :mod:`alphatank.envs`). A tank in a walled arena
+fights bots, frozen policies or both, with ricocheting bullets (docs/rules.md); the
+scenario (a TOML file) names the map, the game preset and every seat.
+
+Action space
+    ``MultiDiscrete([3, 3, 2])``: rotate {0 counter-clockwise, 1 none, 2 clockwise}, move
+    {0 back, 1 stop, 2 forward}, fire {0 no, 1 yes}. One action per tick.
+
+Observation space
+    ``Box(-1, 1, (obs_dim,), float32)``, ``obs_dim`` fixed per scenario: the ``paper`` kind
+    (the paper's Table 1 in map coordinates) or ``egocentric`` (the tank's own frame and
+    wall rays). Every feature has a name: ``env.unwrapped.layout["tank[0].dist"]`` is its
+    slice; docs/environments.md tabulates both layouts.
+
+Rewards
+    The sum of the scenario's reward terms for the learner this step (``RewardConfig``;
+    defaults: the paper's Table 5: victory, hits, predicted trajectory hits, bullets
+    closing in, ...). ``info["reward_terms"]`` breaks it down by term.
+
+Episode end
+    Terminated when at most one team has a live tank (the learner's death ends its episode:
+    the rest of the match is played out at once so the winner is real); truncated at
+    ``max_steps`` (1200 ticks by default, 40 s at 30 Hz). The last step's info adds
+    ``winner`` (team or None) and ``outcome`` ("win" / "loss" / "draw").
+
+Arguments
+    ``scenario`` (name or TOML path), ``observation`` ("paper" / "egocentric"; default: the
+    scenario's), ``learner_seat`` (default: the first learner seat), ``opponent_policy``
+    (a Policy in every seat the env plays), ``seat_policies`` ({seat: Policy}; the
+    scenario's other learner seats need one), ``game_overrides`` / ``reward_overrides``
+    (GameConfig / RewardConfig fields), ``render_mode`` (None, "rgb_array", "human").
+
+Version history (``ENV_VERSION`` in :mod:`alphatank.envs.ids`, shared by every AlphaTank
+env and written into checkpoints)
+    * v0: the initial release: paper and egocentric observations, Table 5 rewards.
 """
 
 from __future__ import annotations

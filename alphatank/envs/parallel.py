@@ -1,11 +1,35 @@
 """PettingZoo env: every learner seat of a scenario is an agent; the env plays the rest.
 
 ``parallel_env(scenario="team")`` returns a ParallelEnv, ``env(...)`` its AEC form
-(``pettingzoo.utils.parallel_to_aec``). Agents are named ``tank_<seat>``. A tank that dies
-is terminated and leaves ``agents`` for good, unless ``keep_dead_agents=True``, which keeps
-it (alive flag 0, actions ignored) until the match ends so it still receives its team's
-victory. ``state()`` is the global state for centralised critics (``state_space``,
-index map ``state_layout``). ``max_cycles`` truncates episodes (GameConfig.max_steps).
+(``pettingzoo.utils.parallel_to_aec``). Agents are named ``tank_<seat>``.
+
+Action space
+    Per agent ``MultiDiscrete([3, 3, 2])``: rotate, move, fire (as in
+    :mod:`alphatank.envs.gym`); every live agent acts every step.
+
+Observation space
+    Per agent ``Box(-1, 1, (obs_dim,), float32)``, the same layout as the Gymnasium env
+    (``env.layout``; team scenarios add ``team`` flags). ``state()`` is the global state
+    for centralised critics (``state_space``, index map ``state_layout``).
+
+Rewards
+    Per agent per step, the sum of its reward terms; ``infos[agent]["reward_terms"]``
+    breaks it down.
+
+Episode end
+    The match ends when at most one team has a live tank (all agents terminated) or at
+    ``max_cycles`` ticks (truncated). A tank that dies is terminated and leaves ``agents``
+    for good, unless ``keep_dead_agents=True``, which keeps it (alive flag 0, actions
+    ignored) until the match ends so it still receives its team's victory. The last
+    step's infos add ``winner`` and ``outcome``.
+
+Arguments
+    ``scenario``, ``observation``, ``seat_policies``, ``game_overrides``,
+    ``reward_overrides``, ``max_cycles`` (GameConfig.max_steps), ``keep_dead_agents``,
+    ``render_mode`` (None, "rgb_array", "human").
+
+Version history
+    ``metadata["name"]`` is ``alphatank_v<ENV_VERSION>``; see :mod:`alphatank.envs.gym`.
 """
 
 from __future__ import annotations
@@ -19,6 +43,7 @@ from pettingzoo import AECEnv, ParallelEnv
 from pettingzoo.utils import parallel_to_aec
 
 from alphatank.envs.core import FirstMatchRenderer, MatchSet, action_space, check_actions
+from alphatank.envs.ids import ENV_VERSION
 from alphatank.game.observe import ObsLayout
 from alphatank.game.rewards import TERMS
 from alphatank.game.scenarios import Scenario, load_scenario
@@ -30,7 +55,7 @@ RENDER_MODES = ["rgb_array", "human"]
 class TankBattleParallelEnv(ParallelEnv):
     """All learner seats of a scenario as simultaneous agents."""
 
-    metadata = {"name": "alphatank_v0", "render_modes": RENDER_MODES, "render_fps": 30,
+    metadata = {"name": f"alphatank_v{ENV_VERSION}", "render_modes": RENDER_MODES, "render_fps": 30,
                 "is_parallelizable": True}
 
     def __init__(self, scenario: str | Scenario = "team", *, observation: str | None = None,

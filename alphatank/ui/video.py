@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from alphatank.extras import require
 from alphatank.ui.render import DEFAULT_OVERLAYS, Renderer, surface_to_array
 
 if TYPE_CHECKING:
@@ -42,6 +43,7 @@ class _Mp4:
     """Stream RGB frames to an H.264 MP4 (even sizes for yuv420p), written atomically."""
 
     def __init__(self, path: Path, fps: float, quality: float = 7.0):
+        require("video", "MP4 recording")
         import imageio.v2 as imageio
 
         self.path = path
@@ -146,6 +148,7 @@ def _downscale(surf: Any, factor: float) -> np.ndarray:
 
 
 def _write_gif(path: Path, frames: list[np.ndarray], fps: float) -> None:
+    require("video", "GIF recording")
     import imageio.v3 as iio
 
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -156,6 +159,7 @@ def _write_gif(path: Path, frames: list[np.ndarray], fps: float) -> None:
 
 def wandb_video(recording: Recording, caption: str | None = None) -> Any:
     """A ``wandb.Video`` of a recording's MP4 (for ``wandb.log({"eval/video": ...})``)."""
+    require("train", "wandb video logging")
     import wandb
 
     if recording.mp4 is None:
