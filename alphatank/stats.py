@@ -41,6 +41,12 @@ class League:
         self.names = list(names)
         self.ratings = [self.model.rating(name=n) for n in self.names]
 
+    def add(self, name: str, mu: float | None = None, sigma: float | None = None) -> int:
+        """A new player (default: the model's starting rating); returns its index."""
+        self.names.append(name)
+        self.ratings.append(self.model.rating(mu=mu, sigma=sigma, name=name))
+        return len(self.names) - 1
+
     def record(self, i: int, j: int, outcome: int) -> None:
         """Player i against player j: outcome +1 (i won), 0 (draw) or -1 (j won)."""
         if outcome not in (-1, 0, 1):

@@ -108,6 +108,17 @@ class RewardConfig:
     rotation: float = 0.0
     rotation_limit_deg: float = 360.0
     rotation_reset_px: float = 35.0
+    # Not in the paper's Table 5 (issue 12); 0 keeps every paper result unchanged.
+    team_win: float = 0.0  # to every seat of the winning team, dead or alive
+    team_win_time_decay: float = 0.0  # share of team_win lost by max_steps (linear in time)
+    team_loss: float = 0.0  # to every seat of a losing team (configure <= 0)
+    team_draw: float = 0.0  # to every seat on a draw; must not exceed team_loss
+    step_cost: float = 0.0  # per tick to every seat while the match runs (configure <= 0)
+    engagement: float = 0.0  # potential-based: weight x (1 - BFS cells to nearest enemy / diameter)
+    engagement_gamma: float = 0.99  # the learner's discount (shaping gamma*phi(s') - phi(s))
+    distance_progress: float = 0.0  # per px of Euclidean distance gained (paper eq. 14, 2nd half)
+    trajectory_far: float = 0.0  # eq. 15 far penalty: weight x min(1, (d - far) / far)
+    trajectory_far_px: float = 140.0  # D_far: beyond this a fired shot is penalised
 
 
 PRESETS: dict[str, dict[str, Any]] = {
