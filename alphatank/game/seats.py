@@ -303,13 +303,19 @@ def check_human_seat(seat: Seat) -> tuple[str, str] | None:
 
 # ---- shipped agents --------------------------------------------------------------------
 
+def agents_root() -> Any:
+    """The folder of shipped agents, ``alphatank/data/agents`` (a Traversable)."""
+    return resources.files("alphatank").joinpath("data", "agents")
+
+
 def shipped_agents() -> list[str]:
-    """Names of the trained agents shipped in ``alphatank/data/agents/<NAME>/``."""
-    root = resources.files("alphatank").joinpath("data", "agents")
+    """Names of the trained agents shipped in ``alphatank/data/agents/<NAME>/`` (each a
+    checkpoint folder: ``meta.json`` plus weights)."""
+    root = agents_root()
     if not root.is_dir():
         return []
-    return sorted(p.name for p in root.iterdir() if p.is_dir() and p.joinpath(
-        "meta.json").is_file())
+    return sorted(p.name for p in root.iterdir()
+                  if p.is_dir() and p.joinpath("meta.json").is_file())
 
 
 def agent_path(name: str) -> str:
@@ -318,7 +324,7 @@ def agent_path(name: str) -> str:
     if name not in names:
         raise SeatError(f"unknown agent {name!r}; shipped agents: "
                         f"{', '.join(names) if names else 'none yet'}")
-    return str(resources.files("alphatank").joinpath("data", "agents", name))
+    return str(agents_root().joinpath(name))
 
 
 def check_agent_seat(seat: Seat) -> tuple[str, str] | None:
