@@ -20,7 +20,7 @@ PACKAGES = {"alphatank": "alphatank", "bots": "alphatank.bots",
 # earlier in this table; "base" (plain statistics) and the bare package may be imported
 # by anyone.
 LAYERS: dict[str, tuple[str, ...]] = {
-    "base": (),
+    "base": (),  # statistics, optional-dependency checks
     "sim": (),  # config, maps, grid, world, match, episodes, navigation, Policy
     "render": ("sim",),  # renderer, render modes, videos, replays (episode hooks)
     "game": ("sim",),  # scenarios, seats, line-ups, arena, observations, rewards
@@ -34,6 +34,7 @@ LAYERS: dict[str, tuple[str, ...]] = {
 }
 LAYER_OF = {  # module prefix -> layer; the longest matching prefix wins
     "alphatank.stats": "base",
+    "alphatank.extras": "base",  # optional-dependency checks
     "alphatank.sim": "sim",
     "alphatank.ui": "render",
     "alphatank.ui.human": "players",
