@@ -25,6 +25,7 @@ from alphatank.game.seats import (
     KEYSETS,
     Seat,
     SeatError,
+    controller_kind,
     make_controller,
     parse_seat_spec,
     parse_seat_table,
@@ -85,11 +86,11 @@ def build_lineup(scenario: str | Scenario, *, interactive: bool = False,
                  learner: str | None = None, stand_in: str | None = None) -> Lineup:
     """Controllers for every seat of ``scenario``.
 
-    Human seats get keyboards when ``interactive`` (two players may not share a key
-    layout), else the ``stand_in`` bot if given, else they idle. Learner seats get
-    ``learner`` (a seat spec such as ``checkpoint:PATH``, ``agent:NAME`` or a bot) if
-    given, else the ``stand_in`` bot; with neither, ScenarioError. Every other seat gets
-    its kind's controller.
+    Human seats (any interactive kind) get keyboards when ``interactive`` (two players
+    may not share a key layout), else the ``stand_in`` bot if given, else they idle.
+    Learner seats get ``learner`` (a seat spec such as ``checkpoint:PATH``,
+    ``agent:NAME`` or a bot) if given, else the ``stand_in`` bot; with neither,
+    ScenarioError. Every other seat gets its kind's controller.
     """
     sc = load_scenario(scenario)
     controllers: list[Policy] = []
@@ -99,7 +100,8 @@ def build_lineup(scenario: str | Scenario, *, interactive: bool = False,
     humans: dict[str, int] = {}
     for i, seat in enumerate(sc.seats):
         desc, played = seat.describe(), seat
-        if seat.controller == "human" and interactive:
+        person = controller_kind(seat.controller).interactive  # needs a player
+        if person and interactive:
             if seat.keys in humans:
                 raise ScenarioError(f"{sc.source}: seats[{i}]: two human seats use the "
                                     f"{seat.keys!r} keys; give each player its own set "
@@ -107,15 +109,14 @@ def build_lineup(scenario: str | Scenario, *, interactive: bool = False,
             humans[str(seat.keys)] = i
         elif seat.controller == "learner" and fill is not None:
             played, desc = fill, fill.describe()
-        elif seat.controller in ("learner", "human") and stand is not None:
+        elif (seat.controller == "learner" or person) and stand is not None:
             played = stand
             notes.append(f"seat {i + 1} ({desc}) is played by {stand.describe()}")
             desc = f"{stand.describe()}(for {desc})"
-        elif seat.controller == "learner":
-            raise ScenarioError(f"{sc.source}: seats[{i}] is a learner seat: give its "
-                                "controller (a checkpoint or a stand-in bot)")
         ctrl = make_controller(played, interactive=interactive)
-        assert ctrl is not None  # learner seats were filled above
+        if ctrl is None:
+            raise ScenarioError(f"{sc.source}: seats[{i}] is a learner seat: give its "
+                                "controller (a checkpoint, an agent or a stand-in bot)")
         controllers.append(ctrl)
         labels.append(seat_label(played))
         descs.append(desc)
