@@ -15,6 +15,7 @@ from __future__ import annotations
 from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -31,11 +32,14 @@ class FloorGraph:
     cells: np.ndarray
     index: np.ndarray
     neighbors: np.ndarray
-    adjacency: tuple[tuple[int, ...], ...]
 
     @property
     def size(self) -> int:
         return len(self.cells)
+
+    @cached_property
+    def adjacency(self) -> tuple[tuple[int, ...], ...]:
+        return tuple(tuple(v for v in row if v >= 0) for row in self.neighbors.tolist())
 
 
 _CACHE_SIZE = 64
@@ -59,11 +63,10 @@ def floor_graph(walls: np.ndarray) -> FloorGraph:
         nr, nc = rr + dr, cc + dc
         ok = (nr >= 0) & (nr < rows) & (nc >= 0) & (nc < cols)
         neighbors[ok, k] = index[nr[ok], nc[ok]]
-    adjacency = tuple(tuple(v for v in row if v >= 0) for row in neighbors.tolist())
     cells = np.stack([rr, cc], axis=1).astype(np.int32)
     for arr in (cells, index, neighbors):
         arr.flags.writeable = False  # shared by every user of the same wall grid
-    g = FloorGraph(cells, index, neighbors, adjacency)
+    g = FloorGraph(cells, index, neighbors)
     _graphs[key] = g
     if len(_graphs) > _CACHE_SIZE:
         _graphs.popitem(last=False)
