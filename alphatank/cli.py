@@ -17,7 +17,8 @@ COMMANDS = {
     "play": "Play interactively: humans, bots and checkpoints in any seat.",
     "record": "Record a headless match to MP4/GIF (and a replay file).",
     "replay": "Re-simulate, render or record a replay file.",
-    "arena": "Play every pair of bots on both sides; win/draw/loss matrix.",
+    "arena": "Play every pair of seats (bots, checkpoints, agents) on both sides; W/D/L "
+             "matrix and league.",
     "bench": "Measure ticks/s of the match, env steps/s, bot and renderer cost.",
     "maps": "List shipped maps or validate and print some.",
 }

@@ -70,6 +70,34 @@ def bot_from_spec(text: str, seed: int | None = None) -> Bot | Weakened:
     return make_bot(name, weakness=weakness, seed=seed, **options)
 
 
+# ---- the line-up's "bot" controller kind (entry points named in alphatank.game.seats) ---
+
+def bot_seat_fields(text: str) -> dict[str, Any]:
+    """The seat-table keys of a bot spec string: ``bot``, ``options`` and, when given,
+    ``weakness`` (``--seats`` items and arena seats)."""
+    name, weakness, options = parse_bot_spec(text)
+    fields: dict[str, Any] = {"bot": name, "options": options}
+    if weakness is not None:
+        fields["weakness"] = weakness
+    return fields
+
+
+def check_seat_bot(seat: Any) -> tuple[str, str] | None:
+    """A ``bot`` seat's problem as (key, message), or None: a known bot and options."""
+    if seat.bot not in BOTS:
+        return "bot", f"got {seat.bot!r}; valid bots: {list(BOT_NAMES)}"
+    unknown = sorted(set(seat.options) - set(bot_options(seat.bot)))
+    if unknown:
+        return "options", (f"bot {seat.bot!r} has no option(s) {unknown}; valid options: "
+                           f"{bot_options(seat.bot)}")
+    return None
+
+
+def seat_bot(seat: Any, seed: int | None = None) -> Bot | Weakened:
+    """The controller of a ``bot`` seat (its bot, weakness and options)."""
+    return make_bot(seat.bot, weakness=seat.weakness, seed=seed, **seat.options)
+
+
 def _value(text: str) -> Any:
     low = text.lower()
     if low in ("true", "yes", "on"):

@@ -19,11 +19,11 @@ from alphatank.bots import (
     make_bot,
     parse_bot_spec,
 )
-from alphatank.bots.arena import run_arena
 from alphatank.bots.benchmark import bot_costs
-from alphatank.bots.runner import play_game
 from alphatank.commands import arena as arena_cmd
+from alphatank.game.arena import run_arena
 from alphatank.sim.config import GameConfig
+from alphatank.sim.episode import Episode, EpisodeHook, start_episode
 from alphatank.sim.mapspec import load_map, parse_map
 from alphatank.sim.match import Match
 from alphatank.sim.navigation import nav_grid
@@ -32,6 +32,22 @@ from alphatank.sim.policy import NOOP, Policy
 GAMES = 100  # seeds 0..99, chosen once; thresholds are the issue's
 CLASSES = {"random": RandomBot, "aggressive": AggressiveBot, "defensive": DefensiveBot,
            "dodge": DodgeBot, "smart": SmartBot}
+
+
+class _Watch(EpisodeHook):
+    """Calls ``fn(match, actions)`` after every tick."""
+
+    def __init__(self, fn):
+        self.fn = fn
+
+    def on_tick(self, episode, events):
+        self.fn(episode.match, episode.actions)
+
+
+def play_game(cfg, spec, bots, seed=0, on_tick=None) -> Episode:
+    """One whole 1v1 (teams A, B) seeded like every episode (sim.episode)."""
+    hooks = [] if on_tick is None else [_Watch(on_tick)]
+    return start_episode(cfg, [spec], ["A", "B"], bots, seed, hooks=hooks).run()
 
 
 def _series(a: str, b: str, map_name: str, cfg: GameConfig | None = None, swap: bool = True,
@@ -269,8 +285,8 @@ def test_smart_banks_shots_off_walls_only_with_ricochet():
 # ---- arena and costs --------------------------------------------------------------
 
 def test_run_arena_counts_are_consistent():
-    cfg = GameConfig(max_steps=300)
-    res = run_arena(["smart", "random", "dodge"], load_map("open"), cfg, games=4, seed=3)
+    res = run_arena(["smart", "random", "dodge"], "open", games=4, seed=3,
+                    game={"max_steps": 300})
     for i in range(3):
         for j in range(3):
             if i != j:

@@ -29,6 +29,7 @@ import numpy as np
 import torch
 
 from alphatank.game.scenarios import Scenario, ScenarioError, parse_scenario
+from alphatank.game.seats import agent_path
 from alphatank.sim.policy import NOOP
 from alphatank.training.learners import make_learner
 from alphatank.training.presets import LearnerSpec, TrainConfig
@@ -344,3 +345,25 @@ def load_policy(path: str | Path, learner: str | None = None,
                 deterministic: bool = False) -> CheckpointPolicy:
     """A checkpoint (directory, or a run directory's latest) as a Policy for any seat."""
     return CheckpointPolicy(load_checkpoint(path), learner, deterministic)
+
+
+# ---- the line-up's "checkpoint" and "agent" controller kinds (alphatank.game.seats) ----
+
+def checkpoint_seat(seat: Any, seed: int | None = None) -> CheckpointPolicy:
+    """The controller of a ``checkpoint`` seat: the checkpoint at ``seat.path``."""
+    return load_policy(seat.path)
+
+
+def agent_seat(seat: Any, seed: int | None = None) -> CheckpointPolicy:
+    """The controller of an ``agent`` seat: the shipped agent ``seat.agent``."""
+    return load_policy(agent_path(seat.agent))
+
+
+def check_checkpoint_seat(seat: Any) -> tuple[str, str] | None:
+    """A ``checkpoint`` seat's problem as (key, message), or None: ``path`` must be a
+    checkpoint folder or a run folder with a ``latest`` save (weights are not loaded)."""
+    try:
+        resolve_checkpoint_dir(seat.path)
+    except CheckpointError as exc:
+        return "path", str(exc)
+    return None

@@ -8,7 +8,8 @@ import argparse
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("checkpoints", nargs="+", metavar="CHECKPOINT",
-                   help="checkpoint folder(s) or run folder(s) (their latest save)")
+                   help="checkpoint folder(s) or run folder(s) (their latest save), also as "
+                        "checkpoint:PATH, or agent:NAME for a shipped agent")
     p.add_argument("--vs", default="",
                    help="comma-separated bots to play (e.g. smart,aggressive,dodge,defensive); "
                         "default: the opponents of each checkpoint's scenario")
@@ -24,6 +25,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from alphatank.game.seats import checkpoint_source
     from alphatank.training.checkpoint import CheckpointError
     from alphatank.training.evaluate import (
         evaluate_checkpoint,
@@ -37,12 +39,13 @@ def run(args: argparse.Namespace) -> int:
     opponents = [b.strip() for b in args.vs.split(",") if b.strip()] or [None]
     results = []
     try:
-        for ckpt in args.checkpoints:
-            results += evaluate_checkpoint(ckpt, opponents, games=args.games, seed=args.seed,
+        for arg in args.checkpoints:
+            results += evaluate_checkpoint(checkpoint_source(arg), opponents,
+                                           games=args.games, seed=args.seed,
                                            scenario=args.scenario, team=args.team,
                                            deterministic=args.greedy, num_envs=args.num_envs,
                                            weakness=args.weakness)
-    except (CheckpointError, ValueError) as exc:  # ScenarioError is a ValueError
+    except (CheckpointError, ValueError) as exc:  # ScenarioError, SeatError: ValueErrors
         print(f"error: {exc}")
         return 2
     print(format_table(results))

@@ -13,11 +13,17 @@ import os
 import sys
 import time
 
-from alphatank.commands.play import NO_DISPLAY_HELP, Lineup, PlaySession
-from alphatank.sim.policy import Policy
 from alphatank.ui.render import DEFAULT_OVERLAYS, DisplayUnavailable, parse_overlays
-from alphatank.ui.replay import Replay, ReplayError, ReplayPolicy, load_replay, simulate
-from alphatank.ui.video import record_match
+from alphatank.ui.replay import (
+    Replay,
+    ReplayError,
+    check_replayed,
+    load_replay,
+    replay_episode,
+    simulate,
+)
+from alphatank.ui.session import NO_DISPLAY_HELP, PlaySession
+from alphatank.ui.video import VideoRecorder, record_episode
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -34,13 +40,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-frames", type=int, help="stop --render after this many frames")
 
 
-def replay_lineup(replay: Replay) -> Lineup:
-    """A line-up whose every seat plays back the replay's actions."""
-    policies: list[Policy] = [ReplayPolicy(replay.actions) for _ in replay.teams]
-    labels = replay.labels or [str(i + 1) for i in range(len(replay.teams))]
-    return Lineup(None, policies, labels, replay.seats)
-
-
 def run(args: argparse.Namespace) -> int:
     try:
         replay = load_replay(args.file)
@@ -54,13 +53,11 @@ def run(args: argparse.Namespace) -> int:
           f"{'team ' + replay.winner + ' wins' if replay.winner else 'no winner'}")
     try:
         if args.record:
-            match = replay.new_match()
-            rec = record_match(match, [ReplayPolicy(replay.actions)] * match.n,
-                               mp4=args.record, gif=args.gif, overlays=overlays,
-                               labels=replay.labels or None, max_ticks=replay.ticks)
-            if rec.final_hash != replay.final_hash:
-                raise ReplayError(f"replay diverged: final state hash {rec.final_hash[:16]}"
-                                  f"... != recorded {replay.final_hash[:16]}...")
+            video = VideoRecorder(mp4=args.record, gif=args.gif, overlays=overlays,
+                                  labels=replay.labels or None)
+            episode = replay_episode(replay, [video])
+            rec = record_episode(episode, video)
+            check_replayed(replay, episode.match)
             print(f"wrote {rec.mp4} ({rec.frames} frames)" + (f" and {rec.gif}" if rec.gif
                                                               else ""))
         if args.render:
@@ -82,9 +79,10 @@ def _render(replay: Replay, args: argparse.Namespace, overlays: tuple[str, ...])
               file=sys.stderr)
         return 2
     tick_hz = replay.game_config().tick_hz
-    session = PlaySession(replay_lineup(replay), fps=tick_hz * args.speed, overlays=overlays,
-                          verbose=False, tick_limit=replay.ticks,
-                          new_match=lambda _seed: (replay.new_match(), replay.match_seed))
+    labels = replay.labels or [str(i + 1) for i in range(len(replay.teams))]
+    session = PlaySession(fps=tick_hz * args.speed, overlays=overlays, verbose=False,
+                          new_episode=lambda _seed, hooks: replay_episode(replay, hooks),
+                          labels=labels)
     try:
         session.run(max_frames=args.max_frames, caption=f"AlphaTank replay: {args.file}")
     except DisplayUnavailable as exc:

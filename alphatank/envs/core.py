@@ -8,7 +8,10 @@ match, then computes rewards and observations for all of them with batched numpy
 Rules shared by all envs:
 
 * Seeding: ``reset_env(e, seed)`` derives the map choice, the match seed and one seed per
-  seat from ``numpy.random.SeedSequence(seed)``; same seed + same actions => same episode.
+  seat with :func:`alphatank.sim.episode.episode_seeds` (``SeedSequence(seed)``), the rule
+  ``play``, ``record`` and the arena use too; same seed + same actions => same episode.
+* Controllers come from the seat kinds of :mod:`alphatank.game.seats` (bots, checkpoints,
+  shipped agents; human seats idle).
 * Dead driven seats keep their slot: their actions are ignored and they still receive
   rewards (e.g. their team's victory).
 * When no driven seat is alive but the match goes on (bots left in several teams), the
@@ -32,7 +35,9 @@ from alphatank.game.observe import (
     slot_counts,
 )
 from alphatank.game.rewards import RewardTracker
-from alphatank.game.scenarios import Scenario, ScenarioError, Seat, load_scenario, seat_policy
+from alphatank.game.scenarios import Scenario, ScenarioError, Seat, load_scenario
+from alphatank.game.seats import make_controller
+from alphatank.sim.episode import episode_match, episode_seeds, reset_controllers
 from alphatank.sim.match import Match
 from alphatank.sim.policy import NOOP, Policy
 
@@ -184,11 +189,11 @@ class MatchSet:
         if spec is None or not isinstance(spec, Seat):
             return spec
         key = (spec.controller, spec.bot, spec.weakness, tuple(sorted(spec.options.items())),
-               spec.keys, spec.path)
+               spec.keys, spec.path, spec.agent)
         cached = self._bots[e].get(seat)
         if cached is not None and cached[0] == key:
             return cached[1]
-        pol = seat_policy(spec, seed)
+        pol = make_controller(spec, seed)
         self._bots[e][seat] = (key, pol)
         return pol
 
@@ -196,32 +201,19 @@ class MatchSet:
 
     def reset_env(self, e: int, seed: int) -> None:
         """Start a new episode in env ``e``, everything derived from ``seed``."""
-        ss = np.random.SeedSequence(seed)
-        s_map, s_match, s_seats = ss.spawn(3)
-        k = 0
-        if len(self.specs) > 1:
-            k = int(np.random.default_rng(s_map).integers(len(self.specs)))
-        match_seed = int(s_match.generate_state(1, np.uint64)[0])
-        seat_seeds = [int(x) for x in s_seats.generate_state(self.n, np.uint64)]
-        spec = self.specs[k]
-        if e < len(self.matches) and self.matches[e].spec is spec:
-            m = self.matches[e]
-            m.reset(match_seed)
+        seeds = episode_seeds(seed, self.n, len(self.specs))
+        old = self.matches[e] if e < len(self.matches) else None
+        m = episode_match(self.game, self.specs, self.teams, seeds, old)
+        if old is None:
+            self.matches.append(m)
         else:
-            m = Match(self.game, spec, self.teams, seed=match_seed)
-            if e < len(self.matches):
-                self.matches[e] = m
-            else:
-                self.matches.append(m)
-        self.map_index[e] = k
-        played = []
+            self.matches[e] = m
+        self.map_index[e] = seeds.map_index
+        ctrls = self.controllers[e]
         for seat in range(self.n):
-            ctrl = self._controller(e, seat, seat_seeds[seat])
-            self.controllers[e][seat] = ctrl
-            if ctrl is not None:
-                ctrl.reset(m, seat, seat_seeds[seat])
-                played.append((seat, ctrl))
-        self._played[e] = played
+            ctrls[seat] = self._controller(e, seat, seeds.seat_seeds[seat])
+        reset_controllers(m, ctrls, seeds)
+        self._played[e] = [(seat, c) for seat, c in enumerate(ctrls) if c is not None]
         self.joint[e] = 1
         b = self.batch
         b.set_static(e, m)

@@ -52,8 +52,7 @@ from alphatank.game.rewards import TERMS
 from alphatank.game.scenarios import Scenario, ScenarioError, load_scenario
 from alphatank.sim.match import Match
 from alphatank.sim.policy import Policy
-
-RENDER_MODES = ["rgb_array", "human"]
+from alphatank.ui.modes import RENDER_MODES, check_render_mode
 
 
 def single_learner_seat(sc: Scenario, learner_seat: int | None,
@@ -92,9 +91,7 @@ class TankBattleEnv(gym.Env):
                  render_mode: str | None = None):
         sc = load_scenario(scenario)
         seat = single_learner_seat(sc, learner_seat, seat_policies, opponent_policy)
-        if render_mode is not None and render_mode not in RENDER_MODES:
-            raise ValueError(f"render_mode must be one of {RENDER_MODES} or None, "
-                             f"got {render_mode!r}")
+        check_render_mode(render_mode)
         self.core = MatchSet(sc, 1, observation=observation, game_overrides=game_overrides,
                              reward_overrides=reward_overrides, driven=[seat],
                              seat_policies=seat_policies)

@@ -48,8 +48,7 @@ from alphatank.game.observe import ObsLayout
 from alphatank.game.rewards import TERMS
 from alphatank.game.scenarios import Scenario, load_scenario
 from alphatank.sim.policy import Policy
-
-RENDER_MODES = ["rgb_array", "human"]
+from alphatank.ui.modes import RENDER_MODES, check_render_mode
 
 
 class TankBattleParallelEnv(ParallelEnv):
@@ -64,9 +63,7 @@ class TankBattleParallelEnv(ParallelEnv):
                  reward_overrides: Mapping[str, Any] | None = None,
                  max_cycles: int | None = None, keep_dead_agents: bool = False,
                  render_mode: str | None = None):
-        if render_mode is not None and render_mode not in RENDER_MODES:
-            raise ValueError(f"render_mode must be one of {RENDER_MODES} or None, "
-                             f"got {render_mode!r}")
+        check_render_mode(render_mode)
         self.scenario = sc = load_scenario(scenario)
         overrides = dict(game_overrides or {})
         if max_cycles is not None:

@@ -14,7 +14,7 @@ import json
 import os
 import tempfile
 import zipfile
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -22,8 +22,9 @@ from typing import Any
 import numpy as np
 
 from alphatank.sim.config import ConfigError, GameConfig, from_dict
+from alphatank.sim.episode import Episode, EpisodeHook, EpisodeSeeds
 from alphatank.sim.mapspec import MapError, MapSpec, map_text, parse_map
-from alphatank.sim.match import Match
+from alphatank.sim.match import Match, TickEvents
 from alphatank.sim.policy import NOOP
 
 FORMAT = "alphatank-replay"
@@ -68,27 +69,59 @@ class Replay:
         return Match(self.game_config(), self.map_spec(), self.teams, seed=self.match_seed)
 
 
-class ReplayRecorder:
-    """Collects the actions of one episode; call :meth:`record` with each tick's actions
-    right before ``match.step`` and :meth:`finish` once the episode is over."""
+class ReplayRecorder(EpisodeHook):
+    """Collects the actions of one episode. As an episode hook it binds to the episode at
+    ``on_start`` (unless made with a ``match``), records every tick and, at ``on_end``,
+    keeps the :class:`Replay` in :attr:`replay` and saves it to ``path`` if given. By
+    hand: :meth:`record` each tick's actions (before or after ``match.step``) and
+    :meth:`finish` once the episode is over."""
 
-    def __init__(self, match: Match, *, match_seed: int, seed: int | None = None,
-                 scenario: str | None = None, seats: Sequence[str] = (),
-                 labels: Sequence[str] = ()):
+    def __init__(self, match: Match | None = None, *, match_seed: int | None = None,
+                 seed: int | None = None, scenario: str | None = None,
+                 seats: Sequence[str] = (), labels: Sequence[str] = (),
+                 path: str | Path | None = None):
+        self.match: Match | None = None
+        self.match_seed, self.seed = match_seed, seed
+        self.scenario, self.seats, self.labels = scenario, list(seats), list(labels)
+        self.path = Path(path) if path is not None else None
+        self.replay: Replay | None = None
+        self._actions: list[np.ndarray] = []
+        if match is not None:
+            if match_seed is None:
+                raise ValueError("a ReplayRecorder made with a match needs its match_seed")
+            self._bind(match)
+
+    def _bind(self, match: Match) -> None:
         if match.tick != 0:
             raise ValueError(f"start recording at tick 0 (match is at tick {match.tick})")
-        self.match, self.match_seed, self.seed = match, match_seed, seed
-        self.scenario, self.seats, self.labels = scenario, list(seats), list(labels)
-        self._actions: list[np.ndarray] = []
+        self.match = match
+
+    def on_start(self, episode: Episode) -> None:
+        if self.match is None:
+            if episode.seeds is None:
+                raise ValueError("a replay needs the episode's seeds (start episodes with "
+                                 "start_episode or Lineup.start)")
+            self.match_seed, self.seed = episode.seeds.match_seed, episode.seeds.seed
+            self._bind(episode.match)
+
+    def on_tick(self, episode: Episode, events: TickEvents) -> None:
+        self.record(episode.actions)
+
+    def on_end(self, episode: Episode) -> None:
+        self.replay = self.finish()
+        if self.path is not None:
+            save_replay(self.replay, self.path)
 
     def record(self, actions: np.ndarray) -> None:
         self._actions.append(np.asarray(actions, dtype=np.int8).copy())
 
     def finish(self) -> Replay:
         m = self.match
+        if m is None or self.match_seed is None:
+            raise ValueError("nothing recorded: the recorder was never bound to a match")
         if len(self._actions) != m.tick:
             raise ValueError(f"recorded {len(self._actions)} ticks of actions but the match "
-                             f"is at tick {m.tick}: call record() before every step()")
+                             f"is at tick {m.tick}: call record() once per step()")
         actions = (np.stack(self._actions) if self._actions
                    else np.zeros((0, m.n, 3), dtype=np.int8))
         return Replay(match_seed=self.match_seed, map_name=m.spec.name,
@@ -186,21 +219,31 @@ def load_replay(path: str | Path) -> Replay:
     return replay
 
 
-def simulate(replay: Replay, on_tick: Callable[[Match], None] | None = None,
-             check: bool = True) -> Match:
-    """Re-run a replay from its seed; ``on_tick(match)`` sees the initial state and every
-    tick after it. With ``check``, ReplayError if the end state differs from the recording."""
+def replay_episode(replay: Replay, hooks: Sequence[EpisodeHook] = ()) -> Episode:
+    """An episode that plays ``replay`` back from its initial state: every seat is a
+    :class:`ReplayPolicy`, and it ends after the recorded number of ticks."""
     match = replay.new_match()
-    if on_tick is not None:
-        on_tick(match)
-    for t in range(replay.ticks):
-        if match.done:
-            raise ReplayError(f"replay diverged: the match ended at tick {match.tick} but "
-                              f"{replay.ticks} ticks were recorded")
-        match.step(replay.actions[t])
-        if on_tick is not None:
-            on_tick(match)
-    if check and match.state_hash() != replay.final_hash:
+    seeds = EpisodeSeeds(replay.seed if replay.seed is not None else 0, 0, replay.match_seed,
+                         ())
+    return Episode(match, [ReplayPolicy(replay.actions) for _ in range(match.n)],
+                   seeds=seeds, hooks=hooks, tick_limit=replay.ticks)
+
+
+def check_replayed(replay: Replay, match: Match) -> None:
+    """ReplayError unless ``match`` (played back from ``replay``) reached the recorded
+    tick count and final state hash."""
+    if match.tick != replay.ticks:
+        raise ReplayError(f"replay diverged: the match ended at tick {match.tick} but "
+                          f"{replay.ticks} ticks were recorded")
+    if match.state_hash() != replay.final_hash:
         raise ReplayError(f"replay diverged: final state hash {match.state_hash()[:16]}... "
                           f"!= recorded {replay.final_hash[:16]}... after {match.tick} ticks")
+
+
+def simulate(replay: Replay, hooks: Sequence[EpisodeHook] = (), check: bool = True) -> Match:
+    """Re-run a replay from its seed through the episode loop (``hooks`` see it as any
+    episode); with ``check``, ReplayError if it ends differently from the recording."""
+    match = replay_episode(replay, hooks).run().match
+    if check:
+        check_replayed(replay, match)
     return match
