@@ -79,6 +79,12 @@ def type_label(tp: Any) -> str:
     return f"{label} or none" if optional else label
 
 
+def a_type(tp: Any) -> str:
+    """``"an int"``, ``"a float or none"``: the type label with its article."""
+    label = type_label(tp)
+    return f"{'an' if label[0] in 'aeiou' else 'a'} {label}"
+
+
 def allowed(f: dataclasses.Field) -> str:
     """``"> 0"``, ``"in [0, 1]"``, ``"one of a, b"`` or ``""`` from a field's metadata."""
     m = f.metadata
@@ -110,7 +116,7 @@ def check_value(cls: type, f: dataclasses.Field, value: Any) -> Any:
     if value is None:
         if optional:
             return None
-        raise FieldError(owner, f.name, f"needs a {type_label(tp)}, got None")
+        raise FieldError(owner, f.name, f"needs {a_type(tp)}, got None")
     if base is None:
         origin = typing.get_origin(tp) or tp
         if origin is dict and not isinstance(value, dict):
@@ -118,7 +124,7 @@ def check_value(cls: type, f: dataclasses.Field, value: Any) -> Any:
         return value
     accepted = (bool,) if base is bool else (int, float) if base is float else (base,)
     if not isinstance(value, accepted) or (base is not bool and isinstance(value, bool)):
-        raise FieldError(owner, f.name, f"needs a {type_label(tp)}, got {value!r}")
+        raise FieldError(owner, f.name, f"needs {a_type(tp)}, got {value!r}")
     if base is float:
         value = float(value)
     if "choices" in f.metadata and value not in f.metadata["choices"]:
@@ -186,7 +192,7 @@ def parse_value(cls: type, name: str, text: str) -> Any:
         if base is str:
             return raw
     except ValueError:
-        raise FieldError(cls.__name__, name, f"needs a {type_label(tp)}, got {raw!r}") from None
+        raise FieldError(cls.__name__, name, f"needs {a_type(tp)}, got {raw!r}") from None
     raise FieldError(cls.__name__, name, f"is a {type_label(tp)}; it cannot be set from "
                      f"the command line")
 

@@ -19,7 +19,15 @@ from pathlib import Path
 from typing import Any
 
 from alphatank.training.algorithms import ALGORITHMS, get_algorithm
-from alphatank.training.fields import FieldError, build, describe, field_map, hp, parse_value
+from alphatank.training.fields import (
+    FieldError,
+    a_type,
+    build,
+    describe,
+    field_map,
+    hp,
+    parse_value,
+)
 from alphatank.training.fields import validate as validate_fields
 from alphatank.training.tomlwriter import dumps
 
@@ -297,7 +305,7 @@ def _check_overrides(table: dict[str, Any], key: str, prefix: str) -> None:
               isinstance(value, int | float) and not isinstance(value, bool) if kind is float
               else isinstance(value, kind) and not isinstance(value, bool))
         if not ok:
-            raise ValueError(f"{prefix}{key}.{name}: needs a {kind.__name__}, got {value!r}")
+            raise ValueError(f"{prefix}{key}.{name}: needs {a_type(kind)}, got {value!r}")
 
 
 def load_run(path: str | Path) -> TrainConfig:
