@@ -4,6 +4,7 @@ bad value is a one-line error naming the flag and what is allowed."""
 
 from __future__ import annotations
 
+import dataclasses
 import re
 
 import pytest
@@ -115,3 +116,8 @@ def test_a_run_file_trains_on_the_training_maps(capsys, tmp_path):
     assert ck.train_config.map == "train" and len(ck.scenario.maps) == 16
     assert ck.learner_specs[0].config.num_steps == 16
     capsys.readouterr()
+    saved = printed_run(capsys, tmp_path, "--resume", str(tmp_path / "tiny"), "--total-steps",
+                        "64")
+    assert saved == dataclasses.replace(ck.train_config, total_steps=64)
+    assert main(["train", "--resume", str(tmp_path / "nope")]) == 2
+    assert capsys.readouterr().out.startswith(f"error: {tmp_path / 'nope'}: no such checkpoint")

@@ -221,8 +221,18 @@ def run(args: argparse.Namespace) -> int:
             print(f"error: {', '.join(given)} apply to new runs; a resumed run keeps its "
                   f"settings")
             return 2
+        from alphatank.training.checkpoint import CheckpointError, load_checkpoint
         from alphatank.training.runner import resume_trainer
-        trainer = resume_trainer(args.resume, progress=progress, **_overrides(args))
+        try:
+            if args.print_config:
+                cfg = load_checkpoint(args.resume).train_config.with_overrides(
+                    **_overrides(args))
+                print(run_toml(cfg), end="")
+                return 0
+            trainer = resume_trainer(args.resume, progress=progress, **_overrides(args))
+        except (CheckpointError, ValueError) as exc:
+            print(f"error: {exc}")
+            return 2
         print(f"resuming {trainer.run_dir} at step {trainer.global_step:,}")
     else:
         try:
