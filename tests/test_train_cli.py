@@ -79,6 +79,8 @@ def test_scenario_flag_refits_learners_of_the_first_kind(capsys, tmp_path):
     (["--preset", "nope"], "unknown training preset 'nope'"),
     (["--config", "missing.toml"], "missing.toml: no such run file"),
     (["--config", "x.toml", "--preset", "demo"], "--config and --preset: give one"),
+    (["--total-steps", "0"], "--total-steps: must be > 0, got 0"),
+    (["--time-limit", "-1"], "--time-limit: must be >= 0, got -1.0"),
 ])
 def test_bad_flags_are_one_line_errors(capsys, argv, error):
     assert main(["train", "--print-config", *argv]) == 2

@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from alphatank.training.fields import FieldError
 from alphatank.training.presets import (
     BOT_POOL,
     CYCLE_INTERVAL,
@@ -97,14 +98,28 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
+# TrainConfig field -> the flag that sets it (run settings, also allowed with --resume)
+RUN_FLAGS = {"total_steps": "--total-steps", "num_envs": "--num-envs",
+             "num_workers": "--workers", "seed": "--seed", "time_limit_s": "--time-limit",
+             "checkpoint_every": "--checkpoint-every", "eval_every": "--eval-every",
+             "keep_checkpoints": "--keep-checkpoints", "eval_games": "--eval-games",
+             "video_every": "--video-every", "wandb": "--wandb", "tensorboard": "--tensorboard",
+             "torch_threads": "--torch-threads"}
+
+
 def _overrides(args: argparse.Namespace) -> dict:
-    return {"total_steps": args.total_steps, "num_envs": args.num_envs,
-            "num_workers": args.workers, "seed": args.seed, "time_limit_s": args.time_limit,
-            "checkpoint_every": args.checkpoint_every, "eval_every": args.eval_every,
-            "keep_checkpoints": args.keep_checkpoints,
-            "eval_games": args.eval_games, "video_every": args.video_every,
-            "wandb": args.wandb, "tensorboard": args.tensorboard,
-            "torch_threads": args.torch_threads}
+    return {field: getattr(args, flag[2:].replace("-", "_"))
+            for field, flag in RUN_FLAGS.items()}
+
+
+def _with_run_settings(cfg: TrainConfig, args: argparse.Namespace, name: str | None = None
+                       ) -> TrainConfig:
+    """``cfg`` with the run-setting flags (and ``name``) applied; a bad value names its
+    flag."""
+    try:
+        return cfg.with_overrides(name=name, **_overrides(args))
+    except FieldError as exc:
+        raise ValueError(f"{RUN_FLAGS.get(exc.name, exc.name)}: {exc.problem}") from None
 
 
 def _learners_label(cfg: TrainConfig) -> str:
@@ -164,7 +179,7 @@ def build_run(args: argparse.Namespace) -> TrainConfig:
     if args.config and args.preset:
         raise ValueError("--config and --preset: give one")
     cfg = load_run(args.config) if args.config else get_preset(args.preset or DEFAULT_PRESET)
-    cfg = cfg.with_overrides(name=args.name, **_overrides(args))
+    cfg = _with_run_settings(cfg, args, args.name)
     if args.scenario is not None:
         from alphatank.game.scenarios import load_scenario
         try:
@@ -185,8 +200,9 @@ def build_run(args: argparse.Namespace) -> TrainConfig:
                              f"not drive scenario {sc.name!r}'s {n} learner seats exactly once")
         first = cfg.learners[0]
         learners = default_learners(n, first.algo, first.config)
-        print(f"note: the learners of {cfg.name!r} do not fit scenario {sc.name!r} ({n} "
-              f"learner seats): one {first.algo} learner per seat instead", file=sys.stderr)
+        print(f"note: learners {[(s.name, list(s.seats)) for s in cfg.learners]} do not fit "
+              f"scenario {sc.name!r} ({n} learner seats): one {first.algo} learner per seat "
+              f"instead", file=sys.stderr)
         cfg = dataclasses.replace(cfg, learners=learners)
     schedule = _schedule(cfg, args)
     if schedule.get("kind", "none") != "none" and not any(
@@ -224,9 +240,8 @@ def run(args: argparse.Namespace) -> int:
         from alphatank.training.checkpoint import CheckpointError, load_checkpoint
         from alphatank.training.runner import resume_trainer
         try:
+            cfg = _with_run_settings(load_checkpoint(args.resume).train_config, args)
             if args.print_config:
-                cfg = load_checkpoint(args.resume).train_config.with_overrides(
-                    **_overrides(args))
                 print(run_toml(cfg), end="")
                 return 0
             trainer = resume_trainer(args.resume, progress=progress, **_overrides(args))
