@@ -4,6 +4,7 @@ hyperparameters and --hp overrides, and per-opponent metrics of agent-vs-agent r
 from __future__ import annotations
 
 import dataclasses
+import json
 import subprocess
 import sys
 
@@ -23,9 +24,11 @@ from alphatank.training.presets import (
     parse_hp,
     with_hp,
 )
-from alphatank.training.runner import Trainer, opposing_learners
+from alphatank.training.runner import Trainer, opposing_learners, resume_trainer
 
 TINY = PPOConfig(num_steps=16, update_epochs=1, num_minibatches=2)
+TINY_SAC = SACConfig(hidden=16, batch_size=16, start_steps=16, update_after=16, update_every=16,
+                     buffer_size=1000)
 
 
 # ---- a new algorithm: its module (here: this one) + one registry line ---------------------
@@ -255,9 +258,21 @@ def test_agent_vs_agent_win_rates_are_logged_per_opponent(tmp_path):
     cfg = TrainConfig("pvp", "pair", total_steps=16 * 2, num_envs=2, wandb="disabled",
                       checkpoint_every=0, game={"max_steps": 12},
                       learners=(LearnerSpec("ppo_a", "ppo", (0,), TINY),
-                                LearnerSpec("ppo_b", "ppo", (1,), TINY)))
+                                LearnerSpec("sac_b", "sac", (1,), TINY_SAC)))
     tr = Trainer(cfg, tmp_path / "pvp", progress=False)
     tr.train()
     keys = {k for k in tr.history[-1] if k.startswith("charts/win_rate_vs/")}
-    assert keys == {"charts/win_rate_vs/ppo_b/ppo_a", "charts/win_rate_vs/ppo_a/ppo_b"}
+    assert keys == {"charts/win_rate_vs/sac_b/ppo_a", "charts/win_rate_vs/ppo_a/sac_b"}
+    # a checkpoint written before the algorithm table (no input_dims, no map) still loads
+    ck = load_checkpoint(tmp_path / "pvp")
+    meta = json.loads((ck.path / "meta.json").read_text())
+    del meta["input_dims"], meta["train_config"]["map"]
+    (ck.path / "meta.json").write_text(json.dumps(meta))
+    old = load_checkpoint(tmp_path / "pvp")
+    assert [s.config for s in old.learner_specs] == [TINY, TINY_SAC]
+    assert old.load_learner("sac_b").algo == "sac"
+    resumed = resume_trainer(tmp_path / "pvp", progress=False, total_steps=16 * 4)
+    assert len(resumed.learners["sac_b"].replay) == 16 * 2
+    resumed.train()
+    assert resumed.global_step == 16 * 4
 

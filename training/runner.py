@@ -82,8 +82,8 @@ class Trainer:
     ``scenario`` may be given instead of being built from ``cfg.scenario``.
 
     ``action_mask``: optional hook ``f(obs (E, L, D)) -> bool (E, L, 8)`` over the
-    concatenated choices (rotate 3, move 3, fire 2); PPO learners never sample a masked
-    choice and their losses use the same masks.
+    concatenated choices (rotate 3, move 3, fire 2); learners that take masks (PPO) never
+    sample a masked choice and their losses use the same masks.
     """
 
     def __init__(self, cfg: TrainConfig, run_dir: str | Path, env: Any = None,
