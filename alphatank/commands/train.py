@@ -207,9 +207,11 @@ def build_run(args: argparse.Namespace) -> TrainConfig:
     schedule = _schedule(cfg, args)
     if schedule.get("kind", "none") != "none" and not any(
             s.controller == "bot" for s in sc.seats):
-        flag = "--schedule" if args.schedule else "--curriculum" if args.curriculum is not None \
-            else "schedule"
-        raise ValueError(f"{flag}: scenario {sc.name!r} has no bot seats to schedule")
+        if args.schedule or args.curriculum is not None:
+            flag = "--schedule" if args.schedule else "--curriculum"
+            raise ValueError(f"{flag}: scenario {sc.name!r} has no bot seats to schedule")
+        raise ValueError(f"schedule: the {schedule['kind']} schedule of {cfg.name!r} needs bot "
+                         f"seats; scenario {sc.name!r} has none (--schedule none drops it)")
     cfg = dataclasses.replace(cfg, schedule=schedule)
     from alphatank.training.schedules import make_schedule
     try:
