@@ -16,6 +16,7 @@ from alphatank.training.algorithms import ALGORITHMS, get_algorithm, register
 from alphatank.training.checkpoint import load_checkpoint
 from alphatank.training.fields import describe
 from alphatank.training.hparams import PPOConfig, SACConfig
+from alphatank.training.learners import make_learner
 from alphatank.training.ppo import PPO
 from alphatank.training.presets import (
     LearnerSpec,
@@ -46,9 +47,10 @@ class AliveProbe(PPO):
     algo = "alive_probe"
     inputs = ("alive",)
 
-    def __init__(self, obs_dim, num_streams, cfg=None, seed=0, mask_dim=0, alive_dim=0):
+    def __init__(self, obs_dim, num_streams, cfg=None, seed=0, mask_dim=0, num_seats=1,
+                 alive_dim=0):
         super().__init__(obs_dim, num_streams, TINY, seed=seed, mask_dim=mask_dim)
-        self.probe_cfg, self.alive_dim = cfg, alive_dim
+        self.probe_cfg, self.alive_dim, self.num_seats = cfg, alive_dim, num_seats
         self.acted, self.observed, self.finals, self.updated = [], [], [], []
 
     def act(self, obs, masks=None, alive=None):
@@ -107,7 +109,7 @@ def test_a_registered_algorithm_gets_its_inputs_and_checkpoints(probe_algo, tmp_
                                             ProbeConfig(num_steps=8)),))
     tr = Trainer(cfg, tmp_path / "probe", progress=False)
     lr = tr.learners["probe"]
-    assert isinstance(lr, AliveProbe) and lr.alive_dim == 1
+    assert isinstance(lr, AliveProbe) and (lr.alive_dim, lr.num_seats) == (1, 1)
     assert lr.probe_cfg == ProbeConfig(num_steps=8)  # the spec's config object
     assert tr.input_dims == {"alive": 1} and tr.rollout_steps == 16  # PPO's rollout hint
     tr.train()
@@ -124,6 +126,12 @@ def test_a_registered_algorithm_gets_its_inputs_and_checkpoints(probe_algo, tmp_
     assert ck.meta["input_dims"] == {"alive": 1}
     again = ck.load_learner("probe", weights_only=True)
     assert isinstance(again, AliveProbe) and again.alive_dim == 1
+    # the factory tells a learner how many seats share it (streams are env-major)
+    two = make_learner(LearnerSpec("two", "alive_probe", (0, 1)), 12, 8, 0,
+                       input_dims={"alive": 1})
+    assert (two.num_seats, two.num_streams) == (2, 8)
+    with pytest.raises(ValueError, match=r"'two' \(alive_probe\) needs inputs \['alive'\]"):
+        make_learner(LearnerSpec("two", "alive_probe", (0, 1)), 12, 8, 0)
 
 
 def test_an_env_without_the_input_is_refused(probe_algo, tmp_path):

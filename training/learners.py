@@ -42,9 +42,11 @@ class Learner(Protocol):
     updates: int  # updates done so far (saved in state_dict)
 
     def __init__(self, obs_dim: int, num_streams: int, cfg: Any = None, seed: int = 0,
-                 mask_dim: int = 0, **input_dims: int) -> None:
+                 mask_dim: int = 0, num_seats: int = 1, **input_dims: int) -> None:
         """``cfg``: the algorithm's config dataclass; ``mask_dim`` > 0: ``act`` gets
-        boolean action masks of that width (may be ignored); ``x_dim`` per input."""
+        boolean action masks of that width (may be ignored); ``num_seats``: the learner
+        seats it drives (``num_streams`` = envs x seats, env-major: stream ``i`` is seat
+        ``i % num_seats``); ``x_dim`` per input."""
 
     @property
     def rollout_steps(self) -> int | None:
@@ -111,4 +113,4 @@ def make_learner(spec: Any, obs_dim: int, num_streams: int, seed: int, mask_dim:
     if missing:
         raise ValueError(f"learner {spec.name!r} ({spec.algo}) needs inputs {missing}")
     return cls(obs_dim, num_streams, spec.config, seed=seed, mask_dim=mask_dim,
-               **{f"{x}_dim": int(dims[x]) for x in cls.inputs})
+               num_seats=len(spec.seats), **{f"{x}_dim": int(dims[x]) for x in cls.inputs})

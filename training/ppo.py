@@ -133,7 +133,8 @@ class PPO:
     inputs: tuple[str, ...] = ()
 
     def __init__(self, obs_dim: int, num_streams: int, cfg: PPOConfig | None = None,
-                 seed: int = 0, mask_dim: int = 0):
+                 seed: int = 0, mask_dim: int = 0, num_seats: int = 1):
+        del num_seats  # independent streams: PPO does not tell its seats apart
         self.cfg = cfg = cfg or PPOConfig()
         self.obs_dim, self.num_streams = obs_dim, num_streams
         with torch.random.fork_rng(devices=[]):

@@ -110,8 +110,9 @@ class SAC:
     rollout_steps = None  # updates on its own replay schedule, any rollout length
 
     def __init__(self, obs_dim: int, num_streams: int, cfg: SACConfig | None = None,
-                 seed: int = 0, mask_dim: int = 0):
+                 seed: int = 0, mask_dim: int = 0, num_seats: int = 1):
         del mask_dim  # SAC acts in the continuous space; masks do not apply
+        del num_seats  # independent streams
         self.cfg = cfg = cfg or SACConfig()
         self.obs_dim, self.num_streams = obs_dim, num_streams
         self.nvec = NVEC
