@@ -29,7 +29,7 @@ ITER = 16 * E  # env steps per iteration
 def tiny_config(name: str, iterations: int, **kw) -> TrainConfig:
     base = dict(name=name, scenario="vs_aggressive", total_steps=iterations * ITER,
                 num_envs=E, num_workers=1, seed=3, wandb="disabled", checkpoint_every=2,
-                game={"max_steps": 40}, learners=(LearnerSpec("ppo", "ppo", (0,), ppo=PPO_TINY),))
+                game={"max_steps": 40}, learners=(LearnerSpec("ppo", "ppo", (0,), PPO_TINY),))
     base.update(kw)
     return TrainConfig(**base)
 
@@ -102,8 +102,8 @@ def test_checkpoint_policy_rejects_a_match_it_cannot_observe(trained):
 
 
 def test_resume_continues_exactly_like_an_uninterrupted_run(tmp_path):
-    spec_sac = LearnerSpec("sac", "sac", (1,), sac=SAC_TINY)
-    spec_ppo = LearnerSpec("ppo", "ppo", (0,), ppo=PPO_TINY)
+    spec_sac = LearnerSpec("sac", "sac", (1,), config=SAC_TINY)
+    spec_ppo = LearnerSpec("ppo", "ppo", (0,), PPO_TINY)
     cfg = tiny_config("pair", 4, scenario="pair", learners=(spec_ppo, spec_sac),
                       game={"max_steps": 30})
     full = Trainer(cfg, tmp_path / "full", progress=False)
@@ -202,7 +202,7 @@ def test_train_command_runs_resumes_and_refuses_to_overwrite(tmp_path, capsys):
     assert train_cmd.run(resume) == 0
     ck = load_checkpoint(tmp_path / "cli")
     assert ck.meta["progress"]["global_step"] == 128
-    assert ck.learner_specs[0].ppo.num_steps == 16  # the run keeps its own settings
+    assert ck.learner_specs[0].config.num_steps == 16  # the run keeps its own settings
     bad = parser.parse_args(["--preset", "ppo_vs_aggressive", "--name", "x",
                              "--ppo", "num_stepz=3", *common])
     assert train_cmd.run(bad) == 2

@@ -89,7 +89,7 @@ def checkpoint(tmp_path_factory):
     cfg = TrainConfig("ev", "vs_aggressive", total_steps=128, num_envs=4, wandb="disabled",
                       game={"max_steps": 60},
                       learners=(LearnerSpec("ppo", "ppo", (0,),
-                                            ppo=PPOConfig(num_steps=16, update_epochs=1)),))
+                                            config=PPOConfig(num_steps=16, update_epochs=1)),))
     Trainer(cfg, run, progress=False).train()
     return run
 

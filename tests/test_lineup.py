@@ -211,7 +211,7 @@ def trained(tmp_path_factory):
     cfg = TrainConfig("tiny", "vs_aggressive", total_steps=64, num_envs=2, num_workers=1,
                       wandb="disabled", game={"max_steps": 40},
                       learners=(LearnerSpec("ppo", "ppo", (0,),
-                                            ppo=PPOConfig(num_steps=16, update_epochs=1)),))
+                                            config=PPOConfig(num_steps=16, update_epochs=1)),))
     Trainer(cfg, root / "run", progress=False).train()
     shutil.copytree(resolve_checkpoint_dir(root / "run"), root / "agents" / "tiny")
     return root / "run", root / "agents"

@@ -256,7 +256,7 @@ def test_human_vs_trained_agent_and_checkpoint_in_learner_seats(tmp_path):
     ppo = PPOConfig(num_steps=16, update_epochs=1, num_minibatches=2)
     cfg = TrainConfig(name="tiny", scenario="vs_aggressive", total_steps=2 * 16 * 2,
                       num_envs=2, num_workers=1, seed=0, wandb="disabled", checkpoint_every=1,
-                      game={"max_steps": 40}, learners=(LearnerSpec("ppo", "ppo", (0,), ppo=ppo),))
+                      game={"max_steps": 40}, learners=(LearnerSpec("ppo", "ppo", (0,), ppo),))
     run = tmp_path / "tiny"
     Trainer(cfg, run, progress=False).train()
 

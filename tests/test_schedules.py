@@ -176,7 +176,7 @@ def test_cycle_training_rotates_the_opponents_and_scales_the_victory_reward(tmp_
                       schedule={"kind": "cycle", "pool": ["random", "aggressive"],
                                 "mode": "fixed", "interval": 64, "mastery_phase": 10**6},
                       learners=(LearnerSpec("ppo", "ppo", (0,),
-                                            ppo=PPOConfig(num_steps=16, update_epochs=1)),))
+                                            config=PPOConfig(num_steps=16, update_epochs=1)),))
     tr = Trainer(cfg, tmp_path / "cyc", progress=False)
     tr.train()
     opps = {k for h in tr.history for k in h if k.startswith("charts/win_rate_vs/")}

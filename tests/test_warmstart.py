@@ -96,7 +96,7 @@ def test_warm_start_from_a_1v1_checkpoint(tmp_path):
     cfg = TrainConfig("duel", "vs_defensive", total_steps=2 * 32 * 2, num_envs=2,
                       wandb="disabled", checkpoint_every=1,
                       learners=(LearnerSpec("ppo", "ppo", (0,),
-                                            ppo=PPOConfig(num_steps=32, update_epochs=1)),))
+                                            config=PPOConfig(num_steps=32, update_epochs=1)),))
     tr = Trainer(cfg, tmp_path / "duel", progress=False)
     tr.train()
     env = VectorMatchEnv("team_vs_def_bot", 1)

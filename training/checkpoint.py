@@ -153,7 +153,8 @@ class Checkpoint:
     @property
     def learner_specs(self) -> list[LearnerSpec]:
         try:
-            return [LearnerSpec.from_dict(d) for d in self.meta["learners"]]
+            return [LearnerSpec.from_dict({k: v for k, v in d.items() if k != "scenario_seats"})
+                    for d in self.meta["learners"]]
         except (ValueError, KeyError, TypeError) as exc:
             raise CheckpointError(f"{self.path / 'meta.json'}: learners: {exc}") from None
 
@@ -197,14 +198,16 @@ class Checkpoint:
             raise CheckpointError(f"{file}: corrupt or truncated (SHA-256 differs from the one "
                                   f"recorded in meta.json; size {file.stat().st_size} bytes)")
 
-    def load_learner(self, name: str, num_streams: int = 1, weights_only: bool = False,
-                     seed: int = 0) -> Any:
-        """A PPO/SAC learner rebuilt from its spec with this checkpoint's state."""
+    def load_learner(self, name: str, num_streams: int | None = None,
+                     weights_only: bool = False, seed: int = 0) -> Any:
+        """A learner rebuilt from its spec with this checkpoint's state (``num_streams``
+        default: one env's worth, one stream per seat it drives)."""
         specs = {s.name: s for s in self.learner_specs}
         if name not in specs:
             raise CheckpointError(f"{self.path}: no learner {name!r}; learners: {list(specs)}")
         spec = specs[name]
-        learner = make_learner(spec, self.obs_dim, num_streams, seed)
+        learner = make_learner(spec, self.obs_dim, num_streams or len(spec.seats), seed,
+                               input_dims=self.meta.get("input_dims"))
         state = self.state(name)
         try:
             learner.load_state_dict(state, weights_only=weights_only)

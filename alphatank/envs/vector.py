@@ -34,6 +34,14 @@ of a scenario and speaks (num_envs, L learners, ...) arrays: observations float3
 terminated / truncated bool (num_envs,); ``info["final_obs"]`` (zeros where no episode
 ended) and ``info["episodes"]``, one summary dict per ended episode. Dead learners keep
 their slot until their match ends. AlphaTank's trainer uses this view.
+
+Extra per-learner inputs (for learners that need more than observations, e.g. a
+centralised critic's state): an env made with ``inputs=("alive", ...)`` keeps
+``env.inputs[name]`` (num_envs, L, ...) for the current step, puts the values of ended
+episodes (taken before the autoreset) in ``info["final_inputs"][name]``, and gives each
+one's trailing shape in ``env.input_shapes``. Input ``x`` is the method ``input_x()`` of
+:class:`VectorMatchEnv`: adding an input is adding that one method.
+
 :class:`SubprocVectorMatchEnv` has the same interface and, for the same seed, the same
 results bit for bit: worker processes each own a contiguous block of envs and exchange
 arrays through shared memory. :func:`make_vector_env` picks one by ``num_workers``.
@@ -83,7 +91,7 @@ class VectorMatchEnv:
                  reward_overrides: dict | None = None, *,
                  seat_policies: Mapping[int, Policy] | None = None,
                  learner_seats: Sequence[int] | None = None,
-                 env_ids: Sequence[int] | None = None):
+                 env_ids: Sequence[int] | None = None, inputs: Sequence[str] = ()):
         self.scenario = load_scenario(scenario)
         self.core = MatchSet(self.scenario, num_envs, observation=observation,
                              game_overrides=game_overrides, reward_overrides=reward_overrides,
@@ -105,6 +113,21 @@ class VectorMatchEnv:
         self._length = np.zeros(num_envs, dtype=np.int64)
         self._started = False
         self._shape = (num_envs, L, 3)
+        self._input_names = tuple(inputs)
+        for name in inputs:
+            check_input(self, name)
+        self.inputs: dict[str, np.ndarray] = self._read_inputs()
+        self.input_shapes = {name: a.shape[2:] for name, a in self.inputs.items()}
+
+    # ---- extra learner inputs (see the module docstring) ------------------------------
+
+    def _read_inputs(self) -> dict[str, np.ndarray]:
+        return {name: np.array(getattr(self, f"input_{name}")(), dtype=np.float32)
+                for name in self._input_names}
+
+    def input_alive(self) -> np.ndarray:
+        """(num_envs, L): 1 where the learner seat's tank is alive."""
+        return self.core.batch.alive[:, self.core.driven_idx]
 
     @property
     def layout(self) -> ObsLayout:
@@ -159,7 +182,9 @@ class VectorMatchEnv:
         for e in range(self.num_envs):
             self._reset_env(e)
         self._started = True
-        return self.core.obs.build().copy()
+        obs = self.core.obs.build().copy()
+        self.inputs = self._read_inputs()
+        return obs
 
     def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
                                           dict[str, Any]]:
@@ -177,10 +202,13 @@ class VectorMatchEnv:
         terminated = np.fromiter((m.terminated for m in core.matches), bool, self.num_envs)
         truncated = np.fromiter((m.truncated for m in core.matches), bool, self.num_envs)
         final_obs = np.zeros_like(obs)
+        final_inputs = {name: np.zeros_like(a) for name, a in self.inputs.items()}
         episodes = []
         done = np.flatnonzero(terminated | truncated)
         if done.size:
             final_obs[done] = obs[done]
+            for name in self._input_names:
+                final_inputs[name][done] = getattr(self, f"input_{name}")()[done]
             for e in done:
                 e = int(e)
                 m = core.matches[e]
@@ -192,7 +220,9 @@ class VectorMatchEnv:
                     "terms": dict(zip(TERMS, self._terms[e].copy(), strict=True))})
                 self._reset_env(e)
             obs = core.obs.build()
-        info = {"final_obs": final_obs, "episodes": episodes}
+        if self._input_names:
+            self.inputs = self._read_inputs()
+        info = {"final_obs": final_obs, "episodes": episodes, "final_inputs": final_inputs}
         return obs.copy(), rewards.astype(np.float32), terminated, truncated, info
 
     def _name(self, idx: tuple[int, ...]) -> str:
@@ -257,9 +287,14 @@ def _worker(conn: Any, kwargs: dict, lo: int, hi: int, specs: dict, names: dict)
                 a["terminated"][lo:hi] = term
                 a["truncated"][lo:hi] = trunc
                 a["final_obs"][lo:hi] = info["final_obs"]
+                for name, arr in env.inputs.items():
+                    a[f"input:{name}"][lo:hi] = arr
+                    a[f"final:{name}"][lo:hi] = info["final_inputs"][name]
                 conn.send(("ok", info["episodes"]))
             elif cmd == "reset":
                 a["obs"][lo:hi] = env.reset(arg)
+                for name, arr in env.inputs.items():
+                    a[f"input:{name}"][lo:hi] = arr
                 conn.send(("ok", None))
             elif cmd == "call":
                 name, args = arg
@@ -289,13 +324,13 @@ class SubprocVectorMatchEnv:
                  reward_overrides: dict | None = None, *, num_workers: int = 2,
                  seat_policies: Mapping[int, Policy] | None = None,
                  learner_seats: Sequence[int] | None = None,
-                 start_method: str = "spawn"):
+                 start_method: str = "spawn", inputs: Sequence[str] = ()):
         if not 1 <= num_workers <= num_envs:
             raise ValueError(f"num_workers must be in 1..num_envs={num_envs}, "
                              f"got {num_workers}")
         probe = VectorMatchEnv(scenario, 1, seed, observation, game_overrides,
                                reward_overrides, seat_policies=seat_policies,
-                               learner_seats=learner_seats)
+                               learner_seats=learner_seats, inputs=inputs)
         self.scenario = probe.scenario
         self.num_envs, self.num_learners = num_envs, probe.num_learners
         self.learner_seats, self.learner_teams = probe.learner_seats, probe.learner_teams
@@ -305,10 +340,15 @@ class SubprocVectorMatchEnv:
         specs = {"obs": ((E, L, D), "float32"), "final_obs": ((E, L, D), "float32"),
                  "rewards": ((E, L), "float32"), "terminated": ((E,), "bool"),
                  "truncated": ((E,), "bool"), "actions": ((E, L, 3), "int64")}
+        self.input_shapes = probe.input_shapes
+        for name, shape in self.input_shapes.items():
+            specs[f"input:{name}"] = specs[f"final:{name}"] = ((E, L, *shape), "float32")
         self._shared = _Shared(specs)
+        self.inputs = self._inputs()
         kwargs = {"scenario": self.scenario, "seed": seed, "observation": observation,
                   "game_overrides": game_overrides, "reward_overrides": reward_overrides,
-                  "seat_policies": seat_policies, "learner_seats": learner_seats}
+                  "seat_policies": seat_policies, "learner_seats": learner_seats,
+                  "inputs": tuple(inputs)}
         bounds = np.linspace(0, E, num_workers + 1).round().astype(int)
         ctx = mp.get_context(start_method)
         self._conns, self._procs = [], []
@@ -328,6 +368,9 @@ class SubprocVectorMatchEnv:
         e, slot = idx
         return (f"env {e}, learner {slot} (seat {self.learner_seats[slot]}, team "
                 f"{self.learner_teams[slot]})")
+
+    def _inputs(self, kind: str = "input") -> dict[str, np.ndarray]:
+        return {name: self._shared.arr[f"{kind}:{name}"].copy() for name in self.input_shapes}
 
     def _gather(self) -> list:
         out = []
@@ -367,6 +410,7 @@ class SubprocVectorMatchEnv:
             self.seed = int(seed)
         self._broadcast("reset", seed)
         self._started = True
+        self.inputs = self._inputs()
         return self._shared.arr["obs"].copy()
 
     def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
@@ -376,7 +420,10 @@ class SubprocVectorMatchEnv:
         a = self._shared.arr
         a["actions"][...] = check_actions(actions, a["actions"].shape, self._name)
         episodes = [ep for part in self._broadcast("step") for ep in part]
-        info = {"final_obs": a["final_obs"].copy(), "episodes": episodes}
+        if self.input_shapes:
+            self.inputs = self._inputs()
+        info = {"final_obs": a["final_obs"].copy(), "episodes": episodes,
+                "final_inputs": self._inputs("final")}
         return (a["obs"].copy(), a["rewards"].copy(), a["terminated"].copy(),
                 a["truncated"].copy(), info)
 
@@ -400,6 +447,14 @@ class SubprocVectorMatchEnv:
     def __del__(self) -> None:
         if hasattr(self, "_closed"):
             self.close()
+
+
+def check_input(env: VectorMatchEnv, name: str) -> None:
+    """Raise unless ``env`` has the input method ``input_<name>`` (listing those it has)."""
+    if not callable(getattr(type(env), f"input_{name}", None)):
+        have = sorted(a[6:] for a in dir(type(env))
+                      if a.startswith("input_") and callable(getattr(type(env), a)))
+        raise ValueError(f"unknown env input {name!r}; this env supplies: {have}")
 
 
 def make_vector_env(scenario: str | Scenario, num_envs: int, seed: int = 0,
