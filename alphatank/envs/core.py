@@ -21,12 +21,14 @@ Rules shared by all envs:
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 from gymnasium import spaces
 
+from alphatank.game.lineup import spec_seat
 from alphatank.game.observe import (
     OBS_KINDS,
     GlobalState,
@@ -103,6 +105,8 @@ class MatchSet:
                    if s not in self.driven and s not in self.seat_policies]
         self.orphans = orphans  # learner seats nobody drives: need an opponent policy
         self.opponent_policy: Policy | None = None
+        self.opponents: dict[str, Seat | Policy] = {}  # named, for set_env_opponents
+        self.env_opponent: list[str | None] = [None] * E
         self.bot_override: list[str] | None = None
         self.weakness: float | None = None
         walls, buffs, debuffs = slot_counts(self.game, self.specs)
@@ -157,6 +161,10 @@ class MatchSet:
             return None
         if seat in self.seat_policies:
             return self.seat_policies[seat]
+        name = self.env_opponent[e]
+        if name is not None:
+            opp = self.opponents[name]
+            return dataclasses.replace(opp, team=self.teams[seat]) if isinstance(opp, Seat) else opp
         if self.opponent_policy is not None:
             return self.opponent_policy
         s = self.scenario.seats[seat]
@@ -173,8 +181,33 @@ class MatchSet:
             s = Seat(s.team, "bot", bot=bot, weakness=w, options=opts)
         return s
 
+    def add_opponent(self, name: str, opponent: str | Policy) -> None:
+        """Register a named opponent for :meth:`set_env_opponents`: a seat spec
+        (``smart@0.5``, ``checkpoint:PATH``, ``agent:NAME``) or a Policy (one object may
+        fill every seat of every env: policies keep their state per match and seat)."""
+        if isinstance(opponent, str):
+            opponent = spec_seat(opponent, "A", where=f"opponent {name!r}")
+        self.opponents[name] = opponent
+
+    def set_env_opponents(self, names: Sequence[str | None]) -> None:
+        """Per env: the named opponent that fills every seat this set plays (not the
+        ``seat_policies``) from that env's next episode; None restores the default."""
+        if len(names) != self.num_envs:
+            raise ValueError(f"need one opponent name per env ({self.num_envs}), got "
+                             f"{len(names)}")
+        bad = sorted({n for n in names if n is not None and n not in self.opponents})
+        if bad:
+            raise ValueError(f"unknown opponent(s) {bad}; registered: {sorted(self.opponents)}")
+        self.env_opponent = list(names)
+
     def describe_opponents(self, e: int) -> str:
-        """Label of the seats this set plays in env ``e``, e.g. ``B:smart(w=1)``."""
+        """Label of the seats this set plays in env ``e``, e.g. ``B:smart(w=1)``; a named
+        opponent (:meth:`set_env_opponents`) is labelled by its name."""
+        name = self.env_opponent[e]
+        if name is not None:
+            teams = dict.fromkeys(self.teams[s] for s in range(self.n)
+                                  if s not in self.driven and s not in self.seat_policies)
+            return ", ".join(f"{t}:{name}" for t in teams) or "none"
         parts = []
         for seat in range(self.n):
             c = self.seat_controller_spec(e, seat)

@@ -164,6 +164,17 @@ class VectorMatchEnv:
         against a snapshot); ``None`` restores the scenario's controllers."""
         self.core.opponent_policy = policy
 
+    def add_opponent(self, name: str, opponent: str | Policy) -> None:
+        """Register a named opponent (a seat spec such as ``smart@0.5`` or
+        ``checkpoint:PATH``, or a Policy) for :meth:`set_env_opponents`."""
+        self.core.add_opponent(name, opponent)
+
+    def set_env_opponents(self, names: Sequence[str | None]) -> None:
+        """One registered opponent name per env (None: the scenario's own controllers),
+        filling every non-learner seat from that env's next episode (league and
+        self-play pools)."""
+        self.core.set_env_opponents(names)
+
     # ---- episodes -------------------------------------------------------------------
 
     def _reset_env(self, e: int) -> None:
@@ -350,6 +361,7 @@ class SubprocVectorMatchEnv:
                   "seat_policies": seat_policies, "learner_seats": learner_seats,
                   "inputs": tuple(inputs)}
         bounds = np.linspace(0, E, num_workers + 1).round().astype(int)
+        self._blocks = list(zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True))
         ctx = mp.get_context(start_method)
         self._conns, self._procs = [], []
         for lo, hi in zip(bounds[:-1], bounds[1:], strict=True):
@@ -404,6 +416,17 @@ class SubprocVectorMatchEnv:
 
     def set_opponent_policy(self, policy: Policy | None) -> None:
         self._broadcast("call", ("set_opponent_policy", (policy,)))
+
+    def add_opponent(self, name: str, opponent: str | Policy) -> None:
+        self._broadcast("call", ("add_opponent", (name, opponent)))
+
+    def set_env_opponents(self, names: Sequence[str | None]) -> None:
+        if len(names) != self.num_envs:
+            raise ValueError(f"need one opponent name per env ({self.num_envs}), got "
+                             f"{len(names)}")
+        for conn, (lo, hi) in zip(self._conns, self._blocks, strict=True):
+            conn.send(("call", ("set_env_opponents", (list(names[lo:hi]),))))
+        self._gather()
 
     def reset(self, seed: int | None = None) -> np.ndarray:
         if seed is not None:
