@@ -1,4 +1,5 @@
-# Set-up on a fresh machine is part of every target: .venv is created and filled on demand.
+# Set-up on a fresh machine is part of every target: .venv is created and filled on demand,
+# with every extra (train, video, sb3) and the dev tools; constraints.txt pins torch.
 PY ?= python3.11
 VENV := .venv
 BIN := $(VENV)/bin
@@ -12,7 +13,7 @@ export PYGAME_HIDE_SUPPORT_PROMPT := 1
 $(BIN)/alphatank: pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
-	$(BIN)/pip install -q -c constraints.txt -e '.[dev]'
+	$(BIN)/pip install -q -c constraints.txt -e '.[all,dev]'
 	touch $(BIN)/alphatank
 
 install: $(BIN)/alphatank

@@ -3,7 +3,9 @@
 Errors are handled here once for every verb: bad input (any
 :class:`~alphatank.errors.InputError`: config, map, scenario, replay, checkpoint, ...) and
 files that cannot be read or written (``OSError``) print one line,
-``alphatank VERB: error: MESSAGE``, and exit with status 2; so do bad arguments. A reader
+``alphatank VERB: error: MESSAGE``, and exit with status 2; so do bad arguments, and a verb
+whose install extra is missing (:class:`~alphatank.extras.MissingExtraError`: the line
+names the ``pip install`` that fixes it). A reader
 that closes the pipe early (``alphatank maps | head -n 1``) ends the command quietly with
 status 141, as a program killed by SIGPIPE. ``ALPHATANK_TRACEBACK=1`` re-raises instead
 (for debugging).
@@ -15,10 +17,11 @@ import argparse
 import importlib
 import os
 import sys
-from typing import NoReturn
+from typing import Any, NoReturn
 
 from alphatank import __version__
 from alphatank.errors import InputError, one_line
+from alphatank.extras import MissingExtraError, install_hint
 
 # verb -> module in alphatank.commands exposing add_arguments(parser) and run(args) -> int
 COMMANDS = {
@@ -28,7 +31,8 @@ COMMANDS = {
     "play": "Play interactively: humans, bots and checkpoints in any seat.",
     "record": "Record a headless match to MP4/GIF (and a replay file).",
     "replay": "Re-simulate, render or record a replay file.",
-    "arena": "Play every pair of bots on both sides; win/draw/loss matrix.",
+    "arena": "Play every pair of seats (bots, checkpoints, agents) on both sides; W/D/L "
+             "matrix and league.",
     "bench": "Measure ticks/s of the match, env steps/s, bot and renderer cost; --soak.",
     "maps": "List shipped maps or validate and print some.",
 }
@@ -50,20 +54,39 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="VERB",
                                 parser_class=Parser)
     for verb, help_text in COMMANDS.items():
-        module = importlib.import_module(f"alphatank.commands.{verb}")
         # help strings are %-formatted by argparse, descriptions are printed as they are
         p = sub.add_parser(verb, help=help_text.replace("%", "%%"), description=help_text)
+        try:
+            module = importlib.import_module(f"alphatank.commands.{verb}")
+        except MissingExtraError as exc:  # the verb exists; running it says what to install
+            p.set_defaults(_run=_unavailable(exc), _any_args=True)
+            continue
         module.add_arguments(p)
         p.set_defaults(_run=module.run)
     return parser
 
 
+def _unavailable(exc: MissingExtraError) -> Any:
+    def run(args: argparse.Namespace) -> int:
+        raise exc
+    return run
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args, unknown = parser.parse_known_args(argv)
+    if unknown and not getattr(args, "_any_args", False):
+        parser.error(f"unrecognized arguments: {' '.join(unknown)}")
     try:
         return int(args._run(args) or 0)
     except BrokenPipeError:
         return broken_pipe_exit()
+    except MissingExtraError as exc:  # an ImportError, not bad input: its own message
+        if os.environ.get("ALPHATANK_TRACEBACK"):
+            raise
+        print(f"alphatank {args.command} needs the '{exc.extra}' extra: "
+              f"{install_hint(exc.extra)}", file=sys.stderr)
+        return EXIT_BAD_INPUT
     except (InputError, OSError) as exc:
         if os.environ.get("ALPHATANK_TRACEBACK"):
             raise

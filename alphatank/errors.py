@@ -13,6 +13,12 @@ class InputError(Exception):
     """Bad input; the message names the file, line or field and what is allowed."""
 
 
+def as_input_error(exc: ValueError) -> InputError:
+    """A ValueError that a layer raised for bad input (the training presets and fields,
+    evaluation options) as an InputError with its message; InputErrors pass unchanged."""
+    return exc if isinstance(exc, InputError) else InputError(str(exc))
+
+
 def one_line(exc: BaseException) -> str:
     """An exception's message on one line (continuation lines joined with ' | ')."""
     text = " | ".join(part.strip() for part in str(exc).strip().splitlines() if part.strip())

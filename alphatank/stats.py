@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 
+from alphatank.extras import require
+
 
 def wilson_interval(successes: float, n: int, z: float = 1.96) -> tuple[float, float]:
     """Wilson score interval for a binomial proportion ``successes / n``.
@@ -32,11 +34,18 @@ class League:
     """openskill (Plackett-Luce) ratings of players from a stream of 1-vs-1 results."""
 
     def __init__(self, names: list[str]):
+        require("train", "openskill ratings")
         from openskill.models import PlackettLuce
 
         self.model = PlackettLuce()
         self.names = list(names)
         self.ratings = [self.model.rating(name=n) for n in self.names]
+
+    def add(self, name: str, mu: float | None = None, sigma: float | None = None) -> int:
+        """A new player (default: the model's starting rating); returns its index."""
+        self.names.append(name)
+        self.ratings.append(self.model.rating(mu=mu, sigma=sigma, name=name))
+        return len(self.names) - 1
 
     def record(self, i: int, j: int, outcome: int) -> None:
         """Player i against player j: outcome +1 (i won), 0 (draw) or -1 (j won)."""

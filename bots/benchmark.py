@@ -7,8 +7,8 @@ import time
 import numpy as np
 
 from alphatank.bots.registry import BOT_NAMES, make_bot
-from alphatank.bots.runner import seat_seeds
 from alphatank.sim.config import GameConfig
+from alphatank.sim.episode import start_episode
 from alphatank.sim.mapspec import load_map
 from alphatank.sim.match import Match
 
@@ -31,9 +31,7 @@ def bot_costs(map_name: str = "maze", ticks: int = 2000, seed: int = 0,
         match = None
         while k < 2 * ticks:
             if match is None or match.done:
-                match = Match(cfg, spec, ["A", "B"], seed=game)
-                for i, s in enumerate(seat_seeds(game, 2)):
-                    bots[i].reset(match, i, s)
+                match = start_episode(cfg, [spec], ["A", "B"], bots, game, match=match).match
                 game += 1
             for i in range(2):
                 if match.alive[i] and k < 2 * ticks:

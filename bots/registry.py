@@ -37,23 +37,31 @@ def make_bot(name: str, weakness: float | None = None, seed: int | None = None,
     whose ``weakness`` attribute a curriculum may change between episodes; ``options`` go
     to the bot's constructor (e.g. ``ricochet=False`` for ``smart``)."""
     cls = _lookup(name)
-    valid = bot_options(name)
-    unknown = sorted(set(options) - set(valid), key=str)
-    if unknown:
-        raise BotError(f"bot {name!r} has no option(s) {unknown}; valid options: "
-                       f"{valid + ['weakness', 'seed']}")
-    params = inspect.signature(cls.__init__).parameters
-    for key, value in options.items():
-        default = params[key].default
-        kind = type(default)
-        if kind in (bool, int, float):
-            _, reason = check_value((kind,), value)
-            if reason is not None:
-                raise BotError(f"bot {name!r} option {key}: {reason}")
+    problem = options_problem(name, options)
+    if problem is not None:
+        raise BotError(problem)
     bot = cls(seed=seed, **options)
     if weakness is None:
         return bot
     return Weakened(bot, weakness, seed=seed)
+
+
+def options_problem(name: str, options: dict[str, Any]) -> str | None:
+    """What is wrong with bot ``name``'s ``options`` (unknown keys, or a value not of its
+    default's type: bool, int or float), or None."""
+    valid = bot_options(name)
+    unknown = sorted(set(options) - set(valid), key=str)
+    if unknown:
+        return (f"bot {name!r} has no option(s) {unknown}; valid options: "
+                f"{valid + ['weakness', 'seed']}")
+    params = inspect.signature(_lookup(name).__init__).parameters
+    for key, value in options.items():
+        kind = type(params[key].default)
+        if kind in (bool, int, float):
+            _, reason = check_value((kind,), value)
+            if reason is not None:
+                return f"bot {name!r} option {key}: {reason}"
+    return None
 
 
 def parse_bot_spec(text: str) -> tuple[str, float | None, dict[str, Any]]:
@@ -83,6 +91,32 @@ def bot_from_spec(text: str, seed: int | None = None) -> Bot | Weakened:
     """:func:`make_bot` from a ``NAME[:KEY=VALUE...][@WEAKNESS]`` string."""
     name, weakness, options = parse_bot_spec(text)
     return make_bot(name, weakness=weakness, seed=seed, **options)
+
+
+# ---- the line-up's "bot" controller kind (entry points named in alphatank.game.seats) ---
+
+def bot_seat_fields(text: str) -> dict[str, Any]:
+    """The seat-table keys of a bot spec string: ``bot``, ``options`` and, when given,
+    ``weakness`` (``--seats`` items and arena seats)."""
+    name, weakness, options = parse_bot_spec(text)
+    fields: dict[str, Any] = {"bot": name, "options": options}
+    if weakness is not None:
+        fields["weakness"] = weakness
+    return fields
+
+
+def check_seat_bot(seat: Any) -> tuple[str, str] | None:
+    """A ``bot`` seat's problem as (key, message), or None: a known bot, known options of
+    the right types."""
+    if seat.bot not in BOTS:
+        return "bot", f"got {seat.bot!r}; valid bots: {list(BOT_NAMES)}"
+    problem = options_problem(seat.bot, seat.options)
+    return None if problem is None else ("options", problem)
+
+
+def seat_bot(seat: Any, seed: int | None = None) -> Bot | Weakened:
+    """The controller of a ``bot`` seat (its bot, weakness and options)."""
+    return make_bot(seat.bot, weakness=seat.weakness, seed=seed, **seat.options)
 
 
 def _value(text: str) -> Any:

@@ -112,6 +112,8 @@ class SmartBot(Bot):
             fire = ready and abs(err) < tolerance
             if fire and match.n > 2:  # teammates may stand in the line of fire
                 fire = self.shot_hits(match, seat)[0]
+            elif fire:  # the bullet flies along the heading, which may clip a corner
+                fire = self.heading_clear(match, seat, dist - self.hit_radius)
             return self.steer(err), STOP, int(fire)
 
         fire = 0
@@ -140,6 +142,15 @@ class SmartBot(Bot):
         if move == STOP and rot == NONE:  # arrived: face the enemy while waiting
             rot = self.steer(wrap(math.atan2(ey - y, ex - x) - heading))
         return rot, move, fire
+
+    def heading_clear(self, match: Match, seat: int, reach: float) -> bool:
+        """A bullet fired now flies ``reach`` px along the heading without touching a
+        wall (exact swept-circle query from the muzzle)."""
+        x, y = (float(v) for v in match.tank_xy[seat])
+        c, s = math.cos(match.tank_angle[seat]), math.sin(match.tank_angle[seat])
+        d, reach = self.muzzle_offset, max(reach, self.muzzle_offset)
+        return match.world.ray((x + c * d, y + s * d), (x + c * reach, y + s * reach),
+                               self.cfg.bullet_radius) is None
 
     def _search(self, match: Match, seat: int, me: int, enode: int,
                 target_xy: tuple[float, float]) -> None:

@@ -19,11 +19,12 @@ from alphatank.bots import (
     make_bot,
     parse_bot_spec,
 )
-from alphatank.bots.arena import run_arena
 from alphatank.bots.benchmark import bot_costs
-from alphatank.bots.runner import play_game
+from alphatank.cli import main
 from alphatank.commands import arena as arena_cmd
+from alphatank.game.arena import run_arena
 from alphatank.sim.config import GameConfig
+from alphatank.sim.episode import Episode, EpisodeHook, start_episode
 from alphatank.sim.mapspec import load_map, parse_map
 from alphatank.sim.match import Match
 from alphatank.sim.navigation import nav_grid
@@ -32,6 +33,22 @@ from alphatank.sim.policy import NOOP, Policy
 GAMES = 100  # seeds 0..99, chosen once; thresholds are the issue's
 CLASSES = {"random": RandomBot, "aggressive": AggressiveBot, "defensive": DefensiveBot,
            "dodge": DodgeBot, "smart": SmartBot}
+
+
+class _Watch(EpisodeHook):
+    """Calls ``fn(match, actions)`` after every tick."""
+
+    def __init__(self, fn):
+        self.fn = fn
+
+    def on_tick(self, episode, events):
+        self.fn(episode.match, episode.actions)
+
+
+def play_game(cfg, spec, bots, seed=0, on_tick=None) -> Episode:
+    """One whole 1v1 (teams A, B) seeded like every episode (sim.episode)."""
+    hooks = [] if on_tick is None else [_Watch(on_tick)]
+    return start_episode(cfg, [spec], ["A", "B"], bots, seed, hooks=hooks).run()
 
 
 def _series(a: str, b: str, map_name: str, cfg: GameConfig | None = None, swap: bool = True,
@@ -269,8 +286,8 @@ def test_smart_banks_shots_off_walls_only_with_ricochet():
 # ---- arena and costs --------------------------------------------------------------
 
 def test_run_arena_counts_are_consistent():
-    cfg = GameConfig(max_steps=300)
-    res = run_arena(["smart", "random", "dodge"], load_map("open"), cfg, games=4, seed=3)
+    res = run_arena(["smart", "random", "dodge"], "open", games=4, seed=3,
+                    game={"max_steps": 300})
     for i in range(3):
         for j in range(3):
             if i != j:
@@ -294,7 +311,7 @@ def test_arena_command_prints_matrix_and_rejects_unknown_bots(capsys):
     assert len(rows) == 2 and all("[" in r and "%" in r for r in rows)
     ratings = [ln.split() for ln in league.splitlines() if ln.startswith(("aggressive", "random"))]
     assert [r[0] for r in ratings] == ["aggressive", "random"]  # the winner is rated first
-    rc = arena_cmd.run(parser.parse_args(["--bots", "smart,terminator"]))
+    rc = main(["arena", "--bots", "smart,terminator"])
     err = capsys.readouterr().err
     assert rc == 2 and "terminator" in err and "'smart'" in err and "'dodge'" in err
 

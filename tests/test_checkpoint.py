@@ -29,7 +29,7 @@ ITER = 16 * E  # env steps per iteration
 def tiny_config(name: str, iterations: int, **kw) -> TrainConfig:
     base = dict(name=name, scenario="vs_aggressive", total_steps=iterations * ITER,
                 num_envs=E, num_workers=1, seed=3, wandb="disabled", checkpoint_every=2,
-                game={"max_steps": 40}, learners=(LearnerSpec("ppo", "ppo", (0,), ppo=PPO_TINY),))
+                game={"max_steps": 40}, learners=(LearnerSpec("ppo", "ppo", (0,), PPO_TINY),))
     base.update(kw)
     return TrainConfig(**base)
 
@@ -57,6 +57,7 @@ def test_save_layout_is_complete_and_atomic(trained):
     ck = load_checkpoint(trained)  # run dir resolves to the latest save
     assert ck.meta["progress"]["global_step"] == 3 * ITER
     assert set(ck.meta["files"]) == {"ppo.pt"}
+    assert ck.meta["env"] == "AlphaTank/VsAggressive-v0"  # the env (and version) trained on
     assert ck.scenario.name == "vs_aggressive" and ck.train_config.num_envs == E
     state = torch.load(ck.path / "ppo.pt", weights_only=True)
     assert {"net", "optimizer", "obs_norm", "ret_norm", "generator"} <= set(state)
@@ -101,8 +102,8 @@ def test_checkpoint_policy_rejects_a_match_it_cannot_observe(trained):
 
 
 def test_resume_continues_exactly_like_an_uninterrupted_run(tmp_path):
-    spec_sac = LearnerSpec("sac", "sac", (1,), sac=SAC_TINY)
-    spec_ppo = LearnerSpec("ppo", "ppo", (0,), ppo=PPO_TINY)
+    spec_sac = LearnerSpec("sac", "sac", (1,), config=SAC_TINY)
+    spec_ppo = LearnerSpec("ppo", "ppo", (0,), PPO_TINY)
     cfg = tiny_config("pair", 4, scenario="pair", learners=(spec_ppo, spec_sac),
                       game={"max_steps": 30})
     full = Trainer(cfg, tmp_path / "full", progress=False)
@@ -184,6 +185,7 @@ def test_train_command_runs_resumes_and_refuses_to_overwrite(tmp_path, capsys):
     import argparse
 
     from alphatank.commands import train as train_cmd
+    from alphatank.errors import InputError
 
     parser = argparse.ArgumentParser()
     train_cmd.add_arguments(parser)
@@ -194,17 +196,17 @@ def test_train_command_runs_resumes_and_refuses_to_overwrite(tmp_path, capsys):
                               *common])
     assert train_cmd.run(args) == 0
     assert load_checkpoint(tmp_path / "cli").meta["progress"]["global_step"] == 64
-    assert train_cmd.run(args) == 2  # the run exists: resume it instead
-    assert "--resume" in capsys.readouterr().out
+    with pytest.raises(InputError, match="--resume"):  # the run exists: resume it instead
+        train_cmd.run(args)
     resume = parser.parse_args(["--resume", str(tmp_path / "cli"), "--total-steps", "128",
                                 *common])
     assert train_cmd.run(resume) == 0
     ck = load_checkpoint(tmp_path / "cli")
     assert ck.meta["progress"]["global_step"] == 128
-    assert ck.learner_specs[0].ppo.num_steps == 16  # the run keeps its own settings
+    assert ck.learner_specs[0].config.num_steps == 16  # the run keeps its own settings
     bad = parser.parse_args(["--preset", "ppo_vs_aggressive", "--name", "x",
                              "--ppo", "num_stepz=3", *common])
-    assert train_cmd.run(bad) == 2
-    assert "num_stepz" in capsys.readouterr().out
+    with pytest.raises(InputError, match="num_stepz"):  # alphatank.cli prints it, exit 2
+        train_cmd.run(bad)
     assert train_cmd.run(parser.parse_args(["--list"])) == 0
     assert "team_ppo_vs_ppo" in capsys.readouterr().out

@@ -72,20 +72,24 @@ def files(tmp_path_factory) -> dict[str, str]:
                                         'options = { hold_min = 2.5 }'))
     put("ckptseat.toml", SCENARIO.replace('controller = "bot"\nbot = "random"',
                                           'controller = "checkpoint"\npath = "gone"'))
+    put("syntax.toml", "x = [\n")
+    put("runsteps.toml", 'scenario = "vs_random"\ntotal_steps = "many"\n')
+    put("rungamma.toml", 'scenario = "vs_random"\n[[learners]]\nname = "p"\n'
+                         '[learners.config]\ngamma = 3\n')
     put("empty.npz", b"")
     put("binary.npz", bytes(range(256)) * 8)
     (d / "emptydir").mkdir()
     out["emptydir"] = str(d / "emptydir")
 
     # A real replay, then spoiled copies.
-    from alphatank.commands.play import build_lineup, parse_seats, start_episode
-    from alphatank.ui.video import record_match
+    from alphatank.game.lineup import build_lineup
+    from alphatank.game.scenarios import seats_scenario
 
-    lineup = build_lineup(parse_seats("smart,random", "open", {"max_steps": 60}))
-    match, match_seed = start_episode(lineup, 1)
-    rec = ReplayRecorder(match, match_seed=match_seed, seed=1, policies=lineup.policies)
-    record_match(match, lineup.policies, recorder=rec)
-    replay = rec.finish()
+    lineup = build_lineup(seats_scenario("smart,random", "open", {"max_steps": 60}))
+    rec = ReplayRecorder()  # an episode hook: seeds and the bots' routes from the episode
+    lineup.play(1, [rec])
+    replay = rec.replay
+    assert replay is not None and (replay.routes[..., 0] >= 0).any()
     good = save_replay(replay, d / "good.npz")
     out["good_npz"] = str(good)
     raw = good.read_bytes()
@@ -120,7 +124,7 @@ def files(tmp_path_factory) -> dict[str, str]:
                       num_workers=1, seed=0, wandb="disabled", checkpoint_every=0,
                       game={"max_steps": 30},
                       learners=(LearnerSpec("ppo", "ppo", (0,),
-                                            ppo=PPOConfig(num_steps=16, update_epochs=1)),))
+                                            PPOConfig(num_steps=16, update_epochs=1)),))
     trainer = Trainer(cfg, d / "run", progress=False)
     ckpt = trainer.save()
     trainer.env.close()
@@ -190,6 +194,15 @@ CASES = [
     ("arena-steps", ["arena", "--max-steps", "0"], ["max_steps", "[1, 10000000]"]),
     ("arena-preset", ["arena", "--preset", "fast"], ["unknown preset 'fast'"]),
     ("arena-seed", ["arena", "--seed", "-1"], ["--seed", "[0, 2^63)", "'-1'"]),
+    ("arena-seats-kind", ["arena", "--seats", "nosuch"], ["'nosuch'", "unknown seat kind",
+                                                          "valid bots"]),
+    ("arena-seats-one", ["arena", "--seats", "smart"], ["--seats needs at least 2 seats"]),
+    ("arena-seats-agent", ["arena", "--seats", "agent:nosuch,smart"],
+     ["unknown agent 'nosuch'"]),
+    ("arena-seats-ckpt", ["arena", "--seats", "checkpoint:{missing},smart"],
+     ["{missing}", "no such checkpoint"]),
+    ("arena-seats-learner", ["arena", "--seats", "learner,smart"],
+     ["learner seat", "agent:NAME"]),
     # replay
     ("replay-missing", ["replay", "{missing}"], ["{missing}", "no such replay file"]),
     ("replay-empty", ["replay", "{empty_npz}"], ["{empty_npz}", "not a readable replay"]),
@@ -223,7 +236,7 @@ CASES = [
     ("record-bot-option", ["record", "--scenario", "{botopt_toml}"],
      ["seats[1].options", "hold_min", "integer"]),
     ("record-ckpt-seat", ["record", "--scenario", "{ckptseat_toml}"],
-     ["seats[1].path", "no checkpoint"]),
+     ["seats[1].path", "gone: no such checkpoint"]),
     ("record-seats", ["record", "--seats", "human,genius"], ["--seats[1]", "genius"]),
     ("record-map", ["record", "--seats", "smart,random", "--map", "{utf16_txt}"],
      ["{utf16_txt}", "UTF-16"]),
@@ -243,6 +256,11 @@ CASES = [
                         "-o", "{good_txt}/x.mp4"], ["{good_txt}"]),
     ("record-max-steps", ["record", "--seats", "smart,random", "--max-steps", "-4"],
      ["max_steps", "[1, 10000000]"]),
+    ("record-max-steps-0", ["record", "--seats", "smart,random", "--max-steps", "0"],
+     ["max_steps", "[1, 10000000]"]),
+    ("record-bot-empty", ["record", "--seats", "bot:,smart"], ["--seats[0]", "bot needs a name"]),
+    ("record-checkpoint-agent", ["record", "--checkpoint", "agent:nosuch", "--seats",
+                                 "learner,smart"], ["unknown agent 'nosuch'"]),
     # play (under the dummy video driver: --headless-test lets it get to the real checks)
     ("play-scenario", ["play", "--headless-test", "--scenario", "{ff_toml}"],
      ["[game].friendly_fire"]),
@@ -253,6 +271,18 @@ CASES = [
     ("play-seats", ["play", "--headless-test", "--seats", "human@0.5,smart"], ["@weakness"]),
     ("play-fps", ["play", "--headless-test", "--seats", "smart,random", "--fps", "0"],
      ["--fps", "> 0"]),
+    ("play-seats-one-agent", ["play", "--headless-test", "--seats", "agent:nosuch"],
+     ["--seats needs at least 2 seats"]),
+    ("play-seats-agent", ["play", "--headless-test", "--seats", "agent:nosuch,smart"],
+     ["seats[0].agent", "unknown agent 'nosuch'"]),
+    ("play-seats-keys", ["play", "--headless-test", "--seats", "human:qwer,smart"],
+     ["seats[0].keys", "'qwer'", "arrows"]),
+    ("play-checkpoint-agent", ["play", "--headless-test", "--checkpoint", "agent:nosuch",
+                               "--seats", "human,learner"], ["unknown agent 'nosuch'"]),
+    ("play-stand-in", ["play", "--headless-test", "--scenario", "vs_smart", "--stand-in",
+                       "genius"], ["stand-in 'genius'", "valid bots"]),
+    ("play-max-frames", ["play", "--headless-test", "--seats", "smart,random",
+                         "--max-frames", "0"], ["--max-frames", ">= 1"]),
     # eval
     ("eval-missing", ["eval", "{missing}"], ["{missing}", "no such checkpoint"]),
     ("eval-empty-dir", ["eval", "{emptydir}"], ["{emptydir}", "not a checkpoint"]),
@@ -265,6 +295,8 @@ CASES = [
     ("eval-vs", ["eval", "{run}", "--vs", "genius", "--games", "1"], ["genius"]),
     ("eval-seed", ["eval", "{run}", "--seed", "x"], ["--seed", "'x'"]),
     ("eval-scenario", ["eval", "{run}", "--scenario", "{binary_toml}"], ["UTF-8"]),
+    ("eval-agent", ["eval", "agent:nosuch"], ["unknown agent 'nosuch'"]),
+    ("eval-checkpoint-empty", ["eval", "checkpoint:"], ["needs the checkpoint folder"]),
     # train
     ("train-resume-missing", ["train", "--resume", "{dir}/runs/nosuch"],
      ["nosuch", "no such checkpoint or run directory"]),
@@ -279,6 +311,31 @@ CASES = [
                            "--no-progress"], ["tensorboard"]),
     ("train-seed", ["train", "--seed", "-1"], ["--seed", "[0, 2^63)"]),
     ("train-steps", ["train", "--total-steps", "many"], ["--total-steps", "invalid int"]),
+    ("train-config-missing", ["train", "--config", "{dir}/none.toml"],
+     ["none.toml", "no such run file"]),
+    ("train-config-binary", ["train", "--config", "{binary_toml}"], ["{binary_toml}", "UTF-8"]),
+    ("train-config-toml", ["train", "--config", "{syntax_toml}"],
+     ["{syntax_toml}", "invalid TOML"]),
+    ("train-config-scenario", ["train", "--config", "{ff_toml}"], ["{ff_toml}", "scenario"]),
+    ("train-config-field", ["train", "--config", "{runsteps_toml}"],
+     ["{runsteps_toml}", "total_steps", "'many'"]),
+    ("train-config-hp", ["train", "--config", "{rungamma_toml}"],
+     ["{rungamma_toml}", "learners[0].config.gamma", "[0, 1]"]),
+    ("train-hp-algo", ["train", "--hp", "nosuch.x=1"], ["--hp nosuch.x", "unknown algorithm"]),
+    ("train-hp-field", ["train", "--hp", "ppo.nosuch=1"], ["ppo.nosuch", "valid"]),
+    ("train-hp-range", ["train", "--hp", "ppo.gamma=2"], ["--hp ppo.gamma", "[0, 1]"]),
+    ("train-hp-form", ["train", "--ppo", "gamma"], ["--ppo"]),
+    ("train-hp-nan", ["train", "--preset", "sac_vs_aggressive", "--hp",
+                      "sac.target_entropy=nan"], ["--hp sac.target_entropy", "finite"]),
+    ("train-time-limit-inf", ["train", "--time-limit", "inf"], ["--time-limit", "finite"]),
+    ("train-schedule", ["train", "--schedule", "cycle:sometimes"], ["--schedule", "cycle:fixed"]),
+    ("train-curriculum", ["train", "--curriculum", "0.1:2"], ["--curriculum", "START:END"]),
+    ("train-map", ["train", "--map", "nowhere"], ["--map", "unknown map 'nowhere'"]),
+    ("train-scenario", ["train", "--scenario", "{binary_toml}"], ["--scenario", "UTF-8"]),
+    ("train-config-and-preset", ["train", "--config", "{ff_toml}", "--preset", "demo"],
+     ["--config and --preset"]),
+    ("train-resume-new-flags", ["train", "--resume", "{run}", "--hp", "ppo.gamma=0.9"],
+     ["--hp apply to new runs"]),
     # demo
     ("demo-minutes", ["demo", "--minutes", "-1"], ["--minutes", "> 0", "'-1'"]),
     ("demo-wandb", ["demo", "--wandb", "cloud"], ["--wandb", "invalid choice"]),

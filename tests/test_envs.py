@@ -200,3 +200,17 @@ def test_stable_baselines3_ppo_trains():
     assert model.num_timesteps >= 2048
     action, _ = model.predict(env.reset(seed=0)[0], deterministic=True)
     assert env.action_space.contains(action)
+
+
+def test_ids_carry_the_env_version_and_checkpoints_name_their_env():
+    import dataclasses
+
+    from alphatank.envs.ids import ENV_VERSION, env_id
+    from alphatank.game.scenarios import load_scenario
+
+    assert all(gid.endswith(f"-v{ENV_VERSION}") for gid in envs.GYM_IDS)
+    assert parallel.TankBattleParallelEnv.metadata["name"] == f"alphatank_v{ENV_VERSION}"
+    assert env_id("vs_smart") == envs.gym_id("vs_smart") == f"AlphaTank/VsSmart-v{ENV_VERSION}"
+    assert env_id("team") == env_id("bot_teams") == f"AlphaTank/TankBattle-v{ENV_VERSION}"
+    changed = dataclasses.replace(load_scenario("vs_smart"), preset="long_range")
+    assert env_id(changed) == f"AlphaTank/TankBattle-v{ENV_VERSION}"

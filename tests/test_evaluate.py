@@ -8,6 +8,7 @@ import pytest
 import torch
 
 from alphatank.bots import make_bot
+from alphatank.cli import main
 from alphatank.commands import eval as eval_cmd
 from alphatank.game.scenarios import parse_scenario
 from alphatank.stats import wilson_interval
@@ -89,7 +90,7 @@ def checkpoint(tmp_path_factory):
     cfg = TrainConfig("ev", "vs_aggressive", total_steps=128, num_envs=4, wandb="disabled",
                       game={"max_steps": 60},
                       learners=(LearnerSpec("ppo", "ppo", (0,),
-                                            ppo=PPOConfig(num_steps=16, update_epochs=1)),))
+                                            config=PPOConfig(num_steps=16, update_epochs=1)),))
     Trainer(cfg, run, progress=False).train()
     return run
 
@@ -113,6 +114,6 @@ def test_eval_command_prints_table_and_writes_files(checkpoint, tmp_path, capsys
     out = capsys.readouterr().out
     assert "| PPO Agent vs Aggressive Bot |" in out and "Wilson 95% CI" in out
     assert json.loads((tmp_path / "e.json").read_text())[0]["games"] == 4
-    bad = parser.parse_args([str(tmp_path / "missing")])
-    assert eval_cmd.run(bad) == 2
-    assert "no such checkpoint" in capsys.readouterr().out
+    assert main(["eval", str(tmp_path / "missing")]) == 2
+    assert "alphatank eval: error: " in (err := capsys.readouterr().err)
+    assert "no such checkpoint" in err

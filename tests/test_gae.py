@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from alphatank.training.buffers import ReplayBuffer, compute_gae
+from alphatank.training.buffers import ReplayBuffer, compute_gae, compute_gae_masked
 from alphatank.training.normalize import ObsNormalizer, ReturnNormalizer, RunningMeanStd
 from alphatank.training.ppo import PPO, PPOConfig
 
@@ -57,6 +57,56 @@ def test_gae_without_episode_ends_matches_the_discounted_sum_and_streams_are_ind
     adv2, _ = compute_gae(r, v, term, zeros, zeros, last, gamma, lam)
     assert torch.equal(adv2[:, 0], adv[:, 0])
     assert not torch.equal(adv2[:, 1], adv[:, 1])
+
+
+def _masked(rewards, values, term, trunc, boot, last, active, gamma=0.9, lam=0.8):
+    return compute_gae_masked(_col(rewards), _col(values), _col(term), _col(trunc), _col(boot),
+                              torch.tensor([last]), _col(active).bool(), gamma, lam)
+
+
+def test_masked_gae_credits_the_team_outcome_to_the_last_live_step():
+    # The seat dies on row 1 (hit penalty -50); its team wins on row 4 (+100) after a
+    # time cost of -1 on row 3. Rows 2-4 are inactive: their values (99) never count.
+    adv, ret = _masked([1, -50, 0, -1, 100], [2, 3, 99, 99, 99], [0, 0, 0, 0, 1],
+                       [0, 0, 0, 0, 0], [77] * 5, 55.0, [1, 1, 0, 0, 0])
+    # P4 = 100, P3 = -1 + .9*100 = 89, P2 = .9*89 = 80.1 (the posthumous return)
+    # t=1: -50 + .9*80.1 - 3 = 19.09     (chain ends here: P is a full return)
+    # t=0: (1 + .9*3 - 2) + .72*19.09 = 15.4448
+    assert adv[:, 0].tolist() == pytest.approx([15.4448, 19.09, 0, 0, 0], abs=1e-4)
+    assert ret[:, 0].tolist() == pytest.approx([17.4448, 22.09, 80.1, 89, 100], abs=1e-4)
+
+
+def test_masked_gae_bootstraps_a_dead_tail_that_outlives_the_rollout():
+    # Dead from row 2 on and the episode goes on past the rollout: the tail is
+    # bootstrapped from last_values (the learner passes a living teammate's value, 20).
+    adv, _ = _masked([1, -50, 0, 0], [2, 3, 99, 99], [0] * 4, [0] * 4, [0] * 4, 20.0,
+                     [1, 1, 0, 0])
+    # P3 = .9*20 = 18, P2 = 16.2; t=1: -50 + .9*16.2 - 3 = -38.42; t=0: 1.7 + .72*-38.42
+    assert adv[:, 0].tolist() == pytest.approx([-25.9624, -38.42, 0, 0], abs=1e-4)
+
+
+def test_masked_gae_truncated_dead_tail_and_a_new_episode():
+    # Dead on rows 1-2; row 2 truncates (V(final) = 10); row 3 starts a new episode.
+    adv, ret = _masked([1, 0, -5, 2], [2, 9, 9, 4], [0] * 4, [0, 0, 1, 0], [0, 0, 10, 0],
+                       6.0, [1, 0, 0, 1])
+    # t=3: 2 + .9*6 - 4 = 3.4; P2 = -5 + .9*10 = 4; P1 = .9*4 = 3.6; t=0: 1 + .9*3.6 - 2
+    assert adv[:, 0].tolist() == pytest.approx([2.24, 0, 0, 3.4], abs=1e-5)
+    assert ret[:, 0].tolist() == pytest.approx([4.24, 3.6, 4.0, 7.4], abs=1e-5)
+
+
+def test_masked_gae_with_every_row_active_is_plain_gae():
+    rng = np.random.default_rng(2)
+    t, b = 9, 3
+    r, v = (torch.tensor(rng.normal(size=(t, b)), dtype=torch.float32) for _ in range(2))
+    term = torch.tensor(rng.random((t, b)) < 0.15, dtype=torch.float32)
+    trunc = torch.tensor(rng.random((t, b)) < 0.15, dtype=torch.float32)
+    boot = torch.tensor(rng.normal(size=(t, b)), dtype=torch.float32)
+    last = torch.tensor(rng.normal(size=b), dtype=torch.float32)
+    want = compute_gae(r, v, term, trunc, boot, last, 0.97, 0.9)
+    got = compute_gae_masked(r, v, term, trunc, boot, last, torch.ones((t, b), dtype=torch.bool),
+                             0.97, 0.9)
+    for w, g in zip(want, got, strict=True):
+        assert torch.allclose(w, g, atol=1e-6)
 
 
 def test_ppo_rollout_bootstraps_truncations_from_final_obs():

@@ -22,7 +22,8 @@ from alphatank.mapgen import (
     is_symmetric,
     map_warnings,
 )
-from alphatank.mapgen.generate import components, image, lines_clear, open_sides
+from alphatank.mapgen.generate import image, lines_clear
+from alphatank.sim.grid import components, open_sides
 from alphatank.sim.mapspec import MapError, load_map, map_text, parse_map
 
 ROOT = Path(__file__).resolve().parents[1]

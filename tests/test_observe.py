@@ -1,15 +1,19 @@
-"""Observations: index map, hand-placed tanks and bullets, rays against known walls."""
+"""Observations: index map, hand-placed tanks and bullets, rays against known walls,
+digests pinned per env version."""
 
 from __future__ import annotations
 
+import hashlib
 import math
 
 import numpy as np
 import pytest
 
 from alphatank.envs.core import MatchSet
-from alphatank.game.observe import DEFAULT_RAY_LENGTH
-from alphatank.game.scenarios import parse_scenario
+from alphatank.envs.ids import ENV_VERSION
+from alphatank.game.observe import DEFAULT_RAY_LENGTH, ObservationBuilder, StateBatch, slot_counts
+from alphatank.game.scenarios import load_scenario, parse_scenario
+from alphatank.sim.match import Match
 
 W = H = 770.0
 DIAG = math.hypot(W, H)
@@ -201,3 +205,63 @@ def test_dead_tank_alive_flag():
     assert feat(ms, obs, "tank[0].alive") == 0.0 and feat(ms, obs, "self.alive") == 1.0
     assert feat(ms, obs, "tank[0].alive", learner=1) == 1.0
     assert feat(ms, obs, "self.alive", learner=1) == 0.0
+
+
+# sha256 (first 16 hex digits) of observations built from seeded synthetic states, per env
+# version. Observations are part of the env's definition: a change that alters them must
+# bump ENV_VERSION (alphatank/envs/ids.py) and pin the new digests under the new version.
+PINNED_OBS = {0: {
+    ("vs_smart", "paper"): "79797cb97f4c4b7f", ("vs_smart", "egocentric"): "88708c3f66063a73",
+    ("team", "paper"): "0217b798cf35674f", ("team", "egocentric"): "14ffd73d900b5071",
+    ("mixed_teams", "paper"): "723d6c2468611ac5",
+    ("mixed_teams", "egocentric"): "7c9c52663aa4d6c2",
+}}
+
+
+def synthetic_digest(scenario: str, kind: str, steps: int = 12, num_envs: int = 3) -> str:
+    """Observations of every seat for random (seeded) tank, bullet and flag states on the
+    scenario's map: the builder alone, independent of physics and bots."""
+    sc = load_scenario(scenario)
+    game, spec = sc.game_config(), sc.map_specs()[0]
+    n = len(sc.teams)
+    batch = StateBatch(game, n, num_envs, *slot_counts(game, [spec]))
+    builder = ObservationBuilder(kind, batch, sc.teams, range(n), team_flags=sc.team_mode)
+    for e in range(num_envs):
+        batch.set_static(e, Match(game, spec, sc.teams, seed=e))
+        builder.set_static(e)
+    rng = np.random.default_rng(7)
+    digest = hashlib.sha256()
+    for k in range(steps):
+        batch.raw[...] = rng.uniform(-1, 1, batch.raw.shape) * 400.0
+        batch.raw[..., 0] += spec.width / 2
+        batch.raw[..., 1] += spec.height / 2
+        batch.raw[..., 2] *= np.pi / 400.0
+        batch.flags[...] = rng.random(batch.flags.shape) < 0.6
+        # every fourth step no other bullet flies (the builder's shortcut path)
+        batch.bullet_active[...] = (rng.random(batch.bullet_active.shape) < 0.5) & (k % 4 != 0)
+        batch.counts[...] = rng.integers(0, game.bullet_capacity + 1, batch.counts.shape)
+        batch.tick[...] = k
+        digest.update(builder.build().tobytes())
+    return digest.hexdigest()[:16]
+
+
+@pytest.mark.parametrize("case", sorted(PINNED_OBS[0]))
+def test_observations_are_pinned_for_this_env_version(case):
+    assert ENV_VERSION in PINNED_OBS, f"pin the observation digests of env v{ENV_VERSION}"
+    assert synthetic_digest(*case) == PINNED_OBS[ENV_VERSION][case], (
+        f"{case}: observations changed; if intended, bump ENV_VERSION and pin the new digest")
+
+
+def test_layout_columns_and_markdown():
+    ms = duel("paper", "arena4", ("A", "A", "B", "B"))
+    lay = ms.obs.layout
+    assert lay.column("tank", "team") == 0 and lay.column("tank", "alive") == 1
+    assert lay.span("tank", "rel_x", "rel_y") == slice(17, 19)
+    assert lay.slot_fields["bullet"][:2] == ("mask", "team")
+    with pytest.raises(KeyError, match="its fields"):
+        lay.column("tank", "colour")
+    with pytest.raises(ValueError, match="not adjacent"):
+        lay.span("tank", "rel_y", "rel_x")
+    table = lay.markdown().splitlines()
+    assert table[0].startswith("| block | slots |") and len(table) == 2 + len(lay.blocks())
+    assert f"| `tank[k]` | 3 | {3 * lay.widths['tank']} | {lay['tank'].start}:" in table[4]

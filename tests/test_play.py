@@ -18,10 +18,18 @@ import pygame
 import pytest
 
 from alphatank.commands import play
-from alphatank.commands.play import PlaySession, build_lineup, parse_seats
+from alphatank.game.lineup import build_lineup as _build_lineup
 from alphatank.game.scenarios import ScenarioError, load_scenario
+from alphatank.game.scenarios import seats_scenario as parse_seats
 from alphatank.ui.human import KeyboardPolicy
 from alphatank.ui.render import OVERLAYS
+from alphatank.ui.session import PlaySession
+
+
+def build_lineup(sc, checkpoint: str | None = None):
+    """The line-up ``alphatank play`` builds: keyboards, stand-in smart for learners."""
+    return _build_lineup(sc, interactive=True, stand_in="smart",
+                         learner=f"checkpoint:{checkpoint}" if checkpoint else None)
 
 
 def down(key: int) -> pygame.event.Event:
@@ -155,7 +163,7 @@ def test_match_end_shows_summary_and_esc_quits():
 def test_human_vs_bot_and_mixed_teams_scenario():
     sc = load_scenario("mixed_teams")
     lineup = build_lineup(sc)
-    assert [type(p).__name__ for p in lineup.policies].count("KeyboardPolicy") == 2
+    assert [type(p).__name__ for p in lineup.controllers].count("KeyboardPolicy") == 2
     assert lineup.labels[0] == "P1" and lineup.labels[3] == "P3"
     assert len(lineup.notes) == 2  # two learner seats played by the stand-in bot
     s = PlaySession(lineup, seed=0, fps=30, realtime=False, verbose=False)
@@ -171,7 +179,7 @@ def test_seat_list_parser():
     assert [s.controller for s in sc.seats] == ["human", "bot", "bot", "learner"]
     auto = parse_seats("human,human,smart", "arena4")
     assert auto.teams == ["A", "B", "C"] and [s.keys for s in auto.seats[:2]] == ["wasd", "arrows"]
-    with pytest.raises(ScenarioError, match="unknown seat kind 'robot'"):
+    with pytest.raises(ScenarioError, match="unknown seat kind 'robot'.*valid bots"):
         parse_seats("human,robot", "open")
     with pytest.raises(ScenarioError, match="valid bots"):
         parse_seats("human,bot:nope", "open")
@@ -248,7 +256,7 @@ def test_human_vs_trained_agent_and_checkpoint_in_learner_seats(tmp_path):
     ppo = PPOConfig(num_steps=16, update_epochs=1, num_minibatches=2)
     cfg = TrainConfig(name="tiny", scenario="vs_aggressive", total_steps=2 * 16 * 2,
                       num_envs=2, num_workers=1, seed=0, wandb="disabled", checkpoint_every=1,
-                      game={"max_steps": 40}, learners=(LearnerSpec("ppo", "ppo", (0,), ppo=ppo),))
+                      game={"max_steps": 40}, learners=(LearnerSpec("ppo", "ppo", (0,), ppo),))
     run = tmp_path / "tiny"
     Trainer(cfg, run, progress=False).train()
 

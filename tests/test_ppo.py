@@ -150,7 +150,7 @@ def test_ppo_learns_to_shoot_a_helpless_bot(tmp_path):
     sc = firing_range(tmp_path)
     cfg = TrainConfig("range", "vs_aggressive", total_steps=28 * 1024, num_envs=8, seed=1,
                       wandb="disabled", checkpoint_every=0,
-                      learners=(LearnerSpec("ppo", "ppo", (0,), ppo=PPOConfig(
+                      learners=(LearnerSpec("ppo", "ppo", (0,), config=PPOConfig(
                           num_steps=128, update_epochs=4, learning_rate=1e-3)),))
     tr = Trainer(cfg, tmp_path / "run", env=VectorMatchEnv(sc, 8, seed=1), progress=False)
     tr.train()
@@ -172,7 +172,7 @@ def test_action_mask_hook_reaches_the_rollout(tmp_path):
     cfg = TrainConfig("mask", "vs_aggressive", total_steps=2 * 64, num_envs=4,
                       wandb="disabled", checkpoint_every=0,
                       learners=(LearnerSpec("ppo", "ppo", (0,),
-                                            ppo=PPOConfig(num_steps=16, update_epochs=1)),))
+                                            config=PPOConfig(num_steps=16, update_epochs=1)),))
     tr = Trainer(cfg, tmp_path / "mask", progress=False, action_mask=no_fire_no_reverse)
     ppo = tr.learners["ppo"]
     seen = []

@@ -281,3 +281,113 @@ def test_episode_return_is_the_sum_of_step_rewards():
 def test_trajectory_uses_the_game_hit_radius():
     g = game_config()
     assert R.hit_radius(g) == g.bullet_radius + g.tank_height / 2
+
+
+# ---- team outcomes, time cost, engagement and the paper's missing halves (issue 12) ----
+
+def test_team_outcome_pays_every_seat_and_decays_the_win():
+    cfg = RewardConfig(team_win=100.0, team_win_time_decay=0.5, team_loss=-100.0,
+                       team_draw=-120.0)
+    team = np.array([0, 0, 1])
+    win, loss, draw = R.team_outcome(team, 0, 0.0, cfg)
+    assert win.tolist() == [100, 100, 0] and loss.tolist() == [0, 0, -100]
+    assert not draw.any()
+    win, _, _ = R.team_outcome(team, 0, 0.5, cfg)
+    assert win.tolist() == [75, 75, 0]  # half the clock gone: a quarter of the win lost
+    win, loss, draw = R.team_outcome(team, None, 1.0, cfg)
+    assert not win.any() and not loss.any() and draw.tolist() == [-120] * 3
+
+
+def test_a_draw_worth_more_than_a_loss_is_rejected():
+    with pytest.raises(R.ConfigError, match="team_draw .* must not exceed team_loss"):
+        match_set(team_loss=-100.0, team_draw=0.0)
+    with pytest.raises(R.ConfigError, match="team_win_time_decay"):
+        match_set(team_win=1.0, team_win_time_decay=1.5)
+    match_set(team_loss=-100.0, team_draw=-100.0)  # equal is allowed
+
+
+def test_team_win_reaches_a_dead_teammate_and_shrinks_with_time():
+    ms = match_set(("A", "A", "B"), team_win=100.0, team_win_time_decay=1.0,
+                   team_loss=-80.0, team_draw=-80.0)
+    m = ms.matches[0]
+    place(ms, [(200.0, 385.0, 0.0), (200.0, 600.0, 0.0), (330.0, 385.0, math.pi)])
+    m.alive[1] = False  # seat 1 is out (as if shot earlier)
+    m.world.remove_tank(1)
+    step(ms, FIRE, NOOP, NOOP)
+    for _ in range(40):
+        t = step(ms, NOOP, NOOP, NOOP)
+        if m.done:
+            break
+    assert m.winner == "A"
+    frac = m.tick / ms.game.max_steps
+    assert t[T["team_win"]] == pytest.approx([100 * (1 - frac)] * 2 + [0.0])
+    assert t[T["team_loss"]].tolist() == [0.0, 0.0, -80.0]
+    assert not t[T["team_draw"]].any()
+
+
+def test_team_draw_on_timeout_and_step_cost_every_tick():
+    seats = [{"team": t, "controller": "learner"} for t in "AB"]
+    sc = parse_scenario({"name": "r", "map": "open", "seats": seats, "game": {"max_steps": 5},
+                         "rewards": {"team_loss": -10.0, "team_draw": -10.0,
+                                     "step_cost": -0.5}})
+    ms = MatchSet(sc, 1)
+    ms.reset_env(0, 3)
+    rows = [step(ms, NOOP, NOOP) for _ in range(5)]
+    assert ms.matches[0].truncated and ms.matches[0].winner is None
+    assert [r[T["step_cost"]].tolist() for r in rows] == [[-0.5, -0.5]] * 5
+    assert rows[-1][T["team_draw"]].tolist() == [-10.0, -10.0]
+    assert not any(r[T["team_draw"]].any() for r in rows[:-1])
+
+
+def test_trajectory_far_penalises_shots_that_go_nowhere_near():
+    cfg = RewardConfig(trajectory_far=-2.0, trajectory_far_px=100.0)
+    assert R.trajectory_far(50.0, cfg) == 0.0
+    assert R.trajectory_far(150.0, cfg) == pytest.approx(-1.0)
+    assert R.trajectory_far(500.0, cfg) == -2.0  # capped at the weight
+    assert R.trajectory_far(math.inf, cfg) == 0.0
+    ms = match_set(trajectory_far=-2.0, trajectory_far_px=100.0)
+    place(ms, [(385.0, 200.0, math.pi), (385.0, 600.0, 0.0)])  # fires left, enemy below
+    t = step(ms, FIRE, NOOP)
+    assert -2.0 <= t[T["trajectory_far"], 0] < 0.0 and t[T["trajectory_far"], 1] == 0.0
+    ms = match_set(trajectory_far=-2.0, trajectory_far_px=100.0)
+    place(ms, [(200.0, 385.0, 0.0), (330.0, 385.0, math.pi)])  # dead on: no penalty
+    assert step(ms, FIRE, NOOP)[T["trajectory_far"], 0] == 0.0
+
+
+def test_distance_progress_sums_to_the_distance_gained():
+    assert R.distance_progress(np.array([10.0, 5.0, np.nan]), np.array([7.0, 6.0, 1.0]),
+                               RewardConfig(distance_progress=0.5)).tolist() == [1.5, -0.5, 0.0]
+    ms = match_set(distance_progress=0.05)
+    place(ms, [(200.0, 385.0, 0.0), (600.0, 385.0, math.pi)])
+    m = ms.matches[0]
+    start = float(np.hypot(*(m.tank_xy[0] - m.tank_xy[1])))
+    total = sum(step(ms, (1, 2, 0), NOOP)[T["distance_progress"]] for _ in range(30))
+    end = float(np.hypot(*(m.tank_xy[0] - m.tank_xy[1])))
+    assert end < start - 50
+    assert total == pytest.approx([0.05 * (start - end)] * 2)  # both got closer
+
+
+def test_engagement_is_potential_based_and_cannot_be_farmed():
+    assert R.engagement_potential(np.array([0, 5, 10, -1]), 10.0, 2.0).tolist() == [
+        2.0, 1.0, 0.0, 0.0]
+    assert R.potential_shaping(np.array([1.0]), np.array([2.0]), 0.9).tolist() == [
+        pytest.approx(0.8)]
+    gamma = 0.99
+    ms = match_set(map_name="maze", engagement=1.0, engagement_gamma=gamma)
+    tr = ms.tracker
+    phi0, d0 = tr.phi_prev[0, 0], tr.bfs_prev[0, 0]
+    # Back off one cell and drive forward again over the same ground: a loop.
+    plan = [(1, 0, 0)] * 25 + [(1, 2, 0)] * 25
+    rewards, dists = [], []
+    for a in plan:
+        rewards.append(step(ms, a, NOOP)[T["engagement"], 0])
+        dists.append(tr.bfs_prev[0, 0])
+    assert max(dists) > d0 and dists[-1] == d0 and not ms.matches[0].done
+    phik = tr.phi_prev[0, 0]
+    assert phik == phi0 == R.engagement_potential(np.array([d0]), tr._diameter[0], 1.0)[0]
+    # The discounted sum telescopes to gamma^k phi(s_k) - phi(s_0) whatever the path ...
+    disc = sum(gamma ** k * r for k, r in enumerate(rewards))
+    assert disc == pytest.approx((gamma ** len(plan) - 1) * phi0, abs=1e-9)
+    # ... so the loop earns nothing: undiscounted, -(1 - gamma) x the potentials passed.
+    assert -(1 - gamma) * len(plan) * phi0 * 1.01 < sum(rewards) < 0.0
+    assert max(rewards) > 0.0  # coming closer did pay on the way back

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from alphatank.commands.benchsoak import heap_mb, slope_per_million, soak_scenario
-from alphatank.commands.play import build_lineup, parse_seats, start_episode
 from alphatank.errors import InputError
-from alphatank.game.scenarios import ScenarioError, load_scenario, parse_scenario
+from alphatank.game.lineup import build_lineup
+from alphatank.game.scenarios import ScenarioError, load_scenario, parse_scenario, seats_scenario
 from alphatank.mapgen import EditorModel, describe
 from alphatank.sim.config import (
     ConfigError,
@@ -129,11 +129,13 @@ def test_bot_options_and_checkpoint_paths_are_checked_when_the_scenario_loads(tm
         load_scenario(p)
     p.write_text(SCENARIO.replace('controller = "bot"\nbot = "random"',
                                   'controller = "checkpoint"\npath = "runs/x"'))
-    with pytest.raises(ScenarioError, match=r"seats\[1\]\.path: no checkpoint at 'runs/x'"):
+    with pytest.raises(ScenarioError, match=r"seats\[1\]\.path: runs/x: no such checkpoint"):
         load_scenario(p)
     run = tmp_path / "runs" / "x"
     run.mkdir(parents=True)
     (run / "latest").write_text("checkpoints/step_1\n")
+    (run / "checkpoints" / "step_1").mkdir(parents=True)
+    (run / "checkpoints" / "step_1" / "meta.json").write_text("{}")  # checked, not loaded
     sc = load_scenario(p)  # relative to the scenario's folder, like maps
     assert sc.seats[1].path == str(run)
 
@@ -207,11 +209,11 @@ def test_describe_a_map_without_interior():
 
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory):
-    lineup = build_lineup(parse_seats("smart,defensive", "maze", {"max_steps": 90}))
-    match, match_seed = start_episode(lineup, 3)
-    rec = ReplayRecorder(match, match_seed=match_seed, seed=3, policies=lineup.policies,
-                         labels=lineup.labels)
-    video = record_match(match, lineup.policies, keep_frames=True, recorder=rec,
+    lineup = build_lineup(seats_scenario("smart,defensive", "maze", {"max_steps": 90}))
+    ep = lineup.start(3)
+    rec = ReplayRecorder(ep.match, match_seed=ep.seeds.match_seed, seed=3,
+                         policies=lineup.controllers, labels=lineup.labels)
+    video = record_match(ep.match, lineup.controllers, keep_frames=True, recorder=rec,
                          labels=lineup.labels, scale=0.5)
     path = save_replay(rec.finish(), tmp_path_factory.mktemp("rep") / "r.npz")
     return path, video

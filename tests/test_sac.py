@@ -131,8 +131,8 @@ def test_each_sac_learner_keeps_its_own_replay_buffer(tmp_path):
                         update_every=16, buffer_size=1000)
     cfg = TrainConfig("s2", "pair", total_steps=4 * 32, num_envs=4, rollout_steps=8,
                       wandb="disabled", checkpoint_every=0, game={"max_steps": 20},
-                      learners=(LearnerSpec("sac_a", "sac", (0,), sac=sac_cfg),
-                                LearnerSpec("sac_b", "sac", (1,), sac=sac_cfg)))
+                      learners=(LearnerSpec("sac_a", "sac", (0,), config=sac_cfg),
+                                LearnerSpec("sac_b", "sac", (1,), config=sac_cfg)))
     tr = Trainer(cfg, tmp_path / "s2", progress=False)
     tr.train()
     a, b = tr.learners["sac_a"], tr.learners["sac_b"]
@@ -169,7 +169,7 @@ def test_sac_learns_to_shoot_a_helpless_bot(tmp_path):
                         buffer_size=50_000)
     cfg = TrainConfig("range", "vs_aggressive", total_steps=24 * 1024, num_envs=8,
                       rollout_steps=64, wandb="disabled", checkpoint_every=0,
-                      learners=(LearnerSpec("sac", "sac", (0,), sac=sac_cfg),))
+                      learners=(LearnerSpec("sac", "sac", (0,), config=sac_cfg),))
     tr = Trainer(cfg, tmp_path / "run", env=VectorMatchEnv(sc, 8, seed=0), progress=False)
     tr.train()
     sac = tr.learners["sac"]

@@ -8,7 +8,12 @@ from alphatank.envs.vector import VectorMatchEnv
 from alphatank.training.ppo import PPOConfig
 from alphatank.training.presets import LearnerSpec, TrainConfig
 from alphatank.training.runner import Trainer, opponent_key
-from alphatank.training.schedules import CurriculumSchedule, CycleSchedule, make_schedule
+from alphatank.training.schedules import (
+    CurriculumSchedule,
+    CycleSchedule,
+    WinRateCurriculum,
+    make_schedule,
+)
 
 torch.set_num_threads(1)
 
@@ -106,7 +111,53 @@ def test_adaptive_cycle_favours_the_bots_it_loses_to_and_scales_victory():
     assert d.current == c.current  # same generator state
 
 
+def test_winrate_curriculum_steps_up_when_the_team_wins():
+    c = make_schedule({"kind": "winrate", "levels": [0.1, 0.5, 1.0], "threshold": 0.6,
+                       "window": 10, "min_episodes": 5}, 1000)
+    assert isinstance(c, WinRateCurriculum)
+    rec = Recorder()
+    assert c.apply(rec, 0)["schedule/weakness"] == 0.1
+    for out in ["win", "loss", "win", "win"]:  # 3/4, but fewer than min_episodes
+        c.record("B:defensive(w=0.1)", out)
+    assert c.level == 0
+    c.record("B:defensive(w=0.1)", "draw")  # 3/5 = 0.6: up
+    assert c.level == 1 and c.weakness == 0.5 and not c.results
+    c.record("B:defensive(w=0.1)", "win")  # finished at the old strength: not counted
+    assert not c.results
+    for _ in range(20):
+        c.record("B:defensive(w=0.5)", "loss")
+    assert c.level == 1 and len(c.results) == 10 and c.win_rate() == 0.0
+    c.apply(rec, 10)
+    c.apply(rec, 20)
+    assert rec.calls == [("weakness", 0.1), ("weakness", 0.5)]  # changes only
+    for _ in range(10):
+        c.record("B:defensive(w=0.5)", "win")
+    assert c.weakness == 1.0
+    for _ in range(10):
+        c.record("B:defensive(w=1)", "win")
+    assert c.level == 2  # the top level stays
+    d = WinRateCurriculum(levels=(0.1, 0.5, 1.0), window=10, min_episodes=5)
+    d.load_state_dict(c.state_dict())
+    assert d.level == 2 and list(d.results) == list(c.results)
+    assert d.apply(rec, 30)["schedule/weakness"] == 1.0 and rec.calls[-1] == ("weakness", 1.0)
+
+
+def test_winrate_curriculum_reaches_the_bots_of_the_next_episode():
+    env = VectorMatchEnv("team_vs_def_bot", 2, seed=0, game_overrides={"max_steps": 5})
+    env.reset()
+    c = WinRateCurriculum(levels=(0.2, 1.0), window=4, min_episodes=2, threshold=0.5)
+    c.apply(env, 0)
+    for _ in range(5):
+        _, _, _, _, info = env.step(np.ones((2, 2, 3), dtype=np.int64))
+    assert env.core.controllers[0][2].weakness == pytest.approx(0.2)
+    assert [ep["opponent"] for ep in info["episodes"]] == ["B:defensive(w=0.2)"] * 2
+
+
 def test_bad_schedule_settings_are_rejected():
+    with pytest.raises(ValueError, match="must rise"):
+        WinRateCurriculum(levels=(0.5, 0.1))
+    with pytest.raises(ValueError, match="min_episodes"):
+        make_schedule({"kind": "winrate", "window": 10, "min_episodes": 20}, 100)
     with pytest.raises(ValueError, match="shape"):
         CurriculumSchedule(steps=10, shape="cubic")
     with pytest.raises(ValueError, match="weakness"):
@@ -125,7 +176,7 @@ def test_cycle_training_rotates_the_opponents_and_scales_the_victory_reward(tmp_
                       schedule={"kind": "cycle", "pool": ["random", "aggressive"],
                                 "mode": "fixed", "interval": 64, "mastery_phase": 10**6},
                       learners=(LearnerSpec("ppo", "ppo", (0,),
-                                            ppo=PPOConfig(num_steps=16, update_epochs=1)),))
+                                            config=PPOConfig(num_steps=16, update_epochs=1)),))
     tr = Trainer(cfg, tmp_path / "cyc", progress=False)
     tr.train()
     opps = {k for h in tr.history for k in h if k.startswith("charts/win_rate_vs/")}

@@ -58,6 +58,10 @@ def test_league_ranks_the_player_who_wins():
     assert rows[-1][0] == "weak"
     with pytest.raises(ValueError, match="outcome must be"):
         league.record(0, 1, 2)
+    k = league.add("late", mu=30.0, sigma=2.0)
+    assert k == 3 and league.names[k] == "late" and league.ratings[k].mu == 30.0
+    league.record(k, 0, -1)
+    assert league.ratings[k].mu < 30.0
 
 
 @pytest.mark.parametrize("n", [1, 7, 100, 200, 1000])

@@ -183,3 +183,34 @@ def test_selfplay_two_learners_and_no_learner_scenarios():
     assert obs.shape == (2, 0, watch.obs_dim)
     obs, rew, *_ = watch.step(np.zeros((2, 0, 3), dtype=np.int64))
     assert rew.shape == (2, 0)
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_named_opponents_per_env(workers):
+    env = make_vector_env("team_vs_bot", 4, seed=0, num_workers=workers,
+                          game_overrides={"max_steps": 5})
+    try:
+        env.add_opponent("weak_smart", "smart@0.5")
+        env.add_opponent("idle", NoopPolicy())
+        env.set_env_opponents(["weak_smart", None, "idle", "weak_smart"])
+        _, eps = rollout(env, 6)
+        by_env = {ep["env"]: ep["opponent"] for ep in eps}
+        assert by_env[0] == by_env[3] == "B:weak_smart"
+        assert by_env[1] == "B:smart(w=1), B:smart(w=1)"
+        assert by_env[2] == "B:idle"
+        with pytest.raises((ValueError, RuntimeError), match="unknown opponent"):
+            env.set_env_opponents(["nobody", None, None, None])
+        with pytest.raises(ValueError, match="one opponent name per env"):
+            env.set_env_opponents([None])
+    finally:
+        env.close()
+
+
+def test_named_opponent_fills_every_non_learner_seat():
+    env = VectorMatchEnv("team_vs_bot", 1, seed=0)
+    env.add_opponent("dodgy", "dodge")
+    env.set_env_opponents(["dodgy"])
+    env.reset()
+    bots = [c for seat, c in enumerate(env.core.controllers[0]) if seat not in env.core.driven]
+    assert len(bots) == 2 and all("DodgeBot" in repr(b) for b in bots)
+    assert bots[0] is not bots[1]  # one controller per seat (their own seeds)

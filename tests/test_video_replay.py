@@ -24,7 +24,8 @@ import pytest
 
 from alphatank.bots import make_bot
 from alphatank.commands import record, replay
-from alphatank.commands.play import PlaySession, build_lineup, parse_seats, start_episode
+from alphatank.game.lineup import build_lineup
+from alphatank.game.scenarios import seats_scenario
 from alphatank.ui.replay import (
     ReplayError,
     ReplayRecorder,
@@ -32,6 +33,7 @@ from alphatank.ui.replay import (
     save_replay,
     simulate,
 )
+from alphatank.ui.session import PlaySession
 from alphatank.ui.video import record_match
 
 
@@ -83,10 +85,11 @@ def test_replay_resimulates_to_the_recorded_hash(recorded, capsys):
 
 def test_replay_matches_the_live_match(tmp_path):
     """Record the actions of a live bot match by hand; the replay ends in its exact state."""
-    lineup = build_lineup(parse_seats("smart,aggressive", "maze", {"max_steps": 400}))
-    match, match_seed = start_episode(lineup, seed=11)
-    rec = ReplayRecorder(match, match_seed=match_seed, seed=11)
-    out = record_match(match, lineup.policies, recorder=rec)
+    lineup = build_lineup(seats_scenario("smart,aggressive", "maze", {"max_steps": 400}))
+    ep = lineup.start(11)
+    match = ep.match
+    rec = ReplayRecorder(match, match_seed=ep.seeds.match_seed, seed=11)
+    out = record_match(match, lineup.controllers, recorder=rec)
     path = save_replay(rec.finish(), tmp_path / "live.npz")
     assert path.stat().st_size < 20_000  # small: actions compress well
     again = simulate(load_replay(path))
@@ -104,7 +107,8 @@ def test_replay_is_identical_in_a_fresh_process(recorded):
 
 
 def test_play_session_saves_replays_of_human_matches(tmp_path):
-    lineup = build_lineup(parse_seats("human:wasd,bot:smart", "battlefield"))
+    lineup = build_lineup(seats_scenario("human:wasd,bot:smart", "battlefield"),
+                          interactive=True)
     s = PlaySession(lineup, seed=5, fps=30, realtime=False, verbose=False,
                     save_replay=tmp_path / "h.npz")
     keys = {0: [pygame.event.Event(pygame.KEYDOWN, key=pygame.K_w)],
@@ -184,9 +188,9 @@ def test_save_is_atomic_and_readable(recorded, tmp_path):
 
 
 def test_record_match_every_and_hold(tmp_path):
-    lineup = build_lineup(parse_seats("smart,dodge", "open", {"max_steps": 50}))
-    match, _ = start_episode(lineup, seed=2)
-    rec = record_match(match, lineup.policies, mp4=tmp_path / "e.mp4", every=4, hold_s=1.0,
+    lineup = build_lineup(seats_scenario("smart,dodge", "open", {"max_steps": 50}))
+    match = lineup.start(2).match
+    rec = record_match(match, lineup.controllers, mp4=tmp_path / "e.mp4", every=4, hold_s=1.0,
                        keep_frames=True, scale=0.5)
     ticks = rec.ticks
     expected = 1 + ticks // 4 + (ticks % 4 != 0) + round(rec.fps)
@@ -201,7 +205,7 @@ def test_record_command_plays_human_seats_with_the_stand_in(tmp_path, capsys):
                           "--out", str(tmp_path / "mixed.mp4")))
     assert rc == 0
     out = capsys.readouterr().out
-    assert out.count("played by the 'smart' bot") == 4  # 2 humans + 2 learners
+    assert out.count("is played by smart(w=1)") == 4  # 2 humans + 2 learners
     assert Path(tmp_path / "mixed.mp4").stat().st_size > 1000
 
 
@@ -210,9 +214,8 @@ def test_wandb_video_wraps_the_mp4(tmp_path):
 
     from alphatank.ui.video import wandb_video
 
-    lineup = build_lineup(parse_seats("smart,random", "open", {"max_steps": 10}))
-    match, _ = start_episode(lineup, seed=0)
-    rec = record_match(match, lineup.policies, mp4=tmp_path / "w.mp4")
+    lineup = build_lineup(seats_scenario("smart,random", "open", {"max_steps": 10}))
+    rec = record_match(lineup.start(0).match, lineup.controllers, mp4=tmp_path / "w.mp4")
     assert isinstance(wandb_video(rec, caption="eval"), wandb.Video)
     with pytest.raises(ValueError, match="mp4="):
-        wandb_video(record_match(*start_episode(lineup, seed=1)[:1], lineup.policies))
+        wandb_video(record_match(lineup.start(1).match, lineup.controllers))

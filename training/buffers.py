@@ -37,6 +37,47 @@ def compute_gae(rewards: torch.Tensor, values: torch.Tensor, terminated: torch.T
     return advantages, advantages + values
 
 
+def compute_gae_masked(rewards: torch.Tensor, values: torch.Tensor, terminated: torch.Tensor,
+                       truncated: torch.Tensor, bootstrap: torch.Tensor,
+                       last_values: torch.Tensor, active: torch.Tensor, gamma: float,
+                       lam: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """GAE with death masking and posthumous credit (MAPPO), shapes as :func:`compute_gae`
+    plus ``active`` (T, B): the stream's seat was alive when it acted on that row.
+
+    An inactive row (a dead seat whose team plays on) is not an agent step: it gets no
+    advantage. Its rewards (the team's outcome, a bullet still in flight, time costs) are
+    credited to the seat's last active row as the discounted sum ``P`` of everything the
+    seat receives until its episode ends (terminated: nothing after; truncated:
+    ``bootstrap``; the rollout ends first: ``last_values``, which the learner fills with a
+    living teammate's value). The last active row then ends its GAE chain:
+    ``delta = r + gamma * P - V``. With every row active this equals :func:`compute_gae`.
+    Returns (advantages, returns); inactive rows get advantage 0 and return ``P``.
+    """
+    num_steps = rewards.shape[0]
+    advantages = torch.zeros_like(rewards)
+    returns = torch.zeros_like(rewards)
+    term = terminated.to(rewards.dtype)
+    ended = torch.clamp(term + truncated.to(rewards.dtype), max=1.0)
+    act = active.to(rewards.dtype)
+    last_gae = torch.zeros_like(last_values)
+    post = last_values.clone()  # P of the row after the current one (if inactive)
+    for t in reversed(range(num_steps)):
+        if t == num_steps - 1:
+            following, nxt_active = last_values, torch.ones_like(last_values)
+        else:
+            nxt_active = act[t + 1]
+            following = values[t + 1] * nxt_active + post * (1.0 - nxt_active)
+        after = following * (1.0 - ended[t]) + bootstrap[t] * (1.0 - term[t]) * ended[t]
+        delta = rewards[t] + gamma * after - values[t]
+        keep = (1.0 - ended[t]) * nxt_active
+        gae = delta + gamma * lam * keep * last_gae
+        advantages[t] = gae * act[t]
+        post = rewards[t] + gamma * after  # P of this row, used if it is inactive
+        returns[t] = torch.where(active[t], gae + values[t], post)
+        last_gae = gae * act[t]
+    return advantages, returns
+
+
 class RolloutBuffer:
     """Preallocated PPO rollout of ``num_steps`` rows for ``num_streams`` (env, seat) streams."""
 

@@ -31,6 +31,7 @@ import torch
 
 from alphatank.errors import InputError
 from alphatank.game.scenarios import Scenario, ScenarioError, parse_scenario
+from alphatank.game.seats import agent_path
 from alphatank.sim.config import check_value
 from alphatank.sim.policy import NOOP
 from alphatank.training.learners import make_learner
@@ -148,7 +149,8 @@ class Checkpoint:
     @property
     def learner_specs(self) -> list[LearnerSpec]:
         try:
-            return [LearnerSpec.from_dict(d) for d in self.meta["learners"]]
+            return [LearnerSpec.from_dict({k: v for k, v in d.items() if k != "scenario_seats"})
+                    for d in self.meta["learners"]]
         except (ValueError, KeyError, TypeError) as exc:
             raise CheckpointError(f"{self.path / 'meta.json'}: learners: {exc}") from None
 
@@ -212,14 +214,16 @@ class Checkpoint:
             raise CheckpointError(f"{file}: corrupt or truncated (SHA-256 differs from the one "
                                   f"recorded in meta.json; size {file.stat().st_size} bytes)")
 
-    def load_learner(self, name: str, num_streams: int = 1, weights_only: bool = False,
-                     seed: int = 0) -> Any:
-        """A PPO/SAC learner rebuilt from its spec with this checkpoint's state."""
+    def load_learner(self, name: str, num_streams: int | None = None,
+                     weights_only: bool = False, seed: int = 0) -> Any:
+        """A learner rebuilt from its spec with this checkpoint's state (``num_streams``
+        default: one env's worth, one stream per seat it drives)."""
         specs = {s.name: s for s in self.learner_specs}
         if name not in specs:
             raise CheckpointError(f"{self.path}: no learner {name!r}; learners: {list(specs)}")
         spec = specs[name]
-        learner = make_learner(spec, self.obs_dim, num_streams, seed)
+        learner = make_learner(spec, self.obs_dim, num_streams or len(spec.seats), seed,
+                               input_dims=self.meta.get("input_dims"))
         state = self.state(name)
         try:
             learner.load_state_dict(state, weights_only=weights_only)
@@ -425,3 +429,25 @@ def load_policy(path: str | Path, learner: str | None = None,
                 deterministic: bool = False) -> CheckpointPolicy:
     """A checkpoint (directory, or a run directory's latest) as a Policy for any seat."""
     return CheckpointPolicy(load_checkpoint(path), learner, deterministic)
+
+
+# ---- the line-up's "checkpoint" and "agent" controller kinds (alphatank.game.seats) ----
+
+def checkpoint_seat(seat: Any, seed: int | None = None) -> CheckpointPolicy:
+    """The controller of a ``checkpoint`` seat: the checkpoint at ``seat.path``."""
+    return load_policy(seat.path)
+
+
+def agent_seat(seat: Any, seed: int | None = None) -> CheckpointPolicy:
+    """The controller of an ``agent`` seat: the shipped agent ``seat.agent``."""
+    return load_policy(agent_path(seat.agent))
+
+
+def check_checkpoint_seat(seat: Any) -> tuple[str, str] | None:
+    """A ``checkpoint`` seat's problem as (key, message), or None: ``path`` must be a
+    checkpoint folder or a run folder with a ``latest`` save (weights are not loaded)."""
+    try:
+        resolve_checkpoint_dir(seat.path)
+    except CheckpointError as exc:
+        return "path", str(exc)
+    return None

@@ -1,73 +1,111 @@
-"""Hyperparameter dataclasses of the learners (no torch import: presets and the CLI
-can list and validate them cheaply)."""
+"""Hyperparameter dataclasses of the learners, one line of help and the allowed range per
+field (no torch import: presets, ``alphatank train --list`` and the CLI list and validate
+them cheaply). An algorithm's config class is named in its registry line
+(:mod:`alphatank.training.algorithms`)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+
+from alphatank.training.fields import hp, validate
 
 
 @dataclass(frozen=True)
 class PPOConfig:
     """PPO hyperparameters. Defaults: the paper's Table 7; the rest CleanRL's defaults."""
 
-    learning_rate: float = 3e-4
-    gamma: float = 0.99
-    gae_lambda: float = 0.95
-    clip_coef: float = 0.2
-    ent_coef: float = 0.01
-    vf_coef: float = 0.3
-    max_grad_norm: float = 0.3
-    num_steps: int = 512  # rollout length per stream
-    update_epochs: int = 60
+    learning_rate: float = hp(3e-4, "Adam step size", gt=0)
+    gamma: float = hp(0.99, "discount factor", ge=0, le=1)
+    gae_lambda: float = hp(0.95, "GAE lambda (bias/variance of the advantage)", ge=0, le=1)
+    clip_coef: float = hp(0.2, "clip range of the probability ratio (and value change)", gt=0)
+    ent_coef: float = hp(0.01, "weight of the entropy bonus", ge=0)
+    vf_coef: float = hp(0.3, "weight of the value loss", ge=0)
+    max_grad_norm: float = hp(0.3, "gradient norm clip", gt=0)
+    num_steps: int = hp(512, "rollout length per stream (vector steps per update)", gt=0)
+    update_epochs: int = hp(60, "passes over each rollout", gt=0)
     # not in Table 7: CleanRL defaults
-    num_minibatches: int = 4
-    norm_adv: bool = True
-    clip_vloss: bool = True
-    anneal_lr: bool = False
-    target_kl: float | None = None
-    hidden: int = 128
-    norm_obs: bool = True
-    norm_reward: bool = True
-    obs_clip: float = 10.0
-    reward_clip: float = 10.0
-    adam_eps: float = 1e-5
+    num_minibatches: int = hp(4, "minibatches per epoch", gt=0)
+    norm_adv: bool = hp(True, "normalise advantages per minibatch")
+    clip_vloss: bool = hp(True, "clip the value loss like the policy ratio")
+    anneal_lr: bool = hp(False, "decay the learning rate linearly to 0 over the run")
+    target_kl: float | None = hp(None, "stop an update's epochs once the approximate KL "
+                                 "exceeds this (none: never)", gt=0)
+    hidden: int = hp(128, "units per hidden layer (two tanh layers, actor and critic)", gt=0)
+    norm_obs: bool = hp(True, "normalise observations by running mean/std (saved)")
+    norm_reward: bool = hp(True, "scale rewards by the running std of the discounted return")
+    obs_clip: float = hp(10.0, "clip of normalised observations", gt=0)
+    reward_clip: float = hp(10.0, "clip of scaled rewards", gt=0)
+    adam_eps: float = hp(1e-5, "Adam epsilon", gt=0)
 
     def __post_init__(self) -> None:
-        for name in ("learning_rate", "num_steps", "update_epochs", "num_minibatches", "hidden"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"PPOConfig.{name} must be > 0, got {getattr(self, name)!r}")
-        for name in ("gamma", "gae_lambda"):
-            if not 0.0 <= getattr(self, name) <= 1.0:
-                raise ValueError(f"PPOConfig.{name} must be in [0, 1], got {getattr(self, name)}")
+        validate(self)
 
 
 @dataclass(frozen=True)
 class SACConfig:
     """SAC hyperparameters; defaults are the paper's Tables 8 and 9."""
 
-    policy_lr: float = 3e-4
-    q_lr: float = 3e-4
-    alpha_lr: float = 3e-4
-    gamma: float = 0.99
-    tau: float = 0.005
-    batch_size: int = 256
-    buffer_size: int = 1_000_000
-    start_steps: int = 1000  # uniform random actions before this many transitions
-    update_after: int = 1000
-    update_every: int = 50  # transitions between update rounds
-    utd_ratio: float = 1.0  # gradient steps per collected transition (update_every per round)
-    hidden: int = 256
-    autotune: bool = True
-    alpha: float = 0.2  # initial (or fixed, without autotune) entropy coefficient
-    target_entropy: float | None = None  # None: -action_dim
-    norm_obs: bool = True
-    obs_clip: float = 10.0
-    reward_scale: float = 1.0
+    policy_lr: float = hp(3e-4, "actor learning rate", gt=0)
+    q_lr: float = hp(3e-4, "critic learning rate", gt=0)
+    alpha_lr: float = hp(3e-4, "entropy-coefficient learning rate (autotune)", gt=0)
+    gamma: float = hp(0.99, "discount factor", ge=0, le=1)
+    tau: float = hp(0.005, "Polyak factor of the target critics", gt=0, le=1)
+    batch_size: int = hp(256, "transitions per gradient step", gt=0)
+    buffer_size: int = hp(1_000_000, "replay buffer capacity (transitions, per learner)", gt=0)
+    start_steps: int = hp(1000, "uniform random actions before this many transitions", ge=0)
+    update_after: int = hp(1000, "transitions collected before the first update", ge=0)
+    update_every: int = hp(50, "transitions between update rounds", gt=0)
+    utd_ratio: float = hp(1.0, "gradient steps per collected transition", gt=0)
+    hidden: int = hp(256, "units per hidden layer (two ReLU layers)", gt=0)
+    autotune: bool = hp(True, "tune the entropy coefficient towards target_entropy")
+    alpha: float = hp(0.2, "initial (or, without autotune, fixed) entropy coefficient", gt=0)
+    target_entropy: float | None = hp(None, "entropy target of autotune (none: -action dims)")
+    norm_obs: bool = hp(True, "normalise observations by running mean/std (saved)")
+    obs_clip: float = hp(10.0, "clip of normalised observations", gt=0)
+    reward_scale: float = hp(1.0, "multiplier of stored rewards", gt=0)
 
     def __post_init__(self) -> None:
-        for name in ("policy_lr", "q_lr", "alpha_lr", "batch_size", "buffer_size",
-                     "update_every", "utd_ratio", "hidden", "alpha", "reward_scale"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"SACConfig.{name} must be > 0, got {getattr(self, name)!r}")
-        if not 0 < self.tau <= 1:
-            raise ValueError(f"SACConfig.tau must be in (0, 1], got {self.tau}")
+        validate(self)
+
+
+@dataclass(frozen=True)
+class MAPPOConfig:
+    """MAPPO hyperparameters. Defaults: MAPPO's published ones (Yu et al. 2022: clip 0.2,
+    10 epochs, 2 minibatches, lr 5e-4, entropy 0.01, grad norm 10, Huber value loss with
+    delta 10, value normalisation); network as PPO's (two 128-unit tanh layers) so 1v1 PPO
+    checkpoints can warm-start its actor."""
+
+    learning_rate: float = hp(5e-4, "actor Adam step size", gt=0)
+    critic_learning_rate: float = hp(5e-4, "critic Adam step size", gt=0)
+    gamma: float = hp(0.99, "discount factor", ge=0, le=1)
+    gae_lambda: float = hp(0.95, "GAE lambda (bias/variance of the advantage)", ge=0, le=1)
+    clip_coef: float = hp(0.2, "clip range of the probability ratio (and value change)", gt=0)
+    ent_coef: float = hp(0.01, "weight of the entropy bonus", ge=0)
+    vf_coef: float = hp(1.0, "weight of the value loss", ge=0)
+    max_grad_norm: float = hp(10.0, "gradient norm clip, per network (actor, critic)", gt=0)
+    num_steps: int = hp(128, "rollout length per stream (vector steps per update)", gt=0)
+    update_epochs: int = hp(10, "passes over each rollout", gt=0)
+    num_minibatches: int = hp(2, "minibatches per epoch", gt=0)
+    value_norm: bool = hp(True, "critic predicts returns normalised by running mean/std")
+    huber_delta: float = hp(10.0, "Huber delta of the value loss on normalised errors "
+                            "(0: squared error)", ge=0)
+    clip_vloss: bool = hp(True, "clip the value loss like the policy ratio")
+    norm_adv: bool = hp(True, "normalise advantages over the live rows of the rollout")
+    anneal_lr: bool = hp(False, "decay the learning rates linearly to 0 over the run")
+    target_kl: float | None = hp(None, "stop an update's epochs once the approximate KL "
+                                 "exceeds this (none: never)", gt=0)
+    hidden: int = hp(128, "units per hidden layer (two tanh layers, actor and critic)", gt=0)
+    norm_obs: bool = hp(True, "normalise observations by running mean/std (saved)")
+    norm_state: bool = hp(True, "normalise the critic's global state by running mean/std")
+    norm_reward: bool = hp(False, "scale rewards by the running std of the discounted return "
+                           "(value normalisation makes it unnecessary)")
+    obs_clip: float = hp(10.0, "clip of normalised observations and states", gt=0)
+    reward_clip: float = hp(10.0, "clip of scaled rewards", gt=0)
+    adam_eps: float = hp(1e-5, "Adam epsilon", gt=0)
+    bootstrap_timeouts: bool = hp(False, "bootstrap time-limit ends from the critic (false: "
+                                  "max_steps ends the game; time is in the state)")
+    critic_warmup_updates: int = hp(0, "first updates train only the critic (warm starts)",
+                                    ge=0)
+
+    def __post_init__(self) -> None:
+        validate(self)

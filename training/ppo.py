@@ -122,16 +122,19 @@ def np_sample(logits: np.ndarray, nvec: tuple[int, ...], rng: np.random.Generato
 
 
 class PPO:
-    """One PPO learner controlling ``num_streams`` = num_envs x its seats.
+    """One PPO learner controlling ``num_streams`` = num_envs x its seats (implements
+    :class:`alphatank.training.learners.Learner`).
 
     Per env step the runner calls :meth:`act` with the streams' raw observations, then
     :meth:`observe` with rewards and episode flags; when :attr:`ready`, :meth:`update`.
     """
 
     algo = "ppo"
+    inputs: tuple[str, ...] = ()
 
     def __init__(self, obs_dim: int, num_streams: int, cfg: PPOConfig | None = None,
-                 seed: int = 0, mask_dim: int = 0):
+                 seed: int = 0, mask_dim: int = 0, num_seats: int = 1):
+        del num_seats  # independent streams: PPO does not tell its seats apart
         self.cfg = cfg = cfg or PPOConfig()
         self.obs_dim, self.num_streams = obs_dim, num_streams
         with torch.random.fork_rng(devices=[]):
@@ -147,7 +150,27 @@ class PPO:
         self.ret_norm = ReturnNormalizer(num_streams, cfg.gamma, cfg.norm_reward, cfg.reward_clip)
         self.buffer = RolloutBuffer(cfg.num_steps, num_streams, obs_dim, mask_dim)
         self.updates = 0
-        self.total_updates = 0  # set by the runner for learning-rate annealing
+        self.total_updates = 0  # set by plan() for learning-rate annealing
+
+    # ---- run plumbing (the Learner protocol) --------------------------------------------
+
+    @property
+    def rollout_steps(self) -> int:
+        return self.cfg.num_steps
+
+    def plan(self, total_steps: int) -> None:
+        """Anneal the learning rate (``anneal_lr``) over ``total_steps`` observe calls."""
+        self.total_updates = total_steps // self.cfg.num_steps
+
+    def new_segment(self) -> None:
+        """Fresh episodes everywhere: restart the discounted returns of reward scaling."""
+        self.ret_norm.returns[:] = 0.0
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {}
+
+    def load_arrays(self, arrays: dict[str, np.ndarray]) -> None:
+        """PPO keeps everything in :meth:`state_dict`."""
 
     # ---- acting -----------------------------------------------------------------------
 

@@ -1,60 +1,114 @@
-"""Named training presets: every experiment of the paper's sections 4.1, 4.2, 4.4 and 4.5
-(plus 4.3's cycle learning and a curriculum run), with Tables 7/8/9 as the defaults.
+"""Training runs as data: :class:`TrainConfig` (the scenario, the learners with their
+algorithms and hyperparameters, the opponent schedule, the run settings), its TOML form,
+and the named presets shipped as ``alphatank/data/presets/<name>.toml`` (every experiment
+of the paper's sections 4.1-4.5 with Tables 7/8/9 as the defaults).
 
-A preset is a :class:`TrainConfig`: the scenario, the learners (which learner seats each
-one drives, its algorithm and hyperparameters), the opponent schedule and the run
-settings. ``alphatank train --preset NAME`` starts one; flags override its run settings.
+``alphatank train --preset NAME`` or ``--config FILE.toml`` starts one; flags override its
+settings. Every load error names the file and the field.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass, field
+import re
+import tomllib
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
 from typing import Any
 
-from alphatank.training.hparams import PPOConfig, SACConfig
+from alphatank.sim.mapspec import read_text
+from alphatank.training.algorithms import ALGORITHMS, get_algorithm
+from alphatank.training.fields import (
+    FieldError,
+    a_type,
+    build,
+    describe,
+    field_map,
+    hp,
+    parse_value,
+)
+from alphatank.training.fields import validate as validate_fields
+from alphatank.training.tomlwriter import dumps
 
-ALGOS = ("ppo", "sac")
 WANDB_MODES = ("offline", "online", "disabled")
-
-# Table 9: PPO's side of SAC vs PPO (SAC's side equals Table 8).
-PPO_TABLE9 = PPOConfig(clip_coef=0.1, ent_coef=0.02, update_epochs=20)
+BOT_POOL = ("random", "aggressive", "defensive", "dodge")  # the cycle of paper 4.3
+CYCLE_INTERVAL = 100_000  # env steps per opponent when a cycle is set from the command line
+REQUIRED: Any = dataclasses.MISSING
+_NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$")
 
 
 @dataclass(frozen=True)
 class LearnerSpec:
-    """One independent learner: its name, algorithm, hyperparameters and the learner
-    seats (indices into the scenario's learner seats, 0..L-1) it controls. Several seats
-    share one network (parameter sharing); give each seat its own spec for independence."""
+    """One independent learner: its name, algorithm, hyperparameters (``config``, that
+    algorithm's config dataclass; None: its defaults) and the learner seats (indices
+    into the scenario's learner seats, 0..L-1) it controls. Several seats share one
+    network (parameter sharing); give each seat its own spec for independence."""
 
     name: str
     algo: str = "ppo"
     seats: tuple[int, ...] = (0,)
-    ppo: PPOConfig = field(default_factory=PPOConfig)
-    sac: SACConfig = field(default_factory=SACConfig)
+    config: Any = None
 
     def __post_init__(self) -> None:
-        if self.algo not in ALGOS:
-            raise ValueError(f"learner {self.name!r}: algo must be one of {ALGOS}, "
-                             f"got {self.algo!r}")
-        if not self.seats:
+        if not isinstance(self.name, str) or not _NAME.match(self.name):
+            raise ValueError(f"learner name must be letters, digits, '_', '.' or '-' (it "
+                             f"names files and metrics), got {self.name!r}")
+        try:
+            algo = get_algorithm(self.algo)
+        except ValueError as exc:
+            raise ValueError(f"learner {self.name!r}: {exc}") from None
+        cfg = algo.config() if self.config is None else self.config
+        if not isinstance(cfg, algo.config):
+            raise ValueError(f"learner {self.name!r}: config must be a {algo.config.__name__} "
+                             f"for algo {self.algo!r}, got {type(cfg).__name__}")
+        seats = tuple(self.seats)
+        if not seats:
             raise ValueError(f"learner {self.name!r} controls no seats")
-
-    @property
-    def config(self) -> PPOConfig | SACConfig:
-        return self.ppo if self.algo == "ppo" else self.sac
+        if any(isinstance(s, bool) or not isinstance(s, int) or s < 0 for s in seats) or \
+                len(set(seats)) != len(seats):
+            raise ValueError(f"learner {self.name!r}: seats must be distinct learner-seat "
+                             f"indices >= 0, got {list(seats)}")
+        object.__setattr__(self, "config", cfg)
+        object.__setattr__(self, "seats", seats)
 
     def to_dict(self) -> dict[str, Any]:
         return {"name": self.name, "algo": self.algo, "seats": list(self.seats),
                 "config": dataclasses.asdict(self.config)}
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> LearnerSpec:
-        algo = data.get("algo", "ppo")
-        cfg_cls = PPOConfig if algo == "ppo" else SACConfig
-        cfg = _dataclass_from(cfg_cls, data.get("config", {}), f"learner {data.get('name')!r}")
-        return cls(name=data["name"], algo=algo, seats=tuple(data.get("seats", (0,))),
-                   **{algo: cfg})
+    def from_dict(cls, data: Any, prefix: str = "") -> LearnerSpec:
+        """From ``{name, algo, seats, config}`` (a checkpoint's or a run file's learner);
+        errors read ``{prefix}{field}: problem``."""
+        if not isinstance(data, dict):
+            raise ValueError(f"{prefix.rstrip('.: ')}: must be a table with name, algo, "
+                             f"seats, config")
+        valid = ("name", "algo", "seats", "config")
+        for key in data:
+            if key not in valid:
+                raise ValueError(f"{prefix}{key}: unknown key; valid keys: {list(valid)}")
+        name = data.get("name")
+        if not isinstance(name, str):
+            raise ValueError(f"{prefix}name: required, a string")
+        algo_name = data.get("algo", "ppo")
+        try:
+            algo = get_algorithm(algo_name)
+        except ValueError as exc:
+            raise ValueError(f"{prefix}algo: {exc}") from None
+        seats = data.get("seats", [0])
+        if not isinstance(seats, list | tuple):
+            raise ValueError(f"{prefix}seats: must be a list of learner-seat indices, "
+                             f"got {seats!r}")
+        config = data.get("config", {})
+        if not isinstance(config, dict):
+            raise ValueError(f"{prefix}config: must be a table of {algo_name} "
+                             f"hyperparameters")
+        cfg = build(algo.config, config, f"{prefix}config.")
+        try:
+            return cls(name=name, algo=algo_name, seats=tuple(seats), config=cfg)
+        except ValueError as exc:
+            raise ValueError(f"{prefix.rstrip('.: ')}: {exc}") from None
 
 
 @dataclass(frozen=True)
@@ -63,39 +117,47 @@ class TrainConfig:
     Cadences (``checkpoint_every``, ``eval_every``, ``video_every``) count iterations of
     ``rollout_steps`` vector steps (one PPO update); 0 switches them off."""
 
-    name: str
-    scenario: str
-    description: str = ""
-    learners: tuple[LearnerSpec, ...] = ()
-    total_steps: int = 2_000_000  # env steps summed over all envs (one match tick each)
-    num_envs: int = 16
-    num_workers: int = 1
-    seed: int = 0
-    observation: str | None = None
-    game: dict[str, Any] = field(default_factory=dict)
-    rewards: dict[str, Any] = field(default_factory=dict)
-    schedule: dict[str, Any] = field(default_factory=dict)
-    rollout_steps: int = 0  # 0: the PPO learners' num_steps (512 for SAC-only runs)
-    checkpoint_every: int = 10
-    keep_checkpoints: int = 3
-    eval_every: int = 0
-    eval_games: int = 50
-    video_every: int = 0
-    wandb: str = "offline"
-    project: str = "alphatank"
-    tensorboard: bool = False
-    torch_threads: int = 1
-    time_limit_s: float = 0.0  # stop (and checkpoint) after this much wall time; 0: none
+    name: str = hp(REQUIRED, "run name; the run lives in <runs>/<name>")
+    scenario: str = hp(REQUIRED, "shipped scenario name or path to a scenario .toml")
+    description: str = hp("", "what the run is for (shown by alphatank train --list)")
+    learners: tuple[LearnerSpec, ...] = hp((), "learners (name, algo, seats, config); "
+                                           "none: one PPO learner per learner seat")
+    total_steps: int = hp(2_000_000, "env steps summed over all envs (one match tick each)",
+                          gt=0)
+    num_envs: int = hp(16, "matches stepped together", gt=0)
+    num_workers: int = hp(1, "env worker processes", gt=0)
+    seed: int = hp(0, "run seed (every random stream derives from it)", ge=0)
+    observation: str | None = hp(None, "observation kind (none: the scenario's)")
+    game: dict[str, Any] = hp({}, "GameConfig overrides on top of the scenario's")
+    rewards: dict[str, Any] = hp({}, "RewardConfig overrides on top of the scenario's")
+    schedule: dict[str, Any] = hp({}, "opponent schedule: kind = none | curriculum | cycle, "
+                                  "and its parameters")
+    rollout_steps: int = hp(0, "vector steps per iteration (0: the longest rollout any "
+                            "learner wants, 512 if none)", ge=0)
+    checkpoint_every: int = hp(10, "iterations per checkpoint (0: only at the end)", ge=0)
+    keep_checkpoints: int = hp(3, "newest checkpoints kept (0: all)", ge=0)
+    eval_every: int = hp(0, "iterations per evaluation (0: none)", ge=0)
+    eval_games: int = hp(50, "games per evaluation", gt=0)
+    video_every: int = hp(0, "iterations per match video (0: none)", ge=0)
+    wandb: str = hp("offline", "wandb mode", choices=WANDB_MODES)
+    project: str = hp("alphatank", "wandb project")
+    tensorboard: bool = hp(False, "also write TensorBoard logs")
+    torch_threads: int = hp(1, "torch threads", gt=0)
+    time_limit_s: float = hp(0.0, "stop (and checkpoint) after this much wall time in "
+                             "seconds (0: none)", ge=0)
+    map: str | None = hp(None, "map override: shipped map or folder name (e.g. train), "
+                         "a .txt path or a folder of maps (none: the scenario's)")
 
     def __post_init__(self) -> None:
-        if self.wandb not in WANDB_MODES:
-            raise ValueError(f"wandb mode must be one of {WANDB_MODES}, got {self.wandb!r}")
-        for name in ("total_steps", "num_envs", "num_workers", "torch_threads"):
-            if getattr(self, name) <= 0:
-                raise ValueError(f"TrainConfig.{name} must be > 0, got {getattr(self, name)}")
+        object.__setattr__(self, "learners", tuple(self.learners))
+        validate_fields(self)
+        for spec in self.learners:
+            if not isinstance(spec, LearnerSpec):
+                raise FieldError("TrainConfig", "learners", f"must hold LearnerSpecs, got "
+                                 f"{type(spec).__name__}")
         names = [spec.name for spec in self.learners]
         if len(set(names)) != len(names):
-            raise ValueError(f"learner names must be unique, got {names}")
+            raise FieldError("TrainConfig", "learners", f"names must be unique, got {names}")
 
     def with_overrides(self, **changes: Any) -> TrainConfig:
         """A copy with run settings changed (None values are ignored)."""
@@ -107,134 +169,224 @@ class TrainConfig:
         return data
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> TrainConfig:
+    def from_dict(cls, data: dict[str, Any], prefix: str = "") -> TrainConfig:
+        """From :meth:`to_dict` or a run file's mapping; errors read ``{prefix}field:
+        problem`` and unknown keys list the valid ones."""
         data = dict(data)
-        learners = tuple(LearnerSpec.from_dict(d) for d in data.pop("learners", []))
-        return _dataclass_from(cls, {**data, "learners": learners}, "train config")
+        learners = data.pop("learners", [])
+        if not isinstance(learners, list | tuple):
+            raise ValueError(f"{prefix}learners: must be a list of learner tables")
+        specs = tuple(LearnerSpec.from_dict(d, f"{prefix}learners[{i}].")
+                      for i, d in enumerate(learners))
+        return build(cls, {**data, "learners": specs}, prefix)
 
 
-def default_learners(num_learners: int) -> tuple[LearnerSpec, ...]:
-    """One independent PPO learner (Table 7) per learner seat."""
+# ---- learners for a scenario ---------------------------------------------------------------
+
+def default_learners(num_learners: int, algo: str = "ppo", config: Any = None
+                     ) -> tuple[LearnerSpec, ...]:
+    """One independent learner of ``algo`` (Table 7 PPO by default) per learner seat."""
     if num_learners == 1:
-        return (LearnerSpec("ppo", "ppo", (0,)),)
-    return tuple(LearnerSpec(f"ppo_{i}", "ppo", (i,)) for i in range(num_learners))
+        return (LearnerSpec(algo, algo, (0,), config),)
+    return tuple(LearnerSpec(f"{algo}_{i}", algo, (i,), config) for i in range(num_learners))
 
 
-def parse_assignments(text: str, cls: type, where: str) -> dict[str, Any]:
-    """``"update_epochs=4,num_steps=128"`` -> typed field values of dataclass ``cls``."""
-    fields = {f.name: f for f in dataclasses.fields(cls)}
-    out: dict[str, Any] = {}
-    for item in filter(None, (part.strip() for part in text.split(","))):
-        key, sep, raw = item.partition("=")
-        key = key.strip()
-        if not sep or key not in fields:
-            raise ValueError(f"{where}: expected KEY=VALUE with KEY one of {sorted(fields)}, "
-                             f"got {item!r}")
-        kind = str(fields[key].type)
-        raw = raw.strip()
-        try:
-            if "bool" in kind:
-                if raw.lower() not in ("true", "false", "1", "0"):
-                    raise ValueError(raw)
-                out[key] = raw.lower() in ("true", "1")
-            elif raw.lower() == "none" and "None" in kind:
-                out[key] = None
-            elif "int" in kind and "float" not in kind:
-                out[key] = int(raw)
-            else:
-                out[key] = float(raw)
-        except ValueError:
-            raise ValueError(f"{where}: {key} needs a {kind} value, got {raw!r}") from None
+def learners_fit(specs: Sequence[LearnerSpec], num_learners: int) -> bool:
+    """True when ``specs`` drive each of ``num_learners`` learner seats exactly once."""
+    return sorted(s for spec in specs for s in spec.seats) == list(range(num_learners))
+
+
+def run_learners(cfg: TrainConfig, num_learners: int) -> tuple[LearnerSpec, ...]:
+    """The run's learners: its own, or one per learner seat when it names none."""
+    return cfg.learners or default_learners(num_learners)
+
+
+def run_scenario(cfg: TrainConfig) -> Any:
+    """The :class:`Scenario` a run plays: ``cfg.scenario`` with ``cfg.map`` (if set) in
+    place of its map."""
+    from alphatank.game.scenarios import load_scenario, parse_scenario
+
+    sc = load_scenario(cfg.scenario)
+    if cfg.map is None:
+        return sc
+    return parse_scenario({**sc.to_dict(), "map": cfg.map}, f"{sc.source} (map {cfg.map!r})")
+
+
+# ---- hyperparameter overrides (--hp ALGO.FIELD=VALUE) -------------------------------------
+
+def parse_hp(items: Iterable[tuple[str, str]]) -> dict[str, dict[str, Any]]:
+    """``[(flag, "ppo.clip_coef=0.1,sac.tau=0.01"), ...]`` -> typed values per algorithm.
+    A flag named after an algorithm (``--ppo``) takes bare ``FIELD=VALUE`` items. Errors
+    are one line naming the flag, the field and what is allowed."""
+    out: dict[str, dict[str, Any]] = {}
+    for flag, text in items:
+        fixed = flag.lstrip("-") if flag.lstrip("-") in ALGORITHMS else None
+        for item in filter(None, (part.strip() for part in text.split(","))):
+            key, sep, raw = item.partition("=")
+            key = key.strip()
+            algo_name, dot, name = key.partition(".") if fixed is None else (fixed, ".", key)
+            if not sep or not dot or not name:
+                form = "FIELD=VALUE" if fixed else "ALGO.FIELD=VALUE"
+                raise ValueError(f"{flag}: expected {form}, got {item!r}")
+            try:
+                cfg_cls = get_algorithm(algo_name).config
+            except ValueError as exc:
+                raise ValueError(f"{flag} {key}: {exc}") from None
+            fields = field_map(cfg_cls)
+            if name not in fields:
+                raise ValueError(f"{flag} {algo_name}.{name}: unknown {algo_name} "
+                                 f"hyperparameter; valid: {sorted(fields)}")
+            try:
+                value = parse_value(cfg_cls, name, raw)
+                dataclasses.replace(cfg_cls(), **{name: value})  # range check now
+            except FieldError as exc:
+                raise ValueError(f"{flag} {algo_name}.{name}: {exc.problem}") from None
+            out.setdefault(algo_name, {})[name] = value
     return out
 
 
-def with_algo_overrides(cfg: TrainConfig, num_learners: int, ppo: str = "", sac: str = ""
-                        ) -> TrainConfig:
-    """``cfg`` with hyperparameters changed for all its PPO / SAC learners."""
-    p = parse_assignments(ppo, PPOConfig, "--ppo")
-    s = parse_assignments(sac, SACConfig, "--sac")
-    specs = cfg.learners or default_learners(num_learners)
-    specs = tuple(dataclasses.replace(spec, ppo=dataclasses.replace(spec.ppo, **p),
-                                      sac=dataclasses.replace(spec.sac, **s)) for spec in specs)
+def with_hp(cfg: TrainConfig, overrides: dict[str, dict[str, Any]], num_learners: int
+            ) -> TrainConfig:
+    """``cfg`` with hyperparameters changed for every learner of each algorithm named."""
+    if not overrides:
+        return cfg
+    specs = run_learners(cfg, num_learners)
+    present = sorted({s.algo for s in specs})
+    for algo in overrides:
+        if algo not in present:
+            raise ValueError(f"--hp {algo}.*: this run has no {algo} learner (its learners "
+                             f"use {', '.join(present)})")
+    specs = tuple(dataclasses.replace(
+        s, config=dataclasses.replace(s.config, **overrides.get(s.algo, {}))) for s in specs)
     return dataclasses.replace(cfg, learners=specs)
 
 
-def _dataclass_from(cls: type, data: dict[str, Any], where: str) -> Any:
-    valid = {f.name for f in dataclasses.fields(cls)}
-    unknown = sorted(set(data) - valid)
-    if unknown:
-        raise ValueError(f"{where}: unknown {cls.__name__} key(s) {unknown}; "
-                         f"valid: {sorted(valid)}")
-    return cls(**data)
+# ---- run files ----------------------------------------------------------------------------
+
+def parse_run(data: dict[str, Any], source: str, base: Path | None = None,
+              name: str | None = None) -> TrainConfig:
+    """A :class:`TrainConfig` from a run file's mapping. ``name`` is the default run name
+    (the file's stem); relative scenario and map paths resolve against ``base``."""
+    data = dict(data)
+    data.setdefault("name", name or "run")
+    if "scenario" not in data:
+        raise ValueError(f"{source}: scenario: required (a shipped scenario name or a path "
+                         f"to a scenario .toml)")
+    if base is not None:
+        for key in ("scenario", "map"):
+            value = data.get(key)
+            if isinstance(value, str) and ("/" in value or value.endswith((".toml", ".txt"))) \
+                    and not Path(value).is_absolute() and (base / value).exists():
+                data[key] = str(base / value)
+    cfg = TrainConfig.from_dict(data, f"{source}: ")
+    from alphatank.training.schedules import make_schedule
+    try:
+        make_schedule(cfg.schedule, cfg.total_steps)
+    except ValueError as exc:
+        raise ValueError(f"{source}: schedule: {exc}") from None
+    for key in ("game", "rewards"):
+        _check_overrides(getattr(cfg, key), key, f"{source}: ")
+    return cfg
 
 
-def _ppo(name: str = "ppo", seats: tuple[int, ...] = (0,),
-         cfg: PPOConfig | None = None) -> LearnerSpec:
-    return LearnerSpec(name=name, algo="ppo", seats=seats, ppo=cfg or PPOConfig())
+def _check_overrides(table: dict[str, Any], key: str, prefix: str) -> None:
+    """Keys and value types of a [game] / [rewards] table (ranges: when the scenario's
+    preset is applied at the start of the run)."""
+    from alphatank.sim.config import GameConfig, RewardConfig
+
+    cls = GameConfig if key == "game" else RewardConfig
+    fields = field_map(cls)
+    for name, value in table.items():
+        if name not in fields:
+            raise ValueError(f"{prefix}{key}.{name}: unknown {cls.__name__} key; valid keys: "
+                             f"{sorted(fields)}")
+        default = fields[name].default
+        kind = type(default)
+        ok = (isinstance(value, bool) if kind is bool else
+              isinstance(value, int | float) and not isinstance(value, bool) if kind is float
+              else isinstance(value, kind) and not isinstance(value, bool))
+        if not ok:
+            raise ValueError(f"{prefix}{key}.{name}: needs {a_type(kind)}, got {value!r}")
 
 
-def _sac(name: str = "sac", seats: tuple[int, ...] = (0,),
-         cfg: SACConfig | None = None) -> LearnerSpec:
-    return LearnerSpec(name=name, algo="sac", seats=seats, sac=cfg or SACConfig())
+def load_run(path: str | Path) -> TrainConfig:
+    """A run file (``--config FILE.toml``): TrainConfig fields as TOML keys, learners as
+    ``[[learners]]`` tables with a ``[learners.config]`` sub-table."""
+    p = Path(path)
+    if not p.is_file():
+        raise ValueError(f"{p}: no such run file")
+    return _parse_text(read_text(p), str(p), p.parent, p.stem)
 
 
-# Faster PPO settings used by the demo and the time-to-skill run (Table 7 architecture,
-# fewer update epochs so a 10-minute budget covers more env steps).
-PPO_FAST = PPOConfig(num_steps=128, update_epochs=4, num_minibatches=4, anneal_lr=True)
+def _parse_text(text: str, source: str, base: Path | None, name: str) -> TrainConfig:
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ValueError(f"{source}: invalid TOML: {exc}") from None
+    return parse_run(data, source, base, name)
 
-BOT_POOL = ["random", "aggressive", "defensive", "dodge"]
 
-PRESETS: dict[str, TrainConfig] = {p.name: p for p in (
-    # 4.1 agent vs agent
-    TrainConfig("ppo_vs_ppo", "pair", "4.1.1 PPO vs PPO (independent learners)",
-                (_ppo("ppo_a", (0,)), _ppo("ppo_b", (1,)))),
-    TrainConfig("sac_vs_sac", "pair", "4.1.2 SAC vs SAC (Table 8)",
-                (_sac("sac_a", (0,)), _sac("sac_b", (1,))), total_steps=200_000),
-    TrainConfig("sac_vs_ppo", "pair", "4.1.3 SAC vs PPO (Table 9)",
-                (_sac("sac", (0,)), _ppo("ppo", (1,), PPO_TABLE9)), total_steps=200_000),
-    # 4.2 agent vs bots
-    TrainConfig("ppo_vs_smart", "vs_smart", "4.2.1 PPO vs smart bot", (_ppo(),)),
-    TrainConfig("ppo_vs_aggressive", "vs_aggressive", "4.2.2 PPO vs aggressive bot",
-                (_ppo(),)),
-    TrainConfig("ppo_vs_dodge", "vs_dodge", "4.2.3 PPO vs dodge bot (long-range bullets)",
-                (_ppo(),)),
-    TrainConfig("ppo_vs_defensive", "vs_defensive",
-                "4.2.4 PPO vs defensive bot (long-range bullets)", (_ppo(),)),
-    TrainConfig("ppo_vs_random", "vs_random", "Table 4: PPO vs random bot", (_ppo(),)),
-    TrainConfig("sac_vs_aggressive", "vs_aggressive", "SAC vs aggressive bot (Table 8)",
-                (_sac(),), total_steps=200_000),
-    # 4.3 cycle learning and the curriculum (3.4.5-3.4.6)
-    TrainConfig("ppo_cycle", "vs_random", "4.3 cycle learning over four bots (adaptive)",
-                (_ppo(),), schedule={"kind": "cycle", "pool": BOT_POOL, "mode": "adaptive",
-                                     "interval": 100_000}),
-    TrainConfig("ppo_curriculum_smart", "vs_smart",
-                "3.4.6 curriculum: smart bot weakness 0.1 -> 0.8 (sigmoid)", (_ppo(),),
-                schedule={"kind": "curriculum", "start": 0.1, "end": 0.8,
-                          "shape": "sigmoid"}),
-    # 4.4 team agents vs team bots
-    TrainConfig("team_vs_2smart", "team_vs_bot", "4.4.1 2 PPO vs 2 smart bots",
-                (_ppo("ppo_1", (0,)), _ppo("ppo_2", (1,)))),
-    TrainConfig("team_vs_def", "team_vs_def_bot", "4.4.2 2 PPO vs 1 defensive bot",
-                (_ppo("ppo_1", (0,)), _ppo("ppo_2", (1,)))),
-    TrainConfig("team_vs_def_2smart", "team_vs_def_smart",
-                "4.4.3 2 PPO vs 1 defensive + 2 smart bots",
-                (_ppo("ppo_1", (0,)), _ppo("ppo_2", (1,)))),
-    TrainConfig("team_vs_four_bots", "team_vs_four_bots",
-                "4.4.4 2 PPO vs 1 defensive + 1 aggressive + 2 smart bots",
-                (_ppo("ppo_1", (0,)), _ppo("ppo_2", (1,)))),
-    # 4.5 team agents vs team agents
-    TrainConfig("team_ppo_vs_ppo", "team", "4.5.1 2 PPO vs 2 PPO (four independent learners)",
-                tuple(_ppo(f"ppo_{t}{k}", (i,)) for i, (t, k) in
-                      enumerate((("a", 1), ("a", 2), ("b", 1), ("b", 2))))),
-    # the make-demo job and the time-to-skill run
-    TrainConfig("demo", "vs_aggressive", "make demo: PPO vs aggressive, short budget",
-                (_ppo(cfg=PPO_FAST),), total_steps=2_000_000, num_envs=16, num_workers=2,
-                checkpoint_every=50, time_limit_s=480.0),
-)}
+def run_toml(cfg: TrainConfig) -> str:
+    """TOML text of ``cfg`` that :func:`load_run` reads back to an equal TrainConfig
+    (settings at their defaults are left out)."""
+    defaults = {f.name: f.default for f in describe(TrainConfig)}
+    out: dict[str, Any] = {}
+    for f in dataclasses.fields(TrainConfig):
+        value = getattr(cfg, f.name)
+        required = f.default is REQUIRED and f.default_factory is REQUIRED
+        if f.name != "learners" and (required or value != defaults[f.name]):
+            out[f.name] = value
+    learners = []
+    for spec in cfg.learners:
+        base = type(spec.config)()
+        changed = {f.name: getattr(spec.config, f.name)
+                   for f in dataclasses.fields(spec.config)
+                   if getattr(spec.config, f.name) != getattr(base, f.name)}
+        entry: dict[str, Any] = {"name": spec.name, "algo": spec.algo, "seats": list(spec.seats)}
+        if changed:
+            entry["config"] = {k: "none" if v is None else v for k, v in changed.items()}
+        learners.append(entry)
+    if learners:
+        out["learners"] = learners
+    return dumps(out)
+
+
+# ---- presets (alphatank/data/presets/<name>.toml) -----------------------------------------
+
+def _preset_dir() -> Any:
+    return resources.files("alphatank").joinpath("data", "presets")
+
+
+def preset_names() -> list[str]:
+    """Names of the shipped training presets."""
+    return sorted(p.name[:-5] for p in _preset_dir().iterdir() if p.name.endswith(".toml"))
 
 
 def get_preset(name: str) -> TrainConfig:
-    try:
-        return PRESETS[name]
-    except KeyError:
-        raise ValueError(f"unknown training preset {name!r}; valid: {sorted(PRESETS)}") from None
+    """A shipped preset by name."""
+    res = _preset_dir().joinpath(f"{name}.toml")
+    if not res.is_file():
+        raise ValueError(f"unknown training preset {name!r}; valid: {preset_names()}")
+    return _parse_text(res.read_text(encoding="utf-8"), f"presets/{name}.toml", None, name)
+
+
+def hyperparameter_help() -> str:
+    """Every hyperparameter of every registered algorithm: default, type, range, help."""
+    lines = []
+    for name, algo in sorted(ALGORITHMS.items()):
+        lines.append(f"{name}: {algo.description} ({algo.config.__name__})")
+        for f in describe(algo.config):
+            kind = f"{f.type} {f.allowed}".strip()
+            lines.append(f"  {name + '.' + f.name:24s} {_show(f.default):>9s}  {kind:22s} "
+                         f"{f.help}")
+    return "\n".join(lines)
+
+
+def _show(value: Any) -> str:
+    if value is None:
+        return "none"
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, float):
+        return f"{value:g}"
+    return str(value)

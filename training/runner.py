@@ -1,10 +1,11 @@
 """The multi-learner training loop over the batched vector env.
 
-Any number of independent learners (PPO or SAC, each with its own parameters) drive the
-scenario's learner seats; bots, schedules or frozen policies fill the rest. One
-iteration = ``rollout_steps`` vector steps; PPO learners update when their rollout is
-full, SAC learners on their own replay schedule. Checkpoints, evaluation, videos and
-logging happen at iteration boundaries.
+Any number of independent learners (any registered algorithm, each with its own
+parameters) drive the scenario's learner seats; bots, schedules or frozen policies fill
+the rest. The loop speaks only the Learner protocol (:mod:`alphatank.training.learners`):
+one iteration = ``rollout_steps`` vector steps (a multiple of every learner's rollout
+length); each learner updates whenever it says it is ready. Checkpoints, evaluation,
+videos and logging happen at iteration boundaries.
 
 A checkpoint is an episode boundary: right after saving, every match restarts from a
 seed derived from ``(seed, iteration)``. A run resumed from that checkpoint does the same,
@@ -24,34 +25,58 @@ from typing import Any
 
 import numpy as np
 
+from alphatank.envs.core import ACTION_NVEC
+from alphatank.envs.ids import env_id
 from alphatank.envs.vector import make_vector_env
+from alphatank.extras import require
 from alphatank.game.observe import slot_counts
-from alphatank.game.scenarios import Scenario, load_scenario
+from alphatank.game.scenarios import Scenario
 from alphatank.training.checkpoint import (
     Checkpoint,
+    CheckpointError,
     LivePolicy,
     load_checkpoint,
     save_checkpoint,
     scenario_to_dict,
 )
-from alphatank.training.learners import make_learner
+from alphatank.training.learners import learner_class, make_learner
 from alphatank.training.logging import RunLogger
-from alphatank.training.ppo import NVEC
-from alphatank.training.presets import TrainConfig, default_learners
+from alphatank.training.presets import TrainConfig, learners_fit, run_learners, run_scenario
 from alphatank.training.schedules import make_schedule
 from alphatank.training.threads import limit_threads
 
 WINDOW = 100  # episodes in the rolling win-rate / return windows
+DEFAULT_ROLLOUT_STEPS = 512  # vector steps per iteration when no learner asks for a length
 
 
 def derive_seed(*parts: int) -> int:
     return int(np.random.SeedSequence(list(parts)).generate_state(1, np.uint64)[0] >> 1)
 
 
-def opponent_key(label: str) -> str:
-    """'B:aggressive(w=1), B:smart(w=0.5)' -> 'aggressive+smart' (for per-opponent stats)."""
-    names = re.findall(r"([A-Za-z_]+)\(", label)
-    return "+".join(sorted(set(names))) if names else re.sub(r"[^A-Za-z0-9_+]", "_", label)
+def opponent_key(label: str, agents: tuple[str, ...] = ()) -> str:
+    """'B:aggressive(w=1), B:smart(w=0.5)' -> 'aggressive+smart' (for per-opponent stats);
+    ``agents``: the opposing learners' names (or ``selfplay``), joined to the bots."""
+    names = set(re.findall(r"([A-Za-z_]+)\(", label)) | set(agents)
+    if names:
+        return "+".join(sorted(names))
+    return re.sub(r"[^A-Za-z0-9_+]", "_", label)
+
+
+def opposing_learners(specs: list, teams: list[str]) -> dict[str, tuple[str, ...]]:
+    """Per learner, the learners it plays against: those driving a seat of another team
+    (``teams``: the team of each learner seat); ``selfplay`` when it drives both sides."""
+    team_of = {spec.name: {teams[c] for c in spec.seats} for spec in specs}
+    out = {}
+    for spec in specs:
+        mine = team_of[spec.name]
+        rivals = {o.name for o in specs if o.name != spec.name and team_of[o.name] - mine}
+        out[spec.name] = tuple(sorted(rivals | ({"selfplay"} if len(mine) > 1 else set())))
+    return out
+
+
+def _rows(arr: np.ndarray, cols: list[int]) -> np.ndarray:
+    """(E, L, ...) env array -> (E * len(cols), ...) stream rows of learner columns."""
+    return arr[:, cols].reshape(-1, *arr.shape[2:])
 
 
 class Trainer:
@@ -59,8 +84,8 @@ class Trainer:
     ``scenario`` may be given instead of being built from ``cfg.scenario``.
 
     ``action_mask``: optional hook ``f(obs (E, L, D)) -> bool (E, L, 8)`` over the
-    concatenated choices (rotate 3, move 3, fire 2); PPO learners never sample a masked
-    choice and their losses use the same masks.
+    concatenated choices (rotate 3, move 3, fire 2); learners that take masks (PPO) never
+    sample a masked choice and their losses use the same masks.
     """
 
     def __init__(self, cfg: TrainConfig, run_dir: str | Path, env: Any = None,
@@ -76,19 +101,21 @@ class Trainer:
         # an injected env brings its own scenario (tests use custom maps); a resumed run
         # uses the one saved in its checkpoint
         self.scenario: Scenario = (scenario or getattr(env, "scenario", None)
-                                   or load_scenario(cfg.scenario))
+                                   or run_scenario(cfg))
         n_learners = len(self.scenario.learner_seats)
-        specs = cfg.learners or default_learners(n_learners)
-        self.specs = specs = list(specs)
-        owned = sorted(s for spec in specs for s in spec.seats)
-        if owned != list(range(n_learners)):
+        self.specs = specs = list(run_learners(cfg, n_learners))
+        if not learners_fit(specs, n_learners):
+            owned = sorted(s for spec in specs for s in spec.seats)
             raise ValueError(f"learners must drive each of the scenario's {n_learners} learner "
                              f"seats exactly once; they drive {owned} "
                              f"({[(s.name, list(s.seats)) for s in specs]})")
+        # extra per-stream inputs the learners need from the env (Learner.inputs)
+        self.inputs = sorted({x for spec in specs for x in learner_class(spec.algo).inputs})
+        extra = {"inputs": self.inputs} if self.inputs else {}
         self.env = env if env is not None else make_vector_env(
             self.scenario, cfg.num_envs, seed=cfg.seed, num_workers=cfg.num_workers,
             observation=cfg.observation, game_overrides=cfg.game or None,
-            reward_overrides=cfg.rewards or None)
+            reward_overrides=cfg.rewards or None, **extra)
         try:
             self._setup(specs, resume, wandb_id)
         except BaseException:
@@ -98,24 +125,32 @@ class Trainer:
 
     def _setup(self, specs: list, resume: Checkpoint | None, wandb_id: str | None) -> None:
         cfg, env = self.cfg, self.env
+        if cfg.video_every:
+            require("video", "training videos (video_every)")
         self.E, self.L, self.D = env.num_envs, env.num_learners, env.obs_dim
         self.cols = {spec.name: list(spec.seats) for spec in specs}
-        mask_dim = sum(NVEC) if self.action_mask is not None else 0
+        mask_dim = int(ACTION_NVEC.sum()) if self.action_mask is not None else 0
+        supplied = getattr(env, "input_shapes", {})
+        missing = [x for x in self.inputs if x not in supplied]
+        if missing:
+            raise ValueError(f"the learners need env inputs {missing}, which this env does not "
+                             f"supply (it supplies {sorted(supplied)})")
+        self.input_dims = {x: int(np.prod(supplied[x], dtype=np.int64)) for x in self.inputs}
         self.learners = {spec.name: make_learner(spec, self.D, self.E * len(spec.seats),
-                                                 derive_seed(cfg.seed, k), mask_dim)
+                                                 derive_seed(cfg.seed, k), mask_dim,
+                                                 self.input_dims)
                          for k, spec in enumerate(specs)}
-        ppo_steps = [spec.ppo.num_steps for spec in specs if spec.algo == "ppo"]
-        self.rollout_steps = cfg.rollout_steps or (max(ppo_steps) if ppo_steps else 512)
-        bad = [n for n in ppo_steps if self.rollout_steps % n]
-        if bad:
+        wants = {n: lr.rollout_steps for n, lr in self.learners.items() if lr.rollout_steps}
+        self.rollout_steps = (cfg.rollout_steps or max(wants.values(), default=0)
+                              or DEFAULT_ROLLOUT_STEPS)
+        if any(self.rollout_steps % n for n in wants.values()):
             raise ValueError(f"rollout_steps {self.rollout_steps} must be a multiple of every "
-                             f"PPO learner's num_steps ({ppo_steps})")
+                             f"learner's rollout length ({wants})")
         steps_per_iter = self.rollout_steps * self.E
         self.total_iterations = max(1, math.ceil(cfg.total_steps / steps_per_iter))
-        for spec in specs:
-            if spec.algo == "ppo":
-                self.learners[spec.name].total_updates = (
-                    self.total_iterations * self.rollout_steps // spec.ppo.num_steps)
+        for lr in self.learners.values():
+            lr.plan(self.total_iterations * self.rollout_steps)
+        self.rivals = opposing_learners(specs, list(env.learner_teams))
         layout = getattr(env, "layout", None)
         self.alive_col = (layout["self.alive"].start
                           if layout is not None and "self.alive" in layout else None)
@@ -158,17 +193,16 @@ class Trainer:
         if ckpt.obs_dim != self.D:
             raise ValueError(f"{ckpt.path}: obs_dim {ckpt.obs_dim}, the env gives {self.D}")
         for name, learner in self.learners.items():
-            from alphatank.training.checkpoint import CheckpointError
             try:
                 learner.load_state_dict(ckpt.state(name))
+                arrays = ckpt.replay(name)
+                if arrays is not None:
+                    learner.load_arrays(arrays)
             except (RuntimeError, ValueError, KeyError) as exc:
                 if isinstance(exc, CheckpointError):
                     raise
                 raise CheckpointError(f"{ckpt.path / (name + '.pt')}: does not fit learner "
                                       f"{name!r}: {str(exc).splitlines()[0]}") from None
-            replay = ckpt.replay(name)
-            if replay is not None and hasattr(learner, "replay"):
-                learner.replay.load_arrays(replay)
         prog = ckpt.meta["progress"]
         self.global_step, self.iteration = int(prog["global_step"]), int(prog["iteration"])
         self.episodes, self.elapsed = int(prog["episodes"]), float(prog["elapsed"])
@@ -183,6 +217,7 @@ class Trainer:
             "train_config": self.cfg.to_dict(),
             "scenario": scenario_to_dict(self.scenario),
             "observation": self.observation_meta,
+            "input_dims": self.input_dims,
             "learners": [{**spec.to_dict(),
                           "scenario_seats": [self.env.learner_seats[c] for c in spec.seats]}
                          for spec in self.specs],
@@ -192,10 +227,10 @@ class Trainer:
             "windows": {"outcomes": {n: list(d) for n, d in self.outcomes.items()},
                         "returns": {n: [float(x) for x in d] for n, d in self.returns.items()}},
             "wandb_id": self.logger.run_id,
+            "env": env_id(self.scenario),
         }
         states = {n: lr.state_dict() for n, lr in self.learners.items()}
-        arrays = {n: lr.replay.arrays() for n, lr in self.learners.items()
-                  if hasattr(lr, "replay")}
+        arrays = {n: a for n, lr in self.learners.items() if (a := lr.arrays())}
         return save_checkpoint(self.run_dir, f"step_{self.global_step:010d}", meta, states,
                                arrays, keep=self.cfg.keep_checkpoints)
 
@@ -208,20 +243,21 @@ class Trainer:
     def _segment_reset(self) -> np.ndarray:
         """Restart every match from seeds derived from (seed, iteration)."""
         for lr in self.learners.values():
-            if hasattr(lr, "ret_norm"):
-                lr.ret_norm.returns[:] = 0.0
+            lr.new_segment()
         return self.env.reset(seed=derive_seed(self.cfg.seed, self.iteration, 7))
 
     def _record_episode(self, ep: dict[str, Any], rewards: np.ndarray, scale: float) -> None:
         self.episodes += 1
         self.lengths.append(int(ep["length"]))
-        key = opponent_key(str(ep.get("opponent", "")))
+        label = str(ep.get("opponent", ""))
+        bots = "" if label == "none" else label
         outcome = ep["outcome"]
         for name, cols in self.cols.items():
             out = outcome[cols[0]]
             score = 1.0 if out == "win" else 0.0
             self.outcomes[name].append(score)
             self.returns[name].append(float(np.mean(ep["return"][cols])))
+            key = opponent_key(bots, self.rivals[name]) if bots or self.rivals[name] else "none"
             self.by_opponent[name].setdefault(key, deque(maxlen=WINDOW)).append(score)
         self.schedule.record(str(ep.get("opponent", "")), outcome[0])
         if scale < 1.0:
@@ -233,30 +269,37 @@ class Trainer:
     def _collect(self, obs: np.ndarray) -> tuple[np.ndarray, dict[str, float]]:
         """One iteration of ``rollout_steps`` vector steps (updates included)."""
         metrics: dict[str, float] = {}
-        E, D = self.E, self.D
+        E, D, env = self.E, self.D, self.env
         for _ in range(self.rollout_steps):
             masks = self.action_mask(obs) if self.action_mask is not None else None
+            inputs = env.inputs if self.inputs else {}
             for name, learner in self.learners.items():
                 cols = self.cols[name]
                 x = obs[:, cols].reshape(-1, D)
                 m = masks[:, cols].reshape(-1, masks.shape[-1]) if masks is not None else None
-                self.actions[:, cols] = learner.act(x, m).reshape(E, len(cols), 3)
-            next_obs, rewards, term, trunc, info = self.env.step(self.actions)
+                extra = {k: _rows(inputs[k], cols) for k in learner.inputs}
+                self.actions[:, cols] = learner.act(x, m, **extra).reshape(E, len(cols), 3)
+            next_obs, rewards, term, trunc, info = env.step(self.actions)
             if info["episodes"]:
                 scale = self.schedule.victory_scale(self.global_step)
                 for ep in info["episodes"]:
                     self._record_episode(ep, rewards, scale)
             final = info["final_obs"]
+            inputs = env.inputs if self.inputs else {}
             for name, learner in self.learners.items():
                 cols = self.cols[name]
                 k = len(cols)
                 active = (obs[:, cols, self.alive_col].reshape(-1) > 0.5
                           if self.alive_col is not None else None)
                 nxt = next_obs[:, cols].reshape(-1, D)
+                extra = {x: _rows(inputs[x], cols) for x in learner.inputs}
+                finals = {f"final_{x}": _rows(info["final_inputs"][x], cols)
+                          for x in learner.inputs}
                 learner.observe(nxt, rewards[:, cols].reshape(-1), np.repeat(term, k),
-                                np.repeat(trunc, k), final[:, cols].reshape(-1, D), active)
+                                np.repeat(trunc, k), final[:, cols].reshape(-1, D), active,
+                                **extra, **finals)
                 if learner.ready:
-                    for key, val in learner.update(nxt).items():
+                    for key, val in learner.update(nxt, **extra).items():
                         metrics[f"{key}/{name}" if len(self.learners) > 1 else key] = val
             obs = next_obs
             self.global_step += E

@@ -102,13 +102,17 @@ class SquashedGaussianActor(nn.Module):
 
 
 class SAC:
-    """One SAC learner over ``num_streams`` = num_envs x its seats (same interface as PPO)."""
+    """One SAC learner over ``num_streams`` = num_envs x its seats (implements
+    :class:`alphatank.training.learners.Learner`)."""
 
     algo = "sac"
+    inputs: tuple[str, ...] = ()
+    rollout_steps = None  # updates on its own replay schedule, any rollout length
 
     def __init__(self, obs_dim: int, num_streams: int, cfg: SACConfig | None = None,
-                 seed: int = 0, mask_dim: int = 0):
+                 seed: int = 0, mask_dim: int = 0, num_seats: int = 1):
         del mask_dim  # SAC acts in the continuous space; masks do not apply
+        del num_seats  # independent streams
         self.cfg = cfg = cfg or SACConfig()
         self.obs_dim, self.num_streams = obs_dim, num_streams
         self.nvec = NVEC
@@ -138,13 +142,27 @@ class SAC:
         self.since_update = 0
         self.updates = 0  # update rounds
         self.grad_steps = 0
-        self.total_updates = 0  # unused by SAC; kept for the common learner interface
         self._obs = np.zeros((num_streams, obs_dim), dtype=np.float32)
         self._act = np.zeros((num_streams, act_dim), dtype=np.float32)
 
     @property
     def alpha(self) -> float:
         return float(self.log_alpha.detach().exp())
+
+    # ---- run plumbing (the Learner protocol) --------------------------------------------
+
+    def plan(self, total_steps: int) -> None:
+        """SAC's schedule does not depend on the run length."""
+
+    def new_segment(self) -> None:
+        """Nothing per episode to forget (transitions are stored whole)."""
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The replay buffer, saved beside the checkpoint for an exact resume."""
+        return self.replay.arrays()
+
+    def load_arrays(self, arrays: dict[str, np.ndarray]) -> None:
+        self.replay.load_arrays(arrays)
 
     # ---- acting -----------------------------------------------------------------------
 

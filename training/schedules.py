@@ -1,4 +1,5 @@
-"""Opponent schedules (paper 3.4.5-3.4.6): curriculum by bot weakness, cycle over a bot pool.
+"""Opponent schedules (paper 3.4.5-3.4.6): curriculum by bot weakness (over steps, or
+level by level as the win rate rises), cycle over a bot pool.
 
 A schedule decides, between episodes, which bots fill the non-learner seats and how
 strong they are. The runner calls :meth:`OpponentSchedule.record` for every finished
@@ -186,6 +187,72 @@ class CycleSchedule(OpponentSchedule):
         self._pushed = None  # a fresh env needs the current opponent again
 
 
+class WinRateCurriculum(OpponentSchedule):
+    """Bot weakness in steps (``levels``), one level up each time the win rate over the
+    last ``window`` episodes played at the current level reaches ``threshold`` (with at
+    least ``min_episodes`` of them). Only wins count; draws and losses do not.
+
+    Episodes whose opponent label names another weakness (``smart(w=0.1)``: finished
+    before the new level reached the env) are not counted. Evaluation is not affected:
+    the runner's evaluation plays the scenario's own bots, at full strength.
+    """
+
+    kind = "winrate"
+
+    def __init__(self, levels: tuple[float, ...] | list[float] = (0.1, 0.25, 0.5, 0.75, 1.0),
+                 threshold: float = 0.6, window: int = 100, min_episodes: int = 50):
+        levels = tuple(float(w) for w in levels)
+        if not levels or any(not 0.0 <= w <= 1.0 for w in levels):
+            raise ValueError(f"winrate curriculum levels must be weaknesses in [0, 1], "
+                             f"got {list(levels)}")
+        if list(levels) != sorted(levels):
+            raise ValueError(f"winrate curriculum levels must rise, got {list(levels)}")
+        if not 0.0 < threshold <= 1.0:
+            raise ValueError(f"winrate curriculum threshold must be in (0, 1], got {threshold}")
+        if window <= 0 or not 0 < min_episodes <= window:
+            raise ValueError(f"winrate curriculum needs window > 0 and 0 < min_episodes <= "
+                             f"window, got {window}, {min_episodes}")
+        self.levels, self.threshold = levels, float(threshold)
+        self.window, self.min_episodes = int(window), int(min_episodes)
+        self.level = 0
+        self.results: deque[float] = deque(maxlen=self.window)
+        self._applied: float | None = None
+
+    @property
+    def weakness(self) -> float:
+        return self.levels[self.level]
+
+    def win_rate(self) -> float:
+        return float(np.mean(self.results)) if self.results else 0.0
+
+    def apply(self, env: ScheduledEnv, step: int) -> dict[str, float]:
+        if self._applied != self.weakness:
+            env.set_bot_weakness(self.weakness)
+            self._applied = self.weakness
+        return {"schedule/weakness": self.weakness, "schedule/level": float(self.level),
+                "schedule/level_win_rate": self.win_rate()}
+
+    def record(self, opponent: str, outcome: str) -> None:
+        seen = {round(float(w), 4) for w in re.findall(r"\(w=([0-9.eE+-]+)", opponent)}
+        if seen and round(self.weakness, 4) not in seen:
+            return
+        self.results.append(1.0 if outcome == "win" else 0.0)
+        if (self.level < len(self.levels) - 1 and len(self.results) >= self.min_episodes
+                and self.win_rate() >= self.threshold):
+            self.level += 1
+            self.results.clear()
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"level": self.level, "results": list(self.results)}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        if state:
+            self.level = min(int(state["level"]), len(self.levels) - 1)
+            self.results.clear()
+            self.results.extend(state["results"])
+        self._applied = None  # a fresh env needs the current weakness again
+
+
 def make_schedule(spec: dict[str, Any], total_steps: int, seed: int = 0) -> OpponentSchedule:
     """Build a schedule from a preset's ``schedule`` mapping (``kind`` + parameters)."""
     spec = dict(spec or {})
@@ -201,6 +268,8 @@ def make_schedule(spec: dict[str, Any], total_steps: int, seed: int = 0) -> Oppo
         if kind == "cycle":
             spec.setdefault("seed", seed)
             return CycleSchedule(**spec)
+        if kind == "winrate":
+            return WinRateCurriculum(**spec)
     except TypeError as exc:
         raise ValueError(f"schedule {kind!r}: {exc}") from None
-    raise ValueError(f"unknown schedule kind {kind!r}; valid: none, curriculum, cycle")
+    raise ValueError(f"unknown schedule kind {kind!r}; valid: none, curriculum, cycle, winrate")

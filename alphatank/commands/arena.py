@@ -1,5 +1,6 @@
-"""``alphatank arena``: every pair of bots, both sides, as a win/draw/loss matrix with
-Wilson 95% intervals; ``--render`` shows the games in a window."""
+"""``alphatank arena``: every pair of seats (bots, checkpoints, shipped agents), both
+sides, as a win/draw/loss matrix with Wilson 95% intervals and an openskill league;
+``--render`` shows the games in a window."""
 
 from __future__ import annotations
 
@@ -7,24 +8,26 @@ import argparse
 import sys
 import time
 
-import numpy as np
-
 from alphatank.commands.argtypes import positive_float, positive_int, seed
-from alphatank.sim.config import ConfigError, game_config
-from alphatank.sim.mapspec import MapError, load_map
-from alphatank.sim.match import Match
+from alphatank.game.arena import run_arena
+from alphatank.game.lineup import spec_seat
+from alphatank.game.scenarios import ScenarioError
+from alphatank.sim.config import game_config
+from alphatank.sim.episode import EpisodeHook
+from alphatank.sim.mapspec import load_map
 
-DEFAULT_BOTS = "smart,aggressive,defensive,dodge,random"
+DEFAULT_SEATS = "smart,aggressive,defensive,dodge,random"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--bots", default=DEFAULT_BOTS,
-                   help="comma-separated bots, each NAME[:KEY=VALUE...][@WEAKNESS], e.g. "
-                        "'smart,smart:ricochet=false,random@0.5' (default: %(default)s)")
+    p.add_argument("--seats", "--bots", dest="seats", default=DEFAULT_SEATS,
+                   help="comma-separated seats, each a bot NAME[:KEY=VALUE...][@WEAKNESS], "
+                        "checkpoint:PATH or agent:NAME, e.g. 'smart,smart:ricochet=false,"
+                        "random@0.5,checkpoint:runs/ppo' (default: %(default)s)")
     p.add_argument("--map", default="maze", help="shipped map name or .txt path")
     p.add_argument("--games", type=positive_int, default=20,
                    help="games per pair, sides alternating (default: %(default)s)")
-    p.add_argument("--seed", type=seed, default=0, help="first match seed")
+    p.add_argument("--seed", type=seed, default=0, help="first episode seed")
     p.add_argument("--preset", default="paper", help="game preset (paper, long_range)")
     p.add_argument("--max-steps", type=int, default=None,
                    help="ticks before a game is a draw (default: the preset's)")
@@ -33,46 +36,33 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from alphatank.bots.arena import run_arena
-    from alphatank.bots.registry import bot_from_spec
-
-    specs = [s.strip() for s in args.bots.split(",") if s.strip()]
-    try:
-        for s in specs:
-            bot_from_spec(s)  # names, options and their types, weakness
-        spec = load_map(args.map)
-        overrides = {} if args.max_steps is None else {"max_steps": args.max_steps}
-        cfg = game_config(args.preset, **overrides)
-    except (ValueError, MapError, ConfigError) as exc:
-        print(f"alphatank arena: error: {exc}", file=sys.stderr)
-        return 2
-    if len(specs) < 2:
-        print(f"alphatank arena: error: --bots needs at least 2 bots, got {args.bots!r}",
-              file=sys.stderr)
-        return 2
-    if args.games < 1:
-        print(f"alphatank arena: error: --games must be >= 1, got {args.games}",
-              file=sys.stderr)
-        return 2
-    on_tick = None
+    seats = [s.strip() for s in args.seats.split(",") if s.strip()]
+    overrides = {} if args.max_steps is None else {"max_steps": args.max_steps}
+    for s in seats:  # bad input raises an InputError: one line from alphatank.cli
+        spec_seat(s)
+    if len(seats) < 2:
+        raise ScenarioError(f"--seats needs at least 2 seats, got {args.seats!r}")
+    spec = load_map(args.map)
+    cfg = game_config(args.preset, **overrides)
+    hooks: list[EpisodeHook] = []
     renderer = None
+    no_window: tuple[type[Exception], ...] = ()
     if args.render:
-        from alphatank.ui.render import DisplayUnavailable, Renderer
+        from alphatank.ui.render import DisplayUnavailable, Renderer, RenderHook
 
         renderer = Renderer("human", fps=args.fps, caption="AlphaTank arena")
-
-        def on_tick(match: Match, actions: np.ndarray) -> None:
-            try:
-                renderer.render(match)
-            except DisplayUnavailable as exc:
-                raise SystemExit(f"alphatank arena: error: --render: {exc}") from exc
-
-    pairs = len(specs) * (len(specs) - 1) // 2
-    print(f"arena: {len(specs)} bots, {pairs} pairs x {args.games} games on "
+        hooks.append(RenderHook(renderer))
+        no_window = (DisplayUnavailable,)
+    pairs = len(seats) * (len(seats) - 1) // 2
+    print(f"arena: {len(seats)} seats, {pairs} pairs x {args.games} games on "
           f"{spec.name!r} (preset {args.preset}, max {cfg.max_steps} ticks)", flush=True)
     t0 = time.perf_counter()
     try:
-        result = run_arena(specs, spec, cfg, args.games, seed=args.seed, on_tick=on_tick)
+        result = run_arena(seats, args.map, args.games, seed=args.seed, preset=args.preset,
+                           game=overrides, hooks=hooks)
+    except no_window as exc:
+        print(f"alphatank arena: error: --render: {exc}", file=sys.stderr)
+        return 2
     finally:
         if renderer is not None:
             renderer.close()

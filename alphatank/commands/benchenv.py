@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from alphatank.envs.vector import SubprocVectorMatchEnv, VectorMatchEnv
+from alphatank.game.observe import OBS_KINDS
 
 DEFAULT_SCENARIOS = ("vs_random", "vs_aggressive", "vs_defensive", "vs_dodge", "vs_smart",
                      "team", "mixed_teams")
@@ -106,7 +107,7 @@ def env_bench(scenarios: Sequence[str] = DEFAULT_SCENARIOS, observation: str = "
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scenarios", nargs="+", default=list(DEFAULT_SCENARIOS))
-    p.add_argument("--observation", default="paper", choices=["paper", "egocentric"])
+    p.add_argument("--observation", default="paper", choices=list(OBS_KINDS))
     p.add_argument("--num-envs", type=int, default=16, help="matches per process")
     p.add_argument("--steps", type=int, default=150, help="timed steps per run")
     p.add_argument("--workers", type=int, default=2, help="processes for the shared-memory "

@@ -115,12 +115,12 @@ def _make_env(scenario: str, seed: int) -> tuple[Any, Callable[[np.ndarray], tup
     returning (observations array, rewards array, episode over)."""
     import gymnasium
 
-    from alphatank.envs import gym_id, parallel_env
+    from alphatank.envs import TANK_BATTLE_ID, gym_id, parallel_env
     from alphatank.game.scenarios import load_scenario
 
     if len(load_scenario(scenario).learner_seats) == 1:
         env = (gymnasium.make(gym_id(scenario)) if gym_id(scenario) in gymnasium.registry
-               else gymnasium.make("AlphaTank/TankBattle-v0", scenario=scenario))
+               else gymnasium.make(TANK_BATTLE_ID, scenario=scenario))
         env.reset(seed=seed)
 
         def step(acts: np.ndarray) -> tuple:

@@ -9,6 +9,8 @@ import time
 from pathlib import Path
 
 from alphatank.commands.argtypes import positive_float, positive_int
+from alphatank.errors import InputError
+from alphatank.extras import require
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -25,6 +27,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    require("video", "alphatank demo")  # before minutes of training, not after
     from alphatank.training.evaluate import (
         evaluate_checkpoint,
         format_table,
@@ -42,8 +45,7 @@ def run(args: argparse.Namespace) -> int:
                                              num_workers=args.workers, wandb=args.wandb)
     run_dir = Path(args.runs) / name
     if (run_dir / "latest").exists():
-        print(f"error: {run_dir} already holds a run; pick another --name")
-        return 2
+        raise InputError(f"{run_dir} already holds a run; pick another --name")
     print(f"[demo] training PPO vs the aggressive bot on 'open' for up to {args.minutes:g} min "
           f"({cfg.num_envs} matches, {cfg.num_workers} worker processes) -> {run_dir}")
     summary = Trainer(cfg, run_dir, progress=not args.no_progress).train()

@@ -6,11 +6,13 @@ from __future__ import annotations
 import argparse
 
 from alphatank.commands.argtypes import positive_int, seed
+from alphatank.errors import as_input_error
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("checkpoints", nargs="+", metavar="CHECKPOINT",
-                   help="checkpoint folder(s) or run folder(s) (their latest save)")
+                   help="checkpoint folder(s) or run folder(s) (their latest save), also as "
+                        "checkpoint:PATH, or agent:NAME for a shipped agent")
     p.add_argument("--vs", default="",
                    help="comma-separated bots to play (e.g. smart,aggressive,dodge,defensive); "
                         "default: the opponents of each checkpoint's scenario")
@@ -26,7 +28,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from alphatank.training.checkpoint import CheckpointError
+    from alphatank.game.seats import checkpoint_source
     from alphatank.training.evaluate import (
         evaluate_checkpoint,
         format_table,
@@ -39,14 +41,14 @@ def run(args: argparse.Namespace) -> int:
     opponents = [b.strip() for b in args.vs.split(",") if b.strip()] or [None]
     results = []
     try:
-        for ckpt in args.checkpoints:
-            results += evaluate_checkpoint(ckpt, opponents, games=args.games, seed=args.seed,
+        for arg in args.checkpoints:
+            results += evaluate_checkpoint(checkpoint_source(arg), opponents,
+                                           games=args.games, seed=args.seed,
                                            scenario=args.scenario, team=args.team,
                                            deterministic=args.greedy, num_envs=args.num_envs,
                                            weakness=args.weakness)
-    except (CheckpointError, ValueError) as exc:  # ScenarioError is a ValueError
-        print(f"error: {exc}")
-        return 2
+    except ValueError as exc:  # scenario, seat, option errors (a CheckpointError is not one)
+        raise as_input_error(exc) from None
     print(format_table(results))
     if args.csv:
         write_csv(results, args.csv)

@@ -12,11 +12,12 @@ import sys
 from pathlib import Path
 
 from alphatank.commands.argtypes import non_negative_float, positive_float, positive_int
-from alphatank.commands.play import add_lineup_arguments, lineup_from_args, start_episode
-from alphatank.game.scenarios import ScenarioError
+from alphatank.commands.lineup_options import add_lineup_arguments, lineup_from_args
+from alphatank.errors import one_line
+from alphatank.sim.episode import EpisodeHook
 from alphatank.ui.render import parse_overlays
-from alphatank.ui.replay import ReplayRecorder, save_replay
-from alphatank.ui.video import record_match
+from alphatank.ui.replay import ReplayRecorder
+from alphatank.ui.video import VideoRecorder, record_episode
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -35,28 +36,29 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     try:
-        lineup = lineup_from_args(args, humans=False)
-        overlays = parse_overlays(args.overlays)
-        match, match_seed = start_episode(lineup, args.seed)
-    except (ScenarioError, ValueError, FileNotFoundError) as exc:
-        print(f"alphatank record: {exc}", file=sys.stderr)
+        lineup = lineup_from_args(args, interactive=False)
+        video = VideoRecorder(mp4=Path(args.out), gif=args.gif, fps=args.fps,
+                              every=args.every, hold_s=args.hold,
+                              overlays=parse_overlays(args.overlays), labels=lineup.labels,
+                              scale=args.scale)
+    except ValueError as exc:  # overlays; other bad input goes to alphatank.cli's one line
+        print(f"alphatank record: error: {one_line(exc)}", file=sys.stderr)
         return 2
     for note in lineup.notes:
         print(f"note: {note}")
-    recorder = None
+    hooks: list[EpisodeHook] = [video]
     if args.replay:
-        recorder = ReplayRecorder(match, match_seed=match_seed, seed=args.seed,
-                                  scenario=lineup.scenario.name, seats=lineup.seats,
-                                  labels=lineup.labels, policies=lineup.policies)
-    rec = record_match(match, lineup.policies, mp4=Path(args.out), gif=args.gif,
-                       fps=args.fps, every=args.every, hold_s=args.hold, overlays=overlays,
-                       labels=lineup.labels, scale=args.scale, recorder=recorder)
+        hooks.append(ReplayRecorder(scenario=lineup.scenario.name, seats=lineup.seats,
+                                    labels=lineup.labels, path=args.replay,
+                                    policies=lineup.controllers))
+    episode = lineup.start(args.seed, hooks)
+    rec = record_episode(episode, video)
     result = f"team {rec.winner} wins" if rec.winner else "draw"
-    print(f"{lineup.scenario.name} seed {args.seed} on {match.spec.name}: {result} after "
-          f"{rec.ticks} ticks; {rec.frames} frames at {rec.fps:g} fps -> {rec.mp4}")
+    print(f"{lineup.scenario.name} seed {args.seed} on {episode.match.spec.name}: {result} "
+          f"after {rec.ticks} ticks; {rec.frames} frames at {rec.fps:g} fps -> {rec.mp4}")
     if rec.gif is not None:
         print(f"gif: {rec.gif}")
-    if recorder is not None:
-        path = save_replay(recorder.finish(), args.replay)
-        print(f"replay: {path}")
+    if args.replay:
+        print(f"replay: {args.replay}")
+    print(f"final state hash: {rec.final_hash}")
     return 0

@@ -14,11 +14,18 @@ import sys
 import time
 
 from alphatank.commands.argtypes import positive_float, positive_int
-from alphatank.commands.play import NO_DISPLAY_HELP, Lineup, PlaySession
-from alphatank.sim.policy import Policy
+from alphatank.errors import one_line
 from alphatank.ui.render import DEFAULT_OVERLAYS, DisplayUnavailable, parse_overlays
-from alphatank.ui.replay import Replay, ReplayError, check_end, load_replay, simulate
-from alphatank.ui.video import record_match
+from alphatank.ui.replay import (
+    Replay,
+    ReplayError,
+    check_replayed,
+    load_replay,
+    replay_episode,
+    simulate,
+)
+from alphatank.ui.session import NO_DISPLAY_HELP, PlaySession
+from alphatank.ui.video import VideoRecorder, record_episode
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -35,19 +42,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-frames", type=positive_int, help="stop --render after this many frames")
 
 
-def replay_lineup(replay: Replay) -> Lineup:
-    """A line-up whose every seat plays back the replay's actions."""
-    policies: list[Policy] = list(replay.policies())
-    labels = replay.labels or [str(i) for i in range(len(replay.teams))]
-    return Lineup(None, policies, labels, replay.seats)
-
-
 def run(args: argparse.Namespace) -> int:
     try:
         replay = load_replay(args.file)
         overlays = parse_overlays(args.overlays)
     except (ReplayError, ValueError) as exc:
-        print(f"alphatank replay: {exc}", file=sys.stderr)
+        print(f"alphatank replay: error: {one_line(exc)}", file=sys.stderr)
         return 2
     who = ", ".join(f"{t}:{s}" for t, s in zip(replay.teams, replay.seats, strict=False))
     print(f"{args.file}: {replay.scenario or 'match'} on {replay.map_name}, "
@@ -55,11 +55,11 @@ def run(args: argparse.Namespace) -> int:
           f"{'team ' + replay.winner + ' wins' if replay.winner else 'no winner'}")
     try:
         if args.record:
-            match = replay.new_match()
-            rec = record_match(match, replay.policies(), mp4=args.record, gif=args.gif,
-                               overlays=overlays, labels=replay.labels or None,
-                               max_ticks=replay.ticks)
-            check_end(replay, match)
+            video = VideoRecorder(mp4=args.record, gif=args.gif, overlays=overlays,
+                                  labels=replay.labels or None)
+            episode = replay_episode(replay, [video])
+            rec = record_episode(episode, video)
+            check_replayed(replay, episode.match)
             print(f"wrote {rec.mp4} ({rec.frames} frames)" + (f" and {rec.gif}" if rec.gif
                                                               else ""))
         if args.render:
@@ -71,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
                   f"final state hash matches ({replay.final_hash[:16]}...), and so does the "
                   f"result ({'team ' + match.winner + ' wins' if match.winner else 'no winner'})")
     except ReplayError as exc:
-        print(f"alphatank replay: {exc}", file=sys.stderr)
+        print(f"alphatank replay: error: {one_line(exc)}", file=sys.stderr)
         return 1
     return 0
 
@@ -82,9 +82,10 @@ def _render(replay: Replay, args: argparse.Namespace, overlays: tuple[str, ...])
               file=sys.stderr)
         return 2
     tick_hz = replay.game_config().tick_hz
-    session = PlaySession(replay_lineup(replay), fps=tick_hz * args.speed, overlays=overlays,
-                          verbose=False, tick_limit=replay.ticks,
-                          new_match=lambda _seed: (replay.new_match(), replay.match_seed))
+    labels = replay.labels or [str(i) for i in range(len(replay.teams))]  # seats from 0
+    session = PlaySession(fps=tick_hz * args.speed, overlays=overlays, verbose=False,
+                          new_episode=lambda _seed, hooks: replay_episode(replay, hooks),
+                          labels=labels)
     try:
         session.run(max_frames=args.max_frames, caption=f"AlphaTank replay: {args.file}")
     except DisplayUnavailable as exc:

@@ -1,94 +1,271 @@
-"""``alphatank train``: run a named training preset (PPO / SAC, against bots, agents, teams)."""
+"""``alphatank train``: run a training preset or a run file (any registered algorithm,
+against bots, agents, teams), with flags for the scenario, map, schedule, hyperparameters
+and run settings. Listing presets and hyperparameters never imports torch."""
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import sys
 from pathlib import Path
+from typing import Any
 
 from alphatank.commands.argtypes import seed
-from alphatank.training.presets import PRESETS, WANDB_MODES, get_preset
+from alphatank.errors import InputError, as_input_error
+from alphatank.training.fields import FieldError
+from alphatank.training.presets import (
+    BOT_POOL,
+    CYCLE_INTERVAL,
+    WANDB_MODES,
+    TrainConfig,
+    default_learners,
+    get_preset,
+    hyperparameter_help,
+    learners_fit,
+    load_run,
+    parse_hp,
+    preset_names,
+    run_learners,
+    run_scenario,
+    run_toml,
+    with_hp,
+)
+
+DEFAULT_PRESET = "ppo_vs_aggressive"
+SCHEDULES = ("none", "cycle:fixed", "cycle:random", "cycle:adaptive")
+SHAPES = ("linear", "sigmoid")
+NEW_RUN_ONLY = ("preset", "config", "scenario", "map", "schedule", "curriculum", "hp", "ppo",
+                "sac")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--preset", default="ppo_vs_aggressive",
-                   help=f"training preset (default: ppo_vs_aggressive); one of {sorted(PRESETS)}")
-    p.add_argument("--list", action="store_true", help="list the presets and exit")
-    p.add_argument("--name", help="run name; the run lives in <runs>/<name> (default: preset)")
-    p.add_argument("--runs", default="runs", help="folder of runs (default: runs)")
-    p.add_argument("--resume", metavar="DIR",
-                   help="continue the run saved in DIR (a run folder or a checkpoint)")
-    p.add_argument("--total-steps", type=int, help="env steps to train in total")
-    p.add_argument("--num-envs", type=int, help="matches stepped together")
-    p.add_argument("--workers", type=int, help="env worker processes (2 uses both cores)")
-    p.add_argument("--seed", type=seed, help="run seed")
-    p.add_argument("--time-limit", type=float, metavar="S",
-                   help="stop (with a checkpoint) after S seconds of training")
-    p.add_argument("--checkpoint-every", type=int, metavar="N", help="iterations per save")
-    p.add_argument("--keep-checkpoints", type=int, metavar="K",
-                   help="newest saves kept (default: 3; 0 keeps all)")
-    p.add_argument("--eval-every", type=int, metavar="N", help="iterations per evaluation")
-    p.add_argument("--eval-games", type=int, help="games per evaluation during training")
-    p.add_argument("--video-every", type=int, metavar="N", help="iterations per match video")
-    p.add_argument("--wandb", choices=WANDB_MODES, help="wandb mode (default: offline)")
-    p.add_argument("--tensorboard", action="store_true", default=None,
-                   help="also write TensorBoard logs (needs the tensorboard package)")
-    p.add_argument("--torch-threads", type=int, help="torch threads (default: 1)")
-    p.add_argument("--ppo", default="", metavar="K=V,...",
-                   help="PPO hyperparameters for every PPO learner, e.g. "
-                        "update_epochs=4,num_steps=128 (new runs only)")
-    p.add_argument("--sac", default="", metavar="K=V,...",
-                   help="SAC hyperparameters for every SAC learner, e.g. utd_ratio=0.25")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.formatter_class = argparse.RawDescriptionHelpFormatter
+    p.epilog = ("Hyperparameters (set with --hp ALGO.FIELD=VALUE; default, type and range "
+                "in brackets):\n" + hyperparameter_help())
+    what = p.add_argument_group("what to train")
+    what.add_argument("--preset", help=f"training preset (default: {DEFAULT_PRESET}); one of "
+                      f"{preset_names()}")
+    what.add_argument("--config", metavar="FILE.toml",
+                      help="a run file (the format of the presets; --print-config writes one)")
+    what.add_argument("--scenario", metavar="NAME|FILE",
+                      help="play this scenario instead (learners that do not fit its learner "
+                           "seats become one learner per seat, of the first learner's kind)")
+    what.add_argument("--map", metavar="NAME|FOLDER",
+                      help="override the scenario's map: a shipped map, a shipped folder such "
+                           "as 'train' (16 training maps), a .txt file or a folder of maps")
+    what.add_argument("--schedule", metavar="|".join(SCHEDULES),
+                      help=f"cycle the opponent over the bots {', '.join(BOT_POOL)} in order "
+                           f"(fixed), uniformly (random) or by weakness (adaptive), keeping "
+                           f"a preset cycle's settings (else every {CYCLE_INTERVAL:,} env "
+                           f"steps, or total/8 for shorter runs); none: no schedule")
+    what.add_argument("--curriculum", nargs="?", const=True, metavar="START:END[:SHAPE]",
+                      help="raise the bots' weakness (probability of acting per tick) over "
+                           "the run; default 0.1:0.8, shape linear or sigmoid")
+    what.add_argument("--hp", action="append", default=[], metavar="ALGO.FIELD=VALUE,...",
+                      help="set a hyperparameter of every learner of that algorithm, e.g. "
+                           "ppo.update_epochs=4 (repeatable; see the list below)")
+    what.add_argument("--ppo", default="", metavar="K=V,...",
+                      help="same as --hp ppo.K=V,... (e.g. update_epochs=4,num_steps=128)")
+    what.add_argument("--sac", default="", metavar="K=V,...",
+                      help="same as --hp sac.K=V,... (e.g. utd_ratio=0.25)")
+    info = p.add_argument_group("information")
+    info.add_argument("--list", action="store_true",
+                      help="list the presets and every hyperparameter, then exit")
+    info.add_argument("--list-hp", action="store_true",
+                      help="list every hyperparameter of every algorithm, then exit")
+    info.add_argument("--print-config", action="store_true",
+                      help="print the run (after all flags) as a run file, then exit")
+    run = p.add_argument_group("run settings")
+    run.add_argument("--name", help="run name; the run lives in <runs>/<name> "
+                                    "(default: the preset's or the file's name)")
+    run.add_argument("--runs", default="runs", help="folder of runs (default: runs)")
+    run.add_argument("--resume", metavar="DIR",
+                     help="continue the run saved in DIR (a run folder or a checkpoint)")
+    run.add_argument("--total-steps", type=int, help="env steps to train in total")
+    run.add_argument("--num-envs", type=int, help="matches stepped together")
+    run.add_argument("--workers", type=int, help="env worker processes (2 uses both cores)")
+    run.add_argument("--seed", type=seed, help="run seed")
+    run.add_argument("--time-limit", type=float, metavar="S",
+                     help="stop (with a checkpoint) after S seconds of training")
+    run.add_argument("--checkpoint-every", type=int, metavar="N", help="iterations per save")
+    run.add_argument("--keep-checkpoints", type=int, metavar="K",
+                     help="newest saves kept (default: 3; 0 keeps all)")
+    run.add_argument("--eval-every", type=int, metavar="N", help="iterations per evaluation")
+    run.add_argument("--eval-games", type=int, help="games per evaluation during training")
+    run.add_argument("--video-every", type=int, metavar="N", help="iterations per match video")
+    run.add_argument("--wandb", choices=WANDB_MODES, help="wandb mode (default: offline)")
+    run.add_argument("--tensorboard", action="store_true", default=None,
+                     help="also write TensorBoard logs (needs the tensorboard package)")
+    run.add_argument("--torch-threads", type=int, help="torch threads (default: 1)")
+    run.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+# TrainConfig field -> the flag that sets it (run settings, also allowed with --resume)
+RUN_FLAGS = {"total_steps": "--total-steps", "num_envs": "--num-envs",
+             "num_workers": "--workers", "seed": "--seed", "time_limit_s": "--time-limit",
+             "checkpoint_every": "--checkpoint-every", "eval_every": "--eval-every",
+             "keep_checkpoints": "--keep-checkpoints", "eval_games": "--eval-games",
+             "video_every": "--video-every", "wandb": "--wandb", "tensorboard": "--tensorboard",
+             "torch_threads": "--torch-threads"}
 
 
 def _overrides(args: argparse.Namespace) -> dict:
-    return {"total_steps": args.total_steps, "num_envs": args.num_envs,
-            "num_workers": args.workers, "seed": args.seed, "time_limit_s": args.time_limit,
-            "checkpoint_every": args.checkpoint_every, "eval_every": args.eval_every,
-            "keep_checkpoints": args.keep_checkpoints,
-            "eval_games": args.eval_games, "video_every": args.video_every,
-            "wandb": args.wandb, "tensorboard": args.tensorboard,
-            "torch_threads": args.torch_threads}
+    return {field: getattr(args, flag[2:].replace("-", "_"))
+            for field, flag in RUN_FLAGS.items()}
+
+
+def _with_run_settings(cfg: TrainConfig, args: argparse.Namespace, name: str | None = None
+                       ) -> TrainConfig:
+    """``cfg`` with the run-setting flags (and ``name``) applied; a bad value names its
+    flag."""
+    try:
+        return cfg.with_overrides(name=name, **_overrides(args))
+    except FieldError as exc:
+        raise ValueError(f"{RUN_FLAGS.get(exc.name, exc.name)}: {exc.problem}") from None
+
+
+def _learners_label(cfg: TrainConfig) -> str:
+    algos = [s.algo for s in cfg.learners] or ["ppo"]
+    if len(set(algos)) == 1:
+        return algos[0] + (f" x{len(algos)}" if len(algos) > 1 else "")
+    return " + ".join(algos)
 
 
 def list_presets() -> str:
-    width = max(len(n) for n in PRESETS)
-    lines = []
-    for name, cfg in sorted(PRESETS.items()):
-        algos = "+".join(s.algo for s in cfg.learners) or "ppo"
-        lines.append(f"{name:{width}s}  {cfg.scenario:18s} {algos:12s} {cfg.description}")
+    presets = {name: get_preset(name) for name in preset_names()}
+    width = max(len(n) for n in presets)
+    lines = [f"{'preset':{width}s}  {'scenario':18s} {'learners':12s} description"]
+    for name, cfg in presets.items():
+        lines.append(f"{name:{width}s}  {cfg.scenario:18s} {_learners_label(cfg):12s} "
+                     f"{cfg.description}")
     return "\n".join(lines)
 
 
-def run(args: argparse.Namespace) -> int:
-    from alphatank.game.scenarios import load_scenario
-    from alphatank.training.presets import with_algo_overrides
-    from alphatank.training.runner import Trainer, resume_trainer
+def _schedule(cfg: TrainConfig, args: argparse.Namespace) -> dict[str, Any]:
+    """The run's schedule after --schedule / --curriculum."""
+    if args.schedule is not None and args.curriculum is not None:
+        raise ValueError("--schedule and --curriculum: give one (a bot cycle or a weakness "
+                         "curriculum)")
+    current = dict(cfg.schedule)
+    if args.schedule is not None:
+        if args.schedule not in SCHEDULES:
+            raise ValueError(f"--schedule: got {args.schedule!r}; allowed: "
+                             f"{', '.join(SCHEDULES)}")
+        if args.schedule == "none":
+            return {}
+        base = current if current.get("kind") == "cycle" else {
+            "pool": list(BOT_POOL), "interval": max(1, min(CYCLE_INTERVAL,
+                                                           cfg.total_steps // 8))}
+        return {**base, "kind": "cycle", "mode": args.schedule.split(":")[1]}
+    if args.curriculum is not None:
+        base = current if current.get("kind") == "curriculum" else {"start": 0.1, "end": 0.8}
+        parts = [] if args.curriculum is True else args.curriculum.split(":")
+        form = "--curriculum: expected START:END[:SHAPE] with weaknesses in [0, 1] and " \
+               f"SHAPE one of {', '.join(SHAPES)}"
+        if args.curriculum is not True and not 2 <= len(parts) <= 3:
+            raise ValueError(f"{form}, got {args.curriculum!r}")
+        try:
+            ends = {"start": float(parts[0]), "end": float(parts[1])} if parts else {}
+        except ValueError:
+            raise ValueError(f"{form}, got {args.curriculum!r}") from None
+        if any(not 0.0 <= w <= 1.0 for w in ends.values()) or (
+                len(parts) == 3 and parts[2] not in SHAPES):
+            raise ValueError(f"{form}, got {args.curriculum!r}")
+        shape = {"shape": parts[2]} if len(parts) == 3 else {}
+        return {**base, **ends, **shape, "kind": "curriculum"}
+    return current
 
+
+def build_run(args: argparse.Namespace) -> TrainConfig:
+    """The TrainConfig a new run's flags describe; ValueError (one line) on bad input."""
+    if args.config and args.preset:
+        raise ValueError("--config and --preset: give one")
+    cfg = load_run(args.config) if args.config else get_preset(args.preset or DEFAULT_PRESET)
+    cfg = _with_run_settings(cfg, args, args.name)
+    if args.scenario is not None:
+        from alphatank.game.scenarios import load_scenario
+        try:
+            load_scenario(args.scenario)
+        except ValueError as exc:
+            raise ValueError(f"--scenario: {exc}") from None
+        cfg = dataclasses.replace(cfg, scenario=args.scenario)
+    if args.map is not None:
+        cfg = dataclasses.replace(cfg, map=args.map)
+    try:
+        sc = run_scenario(cfg)
+    except ValueError as exc:
+        raise ValueError(f"{'--map: ' if args.map is not None else ''}{exc}") from None
+    n = len(sc.learner_seats)
+    if not learners_fit(run_learners(cfg, n), n):
+        if args.scenario is None:
+            raise ValueError(f"learners {[(s.name, list(s.seats)) for s in cfg.learners]} do "
+                             f"not drive scenario {sc.name!r}'s {n} learner seats exactly once")
+        first = cfg.learners[0]
+        learners = default_learners(n, first.algo, first.config)
+        print(f"note: learners {[(s.name, list(s.seats)) for s in cfg.learners]} do not fit "
+              f"scenario {sc.name!r} ({n} learner seats): one {first.algo} learner per seat "
+              f"instead", file=sys.stderr)
+        cfg = dataclasses.replace(cfg, learners=learners)
+    schedule = _schedule(cfg, args)
+    if schedule.get("kind", "none") != "none" and not any(
+            s.controller == "bot" for s in sc.seats):
+        if args.schedule or args.curriculum is not None:
+            flag = "--schedule" if args.schedule else "--curriculum"
+            raise ValueError(f"{flag}: scenario {sc.name!r} has no bot seats to schedule")
+        raise ValueError(f"schedule: the {schedule['kind']} schedule of {cfg.name!r} needs bot "
+                         f"seats; scenario {sc.name!r} has none (--schedule none drops it)")
+    cfg = dataclasses.replace(cfg, schedule=schedule)
+    from alphatank.training.schedules import make_schedule
+    try:
+        make_schedule(cfg.schedule, cfg.total_steps)
+    except ValueError as exc:
+        raise ValueError(f"schedule: {exc}") from None
+    sc.game_config(**cfg.game)
+    sc.reward_config(**cfg.rewards)
+    hp_items = [("--hp", t) for t in args.hp] + [("--ppo", args.ppo), ("--sac", args.sac)]
+    return with_hp(cfg, parse_hp(hp_items), n)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Bad input raises InputError (run files, presets, flags and hyperparameters raise
+    ValueError: converted), reported by :func:`alphatank.cli.main` in one line, exit 2."""
     if args.list:
         print(list_presets())
+        print("\nHyperparameters (--hp ALGO.FIELD=VALUE):\n" + hyperparameter_help())
+        return 0
+    if args.list_hp:
+        print(hyperparameter_help())
         return 0
     progress = not args.no_progress
     if args.resume:
-        if args.ppo or args.sac:
-            print("error: --ppo/--sac apply to new runs; a resumed run keeps its settings")
-            return 2
-        trainer = resume_trainer(args.resume, progress=progress, **_overrides(args))
+        given = [f"--{k}" for k in NEW_RUN_ONLY if getattr(args, k) not in (None, "", [])]
+        if given:
+            raise InputError(f"{', '.join(given)} apply to new runs; a resumed run keeps its "
+                             f"settings")
+        from alphatank.training.checkpoint import load_checkpoint
+        from alphatank.training.runner import resume_trainer
+        try:  # a CheckpointError is an InputError already
+            cfg = _with_run_settings(load_checkpoint(args.resume).train_config, args)
+            if args.print_config:
+                print(run_toml(cfg), end="")
+                return 0
+            trainer = resume_trainer(args.resume, progress=progress, **_overrides(args))
+        except ValueError as exc:
+            raise as_input_error(exc) from None
         print(f"resuming {trainer.run_dir} at step {trainer.global_step:,}")
     else:
         try:
-            cfg = get_preset(args.preset)
-            cfg = cfg.with_overrides(name=args.name or cfg.name, **_overrides(args))
-            cfg = with_algo_overrides(cfg, len(load_scenario(cfg.scenario).learner_seats),
-                                      args.ppo, args.sac)
+            cfg = build_run(args)
         except ValueError as exc:
-            print(f"error: {exc}")
-            return 2
+            raise as_input_error(exc) from None
+        if args.print_config:
+            print(run_toml(cfg), end="")
+            return 0
         run_dir = Path(args.runs) / cfg.name
         if (run_dir / "latest").exists():
-            print(f"error: {run_dir} already holds a run; continue it with --resume {run_dir} "
-                  f"or pick another --name")
-            return 2
+            raise InputError(f"{run_dir} already holds a run; continue it with --resume "
+                             f"{run_dir} or pick another --name")
+        from alphatank.training.runner import Trainer
         trainer = Trainer(cfg, run_dir, progress=progress)
     summary = trainer.train()
     print(f"run {summary['run_dir']}: {summary['global_step']:,} steps, "

@@ -8,7 +8,10 @@ match, then computes rewards and observations for all of them with batched numpy
 Rules shared by all envs:
 
 * Seeding: ``reset_env(e, seed)`` derives the map choice, the match seed and one seed per
-  seat from ``numpy.random.SeedSequence(seed)``; same seed + same actions => same episode.
+  seat with :func:`alphatank.sim.episode.episode_seeds` (``SeedSequence(seed)``), the rule
+  ``play``, ``record`` and the arena use too; same seed + same actions => same episode.
+* Controllers come from the seat kinds of :mod:`alphatank.game.seats` (bots, checkpoints,
+  shipped agents; human seats idle).
 * Dead driven seats keep their slot: their actions are ignored and they still receive
   rewards (e.g. their team's victory).
 * When no driven seat is alive but the match goes on (bots left in several teams), the
@@ -18,12 +21,14 @@ Rules shared by all envs:
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 from gymnasium import spaces
 
+from alphatank.game.lineup import spec_seat
 from alphatank.game.observe import (
     OBS_KINDS,
     GlobalState,
@@ -32,7 +37,9 @@ from alphatank.game.observe import (
     slot_counts,
 )
 from alphatank.game.rewards import RewardTracker
-from alphatank.game.scenarios import Scenario, ScenarioError, Seat, load_scenario, seat_policy
+from alphatank.game.scenarios import Scenario, ScenarioError, Seat, load_scenario
+from alphatank.game.seats import make_controller
+from alphatank.sim.episode import episode_match, episode_seeds, reset_controllers
 from alphatank.sim.match import Match
 from alphatank.sim.policy import NOOP, Policy
 
@@ -98,6 +105,8 @@ class MatchSet:
                    if s not in self.driven and s not in self.seat_policies]
         self.orphans = orphans  # learner seats nobody drives: need an opponent policy
         self.opponent_policy: Policy | None = None
+        self.opponents: dict[str, Seat | Policy] = {}  # named, for set_env_opponents
+        self.env_opponent: list[str | None] = [None] * E
         self.bot_override: list[str] | None = None
         self.weakness: float | None = None
         walls, buffs, debuffs = slot_counts(self.game, self.specs)
@@ -152,6 +161,10 @@ class MatchSet:
             return None
         if seat in self.seat_policies:
             return self.seat_policies[seat]
+        name = self.env_opponent[e]
+        if name is not None:
+            opp = self.opponents[name]
+            return dataclasses.replace(opp, team=self.teams[seat]) if isinstance(opp, Seat) else opp
         if self.opponent_policy is not None:
             return self.opponent_policy
         s = self.scenario.seats[seat]
@@ -168,8 +181,33 @@ class MatchSet:
             s = Seat(s.team, "bot", bot=bot, weakness=w, options=opts)
         return s
 
+    def add_opponent(self, name: str, opponent: str | Policy) -> None:
+        """Register a named opponent for :meth:`set_env_opponents`: a seat spec
+        (``smart@0.5``, ``checkpoint:PATH``, ``agent:NAME``) or a Policy (one object may
+        fill every seat of every env: policies keep their state per match and seat)."""
+        if isinstance(opponent, str):
+            opponent = spec_seat(opponent, "A", where=f"opponent {name!r}")
+        self.opponents[name] = opponent
+
+    def set_env_opponents(self, names: Sequence[str | None]) -> None:
+        """Per env: the named opponent that fills every seat this set plays (not the
+        ``seat_policies``) from that env's next episode; None restores the default."""
+        if len(names) != self.num_envs:
+            raise ValueError(f"need one opponent name per env ({self.num_envs}), got "
+                             f"{len(names)}")
+        bad = sorted({n for n in names if n is not None and n not in self.opponents})
+        if bad:
+            raise ValueError(f"unknown opponent(s) {bad}; registered: {sorted(self.opponents)}")
+        self.env_opponent = list(names)
+
     def describe_opponents(self, e: int) -> str:
-        """Label of the seats this set plays in env ``e``, e.g. ``B:smart(w=1)``."""
+        """Label of the seats this set plays in env ``e``, e.g. ``B:smart(w=1)``; a named
+        opponent (:meth:`set_env_opponents`) is labelled by its name."""
+        name = self.env_opponent[e]
+        if name is not None:
+            teams = dict.fromkeys(self.teams[s] for s in range(self.n)
+                                  if s not in self.driven and s not in self.seat_policies)
+            return ", ".join(f"{t}:{name}" for t in teams) or "none"
         parts = []
         for seat in range(self.n):
             c = self.seat_controller_spec(e, seat)
@@ -184,11 +222,11 @@ class MatchSet:
         if spec is None or not isinstance(spec, Seat):
             return spec
         key = (spec.controller, spec.bot, spec.weakness, tuple(sorted(spec.options.items())),
-               spec.keys, spec.path)
+               spec.keys, spec.path, spec.agent)
         cached = self._bots[e].get(seat)
         if cached is not None and cached[0] == key:
             return cached[1]
-        pol = seat_policy(spec, seed)
+        pol = make_controller(spec, seed)
         self._bots[e][seat] = (key, pol)
         return pol
 
@@ -196,32 +234,19 @@ class MatchSet:
 
     def reset_env(self, e: int, seed: int) -> None:
         """Start a new episode in env ``e``, everything derived from ``seed``."""
-        ss = np.random.SeedSequence(seed)
-        s_map, s_match, s_seats = ss.spawn(3)
-        k = 0
-        if len(self.specs) > 1:
-            k = int(np.random.default_rng(s_map).integers(len(self.specs)))
-        match_seed = int(s_match.generate_state(1, np.uint64)[0])
-        seat_seeds = [int(x) for x in s_seats.generate_state(self.n, np.uint64)]
-        spec = self.specs[k]
-        if e < len(self.matches) and self.matches[e].spec is spec:
-            m = self.matches[e]
-            m.reset(match_seed)
+        seeds = episode_seeds(seed, self.n, len(self.specs))
+        old = self.matches[e] if e < len(self.matches) else None
+        m = episode_match(self.game, self.specs, self.teams, seeds, old)
+        if old is None:
+            self.matches.append(m)
         else:
-            m = Match(self.game, spec, self.teams, seed=match_seed)
-            if e < len(self.matches):
-                self.matches[e] = m
-            else:
-                self.matches.append(m)
-        self.map_index[e] = k
-        played = []
+            self.matches[e] = m
+        self.map_index[e] = seeds.map_index
+        ctrls = self.controllers[e]
         for seat in range(self.n):
-            ctrl = self._controller(e, seat, seat_seeds[seat])
-            self.controllers[e][seat] = ctrl
-            if ctrl is not None:
-                ctrl.reset(m, seat, seat_seeds[seat])
-                played.append((seat, ctrl))
-        self._played[e] = played
+            ctrls[seat] = self._controller(e, seat, seeds.seat_seeds[seat])
+        reset_controllers(m, ctrls, seeds)
+        self._played[e] = [(seat, c) for seat, c in enumerate(ctrls) if c is not None]
         self.joint[e] = 1
         b = self.batch
         b.set_static(e, m)

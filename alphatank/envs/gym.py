@@ -1,11 +1,41 @@
 """Gymnasium env: one learner seat of a scenario; the env plays every other seat.
 
-``gymnasium.make("AlphaTank/TankBattle-v0", scenario="vs_smart")`` (ids in
-:mod:`alphatank.envs`). Other learner seats of the scenario need a Policy
-(``seat_policies={seat: policy}`` or ``opponent_policy=`` for every non-learner seat).
-Observation: ``Box(-1, 1, (obs_dim,), float32)`` (index map: ``env.unwrapped.layout``);
-action: ``MultiDiscrete([3, 3, 2])``. ``info["reward_terms"]`` breaks the step's reward
-down by term; the last step's info adds ``winner`` and ``outcome``.
+``gymnasium.make("AlphaTank/TankBattle-v0", scenario="vs_smart")`` or a scenario's own id
+(``AlphaTank/VsSmart-v0``; all ids in :mod:`alphatank.envs`). A tank in a walled arena
+fights bots, frozen policies or both, with ricocheting bullets (docs/rules.md); the
+scenario (a TOML file) names the map, the game preset and every seat.
+
+Action space
+    ``MultiDiscrete([3, 3, 2])``: rotate {0 counter-clockwise, 1 none, 2 clockwise}, move
+    {0 back, 1 stop, 2 forward}, fire {0 no, 1 yes}. One action per tick.
+
+Observation space
+    ``Box(-1, 1, (obs_dim,), float32)``, ``obs_dim`` fixed per scenario: the ``paper`` kind
+    (the paper's Table 1 in map coordinates) or ``egocentric`` (the tank's own frame and
+    wall rays). Every feature has a name: ``env.unwrapped.layout["tank[0].dist"]`` is its
+    slice; docs/environments.md tabulates both layouts.
+
+Rewards
+    The sum of the scenario's reward terms for the learner this step (``RewardConfig``;
+    defaults: the paper's Table 5: victory, hits, predicted trajectory hits, bullets
+    closing in, ...). ``info["reward_terms"]`` breaks it down by term.
+
+Episode end
+    Terminated when at most one team has a live tank (the learner's death ends its episode:
+    the rest of the match is played out at once so the winner is real); truncated at
+    ``max_steps`` (1200 ticks by default, 40 s at 30 Hz). The last step's info adds
+    ``winner`` (team or None) and ``outcome`` ("win" / "loss" / "draw").
+
+Arguments
+    ``scenario`` (name or TOML path), ``observation`` ("paper" / "egocentric"; default: the
+    scenario's), ``learner_seat`` (default: the first learner seat), ``opponent_policy``
+    (a Policy in every seat the env plays), ``seat_policies`` ({seat: Policy}; the
+    scenario's other learner seats need one), ``game_overrides`` / ``reward_overrides``
+    (GameConfig / RewardConfig fields), ``render_mode`` (None, "rgb_array", "human").
+
+Version history (``ENV_VERSION`` in :mod:`alphatank.envs.ids`, shared by every AlphaTank
+env and written into checkpoints)
+    * v0: the initial release: paper and egocentric observations, Table 5 rewards.
 """
 
 from __future__ import annotations
@@ -22,8 +52,30 @@ from alphatank.game.rewards import TERMS
 from alphatank.game.scenarios import Scenario, ScenarioError, load_scenario
 from alphatank.sim.match import Match
 from alphatank.sim.policy import Policy
+from alphatank.ui.modes import RENDER_MODES, check_render_mode
 
-RENDER_MODES = ["rgb_array", "human"]
+
+def single_learner_seat(sc: Scenario, learner_seat: int | None,
+                        seat_policies: Mapping[int, Policy] | None,
+                        opponent_policy: Policy | None) -> int:
+    """The learner seat a one-learner env drives (default: the scenario's first); the
+    scenario's other learner seats need a Policy (``seat_policies`` or
+    ``opponent_policy``). Errors name the scenario file and what is allowed."""
+    learners = sc.learner_seats
+    if not learners:
+        raise ScenarioError(f"{sc.source}: TankBattle needs a learner seat; this scenario "
+                            "has none (watch it with the PettingZoo or vector env)")
+    seat = learners[0] if learner_seat is None else learner_seat
+    if seat not in learners:
+        raise ScenarioError(f"{sc.source}: learner_seat {seat} is not a learner seat; "
+                            f"learner seats: {learners}")
+    orphans = [s for s in learners if s != seat and s not in (seat_policies or {})]
+    if orphans and opponent_policy is None:
+        raise ScenarioError(
+            f"{sc.source}: learner seats {orphans} have no controller: pass "
+            "seat_policies={seat: policy} or opponent_policy=policy, or use the "
+            "PettingZoo env to drive them all")
+    return seat
 
 
 class TankBattleEnv(gym.Env):
@@ -38,26 +90,12 @@ class TankBattleEnv(gym.Env):
                  reward_overrides: Mapping[str, Any] | None = None,
                  render_mode: str | None = None):
         sc = load_scenario(scenario)
-        learners = sc.learner_seats
-        if not learners:
-            raise ScenarioError(f"{sc.source}: TankBattle needs a learner seat; this scenario "
-                                "has none (watch it with the PettingZoo or vector env)")
-        seat = learners[0] if learner_seat is None else learner_seat
-        if seat not in learners:
-            raise ScenarioError(f"{sc.source}: learner_seat {seat} is not a learner seat; "
-                                f"learner seats: {learners}")
-        if render_mode is not None and render_mode not in RENDER_MODES:
-            raise ValueError(f"render_mode must be one of {RENDER_MODES} or None, "
-                             f"got {render_mode!r}")
+        seat = single_learner_seat(sc, learner_seat, seat_policies, opponent_policy)
+        check_render_mode(render_mode)
         self.core = MatchSet(sc, 1, observation=observation, game_overrides=game_overrides,
                              reward_overrides=reward_overrides, driven=[seat],
                              seat_policies=seat_policies)
         self.core.opponent_policy = opponent_policy
-        if self.core.orphans and opponent_policy is None:
-            raise ScenarioError(
-                f"{sc.source}: learner seats {self.core.orphans} have no controller: pass "
-                "seat_policies={seat: policy} or opponent_policy=policy, or use the "
-                "PettingZoo env to drive them all")
         self.scenario, self.seat = sc, seat
         self.render_mode = render_mode
         self.observation_space = self.core.observation_space()

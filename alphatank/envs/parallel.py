@@ -1,11 +1,35 @@
 """PettingZoo env: every learner seat of a scenario is an agent; the env plays the rest.
 
 ``parallel_env(scenario="team")`` returns a ParallelEnv, ``env(...)`` its AEC form
-(``pettingzoo.utils.parallel_to_aec``). Agents are named ``tank_<seat>``. A tank that dies
-is terminated and leaves ``agents`` for good, unless ``keep_dead_agents=True``, which keeps
-it (alive flag 0, actions ignored) until the match ends so it still receives its team's
-victory. ``state()`` is the global state for centralised critics (``state_space``,
-index map ``state_layout``). ``max_cycles`` truncates episodes (GameConfig.max_steps).
+(``pettingzoo.utils.parallel_to_aec``). Agents are named ``tank_<seat>``.
+
+Action space
+    Per agent ``MultiDiscrete([3, 3, 2])``: rotate, move, fire (as in
+    :mod:`alphatank.envs.gym`); every live agent acts every step.
+
+Observation space
+    Per agent ``Box(-1, 1, (obs_dim,), float32)``, the same layout as the Gymnasium env
+    (``env.layout``; team scenarios add ``team`` flags). ``state()`` is the global state
+    for centralised critics (``state_space``, index map ``state_layout``).
+
+Rewards
+    Per agent per step, the sum of its reward terms; ``infos[agent]["reward_terms"]``
+    breaks it down.
+
+Episode end
+    The match ends when at most one team has a live tank (all agents terminated) or at
+    ``max_cycles`` ticks (truncated). A tank that dies is terminated and leaves ``agents``
+    for good, unless ``keep_dead_agents=True``, which keeps it (alive flag 0, actions
+    ignored) until the match ends so it still receives its team's victory. The last
+    step's infos add ``winner`` and ``outcome``.
+
+Arguments
+    ``scenario``, ``observation``, ``seat_policies``, ``game_overrides``,
+    ``reward_overrides``, ``max_cycles`` (GameConfig.max_steps), ``keep_dead_agents``,
+    ``render_mode`` (None, "rgb_array", "human").
+
+Version history
+    ``metadata["name"]`` is ``alphatank_v<ENV_VERSION>``; see :mod:`alphatank.envs.gym`.
 """
 
 from __future__ import annotations
@@ -19,18 +43,18 @@ from pettingzoo import AECEnv, ParallelEnv
 from pettingzoo.utils import parallel_to_aec
 
 from alphatank.envs.core import FirstMatchRenderer, MatchSet, action_space, check_actions
+from alphatank.envs.ids import ENV_VERSION
 from alphatank.game.observe import ObsLayout
 from alphatank.game.rewards import TERMS
 from alphatank.game.scenarios import Scenario, ScenarioError, load_scenario
 from alphatank.sim.policy import Policy
-
-RENDER_MODES = ["rgb_array", "human"]
+from alphatank.ui.modes import RENDER_MODES, check_render_mode
 
 
 class TankBattleParallelEnv(ParallelEnv):
     """All learner seats of a scenario as simultaneous agents."""
 
-    metadata = {"name": "alphatank_v0", "render_modes": RENDER_MODES, "render_fps": 30,
+    metadata = {"name": f"alphatank_v{ENV_VERSION}", "render_modes": RENDER_MODES, "render_fps": 30,
                 "is_parallelizable": True}
 
     def __init__(self, scenario: str | Scenario = "team", *, observation: str | None = None,
@@ -39,9 +63,7 @@ class TankBattleParallelEnv(ParallelEnv):
                  reward_overrides: Mapping[str, Any] | None = None,
                  max_cycles: int | None = None, keep_dead_agents: bool = False,
                  render_mode: str | None = None):
-        if render_mode is not None and render_mode not in RENDER_MODES:
-            raise ValueError(f"render_mode must be one of {RENDER_MODES} or None, "
-                             f"got {render_mode!r}")
+        check_render_mode(render_mode)
         self.scenario = sc = load_scenario(scenario)
         if not sc.learner_seats:
             raise ScenarioError(f"{sc.source}: no learner seats, so no PettingZoo agents (the "

@@ -1,11 +1,46 @@
-"""Batched vector env for training: many matches in one process, arrays in and out.
+"""Batched envs: many matches of one scenario stepped together in one process (or split
+over worker processes), arrays in and out.
 
-:class:`VectorMatchEnv` steps ``num_envs`` matches of one scenario together; each match
-has ``num_learners`` (L) learner seats. Arrays: observations float32 (num_envs, L,
-obs_dim), actions int (num_envs, L, 3), rewards float32 (num_envs, L), terminated /
-truncated bool (num_envs,). Autoreset is SAME_STEP: an env whose episode ended is reset
-inside ``step``; ``info["final_obs"]`` holds its last observation and
-``info["episodes"]`` one summary dict per ended episode.
+Two faces over one engine:
+
+:class:`TankBattleVectorEnv` is a ``gymnasium.vector.VectorEnv``, the vector entry point of
+every AlphaTank id: ``gymnasium.make_vec("AlphaTank/VsSmart-v0", num_envs=16,
+vectorization_mode="vector_entry_point")``. Each sub-env is exactly
+``gymnasium.make(id)``'s env (one learner seat; the env plays every other seat).
+
+* Action space: ``MultiDiscrete([[3, 3, 2]] * num_envs)``, int (num_envs, 3): rotate
+  {0 ccw, 1 none, 2 cw}, move {0 back, 1 stop, 2 forward}, fire {0, 1}.
+* Observation space: ``Box(-1, 1, (num_envs, obs_dim), float32)``; the layout (feature
+  name -> column) is ``env.layout``; docs/environments.md tabulates it.
+* Rewards: float32 (num_envs,), the sum of the scenario's reward terms for the learner this
+  step (RewardConfig; defaults: the paper's Table 5).
+* Episode end: terminated when at most one team has a live tank, truncated at
+  ``max_steps``. Autoreset is ``AutoresetMode.SAME_STEP``: an ended sub-env is reset in the
+  same ``step``; the returned observation is its new episode's first, and ``infos`` holds
+  ``final_obs`` (object array, the last observation where ``_final_obs``) and
+  ``final_info`` (dict of arrays masked by ``_final_info``: winner, outcome, map,
+  opponent, return, length, and ``terms``: the episode's reward by term).
+* Seeding: ``reset(seed=s)`` gives env ``i`` its ``k``-th episode seed
+  ``SeedSequence(s, spawn_key=(i, k))``; ``reset()`` continues with fresh episodes.
+* Arguments: ``scenario``, ``num_envs``, ``observation``, ``learner_seat``,
+  ``opponent_policy``, ``seat_policies``, ``game_overrides``, ``reward_overrides``,
+  ``num_workers`` (>1: worker processes, same results), ``render_mode`` (None or
+  ``"rgb_array"``: ``render()`` returns one frame per sub-env).
+* Version history: see :mod:`alphatank.envs.gym` (one ``ENV_VERSION`` for all envs).
+
+The engine under it, :class:`VectorMatchEnv` (``env.engine``), drives *every* learner seat
+of a scenario and speaks (num_envs, L learners, ...) arrays: observations float32
+(num_envs, L, obs_dim), actions int (num_envs, L, 3), rewards float32 (num_envs, L),
+terminated / truncated bool (num_envs,); ``info["final_obs"]`` (zeros where no episode
+ended) and ``info["episodes"]``, one summary dict per ended episode. Dead learners keep
+their slot until their match ends. AlphaTank's trainer uses this view.
+
+Extra per-learner inputs (for learners that need more than observations, e.g. a
+centralised critic's state): an env made with ``inputs=("alive", ...)`` keeps
+``env.inputs[name]`` (num_envs, L, ...) for the current step, puts the values of ended
+episodes (taken before the autoreset) in ``info["final_inputs"][name]``, and gives each
+one's trailing shape in ``env.input_shapes``. Input ``x`` is the method ``input_x()`` of
+:class:`VectorMatchEnv`: adding an input is adding that one method.
 
 :class:`SubprocVectorMatchEnv` has the same interface and, for the same seed, the same
 results bit for bit: worker processes each own a contiguous block of envs and exchange
@@ -21,9 +56,13 @@ from multiprocessing import shared_memory
 from typing import Any
 
 import numpy as np
+from gymnasium import logger as gym_logger
 from gymnasium import spaces
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
 
 from alphatank.envs.core import MatchSet, action_space, check_actions
+from alphatank.envs.gym import single_learner_seat
 from alphatank.game.observe import ObsLayout
 from alphatank.game.rewards import TERMS
 from alphatank.game.scenarios import Scenario, load_scenario
@@ -41,17 +80,23 @@ class VectorMatchEnv:
 
     Dead learners keep their slot until their match ends (alive flag 0 in the
     observation, actions ignored, rewards such as their team's victory still delivered).
+    ``learner_seats`` picks the learner seats the caller drives (default: all); the others
+    need a Policy (``seat_policies`` or :meth:`set_opponent_policy`).
     """
+
+    render_mode = None  # the engine draws nothing (TankBattleVectorEnv renders)
 
     def __init__(self, scenario: str | Scenario, num_envs: int, seed: int = 0,
                  observation: str | None = None, game_overrides: dict | None = None,
                  reward_overrides: dict | None = None, *,
                  seat_policies: Mapping[int, Policy] | None = None,
-                 env_ids: Sequence[int] | None = None):
+                 learner_seats: Sequence[int] | None = None,
+                 env_ids: Sequence[int] | None = None, inputs: Sequence[str] = ()):
         self.scenario = load_scenario(scenario)
         self.core = MatchSet(self.scenario, num_envs, observation=observation,
                              game_overrides=game_overrides, reward_overrides=reward_overrides,
-                             seat_policies=seat_policies, env_ids=env_ids)
+                             driven=learner_seats, seat_policies=seat_policies,
+                             env_ids=env_ids)
         core = self.core
         self.num_envs = num_envs
         self.num_learners = L = len(core.driven)
@@ -68,6 +113,21 @@ class VectorMatchEnv:
         self._length = np.zeros(num_envs, dtype=np.int64)
         self._started = False
         self._shape = (num_envs, L, 3)
+        self._input_names = tuple(inputs)
+        for name in inputs:
+            check_input(self, name)
+        self.inputs: dict[str, np.ndarray] = self._read_inputs()
+        self.input_shapes = {name: a.shape[2:] for name, a in self.inputs.items()}
+
+    # ---- extra learner inputs (see the module docstring) ------------------------------
+
+    def _read_inputs(self) -> dict[str, np.ndarray]:
+        return {name: np.array(getattr(self, f"input_{name}")(), dtype=np.float32)
+                for name in self._input_names}
+
+    def input_alive(self) -> np.ndarray:
+        """(num_envs, L): 1 where the learner seat's tank is alive."""
+        return self.core.batch.alive[:, self.core.driven_idx]
 
     @property
     def layout(self) -> ObsLayout:
@@ -104,6 +164,17 @@ class VectorMatchEnv:
         against a snapshot); ``None`` restores the scenario's controllers."""
         self.core.opponent_policy = policy
 
+    def add_opponent(self, name: str, opponent: str | Policy) -> None:
+        """Register a named opponent (a seat spec such as ``smart@0.5`` or
+        ``checkpoint:PATH``, or a Policy) for :meth:`set_env_opponents`."""
+        self.core.add_opponent(name, opponent)
+
+    def set_env_opponents(self, names: Sequence[str | None]) -> None:
+        """One registered opponent name per env (None: the scenario's own controllers),
+        filling every non-learner seat from that env's next episode (league and
+        self-play pools)."""
+        self.core.set_env_opponents(names)
+
     # ---- episodes -------------------------------------------------------------------
 
     def _reset_env(self, e: int) -> None:
@@ -122,7 +193,9 @@ class VectorMatchEnv:
         for e in range(self.num_envs):
             self._reset_env(e)
         self._started = True
-        return self.core.obs.build().copy()
+        obs = self.core.obs.build().copy()
+        self.inputs = self._read_inputs()
+        return obs
 
     def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
                                           dict[str, Any]]:
@@ -140,10 +213,13 @@ class VectorMatchEnv:
         terminated = np.fromiter((m.terminated for m in core.matches), bool, self.num_envs)
         truncated = np.fromiter((m.truncated for m in core.matches), bool, self.num_envs)
         final_obs = np.zeros_like(obs)
+        final_inputs = {name: np.zeros_like(a) for name, a in self.inputs.items()}
         episodes = []
         done = np.flatnonzero(terminated | truncated)
         if done.size:
             final_obs[done] = obs[done]
+            for name in self._input_names:
+                final_inputs[name][done] = getattr(self, f"input_{name}")()[done]
             for e in done:
                 e = int(e)
                 m = core.matches[e]
@@ -155,7 +231,9 @@ class VectorMatchEnv:
                     "terms": dict(zip(TERMS, self._terms[e].copy(), strict=True))})
                 self._reset_env(e)
             obs = core.obs.build()
-        info = {"final_obs": final_obs, "episodes": episodes}
+        if self._input_names:
+            self.inputs = self._read_inputs()
+        info = {"final_obs": final_obs, "episodes": episodes, "final_inputs": final_inputs}
         return obs.copy(), rewards.astype(np.float32), terminated, truncated, info
 
     def _name(self, idx: tuple[int, ...]) -> str:
@@ -220,9 +298,14 @@ def _worker(conn: Any, kwargs: dict, lo: int, hi: int, specs: dict, names: dict)
                 a["terminated"][lo:hi] = term
                 a["truncated"][lo:hi] = trunc
                 a["final_obs"][lo:hi] = info["final_obs"]
+                for name, arr in env.inputs.items():
+                    a[f"input:{name}"][lo:hi] = arr
+                    a[f"final:{name}"][lo:hi] = info["final_inputs"][name]
                 conn.send(("ok", info["episodes"]))
             elif cmd == "reset":
                 a["obs"][lo:hi] = env.reset(arg)
+                for name, arr in env.inputs.items():
+                    a[f"input:{name}"][lo:hi] = arr
                 conn.send(("ok", None))
             elif cmd == "call":
                 name, args = arg
@@ -245,16 +328,20 @@ class SubprocVectorMatchEnv:
     env under ``if __name__ == "__main__":``). Frozen policies and ``seat_policies`` are
     pickled to the workers."""
 
+    render_mode = None
+
     def __init__(self, scenario: str | Scenario, num_envs: int, seed: int = 0,
                  observation: str | None = None, game_overrides: dict | None = None,
                  reward_overrides: dict | None = None, *, num_workers: int = 2,
                  seat_policies: Mapping[int, Policy] | None = None,
-                 start_method: str = "spawn"):
+                 learner_seats: Sequence[int] | None = None,
+                 start_method: str = "spawn", inputs: Sequence[str] = ()):
         if not 1 <= num_workers <= num_envs:
             raise ValueError(f"num_workers must be in 1..num_envs={num_envs}, "
                              f"got {num_workers}")
         probe = VectorMatchEnv(scenario, 1, seed, observation, game_overrides,
-                               reward_overrides, seat_policies=seat_policies)
+                               reward_overrides, seat_policies=seat_policies,
+                               learner_seats=learner_seats, inputs=inputs)
         self.scenario = probe.scenario
         self.num_envs, self.num_learners = num_envs, probe.num_learners
         self.learner_seats, self.learner_teams = probe.learner_seats, probe.learner_teams
@@ -264,11 +351,17 @@ class SubprocVectorMatchEnv:
         specs = {"obs": ((E, L, D), "float32"), "final_obs": ((E, L, D), "float32"),
                  "rewards": ((E, L), "float32"), "terminated": ((E,), "bool"),
                  "truncated": ((E,), "bool"), "actions": ((E, L, 3), "int64")}
+        self.input_shapes = probe.input_shapes
+        for name, shape in self.input_shapes.items():
+            specs[f"input:{name}"] = specs[f"final:{name}"] = ((E, L, *shape), "float32")
         self._shared = _Shared(specs)
+        self.inputs = self._inputs()
         kwargs = {"scenario": self.scenario, "seed": seed, "observation": observation,
                   "game_overrides": game_overrides, "reward_overrides": reward_overrides,
-                  "seat_policies": seat_policies}
+                  "seat_policies": seat_policies, "learner_seats": learner_seats,
+                  "inputs": tuple(inputs)}
         bounds = np.linspace(0, E, num_workers + 1).round().astype(int)
+        self._blocks = list(zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True))
         ctx = mp.get_context(start_method)
         self._conns, self._procs = [], []
         for lo, hi in zip(bounds[:-1], bounds[1:], strict=True):
@@ -287,6 +380,9 @@ class SubprocVectorMatchEnv:
         e, slot = idx
         return (f"env {e}, learner {slot} (seat {self.learner_seats[slot]}, team "
                 f"{self.learner_teams[slot]})")
+
+    def _inputs(self, kind: str = "input") -> dict[str, np.ndarray]:
+        return {name: self._shared.arr[f"{kind}:{name}"].copy() for name in self.input_shapes}
 
     def _gather(self) -> list:
         out = []
@@ -321,11 +417,23 @@ class SubprocVectorMatchEnv:
     def set_opponent_policy(self, policy: Policy | None) -> None:
         self._broadcast("call", ("set_opponent_policy", (policy,)))
 
+    def add_opponent(self, name: str, opponent: str | Policy) -> None:
+        self._broadcast("call", ("add_opponent", (name, opponent)))
+
+    def set_env_opponents(self, names: Sequence[str | None]) -> None:
+        if len(names) != self.num_envs:
+            raise ValueError(f"need one opponent name per env ({self.num_envs}), got "
+                             f"{len(names)}")
+        for conn, (lo, hi) in zip(self._conns, self._blocks, strict=True):
+            conn.send(("call", ("set_env_opponents", (list(names[lo:hi]),))))
+        self._gather()
+
     def reset(self, seed: int | None = None) -> np.ndarray:
         if seed is not None:
             self.seed = int(seed)
         self._broadcast("reset", seed)
         self._started = True
+        self.inputs = self._inputs()
         return self._shared.arr["obs"].copy()
 
     def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
@@ -335,7 +443,10 @@ class SubprocVectorMatchEnv:
         a = self._shared.arr
         a["actions"][...] = check_actions(actions, a["actions"].shape, self._name)
         episodes = [ep for part in self._broadcast("step") for ep in part]
-        info = {"final_obs": a["final_obs"].copy(), "episodes": episodes}
+        if self.input_shapes:
+            self.inputs = self._inputs()
+        info = {"final_obs": a["final_obs"].copy(), "episodes": episodes,
+                "final_inputs": self._inputs("final")}
         return (a["obs"].copy(), a["rewards"].copy(), a["terminated"].copy(),
                 a["truncated"].copy(), info)
 
@@ -361,6 +472,14 @@ class SubprocVectorMatchEnv:
             self.close()
 
 
+def check_input(env: VectorMatchEnv, name: str) -> None:
+    """Raise unless ``env`` has the input method ``input_<name>`` (listing those it has)."""
+    if not callable(getattr(type(env), f"input_{name}", None)):
+        have = sorted(a[6:] for a in dir(type(env))
+                      if a.startswith("input_") and callable(getattr(type(env), a)))
+        raise ValueError(f"unknown env input {name!r}; this env supplies: {have}")
+
+
 def make_vector_env(scenario: str | Scenario, num_envs: int, seed: int = 0,
                     num_workers: int = 1, **kwargs: Any
                     ) -> VectorMatchEnv | SubprocVectorMatchEnv:
@@ -368,3 +487,138 @@ def make_vector_env(scenario: str | Scenario, num_envs: int, seed: int = 0,
     if num_workers <= 1:
         return VectorMatchEnv(scenario, num_envs, seed, **kwargs)
     return SubprocVectorMatchEnv(scenario, num_envs, seed, num_workers=num_workers, **kwargs)
+
+
+# ---- the Gymnasium face ---------------------------------------------------------------
+
+VECTOR_RENDER_MODES = ["rgb_array"]
+_FINAL_INFO_KEYS = ("winner", "outcome", "map", "opponent", "return", "length", "terms")
+
+
+class TankBattleVectorEnv(VectorEnv):
+    """``num_envs`` copies of the one-learner env ``TankBattleEnv`` as one
+    ``gymnasium.vector.VectorEnv`` over the batched engine (see the module docstring for
+    spaces, rewards, episode end, autoreset and seeding)."""
+
+    metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": VECTOR_RENDER_MODES,
+                "render_fps": 30}
+
+    def __init__(self, scenario: str | Scenario = "vs_smart", num_envs: int = 1, *,
+                 observation: str | None = None, learner_seat: int | None = None,
+                 opponent_policy: Policy | None = None,
+                 seat_policies: Mapping[int, Policy] | None = None,
+                 game_overrides: Mapping[str, Any] | None = None,
+                 reward_overrides: Mapping[str, Any] | None = None, num_workers: int = 1,
+                 render_mode: str | None = None):
+        sc = load_scenario(scenario)
+        seat = single_learner_seat(sc, learner_seat, seat_policies, opponent_policy)
+        if render_mode is not None and render_mode not in VECTOR_RENDER_MODES:
+            raise ValueError(f"render_mode must be one of {VECTOR_RENDER_MODES} or None, "
+                             f"got {render_mode!r}")
+        if render_mode is not None and num_workers > 1:
+            raise ValueError("render_mode needs the matches in this process: num_workers=1")
+        self.engine: VectorMatchEnv | SubprocVectorMatchEnv = make_vector_env(
+            sc, num_envs, 0, num_workers, observation=observation,
+            game_overrides=dict(game_overrides or {}) or None,
+            reward_overrides=dict(reward_overrides or {}) or None,
+            seat_policies=seat_policies, learner_seats=[seat])
+        if opponent_policy is not None:
+            self.engine.set_opponent_policy(opponent_policy)
+        self.scenario, self.learner_seat = sc, seat
+        self.num_envs = num_envs
+        self.render_mode = render_mode
+        self.single_observation_space = self.engine.observation_space
+        self.single_action_space = self.engine.action_space
+        self.observation_space = batch_space(self.single_observation_space, num_envs)
+        self.action_space = batch_space(self.single_action_space, num_envs)
+        fps = sc.game_config(**dict(game_overrides or {})).tick_hz
+        self.metadata = {**self.metadata, "render_fps": fps}
+        self._shape = (num_envs, 3)
+        self._started = False
+        self._renderers: list[Any] = []
+
+    @property
+    def layout(self) -> ObsLayout:
+        """Index map of one sub-env's observation vector (feature name -> slice)."""
+        return self.engine.layout
+
+    # ---- opponents (from each sub-env's next episode), as on the engine ---------------
+
+    def set_bot_weakness(self, weakness: float) -> None:
+        self.engine.set_bot_weakness(weakness)
+
+    def set_opponents(self, bot_names: Sequence[str] | None,
+                      weakness: float | None = None) -> None:
+        self.engine.set_opponents(bot_names, weakness)
+
+    def set_opponent_policy(self, policy: Policy | None) -> None:
+        self.engine.set_opponent_policy(policy)
+
+    # ---- episodes ---------------------------------------------------------------------
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None
+              ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Reset every sub-env. ``seed`` restarts the episode sequence; ``None`` continues
+        it (the first reset without a seed draws one from ``np_random``). No options."""
+        if options:
+            raise ValueError(f"reset takes no options (got {sorted(options)}); every ended "
+                             "sub-env is reset inside step (AutoresetMode.SAME_STEP)")
+        if seed is not None and not isinstance(seed, int | np.integer):
+            raise TypeError(f"seed must be an int or None, got {type(seed).__name__} (one "
+                            "seed seeds every sub-env's episode sequence)")
+        super().reset(seed=seed)
+        if seed is None and not self._started:
+            seed = int(self.np_random.integers(2**63 - 1))
+        obs = self.engine.reset(seed)
+        self._started = True
+        return obs[:, 0], {}
+
+    def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                          dict[str, Any]]:
+        if not self._started:
+            raise RuntimeError("step() before reset()")
+        acts = check_actions(actions, self._shape, self._name)
+        obs, rew, term, trunc, info = self.engine.step(acts[:, None, :])
+        infos: dict[str, Any] = {}
+        episodes = info["episodes"]
+        if episodes:
+            final_obs = np.full(self.num_envs, None, dtype=object)
+            ended = np.zeros(self.num_envs, dtype=bool)
+            final_info: dict[str, Any] = {}
+            for ep in episodes:
+                e = ep["env"]
+                final_obs[e] = info["final_obs"][e, 0]
+                ended[e] = True
+                record = {k: ep[k] for k in _FINAL_INFO_KEYS}
+                record["return"] = float(ep["return"][0])
+                record["outcome"] = ep["outcome"][0]
+                record["terms"] = {k: float(v[0]) for k, v in ep["terms"].items()}
+                final_info = self._add_info(final_info, record, e)
+            infos = {"final_obs": final_obs, "_final_obs": ended, "final_info": final_info,
+                     "_final_info": ended.copy()}
+        return obs[:, 0], rew[:, 0], term, trunc, infos
+
+    def _name(self, idx: tuple[int, ...]) -> str:
+        return f"env {idx[0]} (seat {self.learner_seat}, {self.scenario.name})"
+
+    # ---- rendering and closing --------------------------------------------------------
+
+    def render(self) -> tuple[np.ndarray, ...] | None:
+        """One HxWx3 uint8 frame per sub-env (``render_mode="rgb_array"``)."""
+        if self.render_mode is None:
+            gym_logger.warn("render() called with render_mode=None; pass "
+                            f"render_mode='rgb_array' ({VECTOR_RENDER_MODES})")
+            return None
+        from alphatank.ui.render import Renderer
+
+        core = self.engine.core
+        while len(self._renderers) < self.num_envs:
+            self._renderers.append(Renderer(self.render_mode, fps=self.metadata["render_fps"]))
+        return tuple(r.render(m, c) for r, m, c in
+                     zip(self._renderers, core.matches, core.controllers, strict=True))
+
+    def close_extras(self, **kwargs: Any) -> None:
+        for r in self._renderers:
+            r.close()
+        self._renderers = []
+        self.engine.close()

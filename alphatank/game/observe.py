@@ -26,7 +26,7 @@ preallocated buffers.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -40,10 +40,47 @@ if TYPE_CHECKING:
 
 OBS_KINDS = ("paper", "egocentric")
 TANK_FIELDS = ("alive", "x", "y", "sin", "cos", "vx", "vy", "c0x", "c0y", "c1x", "c1y",
-               "c2x", "c2y", "c3x", "c3y", "wall")
+               "c2x", "c2y", "c3x", "c3y", "wall")  # columns of tank_table()
+BULLET_FIELDS = ("x", "y", "vx", "vy")  # columns of bullet_table()
 # Corner offsets in the tank frame (forward, right): front-left, front-right, back-right,
 # back-left on screen (y down); multiplied by (width/2, height/2).
 CORNERS = np.array([[1.0, -1.0], [1.0, 1.0], [-1.0, 1.0], [-1.0, -1.0]])
+# What each field of a slot means (docs/environments.md's observation tables come from this
+# and the layouts; every field a layout names must be here).
+FIELD_HELP = {
+    "alive": "1 while the tank lives, else 0",
+    "team": "1 if the tank (the bullet's shooter) is on my team (team scenarios only)",
+    "mask": "1 if the slot holds something (a live bullet, a wall, a zone), else 0",
+    "x": "x position, 2 x / W - 1", "y": "y position, 2 y / H - 1",
+    "sin": "sin of the heading (egocentric `tank[k]`: of its heading minus mine)",
+    "cos": "cos of the heading (egocentric `tank[k]`: of its heading minus mine)",
+    "vx": "x velocity / tank_speed (tanks) or / bullet_speed (bullets)",
+    "vy": "y velocity / tank_speed (tanks) or / bullet_speed (bullets)",
+    **{f"c{k}{a}": f"{a} of corner {k} ({name}), scaled like {a}" for k, name in enumerate(
+        ("front-left", "front-right", "back-right", "back-left")) for a in "xy"},
+    "wall": "1 while the tank touches a wall",
+    "reload": "cooldown ticks left / cooldown_ticks",
+    "bullets": "own bullets in flight / bullet capacity",
+    "rel_x": "x position minus mine, / max(W, H)", "rel_y": "y position minus mine, / max(W, H)",
+    "dist": "distance from me / map diagonal (`ray[k]`: to the nearest wall / ray length)",
+    "x0": "left edge, scaled like x", "y0": "top edge, scaled like y",
+    "x1": "right edge, scaled like x", "y1": "bottom edge, scaled like y",
+    "in_buff": "1 while I am in a buff zone", "in_debuff": "1 while I am in a debuff zone",
+    "fwd": "position relative to me along my heading, / max(W, H)",
+    "side": "position relative to me towards my right (on screen), / max(W, H)",
+    "v_fwd": "velocity along my heading, / tank_speed or / bullet_speed",
+    "v_side": "velocity towards my right, / tank_speed or / bullet_speed",
+}
+BLOCK_HELP = {
+    "self": "the observing tank",
+    "own_bullet": "my bullet slots, in slot order",
+    "tank": "every other tank: teammates first, then enemies, each in seat order",
+    "bullet": "other tanks' bullets, nearest first",
+    "wall": "the map's merged wall rectangles",
+    "buff": "buff zones", "debuff": "debuff zones",
+    "zone": "where I stand",
+    "ray": "wall distance along evenly spaced directions: ray 0 straight ahead, then clockwise",
+}
 DEFAULT_RAYS = 16
 DEFAULT_RAY_LENGTH = 350.0  # px: five cells of the default map
 
@@ -55,6 +92,8 @@ class ObsLayout:
     Scalar features are named ``block.field`` (``self.x``) or ``block[k].field``
     (``tank[0].rel_x``, ``ray[3].dist``); whole blocks by their name (``self``,
     ``tank[0]``, ``tank``, ``bullet``). ``layout["self.x"]`` returns the slice.
+    ``slot_fields[block]`` lists the fields of one slot; :meth:`column` and :meth:`span`
+    give their positions within a slot (what the builder writes through).
     """
 
     kind: str
@@ -62,6 +101,8 @@ class ObsLayout:
     index: dict[str, slice] = field(default_factory=dict)
     fields: list[str] = field(default_factory=list)  # scalar names in vector order
     widths: dict[str, int] = field(default_factory=dict)  # block -> floats per slot
+    slots: dict[str, int | None] = field(default_factory=dict)  # block -> slots (None: single)
+    slot_fields: dict[str, tuple[str, ...]] = field(default_factory=dict)  # block -> field names
 
     def __getitem__(self, name: str) -> slice:
         try:
@@ -80,6 +121,8 @@ class ObsLayout:
         """Append a block of ``count`` slots (None: a single unnumbered slot)."""
         start = self.size
         self.widths[block] = len(names)
+        self.slots[block] = count
+        self.slot_fields[block] = tuple(names)
         for k in [None] if count is None else range(count):
             head = block if k is None else f"{block}[{k}]"
             s0 = self.size
@@ -92,15 +135,48 @@ class ObsLayout:
         self.index[block] = slice(start, self.size)
         return self.index[block]
 
+    def column(self, block: str, name: str) -> int:
+        """Position of field ``name`` within one slot of ``block``."""
+        names = self.slot_fields.get(block)
+        if names is None or name not in names:
+            raise KeyError(f"no field {name!r} in block {block!r} of the {self.kind} layout; "
+                           f"its fields: {list(names or ())}")
+        return names.index(name)
+
+    def span(self, block: str, *names: str) -> slice:
+        """Positions of the adjacent fields ``names`` (in this order) within one slot of
+        ``block``, as a slice (a writable view in numpy)."""
+        first = self.column(block, names[0])
+        got = [self.column(block, n) for n in names]
+        if got != list(range(first, first + len(names))):
+            raise ValueError(f"fields {list(names)} of block {block!r} are not adjacent in "
+                             f"this order in the {self.kind} layout: "
+                             f"{list(self.slot_fields[block])}")
+        return slice(first, first + len(names))
+
     def describe(self) -> str:
         """Human-readable table of blocks and the fields of one slot."""
         lines = [f"{self.kind} observation: {self.size} floats"]
         for b in self.blocks():
             sl = self.index[b]
-            names = [f.split(".", 1)[1] for f in self.fields[sl.start:sl.stop]]
             lines.append(f"  {b:12s} [{sl.start:4d}:{sl.stop:4d}]  "
-                         f"{', '.join(dict.fromkeys(names))}")
+                         f"{', '.join(self.slot_fields[b])}")
         return "\n".join(lines)
+
+    def markdown(self, notes: Mapping[str, str] | None = None) -> str:
+        """The layout as a Markdown table: block, slots, floats, index range, fields of a
+        slot (and a ``notes[block]`` column when ``notes`` is given)."""
+        head = ["block", "slots", "floats", "index"] + (["what"] if notes else []) + ["fields"]
+        rows = ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
+        for b in self.blocks():
+            sl, count = self.index[b], self.slots[b]
+            cells = [f"`{b}`" if count is None else f"`{b}[k]`",
+                     str(1 if count is None else count), str(sl.stop - sl.start),
+                     f"{sl.start}:{sl.stop}"]
+            cells += [notes.get(b, "")] if notes else []
+            cells.append(", ".join(self.slot_fields[b]))
+            rows.append("| " + " | ".join(cells) + " |")
+        return "\n".join(rows)
 
 
 class StateBatch:
@@ -243,12 +319,13 @@ class ObservationBuilder:
         self.other_bidx = (self.other_idx[:, :, None] * cap + np.arange(cap)).reshape(L, K)
         self.other_bteam = np.repeat(self.other_team, cap, axis=1)  # (L, K)
         self.layout = self._make_layout(n_oth, K, cap, batch)
+        self.at = self._columns()
         self.out = np.zeros((E, L, self.layout.size), dtype=np.float32)
         self._views()
         self._ge = np.arange(E)[:, None, None]
         self._gl = np.arange(L)[None, :, None]
         self._tt = np.zeros((E, n, len(TANK_FIELDS)))
-        self._bt = np.zeros((E, batch.n_bullets, 4))
+        self._bt = np.zeros((E, batch.n_bullets, len(BULLET_FIELDS)))
         self._count_scale = np.array([1.0 / self.cfg.cooldown_ticks, 1.0 / cap])
         self._ray_angles = np.arange(rays) * (2 * math.pi / rays)
 
@@ -263,10 +340,9 @@ class ObservationBuilder:
         B, Dz = batch.max_buffs, batch.max_debuffs
         if self.kind == "paper":
             lay.add("self", None, TANK_FIELDS + ("reload", "bullets"))
-            lay.add("own_bullet", cap, ("mask", "x", "y", "vx", "vy"))
+            lay.add("own_bullet", cap, ("mask",) + BULLET_FIELDS)
             lay.add("tank", n_oth, t + TANK_FIELDS + ("rel_x", "rel_y", "dist"))
-            lay.add("bullet", K, ("mask",) + t + ("x", "y", "vx", "vy", "rel_x", "rel_y",
-                                                   "dist"))
+            lay.add("bullet", K, ("mask",) + t + BULLET_FIELDS + ("rel_x", "rel_y", "dist"))
             lay.add("wall", batch.walls.shape[1], ("mask", "x0", "y0", "x1", "y1"))
             lay.add("buff", B, ("mask", "x", "y"))
             lay.add("debuff", Dz, ("mask", "x", "y"))
@@ -283,6 +359,46 @@ class ObservationBuilder:
             lay.add("debuff", Dz, ("mask", "fwd", "side", "dist"))
         return lay
 
+    def _columns(self) -> dict[str, int | slice]:
+        """Where the builder writes, resolved once from the layout by feature name:
+        ``"block.field"`` -> column within a slot of the block (an int), ``"block.a:b"``
+        -> the adjacent fields a..b (a slice, so numpy writes through a view)."""
+        lay = self.layout
+        at: dict[str, int | slice] = {}
+
+        def cols(block: str, *names: str, span: tuple[str, ...] = ()) -> None:
+            for name in names:
+                at[f"{block}.{name}"] = lay.column(block, name)
+            if span:
+                at[f"{block}.{span[0]}:{span[-1]}"] = lay.span(block, *span)
+
+        counts = ("reload", "bullets")
+        if self.team_flags:
+            cols("tank", "team")
+            cols("bullet", "team")
+        cols("bullet", "mask")
+        cols("own_bullet", "mask")
+        cols("buff", "mask")
+        cols("debuff", "mask")
+        if self.kind == "paper":
+            cols("self", span=TANK_FIELDS)
+            cols("self", span=counts)
+            cols("tank", "dist", span=TANK_FIELDS)
+            cols("tank", span=("rel_x", "rel_y"))
+            cols("own_bullet", span=BULLET_FIELDS)
+            cols("bullet", "dist", span=BULLET_FIELDS)
+            cols("bullet", span=("rel_x", "rel_y"))
+            cols("wall", "mask", span=("x0", "y0"))
+            cols("wall", span=("x1", "y1"))
+            cols("buff", span=("x", "y"))
+            cols("debuff", span=("x", "y"))
+            cols("zone", "in_buff", "in_debuff")
+        else:
+            cols("self", "alive", "sin", "cos", "v_fwd", "v_side", "wall", "in_buff",
+                 "in_debuff", span=counts)
+            cols("tank", "alive", "sin", "cos", "wall")
+        return at
+
     def _block(self, name: str, count: int) -> np.ndarray:
         """(E, L, count, fields) view of a numbered block of the output buffer."""
         E, L, _ = self.out.shape
@@ -296,9 +412,8 @@ class ObservationBuilder:
         self.v_bullet = self._block("bullet", self.n_other_bullets)
         self.v_buff = self._block("buff", self.batch.max_buffs)
         self.v_debuff = self._block("debuff", self.batch.max_debuffs)
-        self._tf = 1 if self.team_flags else 0  # offset of the first non-team field
         if self.team_flags:
-            self.v_tank[..., 0] = self.other_team
+            self.v_tank[..., self.at["tank.team"]] = self.other_team
         if self.kind == "paper":
             self.v_wall = self._block("wall", self.batch.walls.shape[1])
             self.v_zone = self.out[:, :, lay["zone"]]
@@ -312,18 +427,19 @@ class ObservationBuilder:
         """Write the per-episode blocks of env ``e`` (walls, zone positions in ``paper``)."""
         if self.kind != "paper":
             return
-        b = self.batch
+        b, at = self.batch, self.at
         inv = b.inv[e, 0]
         m = b.wall_mask[e][:, None]
-        self.v_wall[e, :, :, 0] = b.wall_mask[e]
-        self.v_wall[e, :, :, 1:3] = (b.walls[e, :, 0:2] * inv - 1) * m
-        self.v_wall[e, :, :, 3:5] = (b.walls[e, :, 2:4] * inv - 1) * m
+        vw = self.v_wall[e]
+        vw[..., at["wall.mask"]] = b.wall_mask[e]
+        vw[..., at["wall.x0:y0"]] = (b.walls[e, :, 0:2] * inv - 1) * m
+        vw[..., at["wall.x1:y1"]] = (b.walls[e, :, 2:4] * inv - 1) * m
         zones = (b.zones[e] * inv - 1) * b.zone_mask[e][:, None]
         nbf = b.max_buffs
-        self.v_buff[e, :, :, 0] = b.zone_mask[e, :nbf]
-        self.v_buff[e, :, :, 1:] = zones[:nbf]
-        self.v_debuff[e, :, :, 0] = b.zone_mask[e, nbf:]
-        self.v_debuff[e, :, :, 1:] = zones[nbf:]
+        self.v_buff[e, ..., at["buff.mask"]] = b.zone_mask[e, :nbf]
+        self.v_buff[e, ..., at["buff.x:y"]] = zones[:nbf]
+        self.v_debuff[e, ..., at["debuff.mask"]] = b.zone_mask[e, nbf:]
+        self.v_debuff[e, ..., at["debuff.x:y"]] = zones[nbf:]
 
     # ---- per step -------------------------------------------------------------------
 
@@ -356,40 +472,41 @@ class ObservationBuilder:
         order = np.where(act, dist, np.inf).argsort(axis=-1, kind="stable")
         ge, gl = self._ge, self._gl
         mask = act[ge, gl, order]
+        vb = self.v_bullet
+        vb[..., self.at["bullet.mask"]] = mask
         if self.team_flags:
-            np.multiply(self.other_bteam[gl, order], mask, out=self.v_bullet[..., 1])
+            np.multiply(self.other_bteam[gl, order], mask, out=vb[..., self.at["bullet.team"]])
         return bidx[gl, order], rel[ge, gl, order], dist[ge, gl, order], mask
 
     def _build_paper(self) -> None:
-        b, t = self.batch, self._tf
+        b, at = self.batch, self.at
         tt = tank_table(b, self._tt)
         obs, oi = self.observers, self.other_idx
         vs = self.v_self
-        vs[..., :16] = tt[:, obs]
-        self._self_counts(vs[..., 16:18])
+        vs[..., at["self.alive:wall"]] = tt[:, obs]
+        self._self_counts(vs[..., at["self.reload:bullets"]])
         # Other tanks.
         vt = self.v_tank
-        vt[..., t:t + 16] = tt[:, oi]
+        vt[..., at["tank.alive:wall"]] = tt[:, oi]
         self_xy = b.tank_xy[:, obs][:, :, None, :]  # (E, L, 1, 2)
         rel = b.tank_xy[:, oi] - self_xy  # (E, L, O, 2)
-        np.multiply(rel, b.scale[..., None], out=vt[..., t + 16:t + 18])
-        np.multiply(np.hypot(rel[..., 0], rel[..., 1]), b.idiag, out=vt[..., t + 18])
+        np.multiply(rel, b.scale[..., None], out=vt[..., at["tank.rel_x:rel_y"]])
+        np.multiply(np.hypot(rel[..., 0], rel[..., 1]), b.idiag, out=vt[..., at["tank.dist"]])
         # Own bullets in slot order; others nearest first; inactive slots zero.
         bt = bullet_table(b, self._bt)
         vo = self.v_own
-        vo[..., 0] = b.bullet_active[:, self.own_bidx]
-        vo[..., 1:5] = bt[:, self.own_bidx]
+        vo[..., at["own_bullet.mask"]] = b.bullet_active[:, self.own_bidx]
+        vo[..., at["own_bullet.x:vy"]] = bt[:, self.own_bidx]
         others = self._other_bullets(self_xy)
         if others is not None:
             sel, brel, bdist, mask = others
             vb = self.v_bullet
-            vb[..., 0] = mask
-            vb[..., t + 1:t + 5] = bt[self._ge, sel]
+            vb[..., at["bullet.x:vy"]] = bt[self._ge, sel]
             k = mask * b.scale
-            np.multiply(brel, k[..., None], out=vb[..., t + 5:t + 7])
-            np.multiply(bdist, k * (b.idiag / b.scale), out=vb[..., t + 7])
-        self.v_zone[..., 0] = b.in_buff[:, obs]
-        self.v_zone[..., 1] = b.in_debuff[:, obs]
+            np.multiply(brel, k[..., None], out=vb[..., at["bullet.rel_x:rel_y"]])
+            np.multiply(bdist, k * (b.idiag / b.scale), out=vb[..., at["bullet.dist"]])
+        self.v_zone[..., at["zone.in_buff"]] = b.in_buff[:, obs]
+        self.v_zone[..., at["zone.in_debuff"]] = b.in_debuff[:, obs]
 
     def _ego_tables(self) -> None:
         """Column maps of the egocentric kind: every relative position (other tanks, own
@@ -419,33 +536,33 @@ class ObservationBuilder:
         self._seg = (no, no + cap, no + cap + K)  # ends of the tank / own / other-bullet groups
 
     def _build_ego(self) -> None:
-        b, g, t = self.batch, self.cfg, self._tf
+        b, g, at = self.batch, self.cfg, self.at
         obs, oi = self.observers, self.other_idx
         ang = b.tank_angle
         sin, cos = np.sin(ang), np.cos(ang)
         s, c = sin[:, obs], cos[:, obs]  # (E, L)
         vs = self.v_self
-        vs[..., 0] = b.alive[:, obs]
-        vs[..., 1] = s
-        vs[..., 2] = c
+        vs[..., at["self.alive"]] = b.alive[:, obs]
+        vs[..., at["self.sin"]] = s
+        vs[..., at["self.cos"]] = c
         v = b.tank_vel[:, obs] * (1.0 / g.tank_speed)  # (E, L, 2)
-        vs[..., 3] = v[..., 0] * c + v[..., 1] * s
-        vs[..., 4] = v[..., 1] * c - v[..., 0] * s
-        vs[..., 5] = b.wall[:, obs]
-        self._self_counts(vs[..., 6:8])
-        vs[..., 8] = b.in_buff[:, obs]
-        vs[..., 9] = b.in_debuff[:, obs]
+        vs[..., at["self.v_fwd"]] = v[..., 0] * c + v[..., 1] * s
+        vs[..., at["self.v_side"]] = v[..., 1] * c - v[..., 0] * s
+        vs[..., at["self.wall"]] = b.wall[:, obs]
+        self._self_counts(vs[..., at["self.reload:bullets"]])
+        vs[..., at["self.in_buff"]] = b.in_buff[:, obs]
+        vs[..., at["self.in_debuff"]] = b.in_debuff[:, obs]
         xy = b.tank_xy[:, obs]
         self_xy = xy[:, :, None, :]
         self.v_ray[...] = self.ray_distances(xy, ang[:, obs]) / self.ray_length
         # Other tanks: scalars.
         vt = self.v_tank
-        vt[..., t] = b.alive[:, oi]
+        vt[..., at["tank.alive"]] = b.alive[:, oi]
         so, co = sin[:, oi], cos[:, oi]
         s3, c3 = s[..., None], c[..., None]
-        vt[..., t + 4] = so * c3 - co * s3  # sin(their heading - mine)
-        vt[..., t + 5] = co * c3 + so * s3
-        vt[..., t + 8] = b.wall[:, oi]
+        vt[..., at["tank.sin"]] = so * c3 - co * s3  # sin(their heading - mine)
+        vt[..., at["tank.cos"]] = co * c3 + so * s3
+        vt[..., at["tank.wall"]] = b.wall[:, oi]
         # Every relative position and velocity, then one rotation.
         o, oc, ock = self._seg
         relv, velv, rm, vm = self._relv, self._velv, self._rmask, self._vmask
@@ -468,7 +585,6 @@ class ObservationBuilder:
             velv[:, :, oc:ock] = b.bullet_vel[self._ge, sel]
             rm[:, :, oc:ock] = mask
             vm[:, :, oc:ock] = mask
-            self.v_bullet[..., 0] = mask
         out = self.out
         fc, sc_, dc = self._rel_cols
         k = rm * b.scale
@@ -479,9 +595,9 @@ class ObservationBuilder:
         k = vm * self._vscale
         out[..., vf] = (velv[..., 0] * c3 + velv[..., 1] * s3) * k
         out[..., vsd] = (velv[..., 1] * c3 - velv[..., 0] * s3) * k
-        self.v_own[..., 0] = act
-        self.v_buff[..., 0] = b.zone_mask[:, None, :b.max_buffs]
-        self.v_debuff[..., 0] = b.zone_mask[:, None, b.max_buffs:]
+        self.v_own[..., at["own_bullet.mask"]] = act
+        self.v_buff[..., at["buff.mask"]] = b.zone_mask[:, None, :b.max_buffs]
+        self.v_debuff[..., at["debuff.mask"]] = b.zone_mask[:, None, b.max_buffs:]
 
     def ray_distances(self, xy: np.ndarray, angle: np.ndarray) -> np.ndarray:
         """(E, L, R) px to the nearest wall rectangle along ``rays`` directions from each
@@ -505,30 +621,42 @@ class ObservationBuilder:
         return np.minimum(d, self.ray_length, out=d)
 
 
+def _span(names: Sequence[str], first: str, last: str) -> slice:
+    return slice(names.index(first), names.index(last) + 1)
+
+
+# Columns of tank_table() / bullet_table(), by name.
+_T_ALIVE, _T_SIN, _T_COS, _T_WALL = (TANK_FIELDS.index(f) for f in ("alive", "sin", "cos", "wall"))
+_T_XY, _T_V, _T_CORNERS = (_span(TANK_FIELDS, *p) for p in (("x", "y"), ("vx", "vy"),
+                                                            ("c0x", "c3y")))
+_B_XY, _B_V = _span(BULLET_FIELDS, "x", "y"), _span(BULLET_FIELDS, "vx", "vy")
+
+
 def tank_table(b: StateBatch, out: np.ndarray) -> np.ndarray:
     """(E, n, len(TANK_FIELDS)) normalised absolute features of every tank."""
-    out[..., 0] = b.alive
-    xy = out[..., 1:3]
+    out[..., _T_ALIVE] = b.alive
+    xy = out[..., _T_XY]
     np.multiply(b.tank_xy, b.inv, out=xy)
     xy -= 1.0
-    s, c = out[..., 3], out[..., 4]
+    s, c = out[..., _T_SIN], out[..., _T_COS]
     np.sin(b.tank_angle, out=s)
     np.cos(b.tank_angle, out=c)
-    np.multiply(b.tank_vel, 1.0 / b.cfg.tank_speed, out=out[..., 5:7])
-    corners = out[..., 7:15].reshape(out.shape[0], -1, 4, 2)
+    np.multiply(b.tank_vel, 1.0 / b.cfg.tank_speed, out=out[..., _T_V])
+    corners = out[..., _T_CORNERS].reshape(out.shape[0], -1, 4, 2)
     np.multiply(c[..., None, None], b.corner_u, out=corners)
     corners += s[..., None, None] * b.corner_v
     corners += xy[:, :, None, :]
-    out[..., 15] = b.wall
+    out[..., _T_WALL] = b.wall
     return out
 
 
 def bullet_table(b: StateBatch, out: np.ndarray) -> np.ndarray:
-    """(E, n_bullets, 4) normalised x, y, vx, vy of every bullet slot; 0 when inactive."""
-    xy = out[..., 0:2]
+    """(E, n_bullets, len(BULLET_FIELDS)) normalised x, y, vx, vy of every bullet slot;
+    0 when inactive."""
+    xy = out[..., _B_XY]
     np.multiply(b.bullet_xy, b.inv, out=xy)
     xy -= 1.0
-    np.multiply(b.bullet_vel, 1.0 / b.cfg.bullet_speed, out=out[..., 2:4])
+    np.multiply(b.bullet_vel, 1.0 / b.cfg.bullet_speed, out=out[..., _B_V])
     out *= b.bullet_active[..., None]
     return out
 

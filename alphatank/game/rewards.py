@@ -6,6 +6,12 @@ that tick only, already scaled by its :class:`~alphatank.sim.config.RewardConfig
 weight of 0 switches the term off (and skips its computation). Weights carry their sign:
 penalties are configured negative. The tracker returns a (envs, terms, tanks) array whose
 sum over terms is the per-step reward, in the order of :data:`TERMS`.
+
+The terms after ``rotation`` are not in the paper's Table 5 (issue 12): team outcomes
+(win, loss, draw to every seat of a team, dead or alive), a per-tick cost, potential-based
+engagement shaping, and the two halves of the paper's equations the original code lacked
+(the Euclidean half of eq. 14, the far-distance penalty of eq. 15). All weigh 0 by
+default, so the ``paper`` preset and every earlier result are unchanged.
 """
 
 from __future__ import annotations
@@ -16,7 +22,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from alphatank.sim.config import GameConfig, RewardConfig
+from alphatank.sim.config import ConfigError, GameConfig, RewardConfig
 
 if TYPE_CHECKING:
     from alphatank.game.observe import StateBatch
@@ -24,7 +30,9 @@ if TYPE_CHECKING:
 
 TERMS = ("victory", "hit", "hit_penalty", "team_hit_penalty", "trajectory_hit",
          "trajectory_distance", "bullet_close", "bullet_away", "wall_hit", "stationary",
-         "bfs_progress", "aim_streak", "control_change", "rotation")
+         "bfs_progress", "aim_streak", "control_change", "rotation",
+         "team_win", "team_loss", "team_draw", "step_cost", "engagement",
+         "distance_progress", "trajectory_far")
 T = {name: k for k, name in enumerate(TERMS)}
 
 
@@ -35,6 +43,33 @@ def victory(team_index: np.ndarray, winner: int | None, weight: float) -> np.nda
     if winner is None:
         return np.zeros(len(team_index))
     return np.where(team_index == winner, weight, 0.0)
+
+
+def team_outcome(team_index: np.ndarray, winner: int | None, elapsed: float,
+                 cfg: RewardConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(team_win, team_loss, team_draw) per tank at the end of a match, to every tank of
+    a team, dead or alive. The win shrinks linearly with the ``elapsed`` fraction of
+    ``max_steps``: ``team_win * (1 - team_win_time_decay * elapsed)``."""
+    n = len(team_index)
+    zero = np.zeros(n)
+    if winner is None:
+        return zero, zero.copy(), np.full(n, cfg.team_draw)
+    mine = team_index == winner
+    win = cfg.team_win * (1.0 - cfg.team_win_time_decay * min(max(elapsed, 0.0), 1.0))
+    return np.where(mine, win, 0.0), np.where(mine, 0.0, cfg.team_loss), zero
+
+
+def check_team_outcome(cfg: RewardConfig) -> None:
+    """A draw is never worth more than a loss (waiting out the clock must not be the safe
+    choice), and the time decay is a share in [0, 1]."""
+    if cfg.team_draw > cfg.team_loss:
+        raise ConfigError(
+            f"RewardConfig.team_draw ({cfg.team_draw}) must not exceed team_loss "
+            f"({cfg.team_loss}): a draw is never worth more than a loss; set team_draw <= "
+            f"team_loss")
+    if not 0.0 <= cfg.team_win_time_decay <= 1.0:
+        raise ConfigError(f"RewardConfig.team_win_time_decay must be in [0, 1], got "
+                          f"{cfg.team_win_time_decay}")
 
 
 def hits(events: Iterable[Hit], n: int, cfg: RewardConfig
@@ -66,6 +101,17 @@ def trajectory(d: float, radius: float, cfg: RewardConfig) -> tuple[float, float
     if d < cfg.trajectory_close_px:
         return 0.0, cfg.trajectory_distance * (1.0 - d / cfg.trajectory_close_px)
     return 0.0, 0.0
+
+
+def trajectory_far(d: float, cfg: RewardConfig) -> float:
+    """Far-distance penalty of paper eq. 15: a shot whose predicted path stays farther
+    than ``trajectory_far_px`` from every enemy costs ``trajectory_far`` times
+    ``min(1, (d - far) / far)`` (the paper's ``min`` has lost its first argument; 1 caps
+    the penalty at the weight). Nothing when ``d`` is unknown (inf)."""
+    far = cfg.trajectory_far_px
+    if not far < d < math.inf:
+        return 0.0
+    return cfg.trajectory_far * min(1.0, (d - far) / far)
 
 
 def path_min_distance(path: np.ndarray, targets: np.ndarray) -> float:
@@ -119,6 +165,29 @@ def bfs_progress(prev: np.ndarray, now: np.ndarray, cfg: RewardConfig) -> np.nda
     (the global half of paper eq. 14); 0 where either distance is unknown (< 0)."""
     ok = (prev >= 0) & (now >= 0)
     return np.where(ok, cfg.bfs_progress * (prev - now), 0.0)
+
+
+def distance_progress(prev: np.ndarray, now: np.ndarray, cfg: RewardConfig) -> np.ndarray:
+    """``distance_progress`` per px of Euclidean distance gained towards the nearest live
+    enemy (the local half of paper eq. 14); 0 where either distance is unknown (NaN)."""
+    gain = prev - now
+    return np.where(np.isnan(gain), 0.0, cfg.distance_progress * gain)
+
+
+def engagement_potential(bfs: np.ndarray, diameter: float, weight: float) -> np.ndarray:
+    """Potential ``weight * (1 - d / diameter)`` of each tank, ``d`` its BFS distance in
+    cells to the nearest live enemy; 0 where ``d < 0`` (dead, or no enemy reachable).
+    Non-negative, so a loop that leaves and comes back never earns (see
+    :func:`potential_shaping`)."""
+    return np.where(bfs >= 0, weight * (1.0 - bfs / max(diameter, 1.0)), 0.0)
+
+
+def potential_shaping(prev: np.ndarray, now: np.ndarray, gamma: float) -> np.ndarray:
+    """Potential-based shaping ``gamma * phi(s') - phi(s)`` (Ng et al. 1999): its
+    discounted sum over any stretch is ``gamma^k phi(s_k) - phi(s_0)``, so it cannot be
+    farmed and leaves the optimal policy unchanged. Terminal and dead states have
+    potential 0, so the episode's total is ``-phi(s_0)`` whatever the agent does."""
+    return gamma * now - prev
 
 
 def aim_streak(count: np.ndarray, cfg: RewardConfig) -> np.ndarray:
@@ -183,6 +252,10 @@ class RewardTracker:
         self.still_count = np.zeros((E, n), dtype=np.int64)
         self.last_cell = np.zeros((E, n, 2), dtype=np.int64)
         self.bfs_prev = np.full((E, n), -1, dtype=np.int64)
+        self.dist_prev = np.full((E, n), np.nan)
+        self.phi_prev = np.zeros((E, n))
+        self._nav: list = [None] * E  # NavGrid of each env's map (set at reset)
+        self._diameter = np.ones(E)  # longest BFS distance of each env's map (cells)
         self.aim_count = np.zeros((E, n), dtype=np.int64)
         self.change_count = np.zeros((E, n, 3), dtype=np.int64)
         self.last_action = np.ones((E, n, 3), dtype=np.int64)
@@ -191,8 +264,12 @@ class RewardTracker:
         self.anchor = np.zeros((E, n, 2))
         on = {name: getattr(cfg, name) != 0 for name in TERMS}
         self.on_progress = on["bullet_close"] or on["bullet_away"]
-        self.on_trajectory = on["trajectory_hit"] or on["trajectory_distance"]
+        self.on_trajectory = (on["trajectory_hit"] or on["trajectory_distance"]
+                              or on["trajectory_far"])
+        self.on_outcome = on["team_win"] or on["team_loss"] or on["team_draw"]
+        self.on_bfs = on["bfs_progress"] or on["engagement"]
         self.on = on
+        check_team_outcome(cfg)
 
     def reset_env(self, e: int, match: Match) -> None:
         """Start env ``e``'s counters for a new episode of ``match``."""
@@ -206,7 +283,15 @@ class RewardTracker:
         self.turned[e] = 0.0
         self.last_angle[e] = match.tank_angle
         self.anchor[e] = match.tank_xy
-        self.bfs_prev[e] = self._bfs_distance(match) if self.on["bfs_progress"] else -1
+        if self.on_bfs:
+            from alphatank.sim.navigation import nav_grid
+            nav = self._nav[e] = nav_grid(match.spec)
+            self._diameter[e] = max(1, int(nav.dist_table.max()))
+            d = self._bfs_distance(e, match)
+            self.bfs_prev[e] = d
+            self.phi_prev[e] = engagement_potential(d, self._diameter[e], self.cfg.engagement)
+        if self.on["distance_progress"]:
+            self.dist_prev[e] = self._euclid(match.tank_xy[None], match.alive[None])[0]
 
     def step(self, sl: slice, batch: StateBatch, matches: Sequence[Match],
              actions: np.ndarray) -> np.ndarray:
@@ -238,11 +323,24 @@ class RewardTracker:
             terms[:, T["control_change"]] = control_change(self.change_count[sl], cfg)
         if self.on["rotation"]:
             self._rotation(sl, batch, terms)
-        if self.on["bfs_progress"]:
+        if self.on_bfs:
             for k, e in enumerate(range(len(matches))[sl]):
-                now = self._bfs_distance(matches[e])
-                terms[k, T["bfs_progress"]] = bfs_progress(self.bfs_prev[e], now, cfg)
+                now = self._bfs_distance(e, matches[e])
+                if self.on["bfs_progress"]:
+                    terms[k, T["bfs_progress"]] = bfs_progress(self.bfs_prev[e], now, cfg)
                 self.bfs_prev[e] = now
+                if self.on["engagement"]:
+                    phi = (engagement_potential(now, self._diameter[e], cfg.engagement)
+                           if not matches[e].done else np.zeros(self.n))
+                    terms[k, T["engagement"]] = potential_shaping(self.phi_prev[e], phi,
+                                                                  cfg.engagement_gamma)
+                    self.phi_prev[e] = phi
+        if self.on["distance_progress"]:
+            now = self._euclid(batch.tank_xy[sl], alive)
+            terms[:, T["distance_progress"]] = distance_progress(self.dist_prev[sl], now, cfg)
+            self.dist_prev[sl] = now
+        if self.on["step_cost"]:
+            terms[:, T["step_cost"]] = cfg.step_cost
         if self.on["aim_streak"]:
             for k, e in enumerate(range(len(matches))[sl]):
                 aimed = self._aimed(matches[e])
@@ -264,13 +362,18 @@ class RewardTracker:
             for f in ev.fired:
                 if not self.rewarded[f.tank]:
                     continue
-                th, td = trajectory(self._shot_distance(match, f.tank, f.bullet),
-                                    self.radius, cfg)
+                d = self._shot_distance(match, f.tank, f.bullet)
+                th, td = trajectory(d, self.radius, cfg)
                 terms[T["trajectory_hit"], f.tank] += th
                 terms[T["trajectory_distance"], f.tank] += td
+                terms[T["trajectory_far"], f.tank] += trajectory_far(d, cfg)
         if match.done and cfg.victory:
             win = None if match.winner is None else match.team_names.index(match.winner)
             terms[T["victory"]] = victory(self.team_index, win, cfg.victory)
+        if match.done and self.on_outcome:
+            win = None if match.winner is None else match.team_names.index(match.winner)
+            out = team_outcome(self.team_index, win, match.tick / self.game.max_steps, cfg)
+            terms[T["team_win"]], terms[T["team_loss"]], terms[T["team_draw"]] = out
 
     def _shot_distance(self, match: Match, tank: int, b: int) -> float:
         """Closest approach of a just-fired bullet's predicted path to a live enemy."""
@@ -328,15 +431,25 @@ class RewardTracker:
     def _cell(sl: slice, matches: Sequence[Match]) -> np.ndarray:
         return np.array([m.spec.cell for m in matches[sl]])[:, None, None]
 
-    def _bfs_distance(self, match: Match) -> np.ndarray:
-        """BFS cells from each tank to its nearest live enemy (-1: none reachable)."""
-        from alphatank.sim.navigation import nav_grid
-        nav = nav_grid(match.spec)
+    def _bfs_distance(self, e: int, match: Match) -> np.ndarray:
+        """BFS cells from each live tank to its nearest live enemy (-1: dead, or none
+        reachable); env ``e``'s NavGrid was cached at reset."""
+        nav = self._nav[e]
         nodes = nav.nodes_of(match.tank_xy)
         table = nav.dist_table[nodes[:, None], nodes[None, :]].astype(np.int64)
         ok = self.foe & match.alive[None, :] & (table >= 0)
         d = np.where(ok, table, np.iinfo(np.int64).max).min(axis=1)
-        return np.where(ok.any(axis=1), d, -1)
+        return np.where(ok.any(axis=1) & match.alive, d, -1)
+
+    def _euclid(self, xy: np.ndarray, alive: np.ndarray) -> np.ndarray:
+        """(E, n) px from each live tank to its nearest live enemy; NaN when dead or no
+        enemy lives. ``xy``: (E, n, 2), ``alive``: (E, n)."""
+        d = xy[:, :, None, :] - xy[:, None, :, :]
+        dist = np.hypot(d[..., 0], d[..., 1])
+        ok = self.foe[None] & alive[:, None, :]
+        near = np.fmin.reduce(np.where(ok, dist, np.nan), axis=-1)
+        near[~alive] = np.nan
+        return near
 
     def _aimed(self, match: Match) -> np.ndarray:
         """Per tank: does a bullet fired now have a predicted path through an enemy?"""

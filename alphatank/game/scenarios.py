@@ -22,10 +22,11 @@ Format (see docs/environments.md)::
     weakness = 1.0               # optional, 0..1
     options = { ricochet = false }   # optional bot options
 
-Controllers: ``learner`` (the env's caller acts), ``bot`` (``bot`` + ``weakness`` +
-``options``), ``human`` (``keys`` = wasd | arrows | ijkl; a NOOP unless a keyboard policy is
-supplied), ``checkpoint`` (``path`` = checkpoint folder). Relative map paths are resolved
-against the scenario file's folder. Every error names the file and the field.
+Controllers (kinds, see :mod:`alphatank.game.seats`): ``learner`` (the env's caller acts),
+``bot`` (``bot`` + ``weakness`` + ``options``), ``human`` (``keys`` = wasd | arrows | ijkl;
+idle unless a keyboard is attached), ``checkpoint`` (``path`` = checkpoint folder),
+``agent`` (``agent`` = a shipped agent's name). Relative map paths are resolved against
+the scenario file's folder. Every error names the file and the field.
 """
 
 from __future__ import annotations
@@ -36,9 +37,16 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from alphatank.errors import InputError
+from alphatank.game.observe import OBS_KINDS
+from alphatank.game.seats import (
+    Seat,
+    SeatError,
+    make_controller,
+    parse_seat_list,
+    parse_seat_table,
+    resolve,
+)
 from alphatank.sim.config import (
     PRESETS,
     ConfigError,
@@ -56,52 +64,16 @@ from alphatank.sim.mapspec import (
     read_text,
     shipped_maps,
 )
-from alphatank.sim.policy import NOOP, Policy
+from alphatank.sim.policy import NoopPolicy
 
-CONTROLLERS = ("learner", "bot", "human", "checkpoint")
-OBSERVATIONS = ("paper", "egocentric")
-KEYSETS = ("wasd", "arrows", "ijkl")
+__all__ = ["NoopPolicy", "Scenario", "ScenarioError", "Seat", "bot_names", "load_scenario",
+           "parse_scenario", "seat_policy", "seats_scenario", "shipped_scenarios"]
 _TOP_KEYS = ("name", "description", "map", "preset", "observation", "game", "rewards", "seats")
-_SEAT_KEYS = ("team", "controller", "bot", "weakness", "options", "keys", "path")
+seat_policy = make_controller  # the name earlier releases used
 
 
 class ScenarioError(InputError, ValueError):
     """A scenario file or value is invalid; the message names the file and the field."""
-
-
-@dataclass(frozen=True)
-class Seat:
-    """One tank slot: its team and who controls it."""
-
-    team: str
-    controller: str
-    bot: str | None = None
-    weakness: float = 1.0
-    options: dict[str, Any] = field(default_factory=dict)
-    keys: str | None = None
-    path: str | None = None
-
-    def describe(self) -> str:
-        """Short label, e.g. ``smart(w=0.5)``, ``learner``, ``human:wasd``."""
-        if self.controller == "bot":
-            opts = "".join(f",{k}={v}" for k, v in sorted(self.options.items()))
-            return f"{self.bot}(w={self.weakness:g}{opts})"
-        if self.controller == "human":
-            return f"human:{self.keys}"
-        if self.controller == "checkpoint":
-            return f"checkpoint:{self.path}"
-        return "learner"
-
-    def to_dict(self) -> dict[str, Any]:
-        """The ``[[seats]]`` entry that parses back to this seat."""
-        d: dict[str, Any] = {"team": self.team, "controller": self.controller}
-        if self.controller == "bot":
-            d.update(bot=self.bot, weakness=self.weakness, options=dict(self.options))
-        elif self.controller == "human":
-            d["keys"] = self.keys
-        elif self.controller == "checkpoint":
-            d["path"] = self.path
-        return d
 
 
 @dataclass(frozen=True)
@@ -210,9 +182,10 @@ def load_scenario(name_or_path: str | Path | Scenario) -> Scenario:
 def parse_scenario(data: dict[str, Any], source: str = "<dict>",
                    base: Path | None = None, check_paths: bool = True) -> Scenario:
     """Validate a scenario mapping (as read from TOML); errors name ``source`` and field.
-    Bot options are checked by building the bot; checkpoint seat paths (resolved against
-    ``base`` first, like maps) must exist unless ``check_paths`` is False (a scenario
-    stored in a checkpoint, whose opponents' folders may since have moved)."""
+    Each seat gets its kind's check (bot names, options and their types, checkpoint
+    folders, ...); checkpoint seat paths are resolved against ``base`` first, like maps,
+    and not checked when ``check_paths`` is False (a scenario stored in a checkpoint, whose
+    opponents' folders may since have moved)."""
     if not isinstance(data, dict):
         raise ScenarioError(f"{source}: a scenario must be a table, got {type(data).__name__}")
 
@@ -232,9 +205,9 @@ def parse_scenario(data: dict[str, Any], source: str = "<dict>",
     if preset not in PRESETS:
         raise fail("preset", f"unknown preset {preset!r}; valid: {sorted(PRESETS)}")
     observation = data.get("observation", "paper")
-    if observation not in OBSERVATIONS:
+    if observation not in OBS_KINDS:
         raise fail("observation", f"unknown observation {observation!r}; valid: "
-                   f"{list(OBSERVATIONS)}")
+                   f"{list(OBS_KINDS)}")
     tables = {}
     for key in ("game", "rewards"):
         table = data.get(key, {})
@@ -251,8 +224,12 @@ def parse_scenario(data: dict[str, Any], source: str = "<dict>",
     seats_data = data.get("seats")
     if not isinstance(seats_data, list) or len(seats_data) < 2:
         raise fail("seats", "need at least 2 [[seats]] entries")
-    seats = tuple(_parse_seat(s, i, fail, base, check_paths)
-                  for i, s in enumerate(seats_data))
+    try:
+        seats = tuple(parse_seat_table(_seat_paths(s, base), f"seats[{i}]",
+                                       check=check_paths or not _is_checkpoint_seat(s))
+                      for i, s in enumerate(seats_data))
+    except SeatError as exc:
+        raise ScenarioError(f"{source}: {exc}") from None
     if len({s.team for s in seats}) < 2:
         raise fail("seats", f"need at least 2 teams, got {sorted({s.team for s in seats})}")
     for m in maps:
@@ -305,99 +282,33 @@ def _checked(sources: tuple[str, ...], fail: Any) -> tuple[str, ...]:
     return sources
 
 
-def _parse_seat(data: Any, i: int, fail: Any, base: Path | None = None,
-                check_paths: bool = True) -> Seat:
-    where = f"seats[{i}]"
-    if not isinstance(data, dict):
-        raise fail(where, "must be a table")
-    unknown = sorted(set(data) - set(_SEAT_KEYS))
-    if unknown:
-        raise fail(f"{where}.{unknown[0]}", f"unknown key; valid keys: {list(_SEAT_KEYS)}")
-    team = data.get("team")
-    if not isinstance(team, str) or not team:
-        raise fail(f"{where}.team", "required, a non-empty string like 'A'")
-    controller = data.get("controller")
-    if controller not in CONTROLLERS:
-        raise fail(f"{where}.controller", f"got {controller!r}; valid: {list(CONTROLLERS)}")
-    allowed = {"learner": set(), "bot": {"bot", "weakness", "options"}, "human": {"keys"},
-               "checkpoint": {"path"}}[controller] | {"team", "controller"}
-    extra = sorted(set(data) - allowed)
-    if extra:
-        raise fail(f"{where}.{extra[0]}", f"not used by a {controller!r} seat; its keys: "
-                   f"{sorted(allowed)}")
-    if controller == "bot":
-        names = bot_names()
-        bot = data.get("bot")
-        if bot not in names:
-            raise fail(f"{where}.bot", f"got {bot!r}; valid bots: {list(names)}")
-        weakness = data.get("weakness", 1.0)
-        if (isinstance(weakness, bool) or not isinstance(weakness, int | float)
-                or not 0.0 <= weakness <= 1.0):
-            raise fail(f"{where}.weakness", f"must be a number in [0, 1], got {weakness!r}")
-        options = data.get("options", {})
-        if not isinstance(options, dict):
-            raise fail(f"{where}.options", "must be a table of bot options")
-        from alphatank.bots import make_bot
-        try:
-            make_bot(bot, **options)
-        except (ValueError, TypeError) as exc:
-            raise fail(f"{where}.options", str(exc)) from None
-        return Seat(team, controller, bot=bot, weakness=float(weakness), options=dict(options))
-    if controller == "human":
-        keys = data.get("keys", "wasd")
-        if keys not in KEYSETS:
-            raise fail(f"{where}.keys", f"got {keys!r}; valid: {list(KEYSETS)}")
-        return Seat(team, controller, keys=keys)
-    if controller == "checkpoint":
-        path = data.get("path")
-        if not isinstance(path, str) or not path:
-            raise fail(f"{where}.path", "required, the checkpoint folder")
-        if check_paths:
-            found = _checkpoint_folder(path, base)
-            if found is None:
-                raise fail(f"{where}.path", f"no checkpoint at {path!r}: give a checkpoint "
-                           "folder (holding meta.json) or a run folder (holding 'latest')"
-                           + (f", absolute or relative to {base}" if base else ""))
-            path = found
-        return Seat(team, controller, path=path)
-    return Seat(team, controller)
+def seats_scenario(seats: str, map_name: str, game: dict[str, Any] | None = None,
+                   preset: str = "paper", name: str = "custom") -> Scenario:
+    """A scenario from a ``--seats`` list (see :mod:`alphatank.game.seats`) on
+    ``map_name``; errors name the seat and the allowed values."""
+    try:
+        tables = parse_seat_list(seats)
+    except SeatError as exc:
+        raise ScenarioError(str(exc)) from None
+    data = {"name": name, "map": map_name, "preset": preset, "seats": tables,
+            "game": dict(game or {})}
+    return parse_scenario(data, source="--seats")
 
 
-def _checkpoint_folder(path: str, base: Path | None) -> str | None:
-    """``path`` as found (relative to ``base`` first, then as given) if it is a checkpoint
-    or run folder, else None."""
-    p = Path(path)
-    for cand in ([base / p] if base is not None and not p.is_absolute() else []) + [p]:
-        if (cand / "meta.json").is_file() or (cand / "latest").is_file():
-            return str(cand)
-    return None
+def _is_checkpoint_seat(data: Any) -> bool:
+    return isinstance(data, dict) and data.get("controller") == "checkpoint"
+
+
+def _seat_paths(data: Any, base: Path | None) -> Any:
+    """A ``checkpoint`` seat table with a relative ``path`` found under ``base`` (the
+    scenario file's folder) pointing there, like relative map paths; else as given."""
+    path = data.get("path") if _is_checkpoint_seat(data) else None
+    if base is None or not isinstance(path, str) or not path or Path(path).is_absolute():
+        return data
+    cand = base / path
+    return {**data, "path": str(cand)} if cand.exists() else data
 
 
 def bot_names() -> tuple[str, ...]:
-    """Bot types that ``bot`` seats may name (from ``alphatank.bots``)."""
-    from alphatank.bots import BOT_NAMES
-    return tuple(BOT_NAMES)
-
-
-class NoopPolicy:
-    """A seat that does nothing (a human seat with no keyboard attached)."""
-
-    def reset(self, match: Any, seat: int, seed: int | None = None) -> None:
-        return None
-
-    def act(self, match: Any, seat: int) -> np.ndarray:
-        return NOOP
-
-
-def seat_policy(seat: Seat, seed: int | None = None) -> Policy | None:
-    """The controller of a non-learner seat: a bot, a loaded checkpoint, or a NOOP for a
-    human seat without keyboard. ``None`` for learner seats (the env's caller acts)."""
-    if seat.controller == "learner":
-        return None
-    if seat.controller == "bot":
-        from alphatank.bots import make_bot
-        return make_bot(seat.bot, weakness=seat.weakness, seed=seed, **seat.options)
-    if seat.controller == "checkpoint":
-        from alphatank.training.checkpoint import load_policy
-        return load_policy(seat.path)
-    return NoopPolicy()
+    """Bot types that ``bot`` seats may name (``alphatank.bots``, resolved late)."""
+    return tuple(resolve("alphatank.bots.registry:BOT_NAMES"))

@@ -12,12 +12,12 @@ All randomness comes from ``numpy.random.default_rng(seed)``: one seed, one file
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from alphatank.errors import InputError
+from alphatank.sim.grid import STEPS, components, distance_field, open_sides
 from alphatank.sim.mapspec import (
     MapSpec,
     parse_map,
@@ -202,57 +202,6 @@ def is_symmetric(spec: MapSpec, symmetry: str) -> bool:
 
 # ---- grid helpers -------------------------------------------------------------------------
 
-_STEPS = ((-1, 0), (1, 0), (0, -1), (0, 1))
-
-
-def bfs_distance(walls: np.ndarray, sources: Sequence[tuple[int, int]]) -> np.ndarray:
-    """Steps over floor from the nearest source (4-neighbours); -1 where unreachable."""
-    rows, cols = walls.shape
-    dist = np.full(walls.shape, -1, dtype=np.int64)
-    queue = deque()
-    for s in sources:
-        if dist[s] < 0:
-            dist[s] = 0
-            queue.append(s)
-    while queue:
-        r, c = queue.popleft()
-        d = dist[r, c] + 1
-        for dr, dc in _STEPS:
-            nr, nc = r + dr, c + dc
-            if 0 <= nr < rows and 0 <= nc < cols and not walls[nr, nc] and dist[nr, nc] < 0:
-                dist[nr, nc] = d
-                queue.append((nr, nc))
-    return dist
-
-
-def components(walls: np.ndarray) -> tuple[np.ndarray, int]:
-    """Label connected floor regions 0..k-1 in row-major order of their first cell (-1: wall)."""
-    rows, cols = walls.shape
-    labels = np.full(walls.shape, -1, dtype=np.int64)
-    k = 0
-    for r, c in zip(*np.nonzero(~walls), strict=True):
-        if labels[r, c] >= 0:
-            continue
-        labels[r, c] = k
-        stack = [(int(r), int(c))]
-        while stack:
-            cr, cc = stack.pop()
-            for dr, dc in _STEPS:
-                nr, nc = cr + dr, cc + dc
-                if (0 <= nr < rows and 0 <= nc < cols and not walls[nr, nc]
-                        and labels[nr, nc] < 0):
-                    labels[nr, nc] = k
-                    stack.append((nr, nc))
-        k += 1
-    return labels, k
-
-
-def open_sides(walls: np.ndarray) -> np.ndarray:
-    """Number of floor 4-neighbours of every cell (outside the grid counts as wall)."""
-    floor = np.pad(~walls, 1, constant_values=False).astype(np.int64)
-    return floor[:-2, 1:-1] + floor[2:, 1:-1] + floor[1:-1, :-2] + floor[1:-1, 2:]
-
-
 def _touches(a: np.ndarray, b: np.ndarray, rr: np.ndarray, cc: np.ndarray) -> np.ndarray:
     """(n_segments, n_cells): does the segment between the centres of cells ``a[i]`` and
     ``b[i]`` touch the closed square of cell ``(rr[j], cc[j])``?"""
@@ -305,7 +254,7 @@ def _maze(rng: np.random.Generator, rows: int, cols: int) -> np.ndarray:
     stack = [start]
     while stack:
         r, c = stack[-1]
-        nbrs = [(r + 2 * dr, c + 2 * dc) for dr, dc in _STEPS
+        nbrs = [(r + 2 * dr, c + 2 * dc) for dr, dc in STEPS
                 if 1 <= r + 2 * dr < rows - 1 and 1 <= c + 2 * dc < cols - 1
                 and walls[r + 2 * dr, c + 2 * dc]]
         if not nbrs:
@@ -464,7 +413,7 @@ def _connect(walls: np.ndarray, symmetry: str) -> None:
             lab = int(labels[r, c])
             if lab >= 0 and lab != main:
                 best.setdefault(lab, (r, c))
-            for dr, dc in _STEPS:
+            for dr, dc in STEPS:
                 nr, nc = r + dr, c + dc
                 if walls[nr, nc] and not inner[nr, nc]:
                     continue
@@ -534,7 +483,7 @@ def _place(rng: np.random.Generator, walls: np.ndarray, symmetry: str, n_spawns:
                            symmetry)
         for c in {cell, image(cell, shape, symmetry)}:
             used[c] = True
-            dists.append(bfs_distance(walls, [c]))
+            dists.append(distance_field(walls, [c]))
             vis = np.zeros(shape, dtype=bool)
             clear = lines_clear(walls, np.broadcast_to(c, floor_cells.shape), floor_cells)
             vis[floor_cells[clear, 0], floor_cells[clear, 1]] = True
@@ -570,10 +519,10 @@ def _self_gap(walls: np.ndarray, symmetry: str) -> np.ndarray | None:
     if symmetry == "mirror":
         if cols % 2:
             axis = [(int(r), cols // 2) for r in np.flatnonzero(~walls[:, cols // 2])]
-            d = bfs_distance(walls, axis)
+            d = distance_field(walls, axis)
             return np.where(d >= 0, 2 * d, -1)
         axis = [(int(r), cols // 2 - 1) for r in np.flatnonzero(~walls[:, cols // 2 - 1])]
-        d = bfs_distance(walls, axis)
+        d = distance_field(walls, axis)
         return np.where(d >= 0, 2 * d + 1, -1)
     if symmetry == "rotational":
         r, c = np.indices(walls.shape)

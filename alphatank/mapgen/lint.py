@@ -14,7 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from alphatank.mapgen.generate import components, lines_clear, open_sides, segment_cells
+from alphatank.mapgen.generate import lines_clear, segment_cells
+from alphatank.sim.grid import components, open_sides
 from alphatank.sim.mapspec import MapError, MapSpec, decode_text, load_map, map_text, read_text
 
 

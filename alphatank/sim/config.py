@@ -190,6 +190,21 @@ class RewardConfig:
     rotation: float = 0.0
     rotation_limit_deg: float = bounded(360.0, 1.0, 1e9)
     rotation_reset_px: float = bounded(35.0, 0.0, 100000.0)
+    # Not in the paper's Table 5 (issue 12); 0 keeps every paper result unchanged.
+    team_win: float = 0.0  # to every seat of the winning team, dead or alive
+    # share of team_win lost by max_steps (linear in time); its range [0, 1] and the rule
+    # team_draw <= team_loss are checked with the reward terms (game.rewards.check_team_outcome)
+    team_win_time_decay: float = 0.0
+    team_loss: float = 0.0  # to every seat of a losing team (configure <= 0)
+    team_draw: float = 0.0  # to every seat on a draw; must not exceed team_loss
+    step_cost: float = 0.0  # per tick to every seat while the match runs (configure <= 0)
+    engagement: float = 0.0  # potential-based: weight x (1 - BFS cells to nearest enemy / diameter)
+    # the learner's discount (shaping gamma*phi(s') - phi(s))
+    engagement_gamma: float = bounded(0.99, 0.0, 1.0)
+    distance_progress: float = 0.0  # per px of Euclidean distance gained (paper eq. 14, 2nd half)
+    trajectory_far: float = 0.0  # eq. 15 far penalty: weight x min(1, (d - far) / far)
+    # D_far: beyond this a fired shot is penalised
+    trajectory_far_px: float = bounded(140.0, 1.0, 100000.0)
 
     def __post_init__(self) -> None:
         check_fields(self)

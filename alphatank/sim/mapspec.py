@@ -7,7 +7,6 @@ zone, ``-`` debuff zone. Lines starting with ``;`` are comments.
 
 from __future__ import annotations
 
-from collections import deque
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -15,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from alphatank.errors import InputError
+from alphatank.sim.grid import floor_areas, reachable_from
 
 GRID_CHARS = "#.12345678+-"
 HEADER_KEYS = ("name", "cell", "description", "zones", "author")
@@ -145,33 +145,6 @@ def merge_walls(walls: np.ndarray) -> list[tuple[int, int, int, int]]:
             rects.append((r, c, r1, c1))
             c = c1
     return rects
-
-
-def reachable_from(walls: np.ndarray, start: tuple[int, int]) -> np.ndarray:
-    """Boolean grid of floor cells reachable from ``start`` over 4-neighbours."""
-    rows, cols = walls.shape
-    seen = np.zeros_like(walls, dtype=bool)
-    seen[start] = True
-    queue = deque([start])
-    while queue:
-        r, c = queue.popleft()
-        for nr, nc in ((r - 1, c), (r + 1, c), (r, c - 1), (r, c + 1)):
-            if 0 <= nr < rows and 0 <= nc < cols and not walls[nr, nc] and not seen[nr, nc]:
-                seen[nr, nc] = True
-                queue.append((nr, nc))
-    return seen
-
-
-def floor_areas(walls: np.ndarray) -> list[np.ndarray]:
-    """Boolean grids of the 4-connected floor areas (largest first)."""
-    todo = ~walls
-    areas = []
-    while todo.any():
-        r, c = np.argwhere(todo)[0]
-        area = reachable_from(walls, (int(r), int(c)))
-        todo &= ~area
-        areas.append(area)
-    return sorted(areas, key=lambda a: -int(a.sum()))
 
 
 def parse_map(text: str, source: str = "<string>", name: str | None = None) -> MapSpec:

@@ -16,7 +16,8 @@ from typing import NamedTuple
 import numpy as np
 
 from alphatank.sim.config import GameConfig
-from alphatank.sim.mapspec import MapSpec, floor_areas, reachable_from
+from alphatank.sim.grid import floor_areas, reachable_from
+from alphatank.sim.mapspec import MapSpec
 from alphatank.sim.world import World
 
 

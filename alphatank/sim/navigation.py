@@ -34,10 +34,10 @@ from collections import OrderedDict
 
 import numpy as np
 
+from alphatank.sim.grid import bfs_layers, floor_graph
 from alphatank.sim.mapspec import MapSpec
 
 Cell = tuple[int, int]
-_STEPS = ((-1, 0), (1, 0), (0, -1), (0, 1))  # up, down, left, right
 _CACHE_SIZE = 32
 _cache: OrderedDict[tuple, NavGrid] = OrderedDict()
 
@@ -64,19 +64,12 @@ class NavGrid:
         self.rows, self.cols = walls.shape
         self.cell = float(spec.cell)
         self.walls = walls
-        rr, cc = np.nonzero(~walls)
-        self.cells = np.stack([rr, cc], axis=1).astype(np.int32)
-        self.n_floor = f = len(self.cells)
-        self.index = np.full(walls.shape, -1, dtype=np.int32)
-        self.index[rr, cc] = np.arange(f, dtype=np.int32)
+        graph = floor_graph(walls)
+        self.cells, self.index, self.neighbors = graph.cells, graph.index, graph.neighbors
+        self.n_floor = f = graph.size
         self.centers = (self.cells[:, ::-1].astype(np.float64) + 0.5) * self.cell
-        self.neighbors = np.full((f, 4), -1, dtype=np.int32)
-        for k, (dr, dc) in enumerate(_STEPS):
-            nr, nc = rr + dr, cc + dc
-            ok = (nr >= 0) & (nr < self.rows) & (nc >= 0) & (nc < self.cols)
-            self.neighbors[ok, k] = self.index[nr[ok], nc[ok]]
         self.node = self._nearest_floor()
-        self.dist_table = self._all_pairs_bfs()
+        self.dist_table = bfs_layers(self.neighbors, np.eye(f, dtype=bool))  # all pairs
         self.next_table = self._next_steps()
         # Wall rectangles (x0, y0, x1, y1) in px, for exact line-of-sight tests.
         self.rects = np.array(spec.wall_rects, dtype=np.float64).reshape(-1, 4)
@@ -92,25 +85,6 @@ class NavGrid:
         d2 = ((rr[..., None] - self.cells[:, 0]) ** 2 + (cc[..., None] - self.cells[:, 1]) ** 2)
         return np.argmin(d2, axis=2).astype(np.int32)
 
-    def _all_pairs_bfs(self) -> np.ndarray:
-        """BFS from every floor cell at once, one layer per iteration (numpy)."""
-        f = self.n_floor
-        dist = np.full((f, f), -1, dtype=np.int32)
-        np.fill_diagonal(dist, 0)
-        nbr = np.where(self.neighbors >= 0, self.neighbors, f)  # f = padding column
-        frontier = np.zeros((f, f + 1), dtype=bool)
-        frontier[np.arange(f), np.arange(f)] = True
-        visited = frontier[:, :f].copy()
-        d = 0
-        while True:
-            d += 1
-            new = frontier[:, nbr].any(axis=2) & ~visited  # new[s, v]: v touches frontier
-            if not new.any():
-                return dist
-            dist[new] = d
-            visited |= new
-            frontier[:, :f] = new
-
     def _next_steps(self) -> np.ndarray:
         f = self.n_floor
         dist = self.dist_table
@@ -118,7 +92,7 @@ class NavGrid:
         np.fill_diagonal(nxt, np.arange(f, dtype=np.int32))
         want = dist - 1  # a neighbour one step closer to the target
         padded = np.vstack([dist, np.full((1, f), -2, dtype=np.int32)])
-        for k in reversed(range(4)):  # first direction in _STEPS wins ties
+        for k in reversed(range(4)):  # first direction in grid.STEPS wins ties
             nb = self.neighbors[:, k]
             nb_dist = padded[np.where(nb >= 0, nb, f)]  # (f, f): dist[nb[a], b]
             step = (nb_dist == want) & (dist > 0)

@@ -1,4 +1,5 @@
-"""The one interface every seat controller implements: bots, checkpoints, human keys."""
+"""The one interface every seat controller implements: bots, checkpoints, human keys;
+and the idle seat."""
 
 from __future__ import annotations
 
@@ -25,3 +26,13 @@ class Policy(Protocol):
 
 
 NOOP = np.array([1, 1, 0], dtype=np.int64)
+
+
+class NoopPolicy:
+    """A seat that does nothing (a human seat with no keyboard attached)."""
+
+    def reset(self, match: Match, seat: int, seed: int | None = None) -> None:
+        return None
+
+    def act(self, match: Match, seat: int) -> np.ndarray:
+        return NOOP

@@ -1,1 +1,2 @@
-"""Presentation: the pygame renderer, keyboard players, match videos and replays."""
+"""Presentation: the pygame renderer, keyboard players, match videos and replays, and the
+interactive play session."""

@@ -13,9 +13,11 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+from alphatank.game.seats import KEYSETS
 
 os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 import pygame  # noqa: E402
@@ -47,7 +49,7 @@ LAYOUTS: dict[str, KeyLayout] = {
                         pygame.K_SPACE),
     "ijkl": KeyLayout(pygame.K_i, pygame.K_k, pygame.K_j, pygame.K_l, pygame.K_p),
 }
-HUMAN_ORDER = ("wasd", "arrows", "ijkl")  # players 1, 2, 3
+HUMAN_ORDER = KEYSETS  # players 1, 2, 3
 
 
 class KeyboardPolicy:
@@ -103,3 +105,9 @@ class KeyboardPolicy:
         a[2] = int(self._tapped or lay.fire in held)
         self._tapped = False
         return a.copy()
+
+
+def keyboard_seat(seat: Any, seed: int | None = None) -> KeyboardPolicy:
+    """The controller of a ``human`` seat with a keyboard attached (the line-up's "human"
+    kind; without a keyboard the seat idles)."""
+    return KeyboardPolicy(seat.keys or HUMAN_ORDER[0])

@@ -22,10 +22,13 @@ import numpy as np
 os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 import pygame  # noqa: E402
 
-if TYPE_CHECKING:
-    from alphatank.sim.match import Match
+from alphatank.sim.episode import Episode, EpisodeHook
+from alphatank.ui.modes import RENDER_MODES as RENDER_MODES  # re-export
+from alphatank.ui.modes import check_render_mode
 
-RENDER_MODES = ("human", "rgb_array")
+if TYPE_CHECKING:
+    from alphatank.sim.match import Match, TickEvents
+
 OVERLAYS = ("aim", "trajectory", "bfs")
 OVERLAY_KEYS = {pygame.K_v: "aim", pygame.K_t: "trajectory", pygame.K_b: "bfs"}
 DEFAULT_OVERLAYS = ("aim", "bfs")  # Table 5: Render Aiming True, Render BFS True, Trajectory False
@@ -100,9 +103,7 @@ class Renderer:
                  overlays: Iterable[str] | str = DEFAULT_OVERLAYS, hud: bool = True,
                  explosions: bool = True, fps: float = 30.0, scale: float = 1.0,
                  labels: Sequence[str] | None = None, caption: str = "AlphaTank"):
-        if render_mode is not None and render_mode not in RENDER_MODES:
-            raise ValueError(f"render_mode must be one of {list(RENDER_MODES)} or None, "
-                             f"got {render_mode!r}")
+        check_render_mode(render_mode)
         if not scale > 0:
             raise ValueError(f"scale must be > 0, got {scale!r}")
         self.render_mode = render_mode
@@ -538,6 +539,20 @@ class Renderer:
             why = "no tank left"
         self.panel(surf, [(f"{why} - {match.tick / match.cfg.tick_hz:.1f}s, "
                            f"{plural(int(match.score.sum()), 'hit')}", TEXT)], title=title)
+
+
+class RenderHook(EpisodeHook):
+    """An episode hook that shows every tick with ``renderer.render`` (a window in
+    ``human`` mode), with the seats' controllers for the BFS overlay."""
+
+    def __init__(self, renderer: Renderer):
+        self.renderer = renderer
+
+    def on_start(self, episode: Episode) -> None:
+        self.renderer.render(episode.match, episode.controllers)
+
+    def on_tick(self, episode: Episode, events: TickEvents) -> None:
+        self.renderer.render(episode.match, episode.controllers)
 
 
 def planned_path(policy: object, match: Match, seat: int) -> Sequence[tuple[int, int]] | None:

@@ -26,7 +26,7 @@ import re
 import tempfile
 import zipfile
 import zlib
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -35,8 +35,9 @@ import numpy as np
 
 from alphatank.errors import InputError
 from alphatank.sim.config import ConfigError, GameConfig, check_value, from_dict
+from alphatank.sim.episode import Episode, EpisodeHook, EpisodeSeeds
 from alphatank.sim.mapspec import MapError, MapSpec, map_text, parse_map
-from alphatank.sim.match import Match
+from alphatank.sim.match import Match, TickEvents
 from alphatank.sim.policy import NOOP
 from alphatank.sim.world import substeps_for
 
@@ -136,21 +137,54 @@ def planned_route(policy: object, match: Match, seat: int) -> tuple[int, int, in
     return (int(r0), int(c0), int(r1), int(c1))
 
 
-class ReplayRecorder:
-    """Collects the actions of one episode; call :meth:`record` with each tick's actions
-    right before ``match.step`` and :meth:`finish` once the episode is over. With
-    ``policies`` (one per seat), each bot's planned route is recorded too."""
+class ReplayRecorder(EpisodeHook):
+    """Collects the actions of one episode, and each seat's planned route (what the path
+    overlay draws) from ``policies`` (one per seat; as a hook, the episode's controllers
+    unless given). As an episode hook it binds to the episode at ``on_start`` (unless made
+    with a ``match``), records every tick and, at ``on_end``, keeps the :class:`Replay` in
+    :attr:`replay` and saves it to ``path`` if given. By hand: :meth:`record` each tick's
+    actions (before or after ``match.step``) and :meth:`finish` once the episode is
+    over."""
 
-    def __init__(self, match: Match, *, match_seed: int, seed: int | None = None,
-                 scenario: str | None = None, seats: Sequence[str] = (),
-                 labels: Sequence[str] = (), policies: Sequence[object] | None = None):
-        if match.tick != 0:
-            raise ValueError(f"start recording at tick 0 (match is at tick {match.tick})")
-        self.match, self.match_seed, self.seed = match, match_seed, seed
+    def __init__(self, match: Match | None = None, *, match_seed: int | None = None,
+                 seed: int | None = None, scenario: str | None = None,
+                 seats: Sequence[str] = (), labels: Sequence[str] = (),
+                 path: str | Path | None = None, policies: Sequence[object] | None = None):
+        self.match: Match | None = None
+        self.match_seed, self.seed = match_seed, seed
         self.scenario, self.seats, self.labels = scenario, list(seats), list(labels)
+        self.path = Path(path) if path is not None else None
         self.policies = list(policies) if policies is not None else None
+        self.replay: Replay | None = None
         self._actions: list[np.ndarray] = []
         self._routes: list[np.ndarray] = []
+        if match is not None:
+            if match_seed is None:
+                raise ValueError("a ReplayRecorder made with a match needs its match_seed")
+            self._bind(match)
+
+    def _bind(self, match: Match) -> None:
+        if match.tick != 0:
+            raise ValueError(f"start recording at tick 0 (match is at tick {match.tick})")
+        self.match = match
+
+    def on_start(self, episode: Episode) -> None:
+        if self.policies is None:
+            self.policies = list(episode.controllers)
+        if self.match is None:
+            if episode.seeds is None:
+                raise ValueError("a replay needs the episode's seeds (start episodes with "
+                                 "start_episode or Lineup.start)")
+            self.match_seed, self.seed = episode.seeds.match_seed, episode.seeds.seed
+            self._bind(episode.match)
+
+    def on_tick(self, episode: Episode, events: TickEvents) -> None:
+        self.record(episode.actions)
+
+    def on_end(self, episode: Episode) -> None:
+        self.replay = self.finish()
+        if self.path is not None:
+            save_replay(self.replay, self.path)
 
     def record(self, actions: np.ndarray) -> None:
         self._actions.append(np.asarray(actions, dtype=np.int8).copy())
@@ -163,9 +197,11 @@ class ReplayRecorder:
 
     def finish(self) -> Replay:
         m = self.match
+        if m is None or self.match_seed is None:
+            raise ValueError("nothing recorded: the recorder was never bound to a match")
         if len(self._actions) != m.tick:
             raise ValueError(f"recorded {len(self._actions)} ticks of actions but the match "
-                             f"is at tick {m.tick}: call record() before every step()")
+                             f"is at tick {m.tick}: call record() once per step()")
         actions = (np.stack(self._actions) if self._actions
                    else np.zeros((0, m.n, 3), dtype=np.int8))
         routes = (np.stack(self._routes) if self._routes
@@ -353,9 +389,12 @@ def load_replay(path: str | Path) -> Replay:
                   labels=list(meta["labels"]), routes=routes)
 
 
-def check_end(replay: Replay, match: Match) -> None:
-    """ReplayError unless ``match`` (re-simulated) ended as the replay says: same final
-    state hash and the same winner."""
+def check_replayed(replay: Replay, match: Match) -> None:
+    """ReplayError unless ``match`` (played back from ``replay``) ended as the replay says:
+    the recorded tick count, final state hash and winner."""
+    if match.tick != replay.ticks:
+        raise ReplayError(f"replay diverged: the match ended at tick {match.tick} but "
+                          f"{replay.ticks} ticks were recorded")
     got = match.state_hash()
     if got != replay.final_hash:
         raise ReplayError(f"replay diverged: final state hash {got[:16]}... != recorded "
@@ -369,21 +408,22 @@ def _result(winner: str | None) -> str:
     return f"team {winner}" if winner is not None else "no winner"
 
 
-def simulate(replay: Replay, on_tick: Callable[[Match], None] | None = None,
-             check: bool = True) -> Match:
-    """Re-run a replay from its seed; ``on_tick(match)`` sees the initial state and every
-    tick after it. With ``check``, ReplayError if the end state or the winner differs from
-    the recording (:func:`check_end`)."""
+def replay_episode(replay: Replay, hooks: Sequence[EpisodeHook] = ()) -> Episode:
+    """An episode that plays ``replay`` back from its initial state: every seat is a
+    :class:`ReplayPolicy` (actions and planned routes), and it ends after the recorded
+    number of ticks."""
     match = replay.new_match()
-    if on_tick is not None:
-        on_tick(match)
-    for t in range(replay.ticks):
-        if match.done:
-            raise ReplayError(f"replay diverged: the match ended at tick {match.tick} but "
-                              f"{replay.ticks} ticks were recorded")
-        match.step(replay.actions[t])
-        if on_tick is not None:
-            on_tick(match)
+    seeds = EpisodeSeeds(replay.seed if replay.seed is not None else 0, 0, replay.match_seed,
+                         ())
+    return Episode(match, replay.policies(), seeds=seeds, hooks=hooks,
+                   tick_limit=replay.ticks)
+
+
+def simulate(replay: Replay, hooks: Sequence[EpisodeHook] = (), check: bool = True) -> Match:
+    """Re-run a replay from its seed through the episode loop (``hooks`` see it as any
+    episode); with ``check``, ReplayError if it ends differently from the recording
+    (:func:`check_replayed`)."""
+    match = replay_episode(replay, hooks).run().match
     if check:
-        check_end(replay, match)
+        check_replayed(replay, match)
     return match

@@ -1,9 +1,11 @@
 """Record a match to MP4 (H.264 via imageio-ffmpeg) and GIF (imageio + Pillow).
 
-:func:`record_match` plays a match with one Policy per seat, draws a frame of the initial
-state and one after every ``every``-th tick (plus the final state), and streams them to an
-MP4; an optional GIF gets a downscaled, thinned copy. ``alphatank record``, ``alphatank
-replay --record`` and training's wandb videos (:func:`wandb_video`) all use it.
+:class:`VideoRecorder` is an episode hook (:mod:`alphatank.sim.episode`): it draws a frame
+of the initial state and one after every ``every``-th tick (plus the final state) and
+streams them to an MP4; an optional GIF gets a downscaled, thinned copy.
+:func:`record_match` plays an already reset match with one Policy per seat through it.
+``alphatank record``, ``alphatank replay --record`` and training's wandb videos
+(:func:`wandb_video`) all use it.
 """
 
 from __future__ import annotations
@@ -16,10 +18,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from alphatank.extras import require
+from alphatank.sim.episode import Episode, EpisodeHook
 from alphatank.ui.render import DEFAULT_OVERLAYS, Renderer, surface_to_array
 
 if TYPE_CHECKING:
-    from alphatank.sim.match import Match
+    from alphatank.sim.match import Match, TickEvents
     from alphatank.sim.policy import Policy
     from alphatank.ui.replay import ReplayRecorder
 
@@ -42,6 +46,7 @@ class _Mp4:
     """Stream RGB frames to an H.264 MP4 (even sizes for yuv420p), written atomically."""
 
     def __init__(self, path: Path, fps: float, quality: float = 7.0):
+        require("video", "MP4 recording")
         import imageio.v2 as imageio
 
         self.path = path
@@ -66,73 +71,110 @@ class _Mp4:
             self.tmp.unlink(missing_ok=True)
 
 
-def record_match(match: Match, policies: Sequence[Policy], *,
-                 mp4: str | Path | None = None, gif: str | Path | None = None,
-                 fps: float | None = None, every: int = 1, max_ticks: int | None = None,
-                 hold_s: float = 0.0, overlays: Iterable[str] | str = DEFAULT_OVERLAYS,
+class VideoRecorder(EpisodeHook):
+    """An episode hook that draws frames into an MP4 (and/or a GIF, or memory).
+
+    Frames: the initial state (``on_start``), the state after every ``every``-th tick and
+    after the last tick, then ``hold_s`` seconds of the final frame (``on_end``, which also
+    closes the files; :attr:`recording` then holds the result). With ``every=1`` and no
+    hold an episode of T ticks gives T + 1 frames. ``fps`` defaults to the game's tick
+    rate divided by ``every`` (real time). ``keep_frames`` also keeps the frames as an
+    array (mind the memory: 2.1 MB per 770 x 770 frame; use ``scale`` < 1 and ``every`` >
+    1 for long matches).
+    """
+
+    def __init__(self, *, mp4: str | Path | None = None, gif: str | Path | None = None,
+                 fps: float | None = None, every: int = 1, hold_s: float = 0.0,
+                 overlays: Iterable[str] | str = DEFAULT_OVERLAYS,
                  labels: Sequence[str] | None = None, scale: float = 1.0,
                  gif_scale: float = 0.5, gif_every: int = 2, keep_frames: bool = False,
-                 recorder: ReplayRecorder | None = None,
-                 renderer: Renderer | None = None) -> Recording:
-    """Play ``match`` (already reset; policies already reset) to its end or ``max_ticks``
-    ticks, with ``policies[seat]`` choosing each live seat's action every tick.
+                 renderer: Renderer | None = None):
+        if every < 1 or gif_every < 1:
+            raise ValueError(f"every and gif_every must be >= 1, got {every}, {gif_every}")
+        self.mp4, self.gif, self.fps, self.every, self.hold_s = mp4, gif, fps, every, hold_s
+        self.gif_scale, self.gif_every, self.keep_frames = gif_scale, gif_every, keep_frames
+        self.renderer = renderer or Renderer(None, overlays=overlays, labels=labels,
+                                             fps=fps or 30.0, scale=scale)
+        self.writer: _Mp4 | None = None
+        self.recording: Recording | None = None
+        self._gif_frames: list[np.ndarray] = []
+        self._kept: list[np.ndarray] = []
+        self._count = 0
 
-    Frames: the initial state, then the state after every ``every``-th tick and after the
-    last tick, then ``hold_s`` seconds of the final frame. With ``every=1`` and no hold an
-    episode of T ticks gives T + 1 frames. ``fps`` defaults to the game's tick rate divided
-    by ``every`` (real time). ``recorder`` (a ReplayRecorder) gets every tick's actions.
-    ``keep_frames`` also returns the frames as an array (mind the memory: 2.1 MB per
-    770 x 770 frame; use ``scale`` < 1 and ``every`` > 1 for long matches).
-    """
-    if every < 1 or gif_every < 1:
-        raise ValueError(f"every and gif_every must be >= 1, got {every}, {gif_every}")
+    def _emit(self, episode: Episode) -> None:
+        surf = self.renderer.draw(episode.match, episode.controllers)
+        frame = surface_to_array(surf)
+        if self.writer is not None:
+            self.writer.append(frame)
+        if self.keep_frames:
+            self._kept.append(frame)
+        if self.gif is not None and self._count % self.gif_every == 0:
+            self._gif_frames.append(_downscale(surf, self.gif_scale))
+        self._count += 1
+
+    def on_start(self, episode: Episode) -> None:
+        self.fps = float(self.fps or episode.match.cfg.tick_hz / self.every)
+        self.renderer.fps = self.fps
+        self.writer = _Mp4(Path(self.mp4), self.fps) if self.mp4 is not None else None
+        try:
+            self._emit(episode)
+        except BaseException:
+            self.close(ok=False)
+            raise
+
+    def on_tick(self, episode: Episode, events: TickEvents) -> None:
+        if episode.match.tick % self.every == 0 or episode.over:
+            self._emit(episode)
+
+    def on_end(self, episode: Episode) -> None:
+        ok = False
+        try:
+            for _ in range(round(self.hold_s * self.fps)):
+                self._emit(episode)
+            ok = True
+        finally:
+            self.close(ok)
+        if self.gif is not None:
+            _write_gif(Path(self.gif), self._gif_frames, self.fps / self.gif_every)
+        m = episode.match
+        self.recording = Recording(
+            ticks=m.tick, frames=self._count, winner=m.winner, final_hash=m.state_hash(),
+            mp4=Path(self.mp4) if self.mp4 is not None else None,
+            gif=Path(self.gif) if self.gif is not None else None, fps=self.fps,
+            kept=np.stack(self._kept) if self.keep_frames else None)
+
+    def close(self, ok: bool) -> None:
+        """Close the MP4 (kept only if ``ok``; else the partial file is removed)."""
+        if self.writer is not None:
+            self.writer.close(ok)
+            self.writer = None
+
+
+def record_episode(episode: Episode, video: VideoRecorder) -> Recording:
+    """Play ``episode`` (which has ``video`` among its hooks) to its end; the partial MP4
+    is removed if anything fails on the way."""
+    try:
+        episode.run()
+    except BaseException:
+        video.close(ok=False)
+        raise
+    assert video.recording is not None
+    return video.recording
+
+
+def record_match(match: Match, policies: Sequence[Policy], *,
+                 max_ticks: int | None = None, recorder: ReplayRecorder | None = None,
+                 **video: Any) -> Recording:
+    """Play ``match`` (already reset; policies already reset) to its end or ``max_ticks``
+    ticks with ``policies[seat]`` in each seat, drawing it as :class:`VideoRecorder`
+    (keyword arguments: ``mp4``, ``gif``, ``fps``, ``every``, ``hold_s``, ``overlays``,
+    ``labels``, ``scale``, ``gif_scale``, ``gif_every``, ``keep_frames``, ``renderer``)
+    does. ``recorder`` (a ReplayRecorder) gets every tick's actions."""
     if len(policies) != match.n:
         raise ValueError(f"need one policy per seat: {match.n} seats, {len(policies)} policies")
-    fps = float(fps or match.cfg.tick_hz / every)
-    renderer = renderer or Renderer(None, overlays=overlays, labels=labels, fps=fps,
-                                    scale=scale)
-    writer = _Mp4(Path(mp4), fps) if mp4 is not None else None
-    gif_frames: list[np.ndarray] = []
-    kept: list[np.ndarray] = []
-    count = 0
-
-    def emit() -> None:
-        nonlocal count
-        surf = renderer.draw(match, policies)
-        frame = surface_to_array(surf)
-        if writer is not None:
-            writer.append(frame)
-        if keep_frames:
-            kept.append(frame)
-        if gif is not None and count % gif_every == 0:
-            gif_frames.append(_downscale(surf, gif_scale))
-        count += 1
-
-    ok = False
-    try:
-        emit()
-        actions = np.ones((match.n, 3), dtype=np.int64)
-        limit = match.cfg.max_steps if max_ticks is None else max_ticks
-        while not match.done and match.tick < limit:
-            for seat in np.flatnonzero(match.alive):
-                actions[seat] = policies[seat].act(match, int(seat))
-            if recorder is not None:
-                recorder.record(actions)
-            match.step(actions)
-            if match.tick % every == 0 or match.done or match.tick >= limit:
-                emit()
-        for _ in range(round(hold_s * fps)):
-            emit()
-        ok = True
-    finally:
-        if writer is not None:
-            writer.close(ok)
-    if gif is not None:
-        _write_gif(Path(gif), gif_frames, fps / gif_every)
-    return Recording(ticks=match.tick, frames=count, winner=match.winner,
-                     final_hash=match.state_hash(), mp4=writer.path if writer else None,
-                     gif=Path(gif) if gif is not None else None, fps=fps,
-                     kept=np.stack(kept) if keep_frames else None)
+    hook = VideoRecorder(**video)
+    hooks: list[EpisodeHook] = [hook] if recorder is None else [hook, recorder]
+    return record_episode(Episode(match, policies, hooks=hooks, tick_limit=max_ticks), hook)
 
 
 def _downscale(surf: Any, factor: float) -> np.ndarray:
@@ -146,6 +188,7 @@ def _downscale(surf: Any, factor: float) -> np.ndarray:
 
 
 def _write_gif(path: Path, frames: list[np.ndarray], fps: float) -> None:
+    require("video", "GIF recording")
     import imageio.v3 as iio
 
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -156,6 +199,7 @@ def _write_gif(path: Path, frames: list[np.ndarray], fps: float) -> None:
 
 def wandb_video(recording: Recording, caption: str | None = None) -> Any:
     """A ``wandb.Video`` of a recording's MP4 (for ``wandb.log({"eval/video": ...})``)."""
+    require("train", "wandb video logging")
     import wandb
 
     if recording.mp4 is None:

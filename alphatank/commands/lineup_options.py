@@ -1,0 +1,43 @@
+"""Command-line options that choose a line-up, shared by ``play`` and ``record`` (not a
+verb itself)."""
+
+from __future__ import annotations
+
+import argparse
+
+from alphatank.commands.argtypes import seed
+from alphatank.game.lineup import Lineup, build_lineup, lineup_scenario
+from alphatank.game.seats import SEAT_HELP
+from alphatank.ui.render import DEFAULT_OVERLAYS
+
+
+def add_lineup_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--scenario", help="scenario name or .toml path (e.g. mixed_teams)")
+    p.add_argument("--map", help="map for --seats (default: battlefield for 2 seats, "
+                                 "arena4 up to 4, arena8 up to 8)")
+    p.add_argument("--seats", help=SEAT_HELP)
+    p.add_argument("--checkpoint", metavar="SEAT",
+                   help="who plays the scenario's learner seats: a checkpoint or run folder, "
+                        "checkpoint:PATH, agent:NAME or bot:NAME")
+    p.add_argument("--stand-in", default="smart",
+                   help="bot for learner seats when no --checkpoint is given (default: smart)")
+    p.add_argument("--seed", type=seed, default=0, help="episode seed (default: 0)")
+    p.add_argument("--max-steps", type=int, help="episode length limit in ticks")
+    p.add_argument("--overlays", default=",".join(DEFAULT_OVERLAYS),
+                   help="aim,trajectory,bfs | all | none (default: aim,bfs)")
+
+
+def learner_seat(checkpoint: str | None) -> str | None:
+    """``--checkpoint`` as a seat spec: a bare path means ``checkpoint:PATH``."""
+    if not checkpoint or checkpoint.startswith(("checkpoint:", "agent:", "bot:")):
+        return checkpoint
+    return f"checkpoint:{checkpoint}"
+
+
+def lineup_from_args(args: argparse.Namespace, interactive: bool) -> Lineup:
+    """The line-up a ``play``/``record`` command line asks for (without a keyboard, human
+    seats are played by the stand-in bot)."""
+    game = {"max_steps": args.max_steps} if args.max_steps is not None else {}  # 0: an error
+    sc = lineup_scenario(args.scenario, args.seats, args.map, game)
+    return build_lineup(sc, interactive=interactive, learner=learner_seat(args.checkpoint),
+                        stand_in=args.stand_in)

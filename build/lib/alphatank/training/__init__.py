@@ -1,3 +1,0 @@
-"""Training stack (installed as ``alphatank.training``): PPO and SAC learners, the
-multi-learner loop over the vector env, opponent schedules, checkpoints usable as
-policies, evaluation tables and logging. See docs/training.md."""

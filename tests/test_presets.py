@@ -1,0 +1,153 @@
+"""Training runs as data: every shipped preset loads, fits its scenario and round-trips
+through TOML; malformed run files give one-line errors naming the file and the field."""
+
+import dataclasses
+import tomllib
+
+import pytest
+
+from alphatank.game.scenarios import load_scenario
+from alphatank.training.hparams import PPOConfig, SACConfig
+from alphatank.training.presets import (
+    LearnerSpec,
+    TrainConfig,
+    get_preset,
+    learners_fit,
+    load_run,
+    parse_run,
+    preset_names,
+    run_learners,
+    run_scenario,
+    run_toml,
+)
+
+PAPER_PRESETS = {"ppo_vs_ppo", "sac_vs_sac", "sac_vs_ppo", "ppo_vs_smart", "ppo_vs_aggressive",
+                 "ppo_vs_dodge", "ppo_vs_defensive", "ppo_vs_random", "sac_vs_aggressive",
+                 "ppo_cycle", "ppo_curriculum_smart", "team_vs_2smart", "team_vs_def",
+                 "team_vs_def_2smart", "team_vs_four_bots", "team_ppo_vs_ppo", "demo"}
+
+
+def roundtrip(cfg: TrainConfig) -> TrainConfig:
+    return parse_run(tomllib.loads(run_toml(cfg)), "<text>")
+
+
+@pytest.mark.parametrize("name", preset_names())
+def test_every_preset_loads_fits_its_scenario_and_round_trips(name):
+    cfg = get_preset(name)
+    assert cfg.name == name and cfg.description
+    sc = load_scenario(cfg.scenario)
+    n = len(sc.learner_seats)
+    assert learners_fit(run_learners(cfg, n), n)
+    assert roundtrip(cfg) == cfg
+    assert TrainConfig.from_dict(cfg.to_dict()) == cfg  # the checkpoint path
+
+
+def test_presets_keep_the_papers_settings():
+    assert set(preset_names()) >= PAPER_PRESETS
+    ppo, sac = PPOConfig(), SACConfig()
+    sac_vs_ppo = get_preset("sac_vs_ppo")
+    assert [(s.name, s.algo, s.seats) for s in sac_vs_ppo.learners] == [
+        ("sac", "sac", (0,)), ("ppo", "ppo", (1,))]
+    assert sac_vs_ppo.learners[0].config == sac  # Table 8
+    assert sac_vs_ppo.learners[1].config == PPOConfig(clip_coef=0.1, ent_coef=0.02,
+                                                      update_epochs=20)  # Table 9
+    assert sac_vs_ppo.total_steps == 200_000 and sac_vs_ppo.scenario == "pair"
+    assert get_preset("ppo_vs_smart").learners[0].config == ppo  # Table 7
+    demo = get_preset("demo")
+    assert demo.learners[0].config == PPOConfig(num_steps=128, update_epochs=4,
+                                                num_minibatches=4, anneal_lr=True)
+    assert (demo.num_workers, demo.checkpoint_every, demo.time_limit_s) == (2, 50, 480.0)
+    assert get_preset("ppo_cycle").schedule == {
+        "kind": "cycle", "pool": ["random", "aggressive", "defensive", "dodge"],
+        "mode": "adaptive", "interval": 100_000}
+    assert get_preset("ppo_curriculum_smart").schedule == {
+        "kind": "curriculum", "start": 0.1, "end": 0.8, "shape": "sigmoid"}
+    assert [s.seats for s in get_preset("team_ppo_vs_ppo").learners] == [(0,), (1,), (2,),
+                                                                          (3,)]
+
+
+def test_every_setting_round_trips_including_none_and_tables(tmp_path):
+    cfg = TrainConfig(
+        "custom", "vs_smart", "all kinds of values", map="train", observation="egocentric",
+        total_steps=123_456, seed=9, game={"max_steps": 300, "friendly_fire": False},
+        rewards={"aim_streak": 5.0}, wandb="disabled", time_limit_s=12.5,
+        learners=(LearnerSpec("p", "ppo", (0,), PPOConfig(target_kl=0.05, norm_adv=False)),))
+    assert roundtrip(cfg) == cfg
+    sac = TrainConfig("s", "pair", learners=(
+        LearnerSpec("a", "sac", (0,), SACConfig(target_entropy=-1.5, utd_ratio=0.25)),
+        LearnerSpec("b", "sac", (1,))))
+    assert roundtrip(sac) == sac
+    path = tmp_path / "mine.toml"
+    path.write_text(run_toml(cfg))
+    assert load_run(path) == cfg
+
+
+def test_run_file_defaults_its_name_and_resolves_paths_beside_it(tmp_path):
+    folder = tmp_path / "exp"
+    folder.mkdir()
+    (folder / "arena.toml").write_text(
+        'name = "arena"\nmap = "open"\n[[seats]]\nteam = "A"\ncontroller = "learner"\n'
+        '[[seats]]\nteam = "B"\ncontroller = "bot"\nbot = "dodge"\n')
+    (folder / "run.toml").write_text('scenario = "arena.toml"\ntotal_steps = 1000\n')
+    cfg = load_run(folder / "run.toml")
+    assert cfg.name == "run" and cfg.learners == ()
+    assert run_scenario(cfg).seats[1].bot == "dodge"
+
+
+def test_map_override_swaps_the_scenarios_map():
+    cfg = dataclasses.replace(get_preset("ppo_vs_smart"), map="train")
+    sc = run_scenario(cfg)
+    assert len(sc.maps) == 16 and sc.seats == load_scenario("vs_smart").seats
+
+
+BAD = [
+    ("scenario = 'vs_smart'\ntotl_steps = 5\n", r"bad\.toml: totl_steps: unknown key; valid "
+                                                r"keys: \[.*'total_steps'"),
+    ("scenario = 'vs_smart'\ntotal_steps = -5\n", r"bad\.toml: total_steps: must be > 0, got -5"),
+    ("scenario = 'vs_smart'\ntotal_steps = 'many'\n",
+     r"bad\.toml: total_steps: needs an int, got 'many'"),
+    ("scenario = 'vs_smart'\nwandb = 'cloud'\n",
+     r"bad\.toml: wandb: must be one of offline, online, disabled, got 'cloud'"),
+    ("total_steps = 5\n", r"bad\.toml: scenario: required"),
+    ("scenario = 'pair'\n[[learners]]\nname = 'a'\n[[learners]]\nname = 'b'\nseats = [1]\n"
+     "[learners.config]\nclip_coef = -1\n",
+     r"bad\.toml: learners\[1\]\.config\.clip_coef: must be > 0, got -1\.0"),
+    ("scenario = 'pair'\n[[learners]]\nname = 'a'\n[learners.config]\nclip = 1\n",
+     r"bad\.toml: learners\[0\]\.config\.clip: unknown key; valid keys: \[.*'clip_coef'"),
+    ("scenario = 'pair'\n[[learners]]\nname = 'a'\nalgo = 'dqn'\n",
+     r"bad\.toml: learners\[0\]\.algo: unknown algorithm 'dqn'; registered: \[.*'ppo'"),
+    ("scenario = 'pair'\n[[learners]]\nname = 'a'\nseat = 1\n",
+     r"bad\.toml: learners\[0\]\.seat: unknown key; valid keys: \['name', 'algo', 'seats'"),
+    ("scenario = 'pair'\n[[learners]]\nname = 'a'\nseats = [0, 0]\n",
+     r"bad\.toml: learners\[0\]: learner 'a': seats must be distinct"),
+    ("scenario = 'pair'\n[[learners]]\nname = 'a'\n[[learners]]\nname = 'a'\nseats = [1]\n",
+     r"bad\.toml: learners: names must be unique"),
+    ("scenario = 'pair'\n[[learners]]\nname = 'a'\n[learners.config]\nupdate_epochs = 2.5\n",
+     r"bad\.toml: learners\[0\]\.config\.update_epochs: needs an int, got 2\.5"),
+    ("scenario = 'vs_smart'\n[schedule]\nkind = 'league'\n",
+     r"bad\.toml: schedule: unknown schedule kind 'league'"),
+    ("scenario = 'vs_smart'\n[schedule]\nkind = 'cycle'\npool = ['random']\nmode = 'often'\n",
+     r"bad\.toml: schedule: cycle mode must be one of"),
+    ("scenario = 'vs_smart'\n[game]\nmax_step = 5\n",
+     r"bad\.toml: game\.max_step: unknown GameConfig key; valid keys: \[.*'max_steps'"),
+    ("scenario = 'vs_smart'\n[rewards]\nvictory = 'big'\n",
+     r"bad\.toml: rewards\.victory: needs a float, got 'big'"),
+    ("scenario = 'vs_smart'\ngame = 3\n", r"bad\.toml: game: needs a table, got 3"),
+    ("scenario = 'vs_smart\n", r"bad\.toml: invalid TOML"),
+]
+
+
+@pytest.mark.parametrize("text,error", BAD)
+def test_malformed_run_files_name_the_file_and_the_field(tmp_path, text, error):
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=error) as info:
+        load_run(path)
+    assert "\n" not in str(info.value)
+
+
+def test_unknown_preset_and_missing_file_are_named(tmp_path):
+    with pytest.raises(ValueError, match=r"unknown training preset 'nope'; valid: \[.*'demo'"):
+        get_preset("nope")
+    with pytest.raises(ValueError, match="missing.toml: no such run file"):
+        load_run(tmp_path / "missing.toml")

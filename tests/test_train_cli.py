@@ -1,0 +1,128 @@
+"""``alphatank train`` as data: --config, --scenario, --map, --schedule, --curriculum and
+--hp build the run (checked through --print-config, which --config reads back), and every
+bad value is a one-line error naming the flag and what is allowed."""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+
+import pytest
+
+from alphatank.cli import main
+from alphatank.training.checkpoint import load_checkpoint
+from alphatank.training.hparams import PPOConfig
+from alphatank.training.presets import get_preset, load_run
+
+
+def printed_run(capsys, tmp_path, *argv: str):
+    """The run that ``train --print-config ARGV`` prints, read back as a run file."""
+    assert main(["train", "--print-config", *argv]) == 0
+    out = capsys.readouterr().out
+    path = tmp_path / "printed.toml"
+    path.write_text(out)
+    return load_run(path)
+
+
+def test_map_schedule_and_hp_flags_build_the_run(capsys, tmp_path):
+    cfg = printed_run(capsys, tmp_path, "--preset", "ppo_vs_smart", "--map", "train",
+                      "--schedule", "cycle:random", "--hp", "ppo.update_epochs=4",
+                      "--ppo", "num_steps=128", "--total-steps", "400000", "--name", "mine")
+    assert (cfg.name, cfg.scenario, cfg.map, cfg.total_steps) == ("mine", "vs_smart", "train",
+                                                                  400_000)
+    assert cfg.schedule == {"kind": "cycle", "mode": "random", "interval": 50_000,
+                            "pool": ["random", "aggressive", "defensive", "dodge"]}
+    assert cfg.learners[0].config == PPOConfig(update_epochs=4, num_steps=128)
+    # a preset's own cycle keeps its pool and interval; only the mode changes
+    cyc = printed_run(capsys, tmp_path, "--preset", "ppo_cycle", "--schedule", "cycle:fixed")
+    assert cyc.schedule == {**get_preset("ppo_cycle").schedule, "mode": "fixed"}
+    none = printed_run(capsys, tmp_path, "--preset", "ppo_cycle", "--schedule", "none")
+    assert none.schedule == {}
+
+
+def test_curriculum_flag(capsys, tmp_path):
+    cfg = printed_run(capsys, tmp_path, "--preset", "ppo_vs_smart", "--curriculum")
+    assert cfg.schedule == {"kind": "curriculum", "start": 0.1, "end": 0.8}
+    cfg = printed_run(capsys, tmp_path, "--preset", "ppo_vs_smart", "--curriculum",
+                      "0.2:0.9:sigmoid")
+    assert cfg.schedule == {"kind": "curriculum", "start": 0.2, "end": 0.9, "shape": "sigmoid"}
+    kept = printed_run(capsys, tmp_path, "--preset", "ppo_curriculum_smart", "--curriculum")
+    assert kept.schedule == get_preset("ppo_curriculum_smart").schedule
+
+
+def test_scenario_flag_refits_learners_of_the_first_kind(capsys, tmp_path):
+    cfg = printed_run(capsys, tmp_path, "--preset", "demo", "--scenario", "team_vs_bot")
+    assert capsys.readouterr().err == ""  # the note went out before the capture was read
+    assert cfg.scenario == "team_vs_bot"
+    fast = get_preset("demo").learners[0].config
+    assert [(s.name, s.algo, s.seats, s.config) for s in cfg.learners] == [
+        ("ppo_0", "ppo", (0,), fast), ("ppo_1", "ppo", (1,), fast)]
+    same = printed_run(capsys, tmp_path, "--preset", "sac_vs_ppo", "--scenario", "selfplay_1v1")
+    assert same.learners == get_preset("sac_vs_ppo").learners  # they fit: kept
+
+
+@pytest.mark.parametrize("argv,error", [
+    (["--schedule", "cycle:sometimes"],
+     "--schedule: got 'cycle:sometimes'; allowed: none, cycle:fixed, cycle:random, "
+     "cycle:adaptive"),
+    (["--curriculum", "0.1"], "--curriculum: expected START:END[:SHAPE]"),
+    (["--curriculum", "0.1:2"], "--curriculum: expected START:END[:SHAPE]"),
+    (["--curriculum", "0.1:0.5:cubic"], "--curriculum: expected START:END[:SHAPE]"),
+    (["--schedule", "cycle:fixed", "--curriculum"], "--schedule and --curriculum: give one"),
+    (["--scenario", "pair", "--schedule", "cycle:fixed"],
+     "--schedule: scenario 'pair' has no bot seats to schedule"),
+    (["--map", "nowhere"], "--map: scenarios/vs_aggressive.toml (map 'nowhere'): map: "
+                           "unknown map 'nowhere'"),
+    (["--scenario", "nowhere"], "--scenario: unknown scenario 'nowhere'"),
+    (["--hp", "ppo.gamma=2"], "--hp ppo.gamma: must be in [0, 1], got 2.0"),
+    (["--hp", "sac.tau=0.1"], "--hp sac.*: this run has no sac learner"),
+    (["--preset", "nope"], "unknown training preset 'nope'"),
+    (["--config", "missing.toml"], "missing.toml: no such run file"),
+    (["--config", "x.toml", "--preset", "demo"], "--config and --preset: give one"),
+    (["--total-steps", "0"], "--total-steps: must be > 0, got 0"),
+    (["--time-limit", "-1"], "--time-limit: must be >= 0, got -1.0"),
+])
+def test_bad_flags_are_one_line_errors(capsys, argv, error):
+    assert main(["train", "--print-config", *argv]) == 2
+    cap = capsys.readouterr()  # notes (on stderr) may come first; the error is one line
+    lines = cap.err.splitlines()
+    assert cap.out == "" and lines[-1].startswith(f"alphatank train: error: {error}"), cap.err
+    assert all(ln.startswith("note: ") for ln in lines[:-1]), cap.err
+
+
+def test_resume_refuses_new_run_flags(capsys, tmp_path):
+    assert main(["train", "--resume", str(tmp_path), "--hp", "ppo.gamma=0.9", "--map",
+                 "open"]) == 2
+    assert capsys.readouterr().err == ("alphatank train: error: --map, --hp apply to new runs; "
+                                       "a resumed run keeps its settings\n")
+
+
+def test_help_and_list_show_every_hyperparameter(capsys):
+    with pytest.raises(SystemExit):
+        main(["train", "--help"])
+    text = capsys.readouterr().out
+    for name in ("ppo.clip_coef", "ppo.update_epochs", "sac.utd_ratio", "sac.tau",
+                 "--hp ALGO.FIELD=VALUE", "--schedule", "--curriculum", "--map", "--config"):
+        assert name in text, name
+    assert main(["train", "--list"]) == 0
+    out = capsys.readouterr().out
+    assert re.search(r"team_ppo_vs_ppo +team +ppo x4 +4\.5\.1", out)
+    assert "sac + ppo" in out and "sac.buffer_size" in out
+
+
+def test_a_run_file_trains_on_the_training_maps(capsys, tmp_path):
+    run = tmp_path / "tiny.toml"
+    run.write_text('scenario = "vs_random"\nmap = "train"\ntotal_steps = 32\nnum_envs = 2\n'
+                   'wandb = "disabled"\n[[learners]]\nname = "p"\n[learners.config]\n'
+                   'num_steps = 16\nupdate_epochs = 1\n')
+    assert main(["train", "--config", str(run), "--runs", str(tmp_path), "--no-progress"]) == 0
+    ck = load_checkpoint(tmp_path / "tiny")
+    assert ck.train_config.map == "train" and len(ck.scenario.maps) == 16
+    assert ck.learner_specs[0].config.num_steps == 16
+    capsys.readouterr()
+    saved = printed_run(capsys, tmp_path, "--resume", str(tmp_path / "tiny"), "--total-steps",
+                        "64")
+    assert saved == dataclasses.replace(ck.train_config, total_steps=64)
+    assert main(["train", "--resume", str(tmp_path / "nope")]) == 2
+    assert capsys.readouterr().err.startswith(
+        f"alphatank train: error: {tmp_path / 'nope'}: no such checkpoint")

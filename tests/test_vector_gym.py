@@ -1,0 +1,204 @@
+"""The batched engine as a gymnasium.vector.VectorEnv (make_vec) and as an SB3 VecEnv."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import (
+    check_reset_options,
+    check_reset_seed_determinism,
+    check_returned_data_not_reused,
+)
+from gymnasium.vector import AutoresetMode
+
+import alphatank.envs as envs
+from alphatank.envs import TankBattleVectorEnv, VectorMatchEnv
+from alphatank.game.scenarios import NoopPolicy, ScenarioError
+
+SHORT = {"max_steps": 40}
+
+
+def vec(gid: str = "AlphaTank/VsRandom-v0", num_envs: int = 3, **kwargs) -> TankBattleVectorEnv:
+    return gym.make_vec(gid, num_envs=num_envs, vectorization_mode="vector_entry_point",
+                        **kwargs)
+
+
+@pytest.mark.parametrize("gid", envs.GYM_IDS)
+def test_every_id_has_the_batched_vector_entry_point(gid):
+    assert gym.spec(gid).vector_entry_point == envs.VECTOR_ENTRY_POINT
+    v = gym.make_vec(gid, num_envs=2)  # the default mode picks the vector entry point
+    single = gym.make(gid)
+    try:
+        assert isinstance(v, TankBattleVectorEnv) and v.num_envs == 2
+        assert v.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP
+        assert v.single_observation_space == single.observation_space
+        assert v.single_action_space == single.action_space
+        assert v.observation_space.shape == (2, *single.observation_space.shape)
+        obs, info = v.reset(seed=0)
+        assert obs in v.observation_space and info == {}
+        assert v.spec.id == gid and v.spec.kwargs["num_envs"] == 2
+    finally:
+        v.close()
+        single.close()
+
+
+def test_gymnasium_checks_that_apply_to_vector_envs():
+    v = vec(num_envs=1)
+    check_reset_seed_determinism(v)
+    check_reset_options(v)
+    check_returned_data_not_reused(v)
+    v.close()
+
+
+def test_cleanrl_style_loop_with_same_step_autoreset():
+    """What a CleanRL PPO script does: batched actions, final obs from infos on SAME_STEP
+    autoreset, episode statistics from RecordEpisodeStatistics."""
+    envs_ = gym.wrappers.vector.RecordEpisodeStatistics(
+        vec(num_envs=4, game_overrides=SHORT))
+    n = envs_.num_envs
+    envs_.reset(seed=1)
+    envs_.single_action_space.seed(0)
+    returns = np.zeros(n)
+    ended = 0
+    for _ in range(100):
+        actions = np.stack([envs_.single_action_space.sample() for _ in range(n)])
+        next_obs, rew, term, trunc, infos = envs_.step(actions)
+        assert next_obs.shape == (n, envs_.single_observation_space.shape[0])
+        assert rew.dtype == np.float32 and term.dtype == trunc.dtype == bool
+        returns += rew
+        done = term | trunc
+        real_next_obs = next_obs.copy()
+        if done.any():
+            assert np.array_equal(infos["_final_obs"], done)
+            assert np.array_equal(infos["_episode"], done)
+            fin = infos["final_info"]
+            for i in np.flatnonzero(done):
+                real_next_obs[i] = infos["final_obs"][i]
+                assert not np.array_equal(real_next_obs[i], next_obs[i])
+                assert envs_.unwrapped.engine.core.matches[i].tick == 0  # reset this step
+                assert fin["_outcome"][i] and fin["outcome"][i] in ("win", "loss", "draw")
+                assert fin["length"][i] == infos["episode"]["l"][i] <= SHORT["max_steps"]
+                assert fin["return"][i] == pytest.approx(returns[i], abs=1e-3)
+                assert infos["episode"]["r"][i] == pytest.approx(returns[i], abs=1e-3)
+                assert sum(fin["terms"][t][i] for t in fin["terms"] if not t.startswith("_")) \
+                    == pytest.approx(returns[i], abs=1e-3)
+                ended += 1
+            returns[done] = 0.0
+        else:
+            assert "final_obs" not in infos and "episode" not in infos
+    assert ended >= 8
+    envs_.close()
+
+
+def test_same_results_as_the_engine_and_its_worker_processes():
+    def rollout(env, steps=90):
+        rng = np.random.default_rng(3)
+        out = [env.reset(seed=7)[0]]
+        for _ in range(steps):
+            obs, rew, term, trunc, info = env.step(rng.integers(0, [3, 3, 2], size=(3, 3)))
+            final = np.zeros_like(obs)
+            for i in np.flatnonzero(info.get("_final_obs", np.zeros(3, bool))):
+                final[i] = info["final_obs"][i]
+            out += [obs, rew, term, trunc, final]
+        return out
+
+    local = rollout(vec(game_overrides=SHORT))
+    workers = vec(game_overrides=SHORT, num_workers=2)
+    try:
+        remote = rollout(workers)
+    finally:
+        workers.close()
+    engine = VectorMatchEnv("vs_random", 3, game_overrides=SHORT)
+    engine.reset(7)
+    rng = np.random.default_rng(3)
+    for k in range(90):
+        obs, rew, *_ = engine.step(rng.integers(0, [3, 3, 2], size=(3, 3))[:, None])
+        assert np.array_equal(obs[:, 0], local[1 + 5 * k])
+        assert np.array_equal(rew[:, 0], local[2 + 5 * k])
+    assert all(np.array_equal(a, b) for a, b in zip(local, remote, strict=True))
+
+
+def test_unseeded_resets_draw_fresh_episodes():
+    v = vec(num_envs=2)
+    a, _ = v.reset()
+    b, _ = v.reset()
+    c, _ = vec(num_envs=2).reset()
+    assert not np.array_equal(a, b) and not np.array_equal(a, c)
+
+
+def test_errors_name_the_env_and_what_is_allowed():
+    v = vec(num_envs=2)
+    with pytest.raises(RuntimeError, match="before reset"):
+        v.step(np.ones((2, 3), dtype=np.int64))
+    v.reset(seed=0)
+    bad = np.ones((2, 3), dtype=np.int64)
+    bad[1, 2] = 4
+    with pytest.raises(ValueError, match=r"env 1 \(seat 0, vs_random\).*fire 0\.\.1"):
+        v.step(bad)
+    with pytest.raises(ValueError, match=r"shape \(2, 3\)"):
+        v.step(np.ones((2, 1, 3), dtype=np.int64))
+    with pytest.raises(ValueError, match="no options"):
+        v.reset(options={"reset_mask": np.ones(2, bool)})
+    with pytest.raises(TypeError, match="seed must be an int"):
+        v.reset(seed=[1, 2])
+    with pytest.raises(ValueError, match="render_mode must be one of"):
+        vec(render_mode="human")
+    with pytest.raises(ValueError, match="num_workers=1"):
+        vec(render_mode="rgb_array", num_workers=2)
+    with pytest.raises(ScenarioError, match=r"learner seats \[1\] have no controller"):
+        vec("AlphaTank/TankBattle-v0", scenario="team_vs_bot")
+
+
+def test_multi_learner_scenario_drives_one_seat_like_the_single_env():
+    v = vec("AlphaTank/TankBattle-v0", num_envs=2, scenario="team_vs_bot", learner_seat=1,
+            seat_policies={0: NoopPolicy()})
+    single = gym.make("AlphaTank/TankBattle-v0", scenario="team_vs_bot", learner_seat=1,
+                      seat_policies={0: NoopPolicy()})
+    assert v.single_observation_space == single.observation_space
+    assert v.unwrapped.engine.learner_seats == [1] and v.learner_seat == 1
+    obs, _ = v.reset(seed=0)
+    assert obs.shape == (2, single.observation_space.shape[0])
+    v.step(np.ones((2, 3), dtype=np.int64))
+    v.close()
+
+
+def test_rgb_array_render_gives_one_frame_per_env():
+    v = vec(num_envs=2, render_mode="rgb_array")
+    assert v.render_mode == "rgb_array" and v.metadata["render_fps"] == 30
+    v.reset(seed=0)
+    frames = v.render()
+    assert len(frames) == 2 and frames[0].shape == (770, 770, 3) and frames[0].dtype == np.uint8
+    v.close()
+
+
+def test_stable_baselines3_ppo_trains_on_the_batched_env():
+    from stable_baselines3 import PPO
+
+    from alphatank.envs.sb3 import SB3VecEnv, make_sb3_env
+
+    env = make_sb3_env("vs_random", 8, seed=0, game_overrides={"max_steps": 100})
+    model = PPO("MlpPolicy", env, n_steps=128, batch_size=256, n_epochs=2, seed=0,
+                device="cpu", verbose=0)
+    model.learn(total_timesteps=3072)
+    assert model.num_timesteps >= 3072 and len(model.ep_info_buffer) >= 16
+    obs = env.reset()
+    action, _ = model.predict(obs, deterministic=True)
+    assert action.shape == (8, 3) and env.action_space.contains(action[0])
+    env.close()
+    # A multi-learner scenario: (match, learner) pairs flatten into SB3's env axis.
+    team = SB3VecEnv(vec("AlphaTank/TankBattle-v0", 2, scenario="team_vs_bot",
+                         seat_policies={1: NoopPolicy()}))
+    assert team.num_envs == 2 and team.env_method("set_bot_weakness", 0.5) == [None] * 2
+    flat = SB3VecEnv(VectorMatchEnv("team", 2, game_overrides=SHORT))
+    assert flat.num_envs == 8 and flat.reset().shape == (8, flat.observation_space.shape[0])
+    for _ in range(SHORT["max_steps"]):
+        obs, rew, dones, infos = flat.step(np.ones((8, 3), dtype=np.int64))
+        if dones.any():
+            break
+    assert dones.reshape(2, 4).all(axis=1).any()  # all seats of a match end together
+    i = int(np.flatnonzero(dones)[0])
+    assert infos[i]["terminal_observation"].shape == obs[i].shape
+    assert {"episode", "outcome", "TimeLimit.truncated"} <= set(infos[i])
+    with pytest.raises(ValueError, match="every env"):
+        flat.env_method("set_bot_weakness", 0.5, indices=[0])

@@ -1,0 +1,111 @@
+"""Warm start: a 1v1 PPO learner's policy carried into a team learner, feature by name."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from alphatank.envs.core import MatchSet
+from alphatank.envs.vector import VectorMatchEnv
+from alphatank.training.hparams import MAPPOConfig
+from alphatank.training.mappo import MAPPO
+from alphatank.training.ppo import PPO, PPOConfig
+from alphatank.training.presets import LearnerSpec, TrainConfig
+from alphatank.training.runner import Trainer
+from alphatank.training.warmstart import feature_map, warm_start, warm_start_from_checkpoint
+
+torch.set_num_threads(1)
+
+
+def layouts(kind: str):
+    """(1v1 layout on battlefield, 2v1 layout on arena4, a real 2v1 observation batch)."""
+    src = MatchSet("vs_defensive", 1, observation=kind).obs.layout
+    env = VectorMatchEnv("team_vs_def_bot", 2, seed=3, observation=kind)
+    env.reset()
+    rng = np.random.default_rng(0)
+    for _ in range(30):
+        obs, *_ = env.step(rng.integers(0, [3, 3, 2], size=(2, 2, 3)))
+    return src, env.layout, obs.reshape(-1, env.obs_dim)
+
+
+def trained_ppo(dim: int, seed: int = 0) -> PPO:
+    """A PPO learner with non-trivial weights and normaliser statistics."""
+    ppo = PPO(dim, 4, PPOConfig(), seed=seed)
+    rng = np.random.default_rng(seed)
+    ppo.obs_norm(rng.normal(0.3, 0.5, size=(500, dim)).astype(np.float32), update=True)
+    with torch.no_grad():
+        for p in ppo.net.parameters():
+            p.add_(torch.randn(p.shape, generator=torch.Generator().manual_seed(seed)) * 0.3)
+    ppo.mirror.sync(ppo.net)
+    return ppo
+
+
+def test_feature_map_matches_tanks_by_role():
+    src, dst, _ = layouts("paper")
+    si, di, dropped = feature_map(src, dst, src_mates=0, dst_mates=1)
+    pairs = {src.fields[s]: dst.fields[d] for s, d in zip(si, di, strict=True)}
+    assert pairs["self.x"] == "self.x"
+    assert pairs["tank[0].rel_x"] == "tank[1].rel_x"  # the enemy, after the teammate
+    assert pairs["bullet[2].dist"] == "bullet[2].dist"
+    assert pairs["wall[0].x0"] == "wall[0].x0"
+    assert not any(dst.fields[d].startswith("tank[0].") for d in di)  # teammate slot: new
+    # battlefield has more wall rectangles and zones than arena4: those slots are dropped
+    assert {src.fields[k] for k in dropped} == {
+        f for f in src.fields if f.startswith(("wall[", "buff[", "debuff[")) and f not in dst}
+    assert dropped.size == 21
+    assert len(set(di.tolist())) == len(di)
+
+
+@pytest.mark.parametrize("kind", ["paper", "egocentric"])
+def test_warm_started_mappo_acts_as_the_1v1_network(kind):
+    src, dst, team_obs = layouts(kind)
+    ppo = trained_ppo(src.size)
+    m = MAPPO(dst.size, 4, MAPPOConfig(), seed=1, num_seats=2)
+    info = warm_start(m, ppo.state_dict(), src, dst, dst_mates=1)
+    assert info["critic"] == 0 and info["mapped"] + info["dropped"] == src.size
+    si, di, _ = feature_map(src, dst, 0, 1)
+    # The 1v1 observation holding the same features; what the team map lacks is an empty
+    # slot (zeros). The team observation's extra features (teammate, team flags, seat)
+    # are real values: their weights start at zero.
+    one = np.zeros((len(team_obs), src.size), dtype=np.float32)
+    one[:, si] = team_obs[:, di]
+    want, _ = ppo.mirror.forward(ppo.obs_norm(one))
+    assert np.abs(team_obs[:, [d for d in range(dst.size) if d not in set(di)]]).sum() > 0
+    for seat in (0, 1):
+        got = m.actor_np.forward(m._actor_input(team_obs, np.full(len(team_obs), seat)))
+        np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-4)
+    assert np.array_equal(m.policy_actions(team_obs, True), ppo.policy_actions(one, True))
+
+
+def test_warm_started_ppo_copies_the_critic_too():
+    src, dst, team_obs = layouts("paper")
+    ppo = trained_ppo(src.size, seed=2)
+    team = PPO(dst.size, 4, PPOConfig(), seed=5)
+    assert warm_start(team, ppo.state_dict(), src, dst, dst_mates=1)["critic"] == 1
+    si, di, _ = feature_map(src, dst, 0, 1)
+    one = np.zeros((len(team_obs), src.size), dtype=np.float32)
+    one[:, si] = team_obs[:, di]
+    want = ppo.mirror.forward(ppo.obs_norm(one))
+    got = team.mirror.forward(team.obs_norm(team_obs))
+    for w, g in zip(want, got, strict=True):
+        np.testing.assert_allclose(g, w, rtol=1e-4, atol=1e-4)
+
+
+def test_warm_start_from_a_1v1_checkpoint(tmp_path):
+    cfg = TrainConfig("duel", "vs_defensive", total_steps=2 * 32 * 2, num_envs=2,
+                      wandb="disabled", checkpoint_every=1,
+                      learners=(LearnerSpec("ppo", "ppo", (0,),
+                                            config=PPOConfig(num_steps=32, update_epochs=1)),))
+    tr = Trainer(cfg, tmp_path / "duel", progress=False)
+    tr.train()
+    env = VectorMatchEnv("team_vs_def_bot", 1)
+    m = MAPPO(env.obs_dim, 2, num_seats=2, state_dim=8)
+    info = warm_start_from_checkpoint(m, tmp_path / "duel", env.layout,
+                                      dst_mates=int(env.core.obs.other_team[0].sum()))
+    assert info["mapped"] > 100
+    src_w = tr.learners["ppo"].net.actor[2].weight
+    assert torch.equal(m.net.actor[2].weight, src_w)
+    with pytest.raises(ValueError, match="same hidden size"):
+        warm_start_from_checkpoint(MAPPO(env.obs_dim, 2, MAPPOConfig(hidden=64), num_seats=2),
+                                   tmp_path / "duel", env.layout, 1)

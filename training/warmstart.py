@@ -1,0 +1,167 @@
+"""Warm start: a team learner starts from a trained PPO learner (e.g. a 1v1 checkpoint).
+
+Observation features are matched by name through both index maps
+(:class:`~alphatank.game.observe.ObsLayout`). Other tanks are matched by role: the
+source's teammates to the target's first teammate slots, its enemies to the target's
+enemy slots (in a 1v1 ``tank[0]`` is the enemy; in a 2v1 it is ``tank[1]``, after the
+teammate). Everything else keeps its name (``self.x``, ``own_bullet[3].vx``,
+``bullet[0].dist`` - the nearest other bullet, ``wall[5].x0``, ...).
+
+* First layer: matched input columns are copied; new inputs (teammate slots, team flags,
+  the seat one-hot of MAPPO) start at zero; a source feature the target lacks (e.g. a
+  wall slot of a map with more walls) is folded into the bias as the empty (all-zero)
+  slot it would have been.
+* Hidden and output layers are copied (the hidden sizes must agree).
+* The observation normaliser's statistics are mapped the same way (new features: mean
+  0, variance 1).
+* The critic is copied for a PPO target (same inputs); a MAPPO critic reads the global
+  state and predicts normalised values, so it starts fresh (see
+  ``MAPPOConfig.critic_warmup_updates``).
+
+So the warm-started actor gives the source's logits on any target observation, whatever
+the new features hold (``tests/test_warmstart.py``).
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from alphatank.game.observe import ObservationBuilder, ObsLayout, StateBatch
+
+_TANK = re.compile(r"^tank\[(\d+)\]\.(.+)$")
+
+
+def feature_map(src: ObsLayout, dst: ObsLayout, src_mates: int = 0, dst_mates: int = 0
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(src_idx, dst_idx, dropped): source feature ``src_idx[i]`` feeds target feature
+    ``dst_idx[i]``; ``dropped`` source features have no target. ``*_mates``: how many of
+    each layout's ``tank[k]`` slots are teammates (they come first)."""
+    if src.kind != dst.kind:
+        raise ValueError(f"cannot map a {src.kind!r} observation onto a {dst.kind!r} one")
+    si, di, dropped = [], [], []
+    for k, name in enumerate(src.fields):
+        target = name
+        m = _TANK.match(name)
+        if m:
+            slot = int(m.group(1))
+            slot = slot if slot < src_mates else slot - src_mates + dst_mates
+            if int(m.group(1)) < src_mates and slot >= dst_mates:
+                slot = -1  # a source teammate the target has no teammate slot for
+            target = f"tank[{slot}].{m.group(2)}"
+        if target in dst.index:
+            si.append(k)
+            di.append(dst[target].start)
+        else:
+            dropped.append(k)
+    return (np.array(si, dtype=np.int64), np.array(di, dtype=np.int64),
+            np.array(dropped, dtype=np.int64))
+
+
+def _first_layer(weight: torch.Tensor, bias: torch.Tensor, si: np.ndarray, di: np.ndarray,
+                 dropped: np.ndarray, zero_norm: np.ndarray, width: int
+                 ) -> tuple[torch.Tensor, torch.Tensor]:
+    w = torch.zeros((weight.shape[0], width), dtype=weight.dtype)
+    w[:, torch.from_numpy(di)] = weight[:, torch.from_numpy(si)]
+    fold = weight[:, torch.from_numpy(dropped)] @ torch.from_numpy(
+        zero_norm[dropped]).to(weight.dtype)
+    return w, bias + fold
+
+
+def _copy_mlp(dst: torch.nn.Sequential, prefix: str, net: dict[str, torch.Tensor],
+              si: np.ndarray, di: np.ndarray, dropped: np.ndarray, zero_norm: np.ndarray
+              ) -> None:
+    src_hidden = net[f"{prefix}.0.weight"].shape[0]
+    if src_hidden != dst[0].out_features:
+        raise ValueError(f"warm start needs the same hidden size: source {src_hidden}, "
+                         f"target {dst[0].out_features} (set hidden={src_hidden})")
+    w, b = _first_layer(net[f"{prefix}.0.weight"], net[f"{prefix}.0.bias"], si, di, dropped,
+                        zero_norm, dst[0].in_features)
+    with torch.no_grad():
+        dst[0].weight.copy_(w)
+        dst[0].bias.copy_(b)
+        for k in (2, 4):
+            dst[k].weight.copy_(net[f"{prefix}.{k}.weight"])
+            dst[k].bias.copy_(net[f"{prefix}.{k}.bias"])
+
+
+def warm_start(learner: Any, src_state: dict[str, Any], src_layout: ObsLayout,
+               dst_layout: ObsLayout, src_mates: int = 0, dst_mates: int = 0
+               ) -> dict[str, int]:
+    """Load a PPO learner's ``state_dict`` (``src_state``, observations ``src_layout``)
+    into ``learner`` (a fresh PPO or MAPPO learner over ``dst_layout``). Returns counts:
+    mapped, new and dropped features, and whether the critic was copied."""
+    if learner.obs_dim != dst_layout.size:
+        raise ValueError(f"learner has obs_dim {learner.obs_dim}, the target layout "
+                         f"{dst_layout.size}")
+    norm = src_state["obs_norm"]
+    mean = norm["mean"].numpy().astype(np.float64)
+    var = norm["var"].numpy().astype(np.float64)
+    if mean.shape != (src_layout.size,):
+        raise ValueError(f"source normaliser has {mean.shape[0]} features, its layout "
+                         f"{src_layout.size}")
+    si, di, dropped = feature_map(src_layout, dst_layout, src_mates, dst_mates)
+    enabled, clip = bool(norm["enabled"]), float(norm["clip"])
+    eps = learner.obs_norm.epsilon
+    zero_norm = (np.clip(-mean / np.sqrt(var + eps), -clip, clip) if enabled
+                 else np.zeros_like(mean))
+    net = src_state["net"]
+    is_mappo = getattr(learner, "algo", "") == "mappo"
+    _copy_mlp(learner.net.actor, "actor", net, si, di, dropped, zero_norm)
+    if not is_mappo:
+        _copy_mlp(learner.net.critic, "critic", net, si, di, dropped, zero_norm)
+    d_mean = np.zeros(dst_layout.size)
+    d_var = np.ones(dst_layout.size)
+    d_mean[di], d_var[di] = mean[si], var[si]
+    learner.obs_norm.load_state_dict({
+        "mean": torch.from_numpy(d_mean), "var": torch.from_numpy(d_var),
+        "count": norm["count"].clone(), "enabled": torch.tensor(enabled),
+        "clip": torch.tensor(clip, dtype=torch.float64)})
+    if is_mappo:
+        learner.actor_np.sync(learner.net.actor)
+        learner.critic_np.sync(learner.net.critic)
+    else:
+        learner.mirror.sync(learner.net)
+    return {"mapped": int(si.size), "new": int(dst_layout.size - si.size),
+            "dropped": int(dropped.size), "critic": int(not is_mappo)}
+
+
+def checkpoint_layout(ckpt: Any, learner: str) -> tuple[ObsLayout, int]:
+    """The observation layout a checkpoint's ``learner`` was trained on, and how many of
+    its ``tank[k]`` slots are teammates."""
+    meta = ckpt.meta["observation"]
+    seats = [int(s) for s, name in meta["seat_learner"].items() if name == learner]
+    if not seats:
+        raise ValueError(f"{ckpt.path}: learner {learner!r} drives no seat")
+    sc = ckpt.scenario
+    game = sc.game_config(**ckpt.train_config.game)
+    batch = StateBatch(game, int(meta["tanks"]), 1, int(meta["max_walls"]),
+                       int(meta["max_buffs"]), int(meta["max_debuffs"]))
+    builder = ObservationBuilder(meta["kind"], batch, sc.teams, [seats[0]],
+                                 team_flags=bool(meta["team_flags"]))
+    if builder.layout.size != int(meta["obs_dim"]):
+        raise ValueError(f"{ckpt.path}: rebuilt layout has {builder.layout.size} features, "
+                         f"the checkpoint says {meta['obs_dim']}")
+    return builder.layout, int(builder.other_team[0].sum())
+
+
+def warm_start_from_checkpoint(learner: Any, path: str | Path, dst_layout: ObsLayout,
+                               dst_mates: int, source: str | None = None) -> dict[str, int]:
+    """:func:`warm_start` from the PPO learner ``source`` (default: the first) of the
+    checkpoint (or run directory's latest) at ``path``."""
+    from alphatank.training.checkpoint import load_checkpoint
+
+    ckpt = load_checkpoint(path)
+    specs = {s.name: s for s in ckpt.learner_specs}
+    name = source or next(iter(specs))
+    if name not in specs:
+        raise ValueError(f"{ckpt.path}: no learner {name!r}; learners: {list(specs)}")
+    if specs[name].algo != "ppo":
+        raise ValueError(f"{ckpt.path}: learner {name!r} is {specs[name].algo}; warm start "
+                         f"reads PPO learners")
+    layout, mates = checkpoint_layout(ckpt, name)
+    return warm_start(learner, ckpt.state(name), layout, dst_layout, mates, dst_mates)
