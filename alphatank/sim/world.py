@@ -106,9 +106,12 @@ class _Bullet:
 
     def __init__(self, flight: Flight, start: int, due: list[int], end_due: int,
                  serial: int):
-        self.flight, self.start, self.due, self.end_due = flight, start, due, end_due
+        self.flight = flight
+        self.start = start  # world substep when it was spawned
+        self.due = due  # substep at whose end each ricochet applies
+        self.end_due = end_due  # substep at whose end it leaves play
         self.done = 0  # ricochets applied so far
-        self.serial = serial
+        self.serial = serial  # tells its scheduled events from an earlier bullet's
 
 
 class World:
@@ -320,9 +323,8 @@ class World:
         """Spawn a bullet from the tank's muzzle; returns its slot, or -1 if the muzzle is
         in a wall or the tank has no free bullet slot."""
         x, y, a = self.tank_state[tank, :3].tolist()
-        d = self.cfg.tank_width / 2 + self.cfg.bullet_radius + 0.5
-        mx, my = x + math.cos(a) * d, y + math.sin(a) * d
-        if self.bullet_walls.segment_query_first((x, y), (mx, my), 0.0, _ANY) is not None:
+        mx, my = self.muzzle(tank)
+        if self.wall_hit(x, y, mx, my, self.cfg.bullet_radius) is not None:
             return -1
         return self.spawn_bullet(tank, mx, my, a)
 
@@ -334,6 +336,7 @@ class World:
             self.drive(tank, 0, 0)
 
     def despawn(self, b: int) -> None:
+        """Take bullet ``b`` out of play (back to its parking place)."""
         if self.bullet_active[b]:
             self.bullet_active[b] = False
             self._bullets[b] = None
@@ -371,13 +374,14 @@ class World:
             due, k = bullet.due, bullet.done
             while k < len(due) and due[k] <= now:
                 k += 1
-            if k > bullet.done:
+            turned = k > bullet.done
+            if turned:
                 self._ricochet(b, bullet, k)
             if bullet.end_due <= now:
                 self.despawn(b)
                 self.expired.append(b)
                 continue
-            if k:
+            if turned:  # continue along the leg after its last ricochet
                 leg = bullet.flight.ricochets[k - 1]
                 t = max(0.0, (now - bullet.start) * step - leg.s)
                 body, speed = self.bullet_bodies[b], self.cfg.bullet_speed
