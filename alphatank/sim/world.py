@@ -37,8 +37,7 @@ TANK_FILTER = pymunk.ShapeFilter(categories=CAT_TANK, mask=CAT_WALL | CAT_TANK)
 WALLS_ONLY = pymunk.ShapeFilter(mask=CAT_WALL)
 TANK_MASS = 10.0
 DRIVE_ACCEL_TICKS = 2.0  # ticks a tank takes to reach full speed; bounds the drive forces
-PARK = (-1000.0, -1000.0)  # where bullet slot 0 waits; slot b waits PARK_GAP * b px further
-PARK_GAP = 1000.0
+PARK = (-1000.0, -1000.0)  # where free bullet bodies wait (without their shapes)
 SKIN = 1e-7  # px: step off a wall after a contact so the next query starts outside it
 NEVER = np.iinfo(np.int64).max
 _BODY_FIELDS = (pymunk.batch.BodyFields.POSITION | pymunk.batch.BodyFields.ANGLE
@@ -165,11 +164,9 @@ class World:
             self.hitboxes.append(hitbox)
         self.bullet_bodies: list[pymunk.Body] = []
         self.bullet_shapes: list[pymunk.Circle] = []
-        # Free bullets wait apart outside the map (no add/remove per shot).
-        self._park = [(PARK[0] - PARK_GAP * b, PARK[1]) for b in range(self.n_bullets)]
         for b in range(self.n_bullets):
             body = pymunk.Body(1.0, float("inf"))
-            body.position = self._park[b]
+            body.position = PARK
             # Detection circle: the physics moves a bullet straight through its substep
             # and its ricochets are applied at the end, so its real path in a substep lies
             # within 2 steps of the straight end point. Any tank that path touches overlaps
@@ -179,7 +176,7 @@ class World:
             shape.filter = pymunk.ShapeFilter(group=self._group(b // cap), categories=CAT_BULLET,
                                               mask=CAT_HITBOX)
             shape.slot = b
-            space.add(body, shape)
+            space.add(body)  # the shape joins while the bullet is in play
             self.bullet_bodies.append(body)
             self.bullet_shapes.append(shape)
         # Forces just strong enough to reach full speed in DRIVE_ACCEL_TICKS: a stronger
@@ -312,6 +309,7 @@ class World:
         vx, vy = dx * cfg.bullet_speed, dy * cfg.bullet_speed
         body = self.bullet_bodies[b]
         body.position, body.velocity = (x, y), (vx, vy)
+        self.space.add(self.bullet_shapes[b])
         active[b] = True
         self.bullet_bounces[b] = 0
         self.bullet_fired_tick[b] = self.tick
@@ -336,12 +334,13 @@ class World:
             self.drive(tank, 0, 0)
 
     def despawn(self, b: int) -> None:
-        """Take bullet ``b`` out of play (back to its parking place)."""
+        """Take bullet ``b`` out of play (its shape leaves the space)."""
         if self.bullet_active[b]:
             self.bullet_active[b] = False
             self._bullets[b] = None
+            self.space.remove(self.bullet_shapes[b])
             body = self.bullet_bodies[b]
-            body.position, body.velocity = self._park[b], (0.0, 0.0)
+            body.position, body.velocity = PARK, (0.0, 0.0)
 
     # ---- time -----------------------------------------------------------------------
 
