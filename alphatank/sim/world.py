@@ -6,10 +6,12 @@ bullet-tank hits allowed by a ``can_hit`` matrix, and reads the whole state back
 tick with ``pymunk.batch``.
 
 Walls never move, so a bullet's flight is traced once, exactly, when it spawns
-(:func:`trace`: continuous, no tunnelling at any speed). In the physics a bullet flies
-straight; each ricochet (and its end on a wall once out of bounces, or at its range) is
-applied at the end of the substep in which it happens. Bullets collide only with tank
-hitboxes, whose handler tests the bullet's exact path of that substep.
+(:meth:`World.trace`: continuous swept-circle queries against a twin of the walls rounded
+by the bullet radius, no tunnelling at any speed). In the physics a bullet flies straight;
+each ricochet (and its end on a wall once out of bounces, or at its range) is applied at
+the end of the substep in which it happens. Bullets collide only with tank hitboxes, whose
+handler tests the bullet's exact path of that substep. No Python runs for a bullet
+between its events.
 
 Body layout never changes after construction (bodies are never removed, only their
 shapes), so the batch read has a fixed order: tank bodies, bullet bodies, control bodies.
