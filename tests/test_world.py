@@ -197,7 +197,7 @@ def test_rounded_wall_twin_answers_like_the_sharp_walls():
     assert hits > 800
 
 
-def test_state_is_the_live_batch_read():
+def test_state_matches_every_body_after_steps():
     """``state`` rows equal every body's pymunk attributes after steps, shots and kills."""
     spec = load_map("maze")
     cfg = game_config()

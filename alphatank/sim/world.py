@@ -220,14 +220,16 @@ class World:
         self._next_event = NEVER
         self._serial = 0
         self._drive = [(0.0, 0.0, 0.0)] * n  # last (vx, vy, w) given to each control body
-        # ``state`` views the batch buffer itself: the first read sizes it (one row per
-        # body the space iterates: ours, then the static body), later reads rewrite it in
-        # place, as bodies are never added or removed.
+        # The batch read lands in pymunk's buffer, sized by a first read (one row per body
+        # the space iterates: ours, then the static body) and rewritten in place after
+        # that, as bodies are never added or removed. ``_batch`` views it privately (it
+        # lives and dies with the buffer); ``state`` is our own copy.
         self._buffer = pymunk.batch.Buffer()
         pymunk.batch.get_space_bodies(space, _BODY_FIELDS, self._buffer)
-        self._rows = np.frombuffer(self._buffer.float_buf(), dtype=np.float64).reshape(
-            -1, _FLOATS_PER_BODY)
-        self.state = self._rows[:2 * n + self.n_bullets]
+        n_bodies = 2 * n + self.n_bullets
+        self._batch = np.frombuffer(self._buffer.float_buf(), dtype=np.float64).reshape(
+            -1, _FLOATS_PER_BODY)[:n_bodies]
+        self.state = np.empty((n_bodies, _FLOATS_PER_BODY))
         self.tank_state = self.state[:n]
         self.bullet_state = self.state[n:n + self.n_bullets]
         self.read_state()
@@ -431,6 +433,7 @@ class World:
         """One batch read of every body into ``state`` (x, y, angle, vx, vy, w)."""
         self._buffer.clear()
         pymunk.batch.get_space_bodies(self.space, _BODY_FIELDS, self._buffer)
+        np.copyto(self.state, self._batch)
 
     # ---- queries --------------------------------------------------------------------
 
