@@ -19,8 +19,7 @@ from alphatank.sim.config import GameConfig
 from alphatank.sim.mapspec import MapSpec, reachable_from
 from alphatank.sim.world import World
 
-ACTION_HELP = ("rotate 0..2 (0 counter-clockwise, 1 none, 2 clockwise), "
-               "move 0..2 (0 back, 1 stop, 2 forward), fire 0..1")
+ACTION_HELP = "rotate 0..2 (0 ccw, 1 none, 2 cw), move 0..2 (0 back, 1 stop, 2 forward), fire 0..1"
 
 
 class Fired(NamedTuple):
