@@ -281,3 +281,28 @@ def test_a_ricochet_and_a_hit_in_the_same_substep():
     assert [(e.bullet, e.x, e.y) for e in w.bounces] == [
         (b, pytest.approx(cx, abs=1e-9), pytest.approx(cy, abs=1e-9))]
     assert w.hits == [(b, 1)] and not w.bullet_active[b] and w.bullet_bounces[b] == 1
+
+
+def test_direct_chipmunk_calls_match_pymunk():
+    """alphatank.sim.cp makes the very calls of the pymunk methods it stands for."""
+    import pymunk
+
+    from alphatank.sim import cp
+
+    spec = load_map("maze")
+    w = _world(spec, game_config(), [(105, 105, 0), (665, 665, 0)])
+    first = cp.FirstHit(w.bullet_walls, 0.0, pymunk.ShapeFilter())
+    rng = np.random.default_rng(2)
+    for _ in range(500):
+        x0, y0, x1, y1 = rng.uniform(-10, spec.width + 10, size=4)
+        fast, slow = first(x0, y0, x1, y1), w.bullet_walls.segment_query_first(
+            (x0, y0), (x1, y1), 0.0, pymunk.ShapeFilter())
+        assert (fast is None) == (slow is None)
+        if slow is not None:
+            assert fast == (cp.handle(slow.shape), tuple(slow.normal), slow.alpha)
+    body = w.controls[0]
+    cp.set_position(body, 1.5, -2.5)
+    cp.set_velocity(body, 3.25, 4.0)
+    cp.set_angular_velocity(body, -0.75)
+    assert (body.position, body.velocity, body.angular_velocity) == ((1.5, -2.5), (3.25, 4.0),
+                                                                      -0.75)

@@ -29,6 +29,7 @@ import numpy as np
 import pymunk
 import pymunk.batch
 
+from alphatank.sim import cp
 from alphatank.sim.config import GameConfig
 from alphatank.sim.mapspec import MapSpec
 
@@ -139,6 +140,7 @@ class World:
         # against the sharp walls).
         self.bullet_walls = pymunk.Space()
         self._add_walls()
+        self._first_bullet_hit = cp.FirstHit(self.bullet_walls, 0.0, _ANY)
         self.tank_bodies: list[pymunk.Body] = []
         self.tank_shapes: list[pymunk.Poly] = []  # collision envelopes
         self.hitboxes: list[pymunk.Poly] = []  # exact boxes that bullets hit
@@ -220,14 +222,13 @@ class World:
         self._next_event = NEVER
         self._serial = 0
         self._drive = [(0.0, 0.0, 0.0)] * n  # last (vx, vy, w) given to each control body
-        # The batch read lands in pymunk's buffer, sized by a first read (one row per body
-        # the space iterates: ours, then the static body) and rewritten in place after
-        # that, as bodies are never added or removed. ``_batch`` views it privately (it
-        # lives and dies with the buffer); ``state`` is our own copy.
-        self._buffer = pymunk.batch.Buffer()
-        pymunk.batch.get_space_bodies(space, _BODY_FIELDS, self._buffer)
+        # The batch read: one row per body the space iterates (ours, then the static
+        # body), rewritten in place by each read as bodies are never added or removed.
+        # ``_batch`` views it privately (it lives and dies with the reader); ``state`` is
+        # our own copy.
+        self._reader = cp.BodyReader(space, _BODY_FIELDS)
         n_bodies = 2 * n + self.n_bullets
-        self._batch = np.frombuffer(self._buffer.float_buf(), dtype=np.float64).reshape(
+        self._batch = np.frombuffer(self._reader.floats, dtype=np.float64).reshape(
             -1, _FLOATS_PER_BODY)[:n_bodies]
         self.state = np.empty((n_bodies, _FLOATS_PER_BODY))
         self.tank_state = self.state[:n]
@@ -271,9 +272,9 @@ class World:
         if cmd != last:
             control = self.controls[tank]
             if cmd[:2] != last[:2]:
-                control.velocity = cmd[:2]
+                cp.set_velocity(control, cmd[0], cmd[1])
             if cmd[2] != last[2]:
-                control.angular_velocity = cmd[2]
+                cp.set_angular_velocity(control, cmd[2])
             self._drive[tank] = cmd
 
     def muzzle(self, tank: int) -> tuple[float, float]:
@@ -312,7 +313,8 @@ class World:
         self._schedule(due[0] if due else end_due, b, self._serial)
         vx, vy = dx * cfg.bullet_speed, dy * cfg.bullet_speed
         body = self.bullet_bodies[b]
-        body.position, body.velocity = (x, y), (vx, vy)
+        cp.set_position(body, x, y)
+        cp.set_velocity(body, vx, vy)
         self.space.add(self.bullet_shapes[b])
         active[b] = True
         self.bullet_bounces[b] = 0
@@ -326,7 +328,7 @@ class World:
         in a wall or the tank has no free bullet slot."""
         x, y, a = self.tank_state[tank, :3].tolist()
         mx, my = self.muzzle(tank)
-        if self.wall_hit(x, y, mx, my, self.cfg.bullet_radius) is not None:
+        if self._first_bullet_hit(x, y, mx, my) is not None:
             return -1
         return self.spawn_bullet(tank, mx, my, a)
 
@@ -344,7 +346,8 @@ class World:
             self._bullets[b] = None
             self.space.remove(self.bullet_shapes[b])
             body = self.bullet_bodies[b]
-            body.position, body.velocity = PARK, (0.0, 0.0)
+            cp.set_position(body, *PARK)
+            cp.set_velocity(body, 0.0, 0.0)
 
     # ---- time -----------------------------------------------------------------------
 
@@ -388,8 +391,8 @@ class World:
                 leg = bullet.flight.ricochets[k - 1]
                 t = max(0.0, (now - bullet.start) * step - leg.s)
                 body, speed = self.bullet_bodies[b], self.cfg.bullet_speed
-                body.position = (leg.sx + leg.dx * t, leg.sy + leg.dy * t)
-                body.velocity = (leg.dx * speed, leg.dy * speed)
+                cp.set_position(body, leg.sx + leg.dx * t, leg.sy + leg.dy * t)
+                cp.set_velocity(body, leg.dx * speed, leg.dy * speed)
             heapq.heappush(events, (due[k] if k < len(due) else bullet.end_due, b, serial))
         self._next_event = events[0][0] if events else NEVER
 
@@ -431,8 +434,7 @@ class World:
 
     def read_state(self) -> None:
         """One batch read of every body into ``state`` (x, y, angle, vx, vy, w)."""
-        self._buffer.clear()
-        pymunk.batch.get_space_bodies(self.space, _BODY_FIELDS, self._buffer)
+        self._reader.read()
         np.copyto(self.state, self._batch)
 
     # ---- queries --------------------------------------------------------------------
@@ -460,9 +462,24 @@ class World:
               bounces_left: int, radius: float | None = None) -> Flight:
         """The flight of a circle (default: a bullet) from (x, y) along unit (dx, dy) over
         ``length`` px with ``bounces_left`` ricochets: what the physics flies."""
-        r = self.cfg.bullet_radius if radius is None else radius
-        return trace_flight(lambda x0, y0, x1, y1, skip: self.wall_hit(x0, y0, x1, y1, r, skip),
-                            x, y, dx, dy, length, bounces_left)
+        if radius is None or radius == self.cfg.bullet_radius:
+            return trace_flight(self._bullet_hit, x, y, dx, dy, length, bounces_left)
+        return trace_flight(
+            lambda x0, y0, x1, y1, skip: first_wall_hit(self.space, x0, y0, x1, y1, radius,
+                                                        skip),
+            x, y, dx, dy, length, bounces_left)
+
+    def _bullet_hit(self, x0: float, y0: float, x1: float, y1: float,
+                    skip: Sequence[object]) -> cp.Hit | None:
+        """:meth:`wall_hit` at the bullet radius, one C call; walls come as handles."""
+        if not skip:
+            return self._first_bullet_hit(x0, y0, x1, y1)
+        best = None
+        for q in self.bullet_walls.segment_query((x0, y0), (x1, y1), 0.0, _ANY):
+            key = cp.handle(q.shape)
+            if key not in skip and (best is None or q.alpha < best.alpha):
+                best = cp.Hit(key, tuple(q.normal), q.alpha)
+        return best
 
 
 def first_wall_hit(space: pymunk.Space, x0: float, y0: float, x1: float, y1: float,
@@ -486,8 +503,8 @@ def first_wall_hit(space: pymunk.Space, x0: float, y0: float, x1: float, y1: flo
     return best
 
 
-WallHit = Callable[[float, float, float, float, Sequence[pymunk.Shape]],
-                   pymunk.SegmentQueryInfo | None]
+WallHit = Callable[[float, float, float, float, Sequence[object]],
+                   pymunk.SegmentQueryInfo | cp.Hit | None]
 
 
 def trace_flight(hit: WallHit, x: float, y: float, dx: float, dy: float, length: float,
@@ -501,7 +518,7 @@ def trace_flight(hit: WallHit, x: float, y: float, dx: float, dy: float, length:
     """
     x0, y0, dx0, dy0 = x, y, dx, dy
     ricochets: list[Ricochet] = []
-    leaving: list[pymunk.Shape] = []  # walls overlapped at the start and moved away from
+    leaving: list[object] = []  # walls overlapped at the start and moved away from
     s = 0.0
     while True:
         q = hit(x, y, x + dx * length, y + dy * length, leaving)
