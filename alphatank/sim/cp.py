@@ -68,11 +68,14 @@ class FirstHit:
 class BodyReader:
     """``pymunk.batch.get_space_bodies(space, fields, buffer)`` with its call data built
     once. The first read sizes the buffer; later reads rewrite it in place (the space's
-    bodies must not change), so ``floats`` views every read."""
+    bodies must not change), so ``floats`` views every read while the reader lives."""
 
     def __init__(self, space: pymunk.Space, fields: pymunk.batch.BodyFields):
-        self._buffer = pymunk.batch.Buffer()
-        pymunk.batch.get_space_bodies(space, fields, self._buffer)
+        buf = self._buffer = pymunk.batch.Buffer()
+        # pymunk 7.3 never frees a Buffer's C arrays: they go with the reader.
+        buf._float_arr = ffi.gc(buf._float_arr, lib.pmFloatArrayFree)
+        buf._int_arr = ffi.gc(buf._int_arr, lib.pmIntArrayFree)
+        pymunk.batch.get_space_bodies(space, fields, buf)
         self._space = space._space
         self._floats = self._buffer._float_arr
         self._data = ffi.new("pmBatchedData *")
