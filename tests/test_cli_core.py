@@ -5,6 +5,7 @@ import subprocess
 import sys
 
 from alphatank.cli import main
+from alphatank.commands.bench import find_floor
 
 
 def test_maps_lists_shipped_maps(capsys):
@@ -23,12 +24,25 @@ def test_maps_validates_files(tmp_path, capsys):
     assert f"error: {bad}:2:3: unknown character 'x'" in out
 
 
-def test_bench_reports_match_ticks(tmp_path, capsys):
+def test_bench_reports_match_ticks_and_the_floor_ratio(tmp_path, capsys):
     report = tmp_path / "bench.json"
     assert main(["bench", "--ticks", "200", "--repeats", "1", "--json", str(report)]) == 0
     figures = json.loads(report.read_text())
     assert figures["match_1v1_ticks_per_s"] > 0 and figures["match_4v4_ticks_per_s"] > 0
-    assert "1v1:" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "1v1:" in out
+    if find_floor(None) is None:  # a checkout without the shared prototype beside it
+        assert "no shared/bench/proto found" in out and "match_1v1_over_floor" not in figures
+    else:
+        for label in ("1v1", "4v4"):
+            ratio = figures[f"match_{label}_over_floor"]
+            assert 0 < ratio < 100 and figures[f"floor_{label}_us_per_tick"] > 0
+            assert f"{ratio:.2f}x the pymunk floor" in out
+
+
+def test_bench_names_a_wrong_floor_folder(tmp_path, capsys):
+    assert main(["bench", "--ticks", "10", "--floor", str(tmp_path)]) == 2
+    assert f"error: --floor {tmp_path}: no sim_core.py" in capsys.readouterr().err
 
 
 def test_console_script_runs():

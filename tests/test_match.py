@@ -223,3 +223,30 @@ def test_random_zones_come_from_the_seed():
     assert a.buffs == b.buffs and a.debuffs == b.debuffs
     assert len(a.buffs) == 2 and len(a.debuffs) == 2
     assert (a.buffs, a.debuffs) != (c.buffs, c.debuffs)
+
+
+@pytest.mark.parametrize("actions, error, message", [
+    ([[5, 1, 0], [1, 1, 0]], ValueError, r"tank 0: action \[5, 1, 0\] out of range"),
+    ([[1, 1, 0], [1, 10, 0]], ValueError, r"tank 1: action \[1, 10, 0\] out of range"),
+    ([[1, 1, 0], [1, 1, 2]], ValueError, r"tank 1: .*fire 0\.\.1"),
+    ([[1, 1, 0], [-1, 1, 0]], ValueError, r"tank 1: .*rotate 0\.\.2"),
+    ([[1, 1.5, 0], [1, 1, 0]], TypeError, r"integers .*got dtype float64"),
+    ([[1, np.nan, 0], [1, 1, 0]], TypeError, r"integers .*got dtype float64"),
+    ([[1, 1, 0]], ValueError, r"shape \(2, 3\).*got \(1, 3\)"),
+    ([[1, 1], [1, 1]], ValueError, r"shape \(2, 3\).*got \(2, 2\)"),
+])
+def test_step_rejects_bad_actions_and_changes_nothing(actions, error, message):
+    m = _match()
+    m.step(_act(m, FIRE, FIRE))
+    before = m.state_hash()
+    with pytest.raises(error, match=message):
+        m.step(actions)
+    assert m.state_hash() == before and m.tick == 1
+
+
+def test_step_accepts_any_integer_array_or_list():
+    m = _match()
+    for acts in ([[2, 2, 1], [0, 0, 1]], np.array([[2, 2, 1], [0, 0, 1]], dtype=np.uint8),
+                 np.array([[1, 1, True], [1, 1, False]]), np.array([[2, 2, 0], [0, 0, 0]])):
+        m.step(acts)
+    assert m.tick == 4 and m.events.fired == []

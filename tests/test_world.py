@@ -7,7 +7,7 @@ import pytest
 
 from alphatank.sim.config import PRESETS, game_config, replace
 from alphatank.sim.mapspec import load_map, parse_map, shipped_maps
-from alphatank.sim.world import World, substeps_for
+from alphatank.sim.world import World, first_wall_hit, substeps_for
 
 
 def _world(spec, cfg, poses):
@@ -23,7 +23,7 @@ def _inside_walls(xy: np.ndarray, rects: np.ndarray) -> np.ndarray:
 
 
 @pytest.mark.parametrize("preset", sorted(PRESETS))
-@pytest.mark.parametrize("speed_factor", [1, 2, 4])
+@pytest.mark.parametrize("speed_factor", [1, 2, 4, 8])
 def test_bullets_never_escape_or_enter_walls(preset, speed_factor):
     """Thousands of bullets at random angles on every shipped map: 0 escapes, 0 wall
     penetrations, constant speed."""
@@ -174,3 +174,135 @@ def test_a_tank_cannot_push_another_through_a_wall():
     assert bx + cfg.tank_width / 2 <= 700 + 1.0
     assert _max_overlap(w, 1) < 1.0
     assert w.tank_state[0, 0] < bx  # A did not pass through B either
+
+
+def test_rounded_wall_twin_answers_like_the_sharp_walls():
+    """Swept-bullet queries against the walls rounded by the bullet radius give the very
+    alpha and normal of radius-r queries against the sharp walls (bit for bit)."""
+    spec = load_map("maze")
+    cfg = game_config()
+    w = _world(spec, cfg, [(105, 105, 0), (665, 665, 0)])
+    rng = np.random.default_rng(5)
+    hits = 0
+    for _ in range(3000):
+        x0, y0 = rng.uniform(-10, spec.width + 10, size=2)
+        a, length = rng.uniform(-math.pi, math.pi), rng.uniform(0, 400)
+        x1, y1 = x0 + math.cos(a) * length, y0 + math.sin(a) * length
+        fast = w.wall_hit(x0, y0, x1, y1, cfg.bullet_radius)
+        slow = first_wall_hit(w.space, x0, y0, x1, y1, cfg.bullet_radius)
+        assert (fast is None) == (slow is None)
+        if fast is not None and slow.alpha > 0:  # alpha 0: starts inside, normal is moot
+            assert (fast.alpha, tuple(fast.normal)) == (slow.alpha, tuple(slow.normal))
+            hits += 1
+    assert hits > 800
+
+
+def test_state_matches_every_body_after_steps():
+    """``state`` rows equal every body's pymunk attributes after steps, shots and kills."""
+    spec = load_map("maze")
+    cfg = game_config()
+    w = World(cfg, spec, np.array([(105, 105, 0.3), (665, 665, 2.0), (385, 385, 1.0)]))
+    rng = np.random.default_rng(0)
+    for t in range(200):
+        for i in range(3):
+            w.drive(i, int(rng.integers(-1, 2)), int(rng.integers(-1, 2)))
+            if t % 7 == 0:
+                w.fire(i)
+        if t == 100:
+            w.remove_tank(2)
+        w.step()
+    bodies = w.tank_bodies + w.bullet_bodies + w.controls
+    expect = [(*b.position, b.angle, *b.velocity, b.angular_velocity) for b in bodies]
+    assert np.array_equal(w.state, np.array(expect))
+    assert w.bullet_active.any()
+
+
+def _box_hit(shape, path: np.ndarray, radius: float) -> bool:
+    return any(shape.segment_query(tuple(a), tuple(b), radius) is not None
+               for a, b in zip(path[:-1], path[1:], strict=True))
+
+
+@pytest.mark.parametrize("map_name", ["open", "maze"])
+def test_bullets_hit_exactly_the_tanks_their_path_touches(map_name):
+    """A still tank is hit iff the bullet's exact path (ricochets included, also inside
+    the substep of a ricochet) passes within the bullet radius of its box; the
+    ricochets made before the hit are reported."""
+    from alphatank.sim.ballistics import predict_path
+
+    spec = load_map(map_name)
+    cfg = game_config()
+    rng = np.random.default_rng(1)
+    floor = spec.floor_cells()
+    hits = after_bounce = checked = 0
+    for _ in range(150):
+        cells = [floor[i] for i in rng.choice(len(floor), 2, replace=False)]
+        target = (*spec.cell_center(cells[1]), float(rng.uniform(-math.pi, math.pi)))
+        w = World(cfg, spec, np.array([(*spec.cell_center(cells[0]), 0.0), target]))
+        w.can_hit[0, 1] = True
+        box = w.hitboxes[1]
+        for _ in range(4):
+            x, y = np.array(spec.cell_center(cells[1])) + rng.uniform(-35, 35, size=2)
+            a = float(rng.uniform(-math.pi, math.pi))
+            if (box.point_query((x, y)).distance < 2 * cfg.bullet_radius
+                    or w.wall_hit(x, y, x, y, cfg.bullet_radius) is not None):
+                continue
+            path = predict_path(w, x, y, a)
+            b = w.spawn_bullet(0, x, y, a)
+            bounces, hit = 0, False
+            while w.bullet_active[b]:
+                w.step()
+                bounces += sum(1 for e in w.bounces if e.bullet == b)
+                hit = hit or any(h == (b, 1) for h in w.hits)
+            assert hit == _box_hit(box, path, cfg.bullet_radius), (x, y, a)
+            if hit:  # ricochets before the hit are the predicted ones before the box
+                before = next(k for k in range(1, len(path))
+                              if _box_hit(box, path[k - 1:k + 1], cfg.bullet_radius))
+                assert bounces == before - 1
+            checked += 1
+            hits += hit
+            after_bounce += hit and bounces > 0
+    assert checked > 300 and hits > 30 and after_bounce > 5
+
+
+def test_a_ricochet_and_a_hit_in_the_same_substep():
+    """A bullet that grazes past a tank into a wall and comes back off it within one
+    substep hits the tank in that substep, after the bounce is recorded."""
+    spec = load_map("open")  # the right wall's face is x = 700
+    cfg = game_config()
+    w = World(cfg, spec, np.array([(105.0, 105.0, 0.0), (684.0, 385.0, 0.0)]))
+    # Tank 1's box spans x 669..699, y 373..397. The bullet flies up-right at 45 degrees
+    # and touches the wall 0.5 px below the box's reach, 0.1 px into its third substep.
+    a, s = -math.pi / 4, 0.1 + 2 * w.step_len
+    cx, cy = 700 - cfg.bullet_radius, 397 + cfg.bullet_radius + 0.5
+    b = w.spawn_bullet(0, cx - s * math.cos(a), cy - s * math.sin(a), a)
+    w.step()
+    assert w.bullet_active[b] and not w.bounces and not w.hits
+    w.step()
+    assert [(e.bullet, e.x, e.y) for e in w.bounces] == [
+        (b, pytest.approx(cx, abs=1e-9), pytest.approx(cy, abs=1e-9))]
+    assert w.hits == [(b, 1)] and not w.bullet_active[b] and w.bullet_bounces[b] == 1
+
+
+def test_direct_chipmunk_calls_match_pymunk():
+    """alphatank.sim.cp makes the very calls of the pymunk methods it stands for."""
+    import pymunk
+
+    from alphatank.sim import cp
+
+    spec = load_map("maze")
+    w = _world(spec, game_config(), [(105, 105, 0), (665, 665, 0)])
+    first = cp.FirstHit(w.bullet_walls, 0.0, pymunk.ShapeFilter())
+    rng = np.random.default_rng(2)
+    for _ in range(500):
+        x0, y0, x1, y1 = rng.uniform(-10, spec.width + 10, size=4)
+        fast, slow = first(x0, y0, x1, y1), w.bullet_walls.segment_query_first(
+            (x0, y0), (x1, y1), 0.0, pymunk.ShapeFilter())
+        assert (fast is None) == (slow is None)
+        if slow is not None:
+            assert fast == (cp.handle(slow.shape), tuple(slow.normal), slow.alpha)
+    body = w.controls[0]
+    cp.set_position(body, 1.5, -2.5)
+    cp.set_velocity(body, 3.25, 4.0)
+    cp.set_angular_velocity(body, -0.75)
+    assert (body.position, body.velocity, body.angular_velocity) == ((1.5, -2.5), (3.25, 4.0),
+                                                                      -0.75)

@@ -1,11 +1,23 @@
-"""``alphatank bench``: throughput of the bare match, and of envs, bots and the renderer."""
+"""``alphatank bench``: throughput of the bare match, and of envs, bots and the renderer.
+
+The match ticks are also given as a ratio to the bare pymunk floor: the prototype in
+``shared/bench/proto`` (walls, tank joints, bullet handlers and one batch read per tick;
+no rules), the same yardstick as ``shared/bench/floor_ratio.py``, timed by the same
+workload in runs interleaved with the match's.
+"""
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
+import os
+import random
 import statistics
+import sys
 import time
+from pathlib import Path
+from types import ModuleType
 
 import numpy as np
 
@@ -16,14 +28,20 @@ from alphatank.sim.config import game_config
 from alphatank.sim.mapspec import load_map
 from alphatank.sim.match import Match
 
+FLOOR_DIR = Path("shared", "bench", "proto")
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--map", default="maze", help="map name or path (default: maze)")
     p.add_argument("--ticks", type=positive_int, default=5000,
                    help="ticks per run (default: 5000)")
     p.add_argument("--repeats", type=positive_int, default=5,
-                   help="runs per setting; median reported")
+                   help="runs per setting; median ticks/s, best run for the floor ratio")
     p.add_argument("--preset", default="paper", help="game preset (paper, long_range)")
+    p.add_argument("--floor", metavar="DIR",
+                   help="folder of the bare pymunk prototype (sim_core.py, maze_0.txt) to "
+                        "compare with (default: the nearest shared/bench/proto above the "
+                        "project or the working folder; skipped when there is none)")
     p.add_argument("--env", action="store_true", help="also measure env steps/s")
     p.add_argument("--bots", action="store_true", help="also measure bot decision cost")
     p.add_argument("--render", action="store_true", help="also measure renderer fps")
@@ -59,19 +77,79 @@ def match_ticks_per_second(map_name: str, teams: list[str], ticks: int, seed: in
     return ticks / (time.perf_counter() - start), shots
 
 
+def find_floor(given: str | None) -> Path | None:
+    """The prototype folder: ``given``, else the nearest ``shared/bench/proto`` in the
+    ancestors of this project's source tree or of the working folder, else None."""
+    if given is not None:
+        folder = Path(given)
+        if not (folder / "sim_core.py").is_file() or not (folder / "maze_0.txt").is_file():
+            raise FileNotFoundError(f"--floor {given}: no sim_core.py and maze_0.txt there "
+                                    "(the bare pymunk prototype's folder)")
+        return folder
+    for top in (Path(__file__).resolve().parents[2], Path.cwd().resolve()):
+        for folder in (top, *top.parents):
+            if (folder / FLOOR_DIR / "sim_core.py").is_file():
+                return folder / FLOOR_DIR
+    return None
+
+
+def _load_floor(folder: Path) -> ModuleType:
+    """Import the prototype's ``sim_core`` (it imports its sibling ``scene`` by name)."""
+    sys.path.insert(0, str(folder))
+    try:
+        return importlib.import_module("sim_core")
+    finally:
+        sys.path.remove(str(folder))
+
+
+def floor_us_per_tick(folder: Path, n: int, ticks: int, seed: int = 0) -> float:
+    """Microseconds per tick of the prototype with ``n`` tanks, set up and driven as
+    ``floor_ratio.py`` does (2 substeps, paper bullet speed, a shot every 3 ticks that
+    never expires; random actions, 100 ticks of warm-up)."""
+    core = _load_floor(folder)
+    core.SUB, core.BULLET_SPEED, core.MAX_BOUNCES, core.COOLDOWN = 2, 300.0, 1000, 3
+    sim = core.Sim((folder / "maze_0.txt").read_text(), n, "pivot")
+    rng = random.Random(seed)
+    acts = [[(rng.randrange(3), rng.randrange(3), 1) for _ in range(n)]
+            for _ in range(ticks + 100)]
+    for a in acts[:100]:
+        sim.step(a)
+    start = time.perf_counter()
+    for a in acts[100:]:
+        sim.step(a)
+    return (time.perf_counter() - start) / ticks * 1e6
+
+
 def run(args: argparse.Namespace) -> int:
     if args.soak:
         return _soak(args)
+    floor = find_floor(args.floor)  # a wrong --floor: one line from alphatank.cli
     results: dict[str, object] = {}
     print(f"bare match on {args.map!r} ({args.preset}), tanks firing constantly, "
           f"{args.ticks} ticks x {args.repeats} runs (median):")
     for label, teams in (("1v1", ["A", "B"]), ("4v4", ["A"] * 4 + ["B"] * 4)):
-        runs = [match_ticks_per_second(args.map, teams, args.ticks, seed=r, preset=args.preset)
-                for r in range(args.repeats)]
+        runs, floors = [], []
+        for r in range(args.repeats):
+            runs.append(match_ticks_per_second(args.map, teams, args.ticks, seed=r,
+                                               preset=args.preset))
+            if floor is not None:
+                floors.append(floor_us_per_tick(floor, len(teams), args.ticks, seed=r))
         tps = statistics.median(r[0] for r in runs)
         shots = sum(r[1] for r in runs) / len(runs)
         results[f"match_{label}_ticks_per_s"] = round(tps, 1)
-        print(f"  {label}: {tps:10,.0f} ticks/s   ({shots:.0f} shots per run)")
+        line = f"  {label}: {tps:10,.0f} ticks/s   ({shots:.0f} shots per run)"
+        if floors:
+            best = 1e6 / max(r[0] for r in runs)
+            ratio = best / min(floors)
+            results[f"floor_{label}_us_per_tick"] = round(min(floors), 2)
+            results[f"match_{label}_over_floor"] = round(ratio, 3)
+            line += f"   {ratio:.2f}x the pymunk floor ({best:.1f} vs {min(floors):.1f} us/tick)"
+        print(line)
+    if floor is not None:
+        print(f"  floor: bare pymunk prototype in {floor} (its own maze; best runs, "
+              "interleaved; lower is better)")
+    else:
+        print("  floor: no shared/bench/proto found (--floor DIR to compare with it)")
     if args.env:
         from alphatank.commands.benchenv import env_bench
 
@@ -112,6 +190,8 @@ def _soak(args: argparse.Namespace) -> int:
 
 
 def _write_json(path: str | None, figures: dict) -> None:
+    """Write ``figures`` to ``path`` (if given) atomically."""
     if path:
-        with open(path, "w", encoding="utf-8") as f:
-            json.dump(figures, f, indent=2)
+        tmp = Path(f"{path}.tmp")
+        tmp.write_text(json.dumps(figures, indent=2), encoding="utf-8")
+        os.replace(tmp, path)

@@ -17,7 +17,7 @@ from collections.abc import Sequence
 import numpy as np
 import pymunk
 
-from alphatank.sim.world import WALLS_ONLY, World, first_wall_hit, trace
+from alphatank.sim.world import WALLS_ONLY, World, trace
 
 
 def predict_path(world: World, x: float, y: float, angle: float,
@@ -32,10 +32,11 @@ def predict_path(world: World, x: float, y: float, angle: float,
     if a bullet there would overlap a wall (the world fires nothing) the path is just
     ``[start, start]``.
 
-    ``exact=True`` runs the physics' own :func:`alphatank.sim.world.trace`. ``exact=False``
-    traces the same way with pymunk's space-level segment query, about 3x cheaper, which
-    can miss a wall corner grazed only by the bullet's rim (bots use it to search, then
-    confirm with an exact prediction before firing).
+    ``exact=True`` runs the physics' own :meth:`alphatank.sim.world.World.trace`, so at the
+    bullet radius the predicted bounces are bit for bit the ones a fired bullet makes.
+    ``exact=False`` traces the same way with pymunk's space-level segment query against the
+    sharp walls, which can miss a wall corner grazed only by the bullet's rim (bots use it
+    to search, then confirm with an exact prediction before firing).
     """
     cfg = world.cfg
     length = cfg.bullet_max_distance if max_distance is None else float(max_distance)
@@ -45,9 +46,13 @@ def predict_path(world: World, x: float, y: float, angle: float,
     inside = world.space.point_query_nearest((x, y), r, WALLS_ONLY)
     if inside is not None and inside.distance < r - 1e-9:
         return np.array([(x, y), (x, y)], dtype=np.float64)
-    ex, ey, _, _, points, _ = trace(world.space, x, y, math.cos(angle), math.sin(angle),
-                                    length, r, bounces,
-                                    first_wall_hit if exact else quick_wall_hit)
+    dx, dy = math.cos(angle), math.sin(angle)
+    if exact:
+        f = world.trace(x, y, dx, dy, length, bounces, radius=r)
+        ex, ey, points = f.ex, f.ey, [(q.x, q.y) for q in f.ricochets]
+    else:
+        ex, ey, _, _, points, _ = trace(world.space, x, y, dx, dy, length, r, bounces,
+                                        quick_wall_hit)
     out = np.empty((len(points) + 2, 2), dtype=np.float64)
     out[0] = (x, y)
     if points:
@@ -110,7 +115,7 @@ def _seg_dist(path: np.ndarray, targets: np.ndarray) -> tuple[np.ndarray, np.nda
 def quick_wall_hit(space: pymunk.Space, x0: float, y0: float, x1: float, y1: float,
                    radius: float, skip: Sequence[pymunk.Shape] = ()
                    ) -> pymunk.SegmentQueryInfo | None:
-    """:func:`alphatank.sim.world.first_wall_hit` through pymunk's space-level query: about 3x
+    """:func:`alphatank.sim.world.first_wall_hit` through pymunk's space-level query:
     cheaper, but it can miss a wall corner grazed only by the circle's rim."""
     best = None
     for q in space.segment_query((x0, y0), (x1, y1), radius, WALLS_ONLY):

@@ -20,6 +20,8 @@ from alphatank.sim.grid import floor_areas, reachable_from
 from alphatank.sim.mapspec import MapSpec
 from alphatank.sim.world import World
 
+ACTION_HELP = "rotate 0..2 (0 ccw, 1 none, 2 cw), move 0..2 (0 back, 1 stop, 2 forward), fire 0..1"
+
 
 class Fired(NamedTuple):
     tank: int
@@ -161,6 +163,9 @@ class Match:
         self.score = np.zeros(n, dtype=np.int64)  # enemy hits scored
         self.in_buff = np.zeros(n, dtype=bool)
         self.in_debuff = np.zeros(n, dtype=bool)
+        self._zone = [0] * n  # zone code of each tank's cell (1 buff, -1 debuff)
+        self._contacts_seen = -1  # world.contacts_changed when _touching was built
+        self._touching: list[WallContact] = []
         self.tick = 0
         self.terminated = self.truncated = False
         self.winner: str | None = None
@@ -217,64 +222,96 @@ class Match:
         return self.cfg.max_bullets
 
     def step(self, actions: np.ndarray) -> TickEvents:
-        """Advance one tick. ``actions``: (n, 3) ints (rotate, move, fire); rows of dead
-        tanks are ignored. Returns this tick's events (reused between ticks)."""
+        """Advance one tick. ``actions``: (n, 3) integers (rotate 0..2, move 0..2, fire
+        0..1), one row per tank, checked before anything moves; rows of dead tanks are
+        ignored. Returns this tick's events (reused between ticks)."""
         if self.terminated or self.truncated:
             raise RuntimeError("step() called on a finished match; call reset()")
+        rows = self._action_rows(actions)
         ev, w, cfg = self.events, self.world, self.cfg
         ev.clear()
         cooldown = self.cooldown
-        np.subtract(cooldown, 1, out=cooldown, where=cooldown > 0)
         alive = self.alive.tolist()
-        for i, (rot, move, fire) in enumerate(np.asarray(actions).tolist()):
+        for i, c in enumerate(cooldown.tolist()):
+            if c:
+                cooldown[i] = c = c - 1
             if not alive[i]:
                 continue
+            rot, move, fire = rows[i]
             w.drive(i, rot - 1, move - 1)
-            if fire and cooldown[i] == 0 and self.bullets_alive[i] < self.bullet_limit(i):
+            if fire and not c and self.bullets_alive[i] < self.bullet_limit(i):
                 b = w.fire(i)
                 if b >= 0:
                     ev.fired.append(Fired(i, b))
                     self.bullets_alive[i] += 1
-                    self.cooldown[i] = (cfg.buff_cooldown_ticks if self.in_buff[i]
-                                        else cfg.cooldown_ticks)
+                    cooldown[i] = (cfg.buff_cooldown_ticks if self.in_buff[i]
+                                   else cfg.cooldown_ticks)
         w.step()
         self.tick += 1
+        if w.bounces or w.expired or w.hits:
+            self._bullet_events(ev, w)
+        if w.contacts_changed != self._contacts_seen:
+            self._contacts_seen = w.contacts_changed
+            self._touching = [WallContact(int(i)) for i in np.flatnonzero(w.wall_contacts)]
+        if self._touching:
+            ev.wall_contacts.extend(self._touching)
+        self._update_zones(report=True)
+        self._check_end()
+        return ev
+
+    def _action_rows(self, actions: np.ndarray) -> list[list[int]]:
+        """``actions`` as lists of ints, after a dtype, shape and range check whose error
+        names the tank and the allowed values."""
+        arr = actions if isinstance(actions, np.ndarray) else np.asarray(actions)
+        if arr.dtype.kind not in "iub":
+            raise TypeError(f"Match.step: actions must be integers ({ACTION_HELP}), "
+                            f"got dtype {arr.dtype}")
+        if arr.shape != (self.n, 3):
+            raise ValueError(f"Match.step: actions must have shape ({self.n}, 3), one row "
+                             f"(rotate, move, fire) per tank, got {arr.shape}")
+        rows = arr.tolist()
+        for i, (rot, move, fire) in enumerate(rows):
+            if not (0 <= rot <= 2 and 0 <= move <= 2 and 0 <= fire <= 1):
+                raise ValueError(f"Match.step: tank {i}: action {rows[i]} out of range; "
+                                 f"allowed: {ACTION_HELP}")
+        return rows
+
+    def _bullet_events(self, ev: TickEvents, w: World) -> None:
+        """Bounces, expiries and hits of the tick: counts, score, kills, events."""
+        owner = self.bullet_owner
         for bounce in w.bounces:
-            ev.bounced.append(Bounced(bounce.bullet, int(w.bullet_owner[bounce.bullet]),
+            ev.bounced.append(Bounced(bounce.bullet, int(owner[bounce.bullet]),
                                       bounce.x, bounce.y))
         for b in w.expired:
-            owner = int(w.bullet_owner[b])
-            self.bullets_alive[owner] -= 1
-            ev.expired.append(BulletExpired(b, owner))
+            o = int(owner[b])
+            self.bullets_alive[o] -= 1
+            ev.expired.append(BulletExpired(b, o))
         for b, victim in w.hits:
-            shooter = int(w.bullet_owner[b])
+            shooter = int(owner[b])
             self.bullets_alive[shooter] -= 1
             friendly = bool(self.team_index[shooter] == self.team_index[victim])
             ev.hits.append(Hit(b, shooter, victim, friendly))
             if not friendly:
                 self.score[shooter] += 1
-            if not cfg.immortal and self.alive[victim]:
+            if not self.cfg.immortal and self.alive[victim]:
                 self.alive[victim] = False
                 w.remove_tank(victim)
                 ev.kills.append(Killed(victim, shooter))
-        if w.wall_contacts.any():
-            ev.wall_contacts.extend(WallContact(int(i)) for i in np.flatnonzero(w.wall_contacts))
-        self._update_zones(report=True)
-        self._check_end()
-        return ev
 
     def _update_zones(self, report: bool) -> None:
-        """Zone membership of live tanks (a few tanks: plain Python beats numpy here)."""
-        cell, zones = self.spec.cell, self._zone_rows
-        in_buff, in_debuff, alive = self.in_buff, self.in_debuff, self.alive
+        """Zone membership of live tanks (a few tanks: plain Python beats numpy here);
+        the arrays are written only when a tank changes zone."""
+        cell, zones, now = self.spec.cell, self._zone_rows, self._zone
+        alive = self.alive.tolist()
         for i, (x, y) in enumerate(self.tank_xy.tolist()):
             zone = zones[int(y // cell)][int(x // cell)] if alive[i] else 0
-            buff, debuff = zone == 1, zone == -1
-            if report and buff and not in_buff[i]:
-                self.events.zones_entered.append(ZoneEntered(i, "buff"))
-            if report and debuff and not in_debuff[i]:
-                self.events.zones_entered.append(ZoneEntered(i, "debuff"))
-            in_buff[i], in_debuff[i] = buff, debuff
+            if zone == now[i]:
+                continue
+            if report and zone:
+                self.events.zones_entered.append(ZoneEntered(i, "buff" if zone == 1
+                                                             else "debuff"))
+            now[i] = zone
+            self.in_buff[i], self.in_debuff[i] = zone == 1, zone == -1
 
     def _check_end(self) -> None:
         if self.events.kills:

@@ -1,9 +1,17 @@
 """The physics world: a pymunk Space with tank, wall and bullet bodies.
 
 The world knows nothing of agents, teams, rewards or pygame. It moves tanks from
-(rotate, move) commands, spawns bullets, ricochets them elastically off walls inside a
-collision handler, reports bullet-tank hits allowed by a ``can_hit`` matrix, and reads the
-whole state back once per tick with ``pymunk.batch``.
+(rotate, move) commands, spawns bullets, ricochets them elastically off walls, reports
+bullet-tank hits allowed by a ``can_hit`` matrix, and reads the whole state back once per
+tick with ``pymunk.batch``.
+
+Walls never move, so a bullet's flight is traced once, exactly, when it spawns
+(:meth:`World.trace`: continuous swept-circle queries against a twin of the walls rounded
+by the bullet radius, no tunnelling at any speed). In the physics a bullet flies straight;
+each ricochet (and its end on a wall once out of bounces, or at its range) is applied at
+the end of the substep in which it happens. Bullets collide only with tank hitboxes, whose
+handler tests the bullet's exact path of that substep. No Python runs for a bullet
+between its events.
 
 Body layout never changes after construction (bodies are never removed, only their
 shapes), so the batch read has a fixed order: tank bodies, bullet bodies, control bodies.
@@ -12,15 +20,16 @@ Bullet slot ``b`` belongs to tank ``b // capacity``.
 
 from __future__ import annotations
 
+import heapq
 import math
-import threading
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import pymunk
 import pymunk.batch
 
+from alphatank.sim import cp
 from alphatank.sim.config import GameConfig
 from alphatank.sim.mapspec import MapSpec
 
@@ -31,11 +40,13 @@ TANK_FILTER = pymunk.ShapeFilter(categories=CAT_TANK, mask=CAT_WALL | CAT_TANK)
 WALLS_ONLY = pymunk.ShapeFilter(mask=CAT_WALL)
 TANK_MASS = 10.0
 DRIVE_ACCEL_TICKS = 2.0  # ticks a tank takes to reach full speed; bounds the drive forces
-PARK = (-1000.0, -1000.0)
+PARK = (-1000.0, -1000.0)  # where free bullet bodies wait (without their shapes)
 SKIN = 1e-7  # px: step off a wall after a contact so the next query starts outside it
+NEVER = np.iinfo(np.int64).max
 _BODY_FIELDS = (pymunk.batch.BodyFields.POSITION | pymunk.batch.BodyFields.ANGLE
                 | pymunk.batch.BodyFields.VELOCITY | pymunk.batch.BodyFields.ANGULAR_VELOCITY)
 _FLOATS_PER_BODY = 6  # x, y, angle, vx, vy, angular velocity
+_ANY = pymunk.ShapeFilter()
 
 
 TANK_TRAVEL_PER_SUBSTEP = 3.0  # px: bound on how far any point of a tank moves per substep
@@ -56,25 +67,53 @@ def substeps_for(cfg: GameConfig, min_wall_thickness: float) -> int:
     return max(1, bullets, tanks)
 
 
-_BUFFERS = threading.local()
-
-
-def batch_buffer() -> pymunk.batch.Buffer:
-    """The calling thread's ``pymunk.batch.Buffer``, shared by every World it builds (a
-    World reads its bodies through it and copies them out at once). pymunk 7.3 never frees
-    a Buffer's C arrays, so one Buffer per World leaked about 1.3 kB per episode reset for
-    the life of the process; one per thread bounds that to a few kB."""
-    buf = getattr(_BUFFERS, "buffer", None)
-    if buf is None:
-        buf = _BUFFERS.buffer = pymunk.batch.Buffer()
-    return buf
-
-
-@dataclass(frozen=True)
-class Bounce:
+class Bounce(NamedTuple):
     bullet: int
     x: float
     y: float
+
+
+class Ricochet(NamedTuple):
+    """One bounce of a traced flight."""
+
+    s: float  # distance travelled at the contact
+    x: float  # centre at the contact
+    y: float
+    sx: float  # where the next leg starts (SKIN off the wall)
+    sy: float
+    dx: float  # unit direction of the next leg
+    dy: float
+
+
+class Flight(NamedTuple):
+    """A traced bullet path: start, ricochets in order, and where it ends."""
+
+    x: float
+    y: float
+    dx: float
+    dy: float
+    ricochets: list[Ricochet]
+    end: float  # distance travelled when it ends (its range, or its last wall contact)
+    ex: float  # centre and direction at the end
+    ey: float
+    edx: float
+    edy: float
+    died: bool  # ends on a wall contact with no bounces left
+
+
+class _Bullet:
+    """Flight bookkeeping of one live bullet (plain Python: read every few substeps)."""
+
+    __slots__ = ("flight", "start", "due", "end_due", "done", "serial")
+
+    def __init__(self, flight: Flight, start: int, due: list[int], end_due: int,
+                 serial: int):
+        self.flight = flight
+        self.start = start  # world substep when it was spawned
+        self.due = due  # substep at whose end each ricochet applies
+        self.end_due = end_due  # substep at whose end it leaves play
+        self.done = 0  # ricochets applied so far
+        self.serial = serial  # tells its scheduled events from an earlier bullet's
 
 
 class World:
@@ -95,7 +134,13 @@ class World:
         space = self.space = pymunk.Space()
         space.iterations = 10
         space.collision_slop = 0.1
+        # Query-only twin of the walls, rounded by the bullet radius: one C-level thin
+        # segment query against it is a swept-bullet query (chipmunk adds the shape's and
+        # the query's radii, so alpha and normal are bit-identical to a radius-r query
+        # against the sharp walls).
+        self.bullet_walls = pymunk.Space()
         self._add_walls()
+        self._first_bullet_hit = cp.FirstHit(self.bullet_walls, 0.0, _ANY)
         self.tank_bodies: list[pymunk.Body] = []
         self.tank_shapes: list[pymunk.Poly] = []  # collision envelopes
         self.hitboxes: list[pymunk.Poly] = []  # exact boxes that bullets hit
@@ -126,15 +171,16 @@ class World:
         for b in range(self.n_bullets):
             body = pymunk.Body(1.0, float("inf"))
             body.position = PARK
-            # Detection circle: large enough that any wall or tank touched during a
-            # substep overlaps it at the substep's end; handlers then trace exactly.
-            shape = pymunk.Circle(body, cfg.bullet_radius + self.step_len + 1e-3)
+            # Detection circle: the physics moves a bullet straight through its substep
+            # and its ricochets are applied at the end, so its real path in a substep lies
+            # within 2 steps of the straight end point. Any tank that path touches overlaps
+            # this circle; the handler then tests the real path exactly.
+            shape = pymunk.Circle(body, cfg.bullet_radius + 2 * self.step_len + 1e-3)
             shape.collision_type = BULLET
             shape.filter = pymunk.ShapeFilter(group=self._group(b // cap), categories=CAT_BULLET,
-                                              mask=CAT_WALL | CAT_HITBOX)
-            shape.friction, shape.elasticity = 0.0, 1.0
+                                              mask=CAT_HITBOX)
             shape.slot = b
-            space.add(body)
+            space.add(body)  # the shape joins while the bullet is in play
             self.bullet_bodies.append(body)
             self.bullet_shapes.append(shape)
         # Forces just strong enough to reach full speed in DRIVE_ACCEL_TICKS: a stronger
@@ -151,7 +197,6 @@ class World:
             space.add(control, pivot, gear)
             self.controls.append(control)
 
-        space.on_collision(BULLET, WALL, pre_solve=_bullet_wall, data=self)
         space.on_collision(BULLET, HITBOX, pre_solve=_bullet_tank, data=self)
         space.on_collision(TANK, WALL, begin=_tank_wall_begin, separate=_tank_wall_end,
                            data=self)
@@ -166,16 +211,26 @@ class World:
         self.grace_ticks = cfg.grace_ticks
         self.tank_present = np.ones(n, dtype=bool)
         self.wall_contacts = np.zeros(n, dtype=np.int64)  # walls each tank touches now
+        self.contacts_changed = 0  # bumped whenever ``wall_contacts`` changes
         self.hits: list[tuple[int, int]] = []  # (bullet, victim) this tick
         self.bounces: list[Bounce] = []
         self.expired: list[int] = []  # bullets removed by the bounce or distance limit
         self.substep = 0
         self.tick = 0
-        self._traced = np.full(self.n_bullets, -1, dtype=np.int64)
-        self._next_expiry = np.iinfo(np.int64).max
-        self._buffer = batch_buffer()
+        self._bullets: list[_Bullet | None] = [None] * self.n_bullets
+        self._events: list[tuple[int, int, int]] = []  # heap of (substep, slot, serial)
+        self._next_event = NEVER
+        self._serial = 0
+        self._drive = [(0.0, 0.0, 0.0)] * n  # last (vx, vy, w) given to each control body
+        # The batch read: one row per body the space iterates (ours, then the static
+        # body), rewritten in place by each read as bodies are never added or removed.
+        # ``_batch`` views it privately (it lives and dies with the reader); ``state`` is
+        # our own copy.
+        self._reader = cp.BodyReader(space, _BODY_FIELDS)
         n_bodies = 2 * n + self.n_bullets
-        self.state = np.zeros((n_bodies, _FLOATS_PER_BODY))
+        self._batch = np.frombuffer(self._reader.floats, dtype=np.float64).reshape(
+            -1, _FLOATS_PER_BODY)[:n_bodies]
+        self.state = np.empty((n_bodies, _FLOATS_PER_BODY))
         self.tank_state = self.state[:n]
         self.bullet_state = self.state[n:n + self.n_bullets]
         self.read_state()
@@ -186,31 +241,45 @@ class World:
         return 0 if self.cfg.self_hit else tank + 1
 
     def _add_walls(self) -> None:
-        """Merged wall boxes plus a closed boundary outside the grid."""
+        """Merged wall boxes plus a closed boundary outside the grid (and their rounded
+        twins in ``bullet_walls``)."""
         spec, static = self.spec, self.space.static_body
         t = spec.cell
         W, H = spec.width, spec.height
         rects = list(spec.wall_rects) + [
             (-t, -t, W + t, 0.0), (-t, H, W + t, H + t), (-t, 0.0, 0.0, H), (W, 0.0, W + t, H)]
+        r = self.cfg.bullet_radius
         for x0, y0, x1, y1 in rects:
-            shape = pymunk.Poly(static, [(x0, y0), (x1, y0), (x1, y1), (x0, y1)])
+            corners = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
+            shape = pymunk.Poly(static, corners)
             shape.collision_type, shape.filter = WALL, WALL_FILTER
             shape.friction, shape.elasticity = 0.0, 1.0
             self.space.add(shape)
+            self.bullet_walls.add(pymunk.Poly(self.bullet_walls.static_body, corners, radius=r))
 
     # ---- commands -------------------------------------------------------------------
 
     def drive(self, tank: int, rotate: int, move: int) -> None:
-        """rotate in {-1, 0, 1} (1 = clockwise on screen), move in {-1, 0, 1}."""
-        cfg, body, control = self.cfg, self.tank_bodies[tank], self.controls[tank]
-        a = body.angle
+        """rotate in {-1, 0, 1} (1 = clockwise on screen), move in {-1, 0, 1}; the heading
+        comes from ``tank_state`` (current after construction, every step and
+        read_state()). pymunk is only written when a control velocity changes."""
+        cfg = self.cfg
+        a = float(self.tank_state[tank, 2])
         speed = cfg.tank_speed * move
-        control.velocity = (math.cos(a) * speed, math.sin(a) * speed)
-        control.angular_velocity = math.radians(cfg.rotation_speed) * rotate
+        cmd = (math.cos(a) * speed, math.sin(a) * speed,
+               math.radians(cfg.rotation_speed) * rotate)
+        last = self._drive[tank]
+        if cmd != last:
+            control = self.controls[tank]
+            if cmd[:2] != last[:2]:
+                cp.set_velocity(control, cmd[0], cmd[1])
+            if cmd[2] != last[2]:
+                cp.set_angular_velocity(control, cmd[2])
+            self._drive[tank] = cmd
 
     def muzzle(self, tank: int) -> tuple[float, float]:
         """Where a bullet fired now would appear (just clear of the tank's front)."""
-        x, y, a = self.tank_state[tank, :3]
+        x, y, a = self.tank_state[tank, :3].tolist()
         d = self.cfg.tank_width / 2 + self.cfg.bullet_radius + 0.5
         return (x + math.cos(a) * d, y + math.sin(a) * d)
 
@@ -219,37 +288,47 @@ class World:
         for body in (self.tank_bodies[tank], self.controls[tank]):
             body.position, body.angle = (x, y), angle
             body.velocity, body.angular_velocity = (0.0, 0.0), 0.0
+        self._drive[tank] = (0.0, 0.0, 0.0)
         self.space.reindex_shapes_for_body(self.tank_bodies[tank])
 
     def spawn_bullet(self, tank: int, x: float, y: float, angle: float) -> int:
         """Put one of ``tank``'s bullets at (x, y) flying along ``angle``; returns its slot,
         or -1 if all of the tank's slots are in use. No muzzle or cooldown checks."""
         lo = tank * self.capacity
-        free = np.flatnonzero(~self.bullet_active[lo:lo + self.capacity])
-        if free.size == 0:
+        active = self.bullet_active
+        free = active[lo:lo + self.capacity].tolist()
+        if all(free):
             return -1
-        b = lo + int(free[0])
+        b = lo + free.index(False)
+        cfg, start, step = self.cfg, self.substep, self.step_len
+        x, y = float(x), float(y)
+        dx, dy = math.cos(angle), math.sin(angle)
+        flight = self.trace(x, y, dx, dy, cfg.bullet_max_distance, cfg.bullet_max_bounces)
+        due = [start + max(1, math.ceil(r.s / step)) for r in flight.ricochets]
+        expire = start + self.life_substeps
+        end_due = (min(expire, start + max(1, math.ceil(flight.end / step))) if flight.died
+                   else expire)
+        self._serial += 1
+        self._bullets[b] = _Bullet(flight, start, due, end_due, self._serial)
+        self._schedule(due[0] if due else end_due, b, self._serial)
+        vx, vy = dx * cfg.bullet_speed, dy * cfg.bullet_speed
         body = self.bullet_bodies[b]
-        speed = self.cfg.bullet_speed
-        body.position = (x, y)
-        body.velocity = (math.cos(angle) * speed, math.sin(angle) * speed)
+        cp.set_position(body, x, y)
+        cp.set_velocity(body, vx, vy)
         self.space.add(self.bullet_shapes[b])
-        self.bullet_active[b] = True
+        active[b] = True
         self.bullet_bounces[b] = 0
         self.bullet_fired_tick[b] = self.tick
-        expire = self.substep + self.life_substeps
         self.bullet_expire[b] = expire
-        self._next_expiry = min(self._next_expiry, expire)
-        self.bullet_state[b, :2] = (x, y)
-        self.bullet_state[b, 3:5] = body.velocity
+        self.bullet_state[b] = (x, y, 0.0, vx, vy, 0.0)
         return b
 
     def fire(self, tank: int) -> int:
         """Spawn a bullet from the tank's muzzle; returns its slot, or -1 if the muzzle is
         in a wall or the tank has no free bullet slot."""
-        x, y, a = self.tank_state[tank, :3]
+        x, y, a = self.tank_state[tank, :3].tolist()
         mx, my = self.muzzle(tank)
-        if first_wall_hit(self.space, x, y, mx, my, self.cfg.bullet_radius):
+        if self._first_bullet_hit(x, y, mx, my) is not None:
             return -1
         return self.spawn_bullet(tank, mx, my, a)
 
@@ -258,15 +337,17 @@ class World:
         if self.tank_present[tank]:
             self.space.remove(self.tank_shapes[tank], self.hitboxes[tank])
             self.tank_present[tank] = False
-            control = self.controls[tank]
-            control.velocity, control.angular_velocity = (0.0, 0.0), 0.0
+            self.drive(tank, 0, 0)
 
     def despawn(self, b: int) -> None:
+        """Take bullet ``b`` out of play (its shape leaves the space)."""
         if self.bullet_active[b]:
             self.bullet_active[b] = False
+            self._bullets[b] = None
             self.space.remove(self.bullet_shapes[b])
             body = self.bullet_bodies[b]
-            body.position, body.velocity = PARK, (0.0, 0.0)
+            cp.set_position(body, *PARK)
+            cp.set_velocity(body, 0.0, 0.0)
 
     # ---- time -----------------------------------------------------------------------
 
@@ -279,33 +360,126 @@ class World:
         for _ in range(self.substeps):
             space.step(dt)
             self.substep += 1
-            if self.substep >= self._next_expiry:
-                self._expire()
+            if self.substep >= self._next_event:
+                self._fly()
         self.tick += 1
         self.read_state()
 
-    def _expire(self) -> None:
-        due = np.flatnonzero(self.bullet_active & (self.bullet_expire <= self.substep))
-        for b in due:
-            self.despawn(int(b))
-            self.expired.append(int(b))
-        live = self.bullet_expire[self.bullet_active]
-        self._next_expiry = int(live.min()) if live.size else np.iinfo(np.int64).max
+    def _schedule(self, substep: int, b: int, serial: int) -> None:
+        heapq.heappush(self._events, (substep, b, serial))
+        self._next_event = self._events[0][0]
+
+    def _fly(self) -> None:
+        """Apply the ricochets and ends due by this substep (in slot order)."""
+        now, events, step = self.substep, self._events, self.step_len
+        while events and events[0][0] <= now:
+            _, b, serial = heapq.heappop(events)
+            bullet = self._bullets[b]
+            if bullet is None or bullet.serial != serial:
+                continue  # hit a tank since it was scheduled
+            due, k = bullet.due, bullet.done
+            while k < len(due) and due[k] <= now:
+                k += 1
+            turned = k > bullet.done
+            if turned:
+                self._ricochet(b, bullet, k)
+            if bullet.end_due <= now:
+                self.despawn(b)
+                self.expired.append(b)
+                continue
+            if turned:  # continue along the leg after its last ricochet
+                leg = bullet.flight.ricochets[k - 1]
+                t = max(0.0, (now - bullet.start) * step - leg.s)
+                body, speed = self.bullet_bodies[b], self.cfg.bullet_speed
+                cp.set_position(body, leg.sx + leg.dx * t, leg.sy + leg.dy * t)
+                cp.set_velocity(body, leg.dx * speed, leg.dy * speed)
+            heapq.heappush(events, (due[k] if k < len(due) else bullet.end_due, b, serial))
+        self._next_event = events[0][0] if events else NEVER
+
+    def _ricochet(self, b: int, bullet: _Bullet, k: int) -> None:
+        """Record bullet ``b``'s ricochets up to (not including) number ``k``."""
+        for r in bullet.flight.ricochets[bullet.done:k]:
+            self.bounces.append(Bounce(b, r.x, r.y))
+        self.bullet_bounces[b] += k - bullet.done
+        bullet.done = k
+
+    def _path_hit(self, b: int, shape: pymunk.Shape) -> int:
+        """Whether bullet ``b``'s exact path in the current substep touches ``shape``:
+        the number of ricochets it has made when it does, else -1."""
+        bullet = self._bullets[b]
+        f, step = bullet.flight, self.step_len
+        m = self.substep + 1 - bullet.start  # substeps flown at the end of this one
+        t, t1 = (m - 1) * step, min(m * step, f.end)
+        if t > t1:
+            return -1
+        rics, r = f.ricochets, self.cfg.bullet_radius
+        k = bullet.done
+        while k < len(rics) and rics[k].s <= t:
+            k += 1
+        while True:
+            if k:
+                leg = rics[k - 1]
+                x, y, dx, dy, s0 = leg.sx, leg.sy, leg.dx, leg.dy, leg.s
+            else:
+                x, y, dx, dy, s0 = f.x, f.y, f.dx, f.dy, 0.0
+            stop = min(t1, rics[k].s) if k < len(rics) else t1
+            a, z = t - s0, stop - s0
+            if shape.segment_query((x + dx * a, y + dy * a), (x + dx * z, y + dy * z),
+                                   r) is not None:
+                return k
+            if stop >= t1:
+                return -1
+            t = stop
+            k += 1
 
     def read_state(self) -> None:
         """One batch read of every body into ``state`` (x, y, angle, vx, vy, w)."""
-        buf = self._buffer
-        buf.clear()
-        pymunk.batch.get_space_bodies(self.space, _BODY_FIELDS, buf)
-        flat = np.frombuffer(buf.float_buf(), dtype=np.float64)
-        self.state.reshape(-1)[:] = flat[: self.state.size]
+        self._reader.read()
+        np.copyto(self.state, self._batch)
 
     # ---- queries --------------------------------------------------------------------
+
+    def wall_hit(self, x0: float, y0: float, x1: float, y1: float, radius: float,
+                 skip: Sequence[pymunk.Shape] = ()) -> pymunk.SegmentQueryInfo | None:
+        """First wall touched by a circle of ``radius`` swept from (x0, y0) to (x1, y1),
+        ignoring ``skip``; exact (at the bullet radius, one C-level query)."""
+        if radius != self.cfg.bullet_radius:
+            return first_wall_hit(self.space, x0, y0, x1, y1, radius, skip)
+        if not skip:
+            return self.bullet_walls.segment_query_first((x0, y0), (x1, y1), 0.0, _ANY)
+        best = None
+        for q in self.bullet_walls.segment_query((x0, y0), (x1, y1), 0.0, _ANY):
+            if q.shape not in skip and (best is None or q.alpha < best.alpha):
+                best = q
+        return best
 
     def ray(self, start: tuple[float, float], end: tuple[float, float],
             radius: float = 0.0) -> pymunk.SegmentQueryInfo | None:
         """First wall touched by a circle of ``radius`` swept along a segment."""
-        return first_wall_hit(self.space, start[0], start[1], end[0], end[1], radius)
+        return self.wall_hit(start[0], start[1], end[0], end[1], radius)
+
+    def trace(self, x: float, y: float, dx: float, dy: float, length: float,
+              bounces_left: int, radius: float | None = None) -> Flight:
+        """The flight of a circle (default: a bullet) from (x, y) along unit (dx, dy) over
+        ``length`` px with ``bounces_left`` ricochets: what the physics flies."""
+        if radius is None or radius == self.cfg.bullet_radius:
+            return trace_flight(self._bullet_hit, x, y, dx, dy, length, bounces_left)
+        return trace_flight(
+            lambda x0, y0, x1, y1, skip: first_wall_hit(self.space, x0, y0, x1, y1, radius,
+                                                        skip),
+            x, y, dx, dy, length, bounces_left)
+
+    def _bullet_hit(self, x0: float, y0: float, x1: float, y1: float,
+                    skip: Sequence[object]) -> cp.Hit | None:
+        """:meth:`wall_hit` at the bullet radius, one C call; walls come as handles."""
+        if not skip:
+            return self._first_bullet_hit(x0, y0, x1, y1)
+        best = None
+        for q in self.bullet_walls.segment_query((x0, y0), (x1, y1), 0.0, _ANY):
+            key = cp.handle(q.shape)
+            if key not in skip and (best is None or q.alpha < best.alpha):
+                best = cp.Hit(key, tuple(q.normal), q.alpha)
+        return best
 
 
 def first_wall_hit(space: pymunk.Space, x0: float, y0: float, x1: float, y1: float,
@@ -329,27 +503,28 @@ def first_wall_hit(space: pymunk.Space, x0: float, y0: float, x1: float, y1: flo
     return best
 
 
-WallQuery = Callable[[pymunk.Space, float, float, float, float, float, Sequence[pymunk.Shape]],
-                     pymunk.SegmentQueryInfo | None]
+WallHit = Callable[[float, float, float, float, Sequence[object]],
+                   pymunk.SegmentQueryInfo | cp.Hit | None]
 
 
-def trace(space: pymunk.Space, x: float, y: float, dx: float, dy: float, length: float,
-          radius: float, bounces_left: int, query: WallQuery = first_wall_hit
-          ) -> tuple[float, float, float, float, list[tuple[float, float]], bool]:
-    """Move a circle of ``radius`` from (x, y) along unit (dx, dy) for ``length`` px,
-    reflecting elastically off walls (continuous: exact contact points, no tunnelling).
+def trace_flight(hit: WallHit, x: float, y: float, dx: float, dy: float, length: float,
+                 bounces_left: int) -> Flight:
+    """Move a circle from (x, y) along unit (dx, dy) for ``length`` px, reflecting
+    elastically off the walls ``hit`` finds (continuous: exact contact points, no
+    tunnelling). ``hit(x0, y0, x1, y1, skip)`` is a swept query of the circle.
 
-    Returns the end position and direction, the centre at each ricochet, and whether the
-    bullet died on a wall contact with no bounces left (it then ends at that contact).
-    The physics and the ricochet predictor both use this, so they agree exactly.
-    A circle that starts overlapping a wall it is moving away from just leaves it.
+    The flight dies on a wall contact with no bounces left (it then ends there). A circle
+    that starts overlapping a wall it is moving away from just leaves it.
     """
-    points: list[tuple[float, float]] = []
-    leaving: list[pymunk.Shape] = []  # walls overlapped at the start and moved away from
+    x0, y0, dx0, dy0 = x, y, dx, dy
+    ricochets: list[Ricochet] = []
+    leaving: list[object] = []  # walls overlapped at the start and moved away from
+    s = 0.0
     while True:
-        q = query(space, x, y, x + dx * length, y + dy * length, radius, leaving)
+        q = hit(x, y, x + dx * length, y + dy * length, leaving)
         if q is None:
-            return x + dx * length, y + dy * length, dx, dy, points, False
+            return Flight(x0, y0, dx0, dy0, ricochets, s + length,
+                          x + dx * length, y + dy * length, dx, dy, False)
         nx, ny = q.normal  # out of the wall, toward the bullet
         vn = dx * nx + dy * ny
         if vn >= 0:
@@ -357,45 +532,35 @@ def trace(space: pymunk.Space, x: float, y: float, dx: float, dy: float, length:
             continue
         travel = length * q.alpha
         x, y = x + dx * travel, y + dy * travel
+        s += travel
         if bounces_left == 0:
-            return x, y, dx, dy, points, True
+            return Flight(x0, y0, dx0, dy0, ricochets, s, x, y, dx, dy, True)
         dx, dy = dx - 2 * vn * nx, dy - 2 * vn * ny
         norm = math.hypot(dx, dy)
         dx, dy = dx / norm, dy / norm
-        points.append((x, y))
+        cx, cy = x, y
         bounces_left -= 1
         length -= travel
         x, y = x + nx * SKIN, y + ny * SKIN
+        ricochets.append(Ricochet(s, cx, cy, x, y, dx, dy))
         leaving.clear()
 
 
-def _bullet_wall(arbiter: pymunk.Arbiter, space: pymunk.Space, world: World) -> None:
-    """Ricochet: re-trace this substep's travel continuously from where it began."""
-    arbiter.process_collision = False
-    shape = arbiter.shapes[0]
-    b = shape.slot
-    if not world.bullet_active[b] or world._traced[b] == world.substep:
-        return
-    world._traced[b] = world.substep
-    body = shape.body
-    speed, length = world.cfg.bullet_speed, world.step_len
-    vx, vy = body.velocity
-    dx, dy = vx / speed, vy / speed
-    x1, y1 = body.position
-    left = world.cfg.bullet_max_bounces - int(world.bullet_bounces[b])
-    done = world.substep - (int(world.bullet_expire[b]) - world.life_substeps)
-    remaining = world.cfg.bullet_max_distance - done * length  # distance limit mid-substep
-    x, y, dx, dy, points, died = trace(space, x1 - dx * length, y1 - dy * length, dx, dy,
-                                       min(length, remaining), world.cfg.bullet_radius, left)
-    for px, py in points:
-        world.bounces.append(Bounce(b, px, py))
-    world.bullet_bounces[b] += len(points)
-    if died:
-        world.despawn(b)
-        world.expired.append(b)
-    elif points:
-        body.position = (x, y)
-        body.velocity = (dx * speed, dy * speed)
+WallQuery = Callable[[pymunk.Space, float, float, float, float, float, Sequence[pymunk.Shape]],
+                     pymunk.SegmentQueryInfo | None]
+
+
+def trace(space: pymunk.Space, x: float, y: float, dx: float, dy: float, length: float,
+          radius: float, bounces_left: int, query: WallQuery = first_wall_hit
+          ) -> tuple[float, float, float, float, list[tuple[float, float]], bool]:
+    """:func:`trace_flight` with ``query(space, x0, y0, x1, y1, radius, skip)``.
+
+    Returns the end position and direction, the centre at each ricochet, and whether the
+    bullet died on a wall contact with no bounces left (it then ends at that contact).
+    """
+    f = trace_flight(lambda x0, y0, x1, y1, skip: query(space, x0, y0, x1, y1, radius, skip),
+                     x, y, dx, dy, length, bounces_left)
+    return f.ex, f.ey, f.edx, f.edy, [(r.x, r.y) for r in f.ricochets], f.died
 
 
 def _bullet_tank(arbiter: pymunk.Arbiter, space: pymunk.Space, world: World) -> None:
@@ -410,22 +575,23 @@ def _bullet_tank(arbiter: pymunk.Arbiter, space: pymunk.Space, world: World) -> 
         return
     if shooter == victim and world.tick - world.bullet_fired_tick[b] < world.grace_ticks:
         return
-    body, length = bullet_shape.body, world.step_len
-    x1, y1 = body.position
-    vx, vy = body.velocity
-    k = length / world.cfg.bullet_speed
-    hit = tank_shape.segment_query((x1 - vx * k, y1 - vy * k), (x1, y1), world.cfg.bullet_radius)
-    if hit is None:
+    k = world._path_hit(b, tank_shape)
+    if k < 0:
         return
+    bullet = world._bullets[b]
+    if k > bullet.done:
+        world._ricochet(b, bullet, k)  # the ricochets it made before the hit
     world.hits.append((b, victim))
     world.despawn(b)
 
 
 def _tank_wall_begin(arbiter: pymunk.Arbiter, space: pymunk.Space, world: World) -> None:
     world.wall_contacts[arbiter.shapes[0].slot] += 1
+    world.contacts_changed += 1
 
 
 def _tank_wall_end(arbiter: pymunk.Arbiter, space: pymunk.Space, world: World) -> None:
     slot = getattr(arbiter.shapes[0], "slot", None)
     if slot is not None:  # None while a discarded space is being torn down
         world.wall_contacts[slot] -= 1
+        world.contacts_changed += 1

@@ -1,0 +1,89 @@
+"""Direct Chipmunk calls through pymunk's cffi layer, for the tick's hot path.
+
+pymunk's Python wrappers cost 0.5-3 us a call (argument checks, a C struct allocated per
+query, result objects); the tick repeats a few of them every substep or shot. Each helper
+here makes the one Chipmunk call that the pymunk method named in its docstring makes,
+with the same result (tests/test_world.py compares them). It relies on pymunk 7's
+internals (``pymunk._chipmunk_cffi``, ``Body._body``, ``Space._space``, the
+``pymunk.batch`` call data); the project pins pymunk below 8.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import pymunk
+import pymunk.batch
+from pymunk._chipmunk_cffi import ffi, lib
+
+_GET_BODIES = ffi.addressof(lib, "pmSpaceBodyGetIteratorFuncBatched")
+
+
+def set_position(body: pymunk.Body, x: float, y: float) -> None:
+    """``body.position = (x, y)``."""
+    lib.cpBodySetPosition(body._body, (x, y))
+
+
+def set_velocity(body: pymunk.Body, vx: float, vy: float) -> None:
+    """``body.velocity = (vx, vy)``."""
+    lib.cpBodySetVelocity(body._body, (vx, vy))
+
+
+def set_angular_velocity(body: pymunk.Body, w: float) -> None:
+    """``body.angular_velocity = w``."""
+    lib.cpBodySetAngularVelocity(body._body, w)
+
+
+class Hit(NamedTuple):
+    """A segment query's answer: ``shape`` is Chipmunk's handle of the shape (compare
+    with :func:`handle`), ``normal`` and ``alpha`` as in ``pymunk.SegmentQueryInfo``."""
+
+    shape: object
+    normal: tuple[float, float]
+    alpha: float
+
+
+def handle(shape: pymunk.Shape) -> object:
+    """Chipmunk's handle of ``shape``, as :class:`Hit` gives it."""
+    return shape._shape
+
+
+class FirstHit:
+    """``space.segment_query_first(start, end, radius, shape_filter)`` as a :class:`Hit`
+    or None, with one result struct allocated once."""
+
+    def __init__(self, space: pymunk.Space, radius: float, shape_filter: pymunk.ShapeFilter):
+        self._space, self._radius, self._filter = space._space, radius, shape_filter
+        self._info = ffi.new("cpSegmentQueryInfo *")
+
+    def __call__(self, x0: float, y0: float, x1: float, y1: float) -> Hit | None:
+        info = self._info
+        shape = lib.cpSpaceSegmentQueryFirst(self._space, (x0, y0), (x1, y1), self._radius,
+                                             self._filter, info)
+        if shape == ffi.NULL:
+            return None
+        return Hit(shape, (info.normal.x, info.normal.y), info.alpha)
+
+
+class BodyReader:
+    """``pymunk.batch.get_space_bodies(space, fields, buffer)`` with its call data built
+    once. The first read sizes the buffer; later reads rewrite it in place (the space's
+    bodies must not change), so ``floats`` views every read while the reader lives."""
+
+    def __init__(self, space: pymunk.Space, fields: pymunk.batch.BodyFields):
+        buf = self._buffer = pymunk.batch.Buffer()
+        # pymunk 7.3 never frees a Buffer's C arrays: they go with the reader.
+        buf._float_arr = ffi.gc(buf._float_arr, lib.pmFloatArrayFree)
+        buf._int_arr = ffi.gc(buf._int_arr, lib.pmIntArrayFree)
+        pymunk.batch.get_space_bodies(space, fields, buf)
+        self._space = space._space
+        self._floats = self._buffer._float_arr
+        self._data = ffi.new("pmBatchedData *")
+        self._data.fields = fields.value
+        self._data.floatArray = self._floats
+        self._data.intArray = self._buffer._int_arr
+        self.floats = ffi.buffer(self._floats.arr, self._floats.num * ffi.sizeof("cpFloat"))
+
+    def read(self) -> None:
+        self._floats.num = 0
+        lib.cpSpaceEachBody(self._space, _GET_BODIES, self._data)
