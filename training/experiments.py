@@ -53,7 +53,7 @@ TABLES = ("table3", "table4", "sac", "league", "heldout")
 EVAL_SEED_BASE = 1_000_000
 DEFAULT_GAMES = 200
 DEFAULT_BUDGET_MIN = 15.0
-DEFAULT_STEPS_PER_MINUTE = 24_000  # PPO at the paper's Table 7 settings, 1 core
+DEFAULT_STEPS_PER_MINUTE = 36_000  # PPO 1v1 at Table 7 settings on one quiet core (~600/s)
 LAYOUTS = ("counts", "matrix")
 CHECKS = ("beats_paper", "best_average", "within", "gap")
 EVAL_ENVS = 16
@@ -559,11 +559,12 @@ def _evaluate(job: Job, spec: EvalSpec) -> dict[str, Any]:
     return data
 
 
-def run_job(job: Job) -> tuple[str, str | None]:
+def run_job(job: Job) -> tuple[str, str | None, float]:
     """Train (unless finished) and evaluate (what is missing); returns (key, error or
-    None). A failure is written to ``<run_dir>/error.txt`` and does not raise."""
+    None, seconds). A failure is written to ``<run_dir>/error.txt`` and does not raise."""
     from alphatank.training.threads import limit_threads
 
+    t0 = time.time()
     err = Path(job.run_dir) / "error.txt"
     try:
         limit_threads()
@@ -574,7 +575,7 @@ def run_job(job: Job) -> tuple[str, str | None]:
                 _evaluate(job, spec)
         if err.exists():
             err.unlink()
-        return job.key, None
+        return job.key, None, time.time() - t0
     except Exception as exc:  # a failed row is reported; the others go on
         text = traceback.format_exc()
         try:
@@ -583,7 +584,7 @@ def run_job(job: Job) -> tuple[str, str | None]:
         except OSError:
             pass
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
-        return job.key, f"{type(exc).__name__}: {first}"
+        return job.key, f"{type(exc).__name__}: {first}", time.time() - t0
 
 
 def execute(jobs: Sequence[Job], workers: int = 1, progress: bool = True,
@@ -599,11 +600,11 @@ def execute(jobs: Sequence[Job], workers: int = 1, progress: bool = True,
         from tqdm import tqdm
         bar = tqdm(total=len(jobs), unit="run", dynamic_ncols=True, desc="experiments")
 
-    def finish(job: Job, error: str | None, t0: float) -> None:
+    def finish(job: Job, error: str | None, seconds: float) -> None:
         if error is not None:
             failed[job.key] = error
         if on_done is not None:
-            on_done(job, error, time.time() - t0)
+            on_done(job, error, seconds)
         if bar is not None:
             bar.update(1)
 
@@ -612,23 +613,22 @@ def execute(jobs: Sequence[Job], workers: int = 1, progress: bool = True,
             for job in jobs:
                 if bar is not None:
                     bar.set_postfix_str(", ".join(job.rows), refresh=True)
-                t0 = time.time()
-                finish(job, run_job(job)[1], t0)
+                _, error, seconds = run_job(job)
+                finish(job, error, seconds)
         else:
             import multiprocessing as mp
             from concurrent.futures import ProcessPoolExecutor, as_completed
 
             with ProcessPoolExecutor(max_workers=workers,
                                      mp_context=mp.get_context("spawn")) as pool:
-                t0 = time.time()
                 futures = {pool.submit(run_job, job): job for job in jobs}
                 for fut in as_completed(futures):
                     job = futures[fut]
                     try:
-                        error = fut.result()[1]
+                        _, error, seconds = fut.result()
                     except Exception as exc:  # the worker process died
-                        error = f"worker died: {type(exc).__name__}: {exc}"
-                    finish(job, error, t0)
+                        error, seconds = f"worker died: {type(exc).__name__}: {exc}", 0.0
+                    finish(job, error, seconds)
     finally:
         if bar is not None:
             bar.close()
@@ -636,8 +636,9 @@ def execute(jobs: Sequence[Job], workers: int = 1, progress: bool = True,
 
 
 def estimate_minutes(plan: Plan, jobs: Sequence[Job], workers: int) -> float:
-    """Rough wall time of ``jobs``: the budget per run plus ~0.25 min per evaluation of
-    200 games, spread over the workers."""
-    total = sum(plan.budget_min + 0.25 * len(j.evals) * plan.games / DEFAULT_GAMES
+    """Rough wall time of ``jobs``: the budget per run plus ~1.5 min per evaluation of 200
+    games (200 games of up to 1,200 ticks took 1-3 min on a shared 2-core machine),
+    spread over the workers."""
+    total = sum(plan.budget_min + 1.5 * len(j.evals) * plan.games / DEFAULT_GAMES
                 for j in jobs)
     return total / max(1, workers)

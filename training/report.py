@@ -453,6 +453,14 @@ def _markdown(plan: Plan, table: Table, results: list[RowResult], checks: list[d
     if league is not None:
         lines += ["", "## openskill ratings (agents and bots in one table, from the "
                   "evaluation games; draws are ties)", "", rating_table(league)]
+    for rr in results:
+        for s, run in sorted(rr.runs.items()):
+            if run.get("league"):
+                lines += ["", f"## {rr.row.title}, seed {s}: the league's own ratings at the "
+                          f"end of training (learner, bots, snapshots)", "",
+                          markdown_table(("Player", "mu", "sigma", "ordinal"),
+                                         [(n, f"{m:.2f}", f"{sg:.2f}", f"{o:.2f}")
+                                          for n, m, sg, o in run["league"]])]
     lines += ["", "## Runs", "", runs_table(results)]
     if missing:
         lines += ["", "## Missing or failed", ""] + [f"- {m}" for m in missing]

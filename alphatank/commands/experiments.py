@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import shlex
 import sys
+from pathlib import Path
 
 CHOICES = ("table3", "table4", "sac", "league", "heldout", "all")
 
@@ -65,6 +66,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.workers < 1:
         return _error(f"--workers must be >= 1, got {args.workers}")
+    if Path(args.out).exists() and not Path(args.out).is_dir():
+        return _error(f"--out {args.out}: exists and is not a folder")
     try:
         names = table_names(args.experiments_dir)
         if args.table == "all":
@@ -89,7 +92,10 @@ def run(args: argparse.Namespace) -> int:
         return _error(f"{args.out} already holds {len(started)} of this plan's runs (e.g. "
                       f"{started[0].run_dir}); pass --resume to keep finished ones and "
                       f"finish the rest, or choose another --out")
-    command = "alphatank experiments " + " ".join(shlex.quote(a) for a in _argv())
+    from alphatank.extras import require
+
+    require("train", "alphatank experiments")
+    command = _command(args)
     failed: dict[str, str] = {}
     if not args.report_only and todo:
         eta = estimate_minutes(plan, todo, args.workers)
@@ -113,7 +119,10 @@ def run(args: argparse.Namespace) -> int:
     from alphatank.training.report import write_report
 
     for table in plan.tables:
-        data = write_report(plan, table, command)
+        try:
+            data = write_report(plan, table, command)
+        except OSError as exc:
+            return _error(f"cannot write the {table.name} report in {args.out}: {exc}")
         status = ", ".join(f"{c['kind']}: " + {True: "met", False: "not met",
                                                None: "not measurable"}[c["passed"]]
                            for c in data["checks"])
@@ -130,9 +139,21 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _argv() -> list[str]:
-    argv = sys.argv[1:]
-    return argv[1:] if argv and argv[0] == "experiments" else argv
+# flags that change what is made, in the order a command line shows them
+RECORDED = (("--budget", "budget", 15.0), ("--seeds", "seeds", 1), ("--workers", "workers", 1),
+            ("--games", "games", 200), ("--steps", "steps", None), ("--rows", "rows", ""),
+            ("--experiments-dir", "experiments_dir", None), ("--wandb", "wandb", "disabled"),
+            ("--out", "out", "results"))
+
+
+def _command(args: argparse.Namespace) -> str:
+    """The command line that makes these tables (options at their defaults left out)."""
+    parts = ["alphatank", "experiments", args.table]
+    for flag, attr, default in RECORDED:
+        value = getattr(args, attr)
+        if value != default:
+            parts += [flag, f"{value:g}" if isinstance(value, float) else str(value)]
+    return " ".join(shlex.quote(p) for p in parts)
 
 
 def _print_plan(plan, todo, workers, estimate) -> None:  # noqa: ANN001
