@@ -94,7 +94,8 @@ def test_league_trains_against_bots_and_its_own_snapshots(tmp_path):
                                 "snapshots": 2},
                       learners=(LearnerSpec("ppo", "ppo", (0,),
                                             PPOConfig(num_steps=64, update_epochs=1)),))
-    env = MixedVectorEnv(["vs_smart", "vs_dodge"], 4, observation="egocentric",
+    # the open map has 4 wall rectangles, the battlefield 11: snapshots play on both
+    env = MixedVectorEnv(["vs_aggressive", "vs_dodge"], 4, observation="egocentric",
                          game_overrides={"max_steps": 60})
     tr = Trainer(cfg, tmp_path / "run", env=env, progress=False)
     tr.train()
@@ -103,6 +104,7 @@ def test_league_trains_against_bots_and_its_own_snapshots(tmp_path):
     names = {name for name, *_ in lg.table()}
     assert {"learner", "random@0.5", "dodge@1", "self@0", "self@1024"} <= names
     assert lg.games > 0 and sum(len(r) for r in lg.results.values()) == lg.games
+    assert sum(len(r) for n, r in lg.results.items() if n.startswith("self@")) > 0
     assert any(k.startswith("league/score/") for k in tr.history[-1])
     state = lg.state_dict()
     again = make_schedule(cfg.schedule, cfg.total_steps)

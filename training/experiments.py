@@ -560,31 +560,42 @@ def _evaluate(job: Job, spec: EvalSpec) -> dict[str, Any]:
 
 
 def run_job(job: Job) -> tuple[str, str | None, float]:
-    """Train (unless finished) and evaluate (what is missing); returns (key, error or
-    None, seconds). A failure is written to ``<run_dir>/error.txt`` and does not raise."""
+    """Train (unless finished) and evaluate what is missing (each evaluation on its own: one
+    that fails does not stop the others); returns (key, error or None, seconds). Failures
+    are written to ``<run_dir>/error.txt`` and do not raise."""
     from alphatank.training.threads import limit_threads
 
     t0 = time.time()
     err = Path(job.run_dir) / "error.txt"
+    errors: list[tuple[str, str]] = []  # (one line, traceback)
+
+    def failed(exc: Exception) -> None:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+        errors.append((f"{type(exc).__name__}: {first}", traceback.format_exc()))
+
+    limit_threads()
     try:
-        limit_threads()
         if not job.done_file.is_file():
             _train(job)
+    except Exception as exc:  # a failed row is reported; the others go on
+        failed(exc)
+    else:
         for spec in job.evals:
             if not job.eval_file(spec).is_file():
-                _evaluate(job, spec)
+                try:
+                    _evaluate(job, spec)
+                except Exception as exc:
+                    failed(exc)
+    if not errors:
         if err.exists():
             err.unlink()
         return job.key, None, time.time() - t0
-    except Exception as exc:  # a failed row is reported; the others go on
-        text = traceback.format_exc()
-        try:
-            err.parent.mkdir(parents=True, exist_ok=True)
-            err.write_text(text, encoding="utf-8")
-        except OSError:
-            pass
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
-        return job.key, f"{type(exc).__name__}: {first}", time.time() - t0
+    try:
+        err.parent.mkdir(parents=True, exist_ok=True)
+        err.write_text("\n".join(tb for _, tb in errors), encoding="utf-8")
+    except OSError:
+        pass
+    return job.key, "; ".join(line for line, _ in errors), time.time() - t0
 
 
 def execute(jobs: Sequence[Job], workers: int = 1, progress: bool = True,

@@ -127,10 +127,14 @@ class LeagueSchedule(OpponentSchedule):
         learner.load_state_dict(frozen_state(tr.learners[spec.name].state_dict()),
                                 weights_only=True)
         name = f"self@{step}"
+        meta = dict(tr.observation_meta)
+        if meta["kind"] != "paper":  # room for the walls of every map the env plays
+            cores = [b.core for b in getattr(env, "blocks", [env]) if hasattr(b, "core")]
+            meta["max_walls"] = max([int(meta["max_walls"]),
+                                     *(c.batch.walls.shape[1] for c in cores)])
         # one Policy object per env: a policy keeps one match's observation state
         for e in range(env.num_envs):
-            env.add_opponent(f"{name}/{e}", LivePolicy({spec.name: learner},
-                                                       tr.observation_meta, spec.name))
+            env.add_opponent(f"{name}/{e}", LivePolicy({spec.name: learner}, meta, spec.name))
         if name not in self.index:
             self._add(name)
         self.pool.append(name)
