@@ -274,10 +274,10 @@ def make_schedule(spec: dict[str, Any], total_steps: int, seed: int = 0) -> Oppo
             return CycleSchedule(**spec)
         if kind == "winrate":
             return WinRateCurriculum(**spec)
-        if kind == "league":
-            from alphatank.training.league import LeagueSchedule
+        if kind == "league":  # resolved late: the league copies learners (checkpoint layer)
+            from alphatank.game.seats import resolve
             spec.setdefault("seed", seed)
-            return LeagueSchedule(**spec)
+            return resolve("alphatank.training.league:LeagueSchedule")(**spec)
     except TypeError as exc:
         raise ValueError(f"schedule {kind!r}: {exc}") from None
     raise ValueError(f"unknown schedule kind {kind!r}; valid: none, curriculum, cycle, winrate, "
