@@ -28,6 +28,9 @@ COMMANDS = {
     "demo": "The main job: train PPO vs the aggressive bot, evaluate, record (runs/<name>/).",
     "train": "Train PPO/SAC learners from a named preset (vs bots, self-play, teams).",
     "eval": "Evaluate a checkpoint against bots: Table-3 layout with Wilson 95% intervals.",
+    "experiments": "The paper's tables in one command: train every row within a budget, "
+                   "evaluate, report with the paper's figures.",
+    "plot": "Learning curves of one or many runs (win rate, return vs steps and wall time).",
     "play": "Play interactively: humans, bots and checkpoints in any seat.",
     "record": "Record a headless match to MP4/GIF (and a replay file).",
     "replay": "Re-simulate, render or record a replay file.",

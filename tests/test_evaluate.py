@@ -17,6 +17,7 @@ from alphatank.training.evaluate import (
     evaluate_checkpoint,
     evaluate_policies,
     format_table,
+    rate_games,
     write_csv,
     write_json,
 )
@@ -117,3 +118,67 @@ def test_eval_command_prints_table_and_writes_files(checkpoint, tmp_path, capsys
     assert main(["eval", str(tmp_path / "missing")]) == 2
     assert "alphatank eval: error: " in (err := capsys.readouterr().err)
     assert "no such checkpoint" in err
+
+
+
+
+@pytest.fixture(scope="module")
+def long_games(tmp_path_factory):
+    """A barely trained (near-uniform, sampled) policy whose games run long enough to end
+    in combat."""
+    run = tmp_path_factory.mktemp("runs") / "long"
+    cfg = TrainConfig("long", "vs_aggressive", total_steps=64, num_envs=4, wandb="disabled",
+                      game={"max_steps": 400},
+                      learners=(LearnerSpec("ppo", "ppo", (0,),
+                                            config=PPOConfig(num_steps=16, update_epochs=1)),))
+    Trainer(cfg, run, progress=False).train()
+    return run
+
+
+def test_sampled_policy_games_do_not_depend_on_num_envs(long_games):
+    """Game i depends only on (seed, i): sampled actions come from that game's generator,
+    whichever env plays it and however many envs run together."""
+    runs = [evaluate_checkpoint(long_games, ["aggressive"], games=8, seed=4, num_envs=n)[0]
+            for n in (1, 3, 8)]
+    assert len(runs[0].outcomes) == 8 and len(set(runs[0].lengths)) > 1
+    for r in runs[1:]:
+        assert (r.wins, r.losses, r.draws) == (runs[0].wins, runs[0].losses, runs[0].draws)
+        assert r.outcomes == runs[0].outcomes and r.lengths == runs[0].lengths
+    # the sampled actions matter: the most likely actions give other games
+    greedy = evaluate_checkpoint(long_games, ["aggressive"], games=8, seed=4, num_envs=3,
+                                 deterministic=True)[0]
+    assert greedy.lengths != runs[0].lengths
+
+
+def test_rows_are_labelled_and_columns_name_what_plays(checkpoint, tmp_path, capsys):
+    parser = argparse.ArgumentParser()
+    eval_cmd.add_arguments(parser)
+    args = parser.parse_args([str(checkpoint), f"checkpoint:{checkpoint}", "--vs", "random",
+                              "--games", "3", "--num-envs", "3", "--ratings",
+                              "--csv", str(tmp_path / "e.csv"), "--json", str(tmp_path / "e.json")])
+    assert eval_cmd.run(args) == 0
+    out = capsys.readouterr().out
+    head, _, first, second = out.splitlines()[:4]
+    assert [c.strip() for c in head.split("|")[1:4]] == ["Checkpoint", "Experiment Name",
+                                                         "Agent Wins"]
+    assert "Bot Wins" in head
+    assert first.split("|")[1].strip() == str(checkpoint)
+    assert second.split("|")[1].strip() == f"checkpoint:{checkpoint}"
+    assert "openskill" in out and "| random" in out  # the bot is rated beside the agents
+    with open(tmp_path / "e.csv") as f:
+        labels = [row["checkpoint"] for row in csv.DictReader(f)]
+    assert labels == [str(checkpoint), f"checkpoint:{checkpoint}"]
+    rows = json.loads((tmp_path / "e.json").read_text())
+    assert [r["checkpoint"] for r in rows] == labels and len(rows[0]["outcomes"]) == 3
+    # an opponent that is not a bot: the column says so
+    agent_row = EvalResult("PPO Agent vs PPO Agent", "B:ppo", wins=1, sides=("Agent", "Agent"))
+    assert "Opponent Wins" in format_table([agent_row]).splitlines()[0]
+    assert "Bot Wins" not in format_table([agent_row]).splitlines()[0]
+
+
+def test_rate_games_puts_agents_and_bots_in_one_table():
+    league = rate_games([("agent_a", "smart", ["win"] * 8 + ["loss"] * 2),
+                         ("agent_b", "smart", ["loss"] * 8 + ["draw"] * 2)])
+    mu = {name: m for name, m, *_ in league.table()}
+    assert set(mu) == {"agent_a", "agent_b", "smart"}
+    assert mu["agent_a"] > mu["smart"] > mu["agent_b"]  # 8-2 over smart; smart 8-0 over b

@@ -239,8 +239,10 @@ def test_eval_accepts_checkpoint_and_agent_arguments(trained, monkeypatch, capsy
     monkeypatch.setattr(seats, "agents_root", lambda: agents)
     assert eval_cmd.run(_args(eval_cmd, f"checkpoint:{run}", "agent:tiny", "--vs", "random",
                               "--games", "2", "--num-envs", "1")) == 0
-    rows = [ln for ln in capsys.readouterr().out.splitlines() if "vs Random Bot" in ln]
-    assert len(rows) == 2 and rows[0] == rows[1]  # the same checkpoint, the same games
+    rows = [ln.split("|")[1:] for ln in capsys.readouterr().out.splitlines()
+            if "vs Random Bot" in ln]
+    assert [r[0].strip() for r in rows] == [f"checkpoint:{run}", "agent:tiny"]  # labelled
+    assert len(rows) == 2 and rows[0][1:] == rows[1][1:]  # the same checkpoint, same games
     assert main(["eval", "agent:nobody"]) == 2
     assert "shipped agents: tiny" in capsys.readouterr().err
 

@@ -150,7 +150,9 @@ def test_winrate_curriculum_reaches_the_bots_of_the_next_episode():
     for _ in range(5):
         _, _, _, _, info = env.step(np.ones((2, 2, 3), dtype=np.int64))
     assert env.core.controllers[0][2].weakness == pytest.approx(0.2)
-    assert [ep["opponent"] for ep in info["episodes"]] == ["B:defensive(w=0.2)"] * 2
+    # the finished episodes began before the curriculum: labelled with what they met
+    assert [ep["opponent"] for ep in info["episodes"]] == ["B:defensive(w=1)"] * 2
+    assert env.core.episode_label == ["B:defensive(w=0.2)"] * 2  # the episodes begun now
 
 
 def test_bad_schedule_settings_are_rejected():
@@ -165,7 +167,7 @@ def test_bad_schedule_settings_are_rejected():
     with pytest.raises(ValueError, match="cycle mode"):
         CycleSchedule(["random"], mode="round-robin")
     with pytest.raises(ValueError, match="unknown schedule kind"):
-        make_schedule({"kind": "league"}, 100)
+        make_schedule({"kind": "tournament"}, 100)
     with pytest.raises(ValueError, match="schedule 'curriculum'"):
         make_schedule({"kind": "curriculum", "speed": 2}, 100)
 

@@ -1,11 +1,14 @@
 """Evaluation: exact win/loss/draw counts with Wilson 95% intervals, in the layout of the
-paper's Table 3, also as CSV and JSON.
+paper's Table 3, also as CSV and JSON, and an openskill table of the games.
 
 Games run in a :class:`~alphatank.envs.core.MatchSet` (the engine under every env): the
 checkpoint's learners drive their seats with batched inference over all matches, bots or
 any other Policy fill the rest. Each env plays a fixed quota of games (never "the first N
-to finish", which would favour short games), and game ``i`` always uses the seed derived
-from ``(seed, i)``, so counts are reproducible.
+to finish", which would favour short games). Game ``i`` depends only on ``(seed, i)``:
+its match seed is :func:`game_seed` ``(seed, i)`` and a sampled policy draws its actions
+from :func:`sampling_rng` ``(seed, i)`` (each env row of a batched forward pass takes its
+noise from the generator of the game that env is playing), so counts and per-game
+outcomes are the same whatever ``num_envs``.
 """
 
 from __future__ import annotations
@@ -14,7 +17,7 @@ import csv
 import dataclasses
 import json
 from collections import Counter
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -24,13 +27,20 @@ import numpy as np
 from alphatank.envs.core import MatchSet
 from alphatank.game.scenarios import Scenario, Seat, load_scenario
 from alphatank.sim.policy import Policy
-from alphatank.stats import wilson_interval
+from alphatank.stats import League, wilson_interval
 from alphatank.training.checkpoint import Checkpoint, load_checkpoint
+
+SAMPLING_STREAM = 1  # third SeedSequence word of the policy's sampling generator
+OUTCOME_SCORE = {"win": 1, "draw": 0, "loss": -1}
 
 
 @dataclass
 class EvalResult:
-    """Outcome counts of ``games`` games from the evaluated team's point of view."""
+    """Outcome counts of ``games`` games from the evaluated team's point of view.
+
+    ``agent`` labels what was evaluated (the checkpoint as given); ``sides`` names what
+    plays on each side ("Agent", "Bot" or "Opponent" for a mix), for column headers;
+    ``outcomes`` and ``lengths`` are per game, in game-index order."""
 
     name: str
     opponent: str
@@ -38,6 +48,9 @@ class EvalResult:
     losses: int = 0
     draws: int = 0
     lengths: list[int] = field(default_factory=list)
+    agent: str = ""
+    sides: tuple[str, str] = ("Agent", "Bot")
+    outcomes: list[str] = field(default_factory=list)
 
     @property
     def games(self) -> int:
@@ -51,24 +64,62 @@ class EvalResult:
     def interval(self) -> tuple[float, float]:
         return wilson_interval(self.wins, self.games)
 
-    def as_dict(self) -> dict[str, Any]:
+    def as_dict(self, per_game: bool = False) -> dict[str, Any]:
+        """One row of the CSV / JSON (``per_game``: with the outcome of every game)."""
         lo, hi = self.interval
-        return {"experiment": self.name, "opponent": self.opponent, "games": self.games,
-                "wins": self.wins, "losses": self.losses, "draws": self.draws,
-                "win_rate": round(self.win_rate, 4), "ci95_low": round(lo, 4),
-                "ci95_high": round(hi, 4),
-                "mean_length": round(float(np.mean(self.lengths)), 1) if self.lengths else 0.0}
+        row = {"checkpoint": self.agent, "experiment": self.name, "opponent": self.opponent,
+               "opponent_kind": self.sides[1].lower(), "games": self.games,
+               "wins": self.wins, "losses": self.losses, "draws": self.draws,
+               "win_rate": round(self.win_rate, 4), "ci95_low": round(lo, 4),
+               "ci95_high": round(hi, 4),
+               "mean_length": round(float(np.mean(self.lengths)), 1) if self.lengths else 0.0}
+        if per_game:
+            row["outcomes"] = list(self.outcomes)
+        return row
 
 
 def game_seed(seed: int, index: int) -> int:
+    """Match seed of game ``index`` of an evaluation seeded ``seed``."""
     return int(np.random.SeedSequence([seed, index]).generate_state(1, np.uint64)[0])
 
 
+def sampling_rng(seed: int, index: int) -> np.random.Generator:
+    """The generator a sampled policy draws game ``index``'s actions from."""
+    return np.random.default_rng([seed, index, SAMPLING_STREAM])
+
+
+class GameStreams:
+    """A stand-in for ``np.random.Generator`` in batched inference: rows come in blocks of
+    ``rows_per_env`` per env, and env ``e``'s block is drawn from ``gens[e]`` (the
+    generator of the game env ``e`` plays; the list is updated in place between games).
+    Offers the draws the learners' samplers use (``random``, ``standard_normal``)."""
+
+    def __init__(self, gens: list[np.random.Generator], rows_per_env: int):
+        self.gens, self.k = gens, int(rows_per_env)
+
+    def _draw(self, method: str, size: Any, dtype: Any) -> np.ndarray:
+        size = (size,) if isinstance(size, int) else tuple(size)
+        if size[0] != len(self.gens) * self.k:
+            raise ValueError(f"expected {len(self.gens)} envs x {self.k} rows, got {size[0]}")
+        out = np.empty(size, dtype=dtype)
+        block = (self.k, *size[1:])
+        for e, g in enumerate(self.gens):
+            out[e * self.k:(e + 1) * self.k] = getattr(g, method)(block, dtype=dtype)
+        return out
+
+    def random(self, size: Any, dtype: Any = np.float64) -> np.ndarray:
+        return self._draw("random", size, dtype)
+
+    def standard_normal(self, size: Any, dtype: Any = np.float64) -> np.ndarray:
+        return self._draw("standard_normal", size, dtype)
+
+
 def play_games(core: MatchSet, team: str, games: int, seed: int,
-               act: Callable[[np.ndarray], np.ndarray] | None = None,
+               act: Callable[[np.ndarray, list[np.random.Generator]], np.ndarray] | None = None,
                result: EvalResult | None = None) -> EvalResult:
-    """Play ``games`` games in ``core`` (its driven seats moved by ``act(obs)`` ->
-    (E, L, 3) actions) and count them for ``team``."""
+    """Play ``games`` games in ``core`` (its driven seats moved by ``act(obs, gens)`` ->
+    (E, L, 3) actions, ``gens[e]`` the sampling generator of env ``e``'s current game)
+    and count them for ``team``."""
     if games <= 0:
         raise ValueError(f"games must be > 0, got {games}")
     res = result or EvalResult(name="", opponent="")
@@ -77,51 +128,59 @@ def play_games(core: MatchSet, team: str, games: int, seed: int,
     start = np.concatenate([[0], np.cumsum(quota)[:-1]]).astype(int)
     played = [0] * E
     extra = games  # seeds for envs that are done but must keep ticking
-    seeds = []
+    index = []  # game index each env plays now
     for e in range(E):
         if quota[e]:
-            seeds.append(game_seed(seed, int(start[e])))
+            index.append(int(start[e]))
         else:
-            seeds.append(game_seed(seed, extra))
+            index.append(extra)
             extra += 1
-    obs = core.reset_all(seeds)
+    gens = [sampling_rng(seed, i) for i in index]
+    obs = core.reset_all([game_seed(seed, i) for i in index])
     L = len(core.driven)
     idle = np.ones((E, L, 3), dtype=np.int64)
+    done: dict[int, tuple[str, int]] = {}
     while min(p - q for p, q in zip(played, quota, strict=True)) < 0:
-        actions = act(obs) if act is not None and L else idle
+        actions = act(obs, gens) if act is not None and L else idle
         _, obs = core.step(actions)
         for e, m in enumerate(core.matches):
             if not m.done:
                 continue
             if played[e] < quota[e]:
-                if m.winner is None:
-                    res.draws += 1
-                elif m.winner == team:
-                    res.wins += 1
-                else:
-                    res.losses += 1
-                res.lengths.append(int(m.tick))
+                out = "draw" if m.winner is None else "win" if m.winner == team else "loss"
+                done[index[e]] = (out, int(m.tick))
                 played[e] += 1
             if played[e] < quota[e]:
-                core.reset_env(e, game_seed(seed, int(start[e]) + played[e]))
+                index[e] = int(start[e]) + played[e]
             else:
-                core.reset_env(e, game_seed(seed, extra))
+                index[e] = extra
                 extra += 1
+            gens[e] = sampling_rng(seed, index[e])
+            core.reset_env(e, game_seed(seed, index[e]))
         obs = core.obs.build()
+    for i in sorted(done):
+        out, length = done[i]
+        res.outcomes.append(out)
+        res.lengths.append(length)
+    counts = Counter(out for out, _ in done.values())
+    res.wins += counts["win"]
+    res.losses += counts["loss"]
+    res.draws += counts["draw"]
     return res
 
 
 def batched_actor(learners: dict[str, Any], groups: dict[str, list[int]], num_envs: int,
-                  deterministic: bool, seed: int) -> Callable[[np.ndarray], np.ndarray]:
-    """``act(obs (E, L, D)) -> (E, L, 3)``: each learner acts for its columns ``groups``."""
-    rng = np.random.default_rng(seed)
+                  deterministic: bool
+                  ) -> Callable[[np.ndarray, list[np.random.Generator]], np.ndarray]:
+    """``act(obs (E, L, D), gens) -> (E, L, 3)``: each learner acts for its columns
+    ``groups``, env ``e``'s rows sampled from ``gens[e]``."""
     width = sum(len(cols) for cols in groups.values())
     out = np.ones((num_envs, width, 3), dtype=np.int64)
 
-    def act(obs: np.ndarray) -> np.ndarray:
+    def act(obs: np.ndarray, gens: list[np.random.Generator]) -> np.ndarray:
         for name, cols in groups.items():
             x = obs[:, cols].reshape(-1, obs.shape[-1])
-            a = learners[name].policy_actions(x, deterministic, rng)
+            a = learners[name].policy_actions(x, deterministic, GameStreams(gens, len(cols)))
             out[:, cols] = a.reshape(num_envs, len(cols), 3)
         return out
 
@@ -146,23 +205,48 @@ def _label(seats: Sequence[Seat], algo_of: dict[int, str], idx: Sequence[int],
     return " + ".join(parts) + f" {noun}"
 
 
+def side_kind(seats: Sequence[Seat], idx: Sequence[int]) -> str:
+    """What plays seats ``idx``: "Bot" (bots only), "Agent" (learners, checkpoints,
+    shipped agents only) or "Opponent" (a mix, or anything else)."""
+    kinds = {"Bot" if seats[i].controller == "bot" else
+             "Agent" if seats[i].controller in ("learner", "checkpoint", "agent") else
+             "Opponent" for i in idx}
+    return kinds.pop() if len(kinds) == 1 else "Opponent"
+
+
+def with_map(sc: Scenario, map_name: str | None) -> Scenario:
+    """``sc`` played on ``map_name`` (a shipped map or folder such as ``test``, a .txt
+    path or a folder of maps); None keeps its own."""
+    if map_name is None:
+        return sc
+    from alphatank.game.scenarios import parse_scenario
+
+    return parse_scenario({**sc.to_dict(), "map": map_name}, f"{sc.source} (map {map_name!r})")
+
+
 def evaluate_checkpoint(checkpoint: str | Path | Checkpoint, opponents: Sequence[str | None],
                         games: int = 100, seed: int = 0, scenario: str | Scenario | None = None,
                         team: str | None = None, deterministic: bool = False,
-                        num_envs: int = 16, weakness: float | None = None
+                        num_envs: int = 16, weakness: float | None = None,
+                        map_name: str | None = None, label: str | None = None
                         ) -> list[EvalResult]:
     """One :class:`EvalResult` per opponent for a saved checkpoint (see
-    :func:`evaluate_learners`)."""
+    :func:`evaluate_learners`), each labelled ``label`` (default: the checkpoint's path);
+    ``map_name`` plays the scenario on other maps."""
     ckpt = checkpoint if isinstance(checkpoint, Checkpoint) else load_checkpoint(checkpoint)
     tc = ckpt.train_config
     learners = {name: ckpt.load_learner(name, weights_only=True)
                 for name in ckpt.learner_names()}
-    return evaluate_learners(
+    base = load_scenario(scenario) if scenario is not None else ckpt.scenario
+    results = evaluate_learners(
         learners, ckpt.meta["observation"], {s.name: s.algo for s in ckpt.learner_specs},
-        load_scenario(scenario) if scenario is not None else ckpt.scenario, opponents,
-        games=games, seed=seed, team=team, deterministic=deterministic, num_envs=num_envs,
-        weakness=weakness, game_overrides=tc.game, reward_overrides=tc.rewards,
-        source=str(ckpt.path))
+        with_map(base, map_name), opponents, games=games, seed=seed, team=team,
+        deterministic=deterministic, num_envs=num_envs, weakness=weakness,
+        game_overrides=tc.game, reward_overrides=tc.rewards, source=str(ckpt.path))
+    for r in results:
+        r.agent = label if label is not None else str(checkpoint if not isinstance(
+            checkpoint, Checkpoint) else checkpoint.path)
+    return results
 
 
 def evaluate_learners(learners: dict[str, Any], observation: dict[str, Any],
@@ -176,7 +260,7 @@ def evaluate_learners(learners: dict[str, Any], observation: dict[str, Any],
     the first learner seat) is played by ``learners`` (per seat as in training). Opponent
     ``None`` keeps the scenario's own opponents (other learner seats are played by their
     learners too); a bot name puts that bot, at ``weakness`` (default 1), in every seat
-    outside the team."""
+    outside the team. Results do not depend on ``num_envs`` (module docstring)."""
     seat_learner = {int(k): v for k, v in observation["seat_learner"].items()}
     first = next(iter(learners))
     if not base.learner_seats:
@@ -210,13 +294,14 @@ def evaluate_learners(learners: dict[str, Any], observation: dict[str, Any],
         groups: dict[str, list[int]] = {}
         for col, seat in enumerate(driven):
             groups.setdefault(seat_learner.get(seat, first), []).append(col)
-        act = batched_actor(learners, groups, n_env, deterministic, seed)
+        act = batched_actor(learners, groups, n_env, deterministic)
         algo_of = {i: algos[seat_learner.get(i, first)] for i in driven}
         ours = [i for i, s in enumerate(seats) if s.team == team]
         theirs = [i for i, s in enumerate(seats) if s.team != team]
         res = EvalResult(name=f"{_label(seats, algo_of, ours, True)} vs "
                               f"{_label(seats, algo_of, theirs, False)}",
-                         opponent=opp or core.describe_opponents(0))
+                         opponent=opp or core.describe_opponents(0),
+                         sides=("Agent", side_kind(seats, theirs)))
         results.append(play_games(core, team, games, seed, act, res))
     return results
 
@@ -228,38 +313,86 @@ def evaluate_policies(scenario: str | Scenario, policies: dict[int, Policy], tea
     Policy: bots, checkpoints, ...); bot seats play as the scenario says."""
     sc = load_scenario(scenario)
     core = MatchSet(sc, max(1, min(num_envs, games)), driven=[], seat_policies=policies)
-    res = EvalResult(name=name or sc.name, opponent=core.describe_opponents(0))
+    res = EvalResult(name=name or sc.name, opponent=core.describe_opponents(0),
+                     sides=("Opponent", "Opponent"))
     return play_games(core, team, games, seed, None, res)
 
 
-HEADER = ("Experiment Name", "Agent Wins", "Bot Wins", "Draws", "Agent Win Ratio",
-          "Wilson 95% CI")
+def header(results: Sequence[EvalResult]) -> tuple[str, ...]:
+    """Column names by what plays: "Agent Wins" / "Bot Wins" as in the paper when every
+    row is agents against bots, "Opponent Wins" when some opponent is not a bot; a
+    "Checkpoint" column first when rows are labelled."""
+    ours = {r.sides[0] for r in results}
+    theirs = {r.sides[1] for r in results}
+    us = ours.pop() if len(ours) == 1 else "Evaluated"
+    them = theirs.pop() if len(theirs) == 1 and theirs != {us} else "Opponent"
+    cols = ("Experiment Name", f"{us} Wins", f"{them} Wins", "Draws", f"{us} Win Ratio",
+            "Wilson 95% CI")
+    return (("Checkpoint",) + cols) if any(r.agent for r in results) else cols
 
 
 def format_table(results: Sequence[EvalResult]) -> str:
-    """Markdown table in the paper's Table 3 layout (plus draws and Wilson interval)."""
+    """Markdown table in the paper's Table 3 layout (plus draws and Wilson interval), each
+    row labelled with its checkpoint."""
+    head = header(results)
     rows = []
     for r in results:
         lo, hi = r.interval
-        rows.append((r.name, str(r.wins), str(r.losses), str(r.draws),
-                     f"{100 * r.win_rate:.0f}%", f"[{100 * lo:.1f}%, {100 * hi:.1f}%]"))
+        row = (r.name, str(r.wins), str(r.losses), str(r.draws),
+               f"{100 * r.win_rate:.0f}%", f"[{100 * lo:.1f}%, {100 * hi:.1f}%]")
+        rows.append(((r.agent,) + row) if head[0] == "Checkpoint" else row)
+    return markdown_table(head, rows)
+
+
+def markdown_table(head: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
+    """A Markdown table with aligned columns."""
     widths = [max(len(h), *(len(row[k]) for row in rows)) if rows else len(h)
-              for k, h in enumerate(HEADER)]
-    line = "| " + " | ".join(h.ljust(w) for h, w in zip(HEADER, widths, strict=True)) + " |"
+              for k, h in enumerate(head)]
+    line = "| " + " | ".join(h.ljust(w) for h, w in zip(head, widths, strict=True)) + " |"
     sep = "|" + "|".join("-" * (w + 2) for w in widths) + "|"
     body = ["| " + " | ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)) + " |"
             for row in rows]
     return "\n".join([line, sep, *body])
 
 
+def rate_games(games: Iterable[tuple[str, str, Sequence[str]]]) -> League:
+    """An openskill (Plackett-Luce) league from ``(player, opponent, outcomes)`` triples
+    (``outcomes``: 'win' / 'loss' / 'draw' of ``player``, rated in order; draws are
+    ties). Agents and bots share one table."""
+    league = League([])
+    index: dict[str, int] = {}
+    for player, opponent, outcomes in games:
+        for name in (player, opponent):
+            if name not in index:
+                index[name] = league.add(name)
+        for out in outcomes:
+            league.record(index[player], index[opponent], OUTCOME_SCORE[out])
+    return league
+
+
+def rating_table(league: League) -> str:
+    """The league as a Markdown table, best ordinal (mu - 3 sigma) first."""
+    return markdown_table(("Player", "mu", "sigma", "ordinal"),
+                          [(n, f"{mu:.2f}", f"{sg:.2f}", f"{o:.2f}")
+                           for n, mu, sg, o in league.table()])
+
+
+def results_league(results: Sequence[EvalResult]) -> League:
+    """The openskill league of an evaluation: each row's checkpoint (or experiment name)
+    against its opponent, game by game."""
+    return rate_games((r.agent or r.name, r.opponent, r.outcomes) for r in results)
+
+
 def write_csv(results: Sequence[EvalResult], path: str | Path) -> None:
     rows = [r.as_dict() for r in results]
+    fields = list(rows[0]) if rows else list(EvalResult("", "").as_dict())
     with open(path, "w", newline="", encoding="utf-8") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]) if rows else list(HEADER))
+        writer = csv.DictWriter(f, fieldnames=fields)
         writer.writeheader()
         writer.writerows(rows)
 
 
-def write_json(results: Sequence[EvalResult], path: str | Path) -> None:
-    Path(path).write_text(json.dumps([r.as_dict() for r in results], indent=1) + "\n",
+def write_json(results: Sequence[EvalResult], path: str | Path, per_game: bool = False
+               ) -> None:
+    Path(path).write_text(json.dumps([r.as_dict(per_game) for r in results], indent=1) + "\n",
                           encoding="utf-8")

@@ -182,6 +182,7 @@ class Trainer:
                                 cfg.tensorboard, run_id=wandb_id)
         self.actions = np.ones((self.E, self.L, 3), dtype=np.int64)
         self.history: list[dict[str, float]] = []
+        self.schedule.bind(self)
 
     # ---- persistence ------------------------------------------------------------------
 

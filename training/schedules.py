@@ -42,6 +42,10 @@ class OpponentSchedule:
     def victory_scale(self, step: int) -> float:
         return 1.0
 
+    def bind(self, trainer: Any) -> None:
+        """Called once by the trainer after its set-up; schedules that need the learners
+        (the league's snapshots, :mod:`alphatank.training.league`) keep it."""
+
     def state_dict(self) -> dict[str, Any]:
         return {}
 
@@ -270,6 +274,11 @@ def make_schedule(spec: dict[str, Any], total_steps: int, seed: int = 0) -> Oppo
             return CycleSchedule(**spec)
         if kind == "winrate":
             return WinRateCurriculum(**spec)
+        if kind == "league":  # resolved late: the league copies learners (checkpoint layer)
+            from alphatank.game.seats import resolve
+            spec.setdefault("seed", seed)
+            return resolve("alphatank.training.league:LeagueSchedule")(**spec)
     except TypeError as exc:
         raise ValueError(f"schedule {kind!r}: {exc}") from None
-    raise ValueError(f"unknown schedule kind {kind!r}; valid: none, curriculum, cycle, winrate")
+    raise ValueError(f"unknown schedule kind {kind!r}; valid: none, curriculum, cycle, winrate, "
+                     f"league")

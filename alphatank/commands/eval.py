@@ -1,12 +1,16 @@
 """``alphatank eval``: win/loss/draw counts of checkpoints against bots, with Wilson 95%
-intervals, printed in the layout of the paper's Table 3 (and as CSV / JSON)."""
+intervals, printed in the layout of the paper's Table 3 (and as CSV / JSON), every row
+labelled with its checkpoint; ``--ratings`` adds an openskill table of the games.
+
+Game ``i`` depends only on ``(--seed, i)`` (its match seed and, for sampled policies, the
+generator its actions are drawn from), so results do not change with ``--num-envs``."""
 
 from __future__ import annotations
 
 import argparse
 
 from alphatank.commands.argtypes import positive_int, seed
-from alphatank.errors import as_input_error
+from alphatank.errors import InputError, as_input_error
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -19,12 +23,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--games", type=positive_int, default=100, help="games per row (default: 100)")
     p.add_argument("--scenario", help="play in this scenario instead of the checkpoint's own")
     p.add_argument("--team", help="team the checkpoint plays (default: its first learner's)")
+    p.add_argument("--map", metavar="NAME|FOLDER",
+                   help="play on other maps: a shipped map, a shipped folder such as 'test', "
+                        "a .txt file or a folder of maps")
     p.add_argument("--weakness", type=float, help="bot weakness 0..1 (default: as trained)")
     p.add_argument("--greedy", action="store_true", help="most likely actions, no sampling")
     p.add_argument("--seed", type=seed, default=0, help="seed of the game sequence")
     p.add_argument("--num-envs", type=positive_int, default=16, help="matches played at once")
     p.add_argument("--csv", metavar="FILE", help="also write the rows as CSV")
-    p.add_argument("--json", metavar="FILE", help="also write the rows as JSON")
+    p.add_argument("--json", metavar="FILE",
+                   help="also write the rows as JSON (with every game's outcome)")
+    p.add_argument("--ratings", action="store_true",
+                   help="also print an openskill table rating checkpoints and opponents "
+                        "together from these games")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -32,12 +43,16 @@ def run(args: argparse.Namespace) -> int:
     from alphatank.training.evaluate import (
         evaluate_checkpoint,
         format_table,
+        rating_table,
+        results_league,
         write_csv,
         write_json,
     )
     from alphatank.training.threads import limit_threads
 
     limit_threads()
+    if args.weakness is not None and not 0.0 <= args.weakness <= 1.0:
+        raise InputError(f"--weakness must be in [0, 1], got {args.weakness}")
     opponents = [b.strip() for b in args.vs.split(",") if b.strip()] or [None]
     results = []
     try:
@@ -46,12 +61,19 @@ def run(args: argparse.Namespace) -> int:
                                            games=args.games, seed=args.seed,
                                            scenario=args.scenario, team=args.team,
                                            deterministic=args.greedy, num_envs=args.num_envs,
-                                           weakness=args.weakness)
+                                           weakness=args.weakness, map_name=args.map,
+                                           label=arg)
     except ValueError as exc:  # scenario, seat, option errors (a CheckpointError is not one)
         raise as_input_error(exc) from None
     print(format_table(results))
-    if args.csv:
-        write_csv(results, args.csv)
-    if args.json:
-        write_json(results, args.json)
+    if args.ratings:
+        print("\nopenskill (Plackett-Luce) ratings from these games (draws are ties):")
+        print(rating_table(results_league(results)))
+    try:
+        if args.csv:
+            write_csv(results, args.csv)
+        if args.json:
+            write_json(results, args.json, per_game=True)
+    except OSError as exc:
+        raise InputError(f"cannot write {exc.filename}: {exc.strerror}") from None
     return 0

@@ -107,6 +107,7 @@ class MatchSet:
         self.opponent_policy: Policy | None = None
         self.opponents: dict[str, Seat | Policy] = {}  # named, for set_env_opponents
         self.env_opponent: list[str | None] = [None] * E
+        self.episode_label: list[str] = ["none"] * E  # who the current episode is against
         self.bot_override: list[str] | None = None
         self.weakness: float | None = None
         walls, buffs, debuffs = slot_counts(self.game, self.specs)
@@ -201,8 +202,10 @@ class MatchSet:
         self.env_opponent = list(names)
 
     def describe_opponents(self, e: int) -> str:
-        """Label of the seats this set plays in env ``e``, e.g. ``B:smart(w=1)``; a named
-        opponent (:meth:`set_env_opponents`) is labelled by its name."""
+        """Label of the seats this set plays in env ``e`` from its next episode, e.g.
+        ``B:smart(w=1)``; a named opponent (:meth:`set_env_opponents`) is labelled by its
+        name. ``episode_label[e]`` keeps the label of the episode being played (taken at
+        its reset: opponents changed during an episode apply from the next one)."""
         name = self.env_opponent[e]
         if name is not None:
             teams = dict.fromkeys(self.teams[s] for s in range(self.n)
@@ -246,6 +249,7 @@ class MatchSet:
         for seat in range(self.n):
             ctrls[seat] = self._controller(e, seat, seeds.seat_seeds[seat])
         reset_controllers(m, ctrls, seeds)
+        self.episode_label[e] = self.describe_opponents(e)
         self._played[e] = [(seat, c) for seat, c in enumerate(ctrls) if c is not None]
         self.joint[e] = 1
         b = self.batch

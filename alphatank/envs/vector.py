@@ -226,7 +226,7 @@ class VectorMatchEnv:
                 episodes.append({
                     "env": self.env_ids[e], "return": self._return[e].copy(),
                     "length": int(self._length[e]), "winner": m.winner,
-                    "outcome": core.outcome(e), "opponent": core.describe_opponents(e),
+                    "outcome": core.outcome(e), "opponent": core.episode_label[e],
                     "map": core.map_name(e),
                     "terms": dict(zip(TERMS, self._terms[e].copy(), strict=True))})
                 self._reset_env(e)

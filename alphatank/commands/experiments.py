@@ -1,0 +1,171 @@
+"""``alphatank experiments``: the paper's tables in one command. Every row of a table
+(``alphatank/data/experiments/<table>/<row>.toml``) is trained within a time budget,
+evaluated over ``--games`` games per column at full bot strength with seeds disjoint
+from training seeds, and reported as ``<out>/<table>.md``, ``.csv``, ``.json`` with the
+paper's figures beside ours, plus learning curves (and a heatmap for cross tables).
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from pathlib import Path
+
+CHOICES = ("table3", "table4", "sac", "league", "heldout", "all")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("table", metavar="|".join(CHOICES),
+                   help="the table to make (all: every table, in this order)")
+    p.add_argument("--budget", type=float, default=15.0, metavar="MINUTES",
+                   help="training time per run in minutes (default: %(default)s)")
+    p.add_argument("--seeds", type=int, default=1, metavar="N",
+                   help="training seeds per row, 0..N-1 (default: %(default)s)")
+    p.add_argument("--workers", type=int, default=1, metavar="W",
+                   help="runs trained at once, one process each (default: %(default)s; "
+                        "2 fills a 2-core machine)")
+    p.add_argument("--out", default="results", metavar="DIR",
+                   help="where runs, tables and figures go (default: %(default)s)")
+    p.add_argument("--resume", action="store_true",
+                   help="reuse what DIR already holds and finish only the missing runs and "
+                        "evaluations (failed ones are tried again)")
+    p.add_argument("--games", type=int, default=200,
+                   help="evaluation games per cell (default: %(default)s)")
+    p.add_argument("--rows", default="", metavar="ROW,...",
+                   help="only these rows (names or TABLE/ROW ids)")
+    p.add_argument("--steps", type=int, metavar="N",
+                   help="env steps per run instead of budget x each row's planning rate "
+                        "(the budget still caps the time)")
+    p.add_argument("--list", action="store_true",
+                   help="print the plan (rows, runs, estimated time) and exit")
+    p.add_argument("--report-only", action="store_true",
+                   help="write the tables from what DIR holds, training nothing")
+    p.add_argument("--experiments-dir", metavar="DIR",
+                   help="read tables and rows from this folder instead of the shipped ones")
+    p.add_argument("--wandb", default="disabled", choices=("disabled", "offline", "online"),
+                   help="wandb mode of the runs (default: %(default)s; metrics.jsonl is "
+                        "always written)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def _error(msg: str) -> int:
+    print(f"alphatank experiments: error: {msg}", file=sys.stderr)
+    return 2
+
+
+def run(args: argparse.Namespace) -> int:
+    from alphatank.training.experiments import (
+        ExperimentError,
+        estimate_minutes,
+        execute,
+        load_tables,
+        make_plan,
+        table_names,
+    )
+
+    if args.workers < 1:
+        return _error(f"--workers must be >= 1, got {args.workers}")
+    if Path(args.out).exists() and not Path(args.out).is_dir():
+        return _error(f"--out {args.out}: exists and is not a folder")
+    try:
+        names = table_names(args.experiments_dir)
+        if args.table == "all":
+            wanted = names
+        elif args.table in names:
+            wanted = [args.table]
+        else:
+            return _error(f"unknown table {args.table!r}; choose one of "
+                          f"{', '.join([*names, 'all'])}")
+        tables = load_tables(wanted, args.experiments_dir)
+        rows = [r.strip() for r in args.rows.split(",") if r.strip()]
+        plan = make_plan(tables, args.out, seeds=args.seeds, budget_min=args.budget,
+                         games=args.games, steps=args.steps, wandb=args.wandb, rows=rows)
+    except (ExperimentError, ValueError) as exc:
+        return _error(str(exc))
+    todo = [j for j in plan.jobs if not j.complete()]
+    started = [j for j in plan.jobs if j.started()]
+    if args.list:
+        _print_plan(plan, todo, args.workers, estimate_minutes)
+        return 0
+    if started and not (args.resume or args.report_only):
+        return _error(f"{args.out} already holds {len(started)} of this plan's runs (e.g. "
+                      f"{started[0].run_dir}); pass --resume to keep finished ones and "
+                      f"finish the rest, or choose another --out")
+    from alphatank.extras import require
+
+    require("train", "alphatank experiments")
+    command = _command(args)
+    failed: dict[str, str] = {}
+    if not args.report_only and todo:
+        eta = estimate_minutes(plan, todo, args.workers)
+        print(f"experiments {', '.join(t.name for t in plan.tables)}: {len(plan.jobs)} runs, "
+              f"{len(todo)} to do, about {eta:.0f} min with {args.workers} worker(s) -> "
+              f"{args.out}", flush=True)
+
+        def on_done(job, error, seconds):  # noqa: ANN001, ANN202
+            status = "FAILED " + error if error else "done"
+            from tqdm import tqdm
+            tqdm.write(f"  {', '.join(job.rows)} seed {job.seed}: {status} "
+                       f"({seconds / 60:.1f} min)")
+
+        try:
+            failed = execute(todo, args.workers, progress=not args.no_progress,
+                             on_done=on_done)
+        except KeyboardInterrupt:
+            print("interrupted: finished runs and evaluations are kept; --resume finishes "
+                  "the rest", file=sys.stderr)
+            return 130
+    from alphatank.training.report import write_report
+
+    for table in plan.tables:
+        try:
+            data = write_report(plan, table, command)
+        except OSError as exc:
+            return _error(f"cannot write the {table.name} report in {args.out}: {exc}")
+        status = ", ".join(f"{c['kind']}: " + {True: "met", False: "not met",
+                                               None: "not measurable"}[c["passed"]]
+                           for c in data["checks"])
+        print(f"{plan.out / (table.name + '.md')}" + (f"  [{status}]" if status else "")
+              + (f"  ({len(data['missing'])} missing)" if data["missing"] else ""))
+    if failed:
+        print(f"{len(failed)} run(s) failed (their error.txt holds the traceback):",
+              file=sys.stderr)
+        by_key = {j.key: j for j in plan.jobs}
+        for key, err in failed.items():
+            print(f"  {', '.join(by_key[key].rows)} seed {by_key[key].seed}: {err} "
+                  f"({by_key[key].run_dir}/error.txt)", file=sys.stderr)
+        return 1
+    return 0
+
+
+# flags that change what is made, in the order a command line shows them
+RECORDED = (("--budget", "budget", 15.0), ("--seeds", "seeds", 1), ("--workers", "workers", 1),
+            ("--games", "games", 200), ("--steps", "steps", None), ("--rows", "rows", ""),
+            ("--experiments-dir", "experiments_dir", None), ("--wandb", "wandb", "disabled"),
+            ("--out", "out", "results"))
+
+
+def _command(args: argparse.Namespace) -> str:
+    """The command line that makes these tables (options at their defaults left out)."""
+    parts = ["alphatank", "experiments", args.table]
+    for flag, attr, default in RECORDED:
+        value = getattr(args, attr)
+        if value != default:
+            parts += [flag, f"{value:g}" if isinstance(value, float) else str(value)]
+    return " ".join(shlex.quote(p) for p in parts)
+
+
+def _print_plan(plan, todo, workers, estimate) -> None:  # noqa: ANN001
+    for table in plan.tables:
+        print(f"{table.name}: {table.title}")
+        for row in table.rows:
+            job = plan.cells[(row.id, 0)][0]
+            cfg = job.cfg
+            shared = [r for r in job.rows if r != row.id]
+            where = (f"mix of {len(job.scenarios)}" if job.scenarios else cfg["scenario"])
+            print(f"  {row.name:18s} {where:18s} steps<={cfg['total_steps']:>9,}"
+                  f"  {row.title}" + (f"  (run shared with {', '.join(shared)})"
+                                      if shared else ""))
+    print(f"{len(plan.jobs)} runs ({plan.seeds} seed(s)), {len(todo)} to do: about "
+          f"{estimate(plan, todo, workers):.0f} min with {workers} worker(s)")

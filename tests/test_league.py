@@ -1,0 +1,117 @@
+"""The league (PFSP over bots and snapshots), the mixed-scenario vector env and episode
+labels that name the opponent each episode was really played against."""
+
+import numpy as np
+import pytest
+import torch
+
+from alphatank.envs.vector import VectorMatchEnv
+from alphatank.training.hparams import PPOConfig
+from alphatank.training.league import LeagueSchedule, opponent_name
+from alphatank.training.mixed import MixedVectorEnv
+from alphatank.training.presets import LearnerSpec, TrainConfig
+from alphatank.training.runner import Trainer
+from alphatank.training.schedules import make_schedule
+
+torch.set_num_threads(1)
+
+
+def test_pfsp_weights_follow_the_loss_rate_with_a_floor():
+    lg = LeagueSchedule(bots=["random", "smart"], weaknesses=[1.0], power=2.0, floor=0.1,
+                        window=4, snapshots=0)
+    assert lg.opponents() == ["random@1", "smart@1"]
+    assert np.allclose(lg.probabilities(), [0.5, 0.5])  # never played: both tried first
+    for out in ("win", "win", "win", "win"):
+        lg.record("B:random@1", out)
+    for out in ("win", "loss", "draw", "loss"):
+        lg.record("B:smart@1", out)
+    # random: score 1 -> weight max(0.1, 0) = 0.1; smart: score 0.375 -> 0.625^2 = 0.390625
+    assert np.allclose(lg.probabilities(), np.array([0.1, 0.390625]) / 0.490625)
+    lg.record("B:smart(w=1)", "win")  # not a league opponent (an episode before the league)
+    assert lg.games == 8
+    mu = {name: m for name, m, *_ in lg.table()}
+    assert mu["learner"] > mu["random@1"]  # four wins rated
+
+
+def test_opponent_names_and_bad_settings():
+    assert opponent_name("B:smart@0.5") == "smart@0.5"
+    assert opponent_name("B:self@4096/3") == "self@4096"
+    assert opponent_name("B:x, C:x") == "x"
+    with pytest.raises(ValueError, match="league bots"):
+        LeagueSchedule(bots=["genius"])
+    with pytest.raises(ValueError, match="weaknesses"):
+        LeagueSchedule(weaknesses=[0.0])
+    assert isinstance(make_schedule({"kind": "league", "bots": ["dodge"]}, 100), LeagueSchedule)
+    with pytest.raises(ValueError, match="schedule 'league'"):
+        make_schedule({"kind": "league", "colour": "red"}, 100)
+
+
+def test_labels_name_the_opponent_the_episode_was_played_against():
+    env = VectorMatchEnv("vs_random", 2, seed=0, game_overrides={"max_steps": 6})
+    env.add_opponent("idle_smart", "smart@0.0")
+    env.reset(seed=1)
+    env.step(np.ones((2, 1, 3), dtype=np.int64))
+    env.set_env_opponents(["idle_smart", None])  # mid-episode: applies from the next one
+    eps = []
+    for _ in range(12):
+        eps += env.step(np.ones((2, 1, 3), dtype=np.int64))[4]["episodes"]
+    first = [ep["opponent"] for ep in eps if ep["env"] == 0]
+    assert first[0] == "B:random(w=1)" and set(first[1:]) == {"B:idle_smart"}
+    assert {ep["opponent"] for ep in eps if ep["env"] == 1} == {"B:random(w=1)"}
+
+
+def test_mixed_env_splits_matches_over_scenarios():
+    mix = MixedVectorEnv(["vs_random", "vs_dodge"], 5, seed=3, observation="egocentric",
+                         game_overrides={"max_steps": 8})
+    assert [b.num_envs for b in mix.blocks] == [3, 2]
+    assert [b.env_ids for b in mix.blocks] == [[0, 1, 2], [3, 4]]
+    assert mix.blocks[1].core.game.bullet_speed > mix.blocks[0].core.game.bullet_speed
+    obs = mix.reset(seed=3)
+    single = VectorMatchEnv("vs_random", 5, seed=3, observation="egocentric",
+                            game_overrides={"max_steps": 8})
+    assert obs.shape == (5, 1, mix.obs_dim)
+    assert np.array_equal(obs[:3], single.reset(seed=3)[:3])  # same env ids, same episodes
+    mix.add_opponent("weak", "aggressive@0.5")
+    mix.set_env_opponents([None, "weak", None, None, "weak"])
+    eps = []
+    for _ in range(20):
+        obs, rew, term, trunc, info = mix.step(np.ones((5, 1, 3), dtype=np.int64))
+        assert rew.shape == (5, 1) and term.shape == (5,) and info["final_obs"].shape == obs.shape
+        eps += info["episodes"]
+    by_env = {}
+    for ep in eps:
+        by_env.setdefault(ep["env"], set()).add(ep["opponent"])
+    assert "B:weak" in by_env[1] and "B:weak" in by_env[4] and by_env[3] == {"B:dodge(w=1)"}
+    with pytest.raises(ValueError, match="egocentric"):
+        MixedVectorEnv(["vs_random", "vs_aggressive"], 2)  # paper observations differ
+
+
+def test_league_trains_against_bots_and_its_own_snapshots(tmp_path):
+    cfg = TrainConfig("lg", "vs_smart", total_steps=1536, num_envs=4, wandb="disabled",
+                      observation="egocentric", game={"max_steps": 60}, checkpoint_every=0,
+                      schedule={"kind": "league", "bots": ["random", "dodge"],
+                                "weaknesses": [0.5, 1.0], "snapshot_every": 512,
+                                "snapshots": 2},
+                      learners=(LearnerSpec("ppo", "ppo", (0,),
+                                            PPOConfig(num_steps=64, update_epochs=1)),))
+    # the open map has 4 wall rectangles, the battlefield 11: snapshots play on both
+    env = MixedVectorEnv(["vs_aggressive", "vs_dodge"], 4, observation="egocentric",
+                         game_overrides={"max_steps": 60})
+    tr = Trainer(cfg, tmp_path / "run", env=env, progress=False)
+    tr.train()
+    lg = tr.schedule
+    assert lg.pool == deque_of(["self@512", "self@1024"])  # the newest 2 of 3 snapshots
+    names = {name for name, *_ in lg.table()}
+    assert {"learner", "random@0.5", "dodge@1", "self@0", "self@1024"} <= names
+    assert lg.games > 0 and sum(len(r) for r in lg.results.values()) == lg.games
+    assert sum(len(r) for n, r in lg.results.items() if n.startswith("self@")) > 0
+    assert any(k.startswith("league/score/") for k in tr.history[-1])
+    state = lg.state_dict()
+    again = make_schedule(cfg.schedule, cfg.total_steps)
+    again.load_state_dict(state)
+    assert again.table() == lg.table() and again.games == lg.games
+
+
+def deque_of(items):
+    from collections import deque
+    return deque(items)

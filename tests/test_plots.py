@@ -1,0 +1,68 @@
+"""``alphatank plot`` and the figures of experiment reports (checked on the Figure objects,
+not on pixels)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from alphatank.cli import main
+from alphatank.training.plots import plot_heatmap, plot_row_curves, plot_runs
+
+
+def fake_run(path, learners=("",), n=5, scale=1.0):
+    """A run folder whose metrics.jsonl holds ``n`` iterations."""
+    path.mkdir(parents=True)
+    with open(path / "metrics.jsonl", "w") as f:
+        for i in range(1, n + 1):
+            row = {"step": 1000 * i, "charts/elapsed_s": 30.0 * i}
+            for name in learners:
+                sfx = f"/{name}" if name else ""
+                row[f"charts/win_rate{sfx}"] = min(1.0, 0.1 * i * scale)
+                row[f"charts/episode_return{sfx}"] = float(i)
+            f.write(json.dumps(row) + "\n")
+    return path
+
+
+def test_plot_runs_draws_one_line_per_run_and_learner(tmp_path):
+    a = fake_run(tmp_path / "a")
+    b = fake_run(tmp_path / "b", learners=("ppo_a", "ppo_b"), scale=0.5)
+    fig = plot_runs([a, b])
+    axes = fig.axes
+    assert len(axes) == 4
+    for ax in axes:
+        assert len(ax.lines) == 3  # run a, and both learners of run b
+    steps_ax, time_ax = axes[0], axes[1]
+    assert list(steps_ax.lines[0].get_xdata()) == [1000, 2000, 3000, 4000, 5000]
+    assert list(time_ax.lines[0].get_xdata()) == [0.5, 1.0, 1.5, 2.0, 2.5]  # minutes
+    assert [ln.get_label() for ln in steps_ax.lines] == ["a", "b ppo_a", "b ppo_b"]
+    assert steps_ax.get_xlabel() == "env steps" and "wall time" in time_ax.get_xlabel()
+    assert axes[2].get_ylabel() == "episode return"
+
+
+def test_plot_command_writes_a_png(tmp_path, capsys):
+    runs = [str(fake_run(tmp_path / n)) for n in ("x", "y")]
+    out = tmp_path / "curves.png"
+    assert main(["plot", *runs, "-o", str(out), "--labels", "first,second"]) == 0
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert main(["plot", str(tmp_path / "missing"), "-o", str(out)]) == 2
+    assert "no such run folder" in capsys.readouterr().err
+    (tmp_path / "empty").mkdir()
+    assert main(["plot", str(tmp_path / "empty"), "-o", str(out)]) == 2
+    assert "metrics.jsonl" in capsys.readouterr().err
+    assert main(["plot", *runs, "-o", str(tmp_path / "c.pdf")]) == 2
+    assert main(["plot", *runs, "--labels", "only_one"]) == 2
+
+
+def test_row_curves_and_heatmap(tmp_path):
+    runs = [fake_run(tmp_path / f"r-s{s}") for s in range(3)]
+    fig = plot_row_curves([("row A", runs), ("row B", runs[:1])])
+    visible = [ax for ax in fig.axes if ax.get_visible()]
+    assert [len(ax.lines) for ax in visible] == [3, 1]
+    values = np.array([[61.0, np.nan], [20.0, 90.0]])
+    paper = np.array([[72.0, 47.0], [np.nan, np.nan]])
+    fig = plot_heatmap(values, ["Random Bot", "Cycle"], ["Random", "Aggressive"], paper=paper)
+    texts = [t.get_text() for t in fig.axes[0].texts]
+    assert texts == ["61\n(paper 72)", "-\n(paper 47)", "20", "90"]
+    with pytest.raises(ValueError, match="rows"):
+        plot_heatmap(values, ["one"], ["a", "b"])

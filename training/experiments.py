@@ -1,0 +1,655 @@
+"""The paper's experiments as data: tables of rows, each row a training run evaluated
+against the table's columns, with the paper's figure beside ours.
+
+Layout of ``alphatank/data/experiments/`` (or any folder given as ``experiments_dir``)::
+
+    <table>/_table.toml   title, layout, the columns (evaluation targets), checks
+    <table>/<row>.toml    one row: its run (a preset and/or inline run settings, the
+                          run-file format), the paper's figures, budget fractions
+
+Seeds: seed index ``s`` (0..N-1) trains with run seed ``s`` and is evaluated with
+evaluation seed ``EVAL_SEED_BASE + s``: training seeds stay below ``EVAL_SEED_BASE``, so
+no evaluation game reuses a training seed, and every row of a table meets the same
+evaluation games for the same ``s`` (common random numbers across rows).
+
+Budget: each run trains for at most ``budget`` minutes (``time_limit_s``) and
+``budget x steps_per_minute`` env steps (the row's planning rate); settings named in the
+row's ``[budget_fractions]`` are set to that fraction of the run's steps (e.g. a cycle
+interval of 1/16 visits each of four bots four times).
+
+Runs are keyed by their settings: a run dir is ``runs/<row>-s<seed>-<digest>`` where the
+digest hashes the resolved run settings (not its name), so rows of different tables that
+describe the same run train it once. A run is finished when its ``done.json`` exists;
+each evaluation is one file ``eval/<column>-<digest>.json``. Everything is written as
+soon as it exists, so an interrupted command resumes (``resume=True``) where it stopped.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import os
+import shutil
+import time
+import tomllib
+import traceback
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from alphatank.training.presets import (
+    TrainConfig,
+    get_preset,
+    parse_hp,
+    parse_run,
+    run_learners,
+    with_hp,
+)
+
+TABLES = ("table3", "table4", "sac", "league", "heldout")
+EVAL_SEED_BASE = 1_000_000
+DEFAULT_GAMES = 200
+DEFAULT_BUDGET_MIN = 15.0
+DEFAULT_STEPS_PER_MINUTE = 36_000  # PPO 1v1 at Table 7 settings on one quiet core (~600/s)
+LAYOUTS = ("counts", "matrix")
+CHECKS = ("beats_paper", "best_average", "within", "gap")
+EVAL_ENVS = 16
+
+
+class ExperimentError(ValueError):
+    """A bad experiment file, option or output folder (one line, naming the file)."""
+
+
+# ---- the data -----------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Column:
+    """An evaluation target: the row's agent against ``bot`` (or the scenario's own
+    opponents) in ``scenario`` (default: the run's own) on ``map`` (default: the
+    scenario's, or the run's map override for its own scenario), bots at ``weakness``."""
+
+    name: str
+    label: str
+    scenario: str | None = None
+    bot: str | None = None
+    map: str | None = None
+    weakness: float = 1.0
+    note: str = ""
+
+    def where(self) -> str:
+        """Scenario, map and game preset in words (for table notes)."""
+        from alphatank.game.scenarios import load_scenario
+
+        if self.scenario is None:
+            base = "the run's own scenario"
+            return base + (f" on maps {self.map!r}" if self.map else "")
+        sc = load_scenario(self.scenario)
+        maps = self.map or sc.map
+        return f"{self.scenario} (map {maps}, {sc.preset} preset)"
+
+
+@dataclass(frozen=True)
+class Row:
+    """One row of a table: a run and what the paper reported for it."""
+
+    table: str
+    name: str
+    title: str
+    order: int
+    run: dict[str, Any]  # run-file mapping (preset settings merged with [run])
+    source: str
+    hp: tuple[str, ...] = ()
+    scenarios: tuple[str, ...] = ()
+    paper: dict[str, float] = field(default_factory=dict)
+    steps_per_minute: float = DEFAULT_STEPS_PER_MINUTE
+    fractions: dict[str, float] = field(default_factory=dict)
+    columns: tuple[str, ...] = ()  # subset of the table's columns ((): all)
+    note: str = ""
+
+    @property
+    def id(self) -> str:
+        return f"{self.table}/{self.name}"
+
+
+@dataclass(frozen=True)
+class Table:
+    name: str
+    title: str
+    description: str
+    layout: str
+    columns: tuple[Column, ...]
+    rows: tuple[Row, ...]
+    average: bool = False
+    heatmap: bool = False
+    checks: tuple[dict[str, Any], ...] = ()
+    paper_average: bool = True
+
+    def row(self, name: str) -> Row:
+        for r in self.rows:
+            if r.name == name:
+                return r
+        raise ExperimentError(f"table {self.name}: no row {name!r}; rows: "
+                              f"{[r.name for r in self.rows]}")
+
+    def row_columns(self, row: Row) -> list[Column]:
+        return [c for c in self.columns if not row.columns or c.name in row.columns]
+
+
+def _root(experiments_dir: str | Path | None) -> Any:
+    if experiments_dir is not None:
+        p = Path(experiments_dir)
+        if not p.is_dir():
+            raise ExperimentError(f"{p}: no such experiments folder")
+        return p
+    return resources.files("alphatank").joinpath("data", "experiments")
+
+
+def table_names(experiments_dir: str | Path | None = None) -> list[str]:
+    """Tables in the experiments folder, the paper's order first."""
+    root = _root(experiments_dir)
+    found = sorted(p.name for p in root.iterdir()
+                   if p.is_dir() and p.joinpath("_table.toml").is_file())
+    return [t for t in TABLES if t in found] + [t for t in found if t not in TABLES]
+
+
+def _read_toml(res: Any, source: str) -> dict[str, Any]:
+    try:
+        return tomllib.loads(res.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as exc:
+        raise ExperimentError(f"{source}: invalid TOML: {exc}") from None
+    except UnicodeDecodeError:
+        raise ExperimentError(f"{source}: not UTF-8 text") from None
+
+
+def _keys(data: dict[str, Any], valid: Sequence[str], source: str) -> None:
+    for key in data:
+        if key not in valid:
+            raise ExperimentError(f"{source}: {key}: unknown key; valid keys: {list(valid)}")
+
+
+def _typed(data: dict[str, Any], key: str, kind: type | tuple[type, ...], source: str,
+           default: Any = None) -> Any:
+    value = data.get(key, default)
+    ok = isinstance(value, kind) and not (isinstance(value, bool) and kind in (int, float,
+                                                                                (int, float)))
+    if value is not default and not ok:
+        names = kind.__name__ if isinstance(kind, type) else " or ".join(k.__name__
+                                                                         for k in kind)
+        raise ExperimentError(f"{source}: {key}: needs {names}, got {value!r}")
+    return value
+
+
+def _column(data: Any, source: str) -> Column:
+    if not isinstance(data, dict):
+        raise ExperimentError(f"{source}: must be a table (name, label, scenario, bot, map, "
+                              f"weakness, note)")
+    _keys(data, [f.name for f in dataclasses.fields(Column)], source)
+    name = _typed(data, "name", str, source)
+    if not name:
+        raise ExperimentError(f"{source}: name: required, a string")
+    weakness = float(_typed(data, "weakness", (int, float), source, 1.0))
+    if not 0.0 <= weakness <= 1.0:
+        raise ExperimentError(f"{source}: weakness: must be in [0, 1], got {weakness}")
+    col = Column(name, _typed(data, "label", str, source, name),
+                 _typed(data, "scenario", str, source), _typed(data, "bot", str, source),
+                 _typed(data, "map", str, source), weakness, _typed(data, "note", str, source, ""))
+    if col.scenario is not None:
+        from alphatank.game.scenarios import load_scenario
+        try:
+            load_scenario(col.scenario)
+        except ValueError as exc:
+            raise ExperimentError(f"{source}: scenario: {exc}") from None
+    if col.bot is not None:
+        from alphatank.game.scenarios import bot_names
+        if col.bot not in bot_names():
+            raise ExperimentError(f"{source}: bot: unknown bot {col.bot!r}; valid: "
+                                  f"{list(bot_names())}")
+    return col
+
+
+def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
+    """``over`` on top of ``base``; tables (schedule, game, rewards) merge key by key."""
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = {**out[k], **v} if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
+ROW_KEYS = ("title", "order", "preset", "same_as", "run", "hp", "scenarios", "paper",
+            "steps_per_minute", "budget_fractions", "columns", "note")
+
+
+def _row(table: str, name: str, data: dict[str, Any], source: str,
+         raw: dict[str, dict[str, Any]]) -> Row:
+    _keys(data, ROW_KEYS, source)
+    same_as = _typed(data, "same_as", str, source)
+    base: dict[str, Any] = {}
+    if same_as is not None:
+        other_table, _, other_row = same_as.partition("/")
+        if (other_table, other_row) == (table, name) or not other_row:
+            raise ExperimentError(f"{source}: same_as: needs TABLE/ROW of another row, got "
+                                  f"{same_as!r}")
+        other = raw.get(same_as)
+        if other is None:
+            raise ExperimentError(f"{source}: same_as: no row {same_as!r} in the experiments "
+                                  f"folder")
+        if "same_as" in other[0]:
+            raise ExperimentError(f"{source}: same_as: {same_as!r} is itself a same_as row")
+        data = {**{k: other[0][k] for k in ("preset", "run", "hp", "scenarios",
+                                            "steps_per_minute", "budget_fractions")
+                   if k in other[0]}, **data}
+    preset = _typed(data, "preset", str, source)
+    run = _typed(data, "run", dict, source, {})
+    if preset is None and not run:
+        raise ExperimentError(f"{source}: needs preset = NAME and/or a [run] table (run-file "
+                              f"settings)")
+    if preset is not None:
+        try:
+            base = get_preset(preset).to_dict()
+        except ValueError as exc:
+            raise ExperimentError(f"{source}: preset: {exc}") from None
+        base.pop("name", None)
+    merged = _merge(base, run)
+    hp_items = _typed(data, "hp", list, source, [])
+    scenarios = _typed(data, "scenarios", list, source, [])
+    paper = _typed(data, "paper", dict, source, {})
+    for k, v in paper.items():
+        if not isinstance(v, int | float) or isinstance(v, bool):
+            raise ExperimentError(f"{source}: paper.{k}: needs a number (percent), got {v!r}")
+    fractions = _typed(data, "budget_fractions", dict, source, {})
+    for k, v in fractions.items():
+        if not isinstance(v, int | float) or isinstance(v, bool) or not 0 < v <= 1:
+            raise ExperimentError(f"{source}: budget_fractions.{k}: needs a fraction in (0, 1], "
+                                  f"got {v!r}")
+    rate = _typed(data, "steps_per_minute", (int, float), source, DEFAULT_STEPS_PER_MINUTE)
+    if rate <= 0:
+        raise ExperimentError(f"{source}: steps_per_minute: must be > 0, got {rate}")
+    cols = _typed(data, "columns", list, source, [])
+    return Row(table, name, _typed(data, "title", str, source, name),
+               int(_typed(data, "order", int, source, 0)), merged, source,
+               tuple(str(h) for h in hp_items), tuple(str(s) for s in scenarios),
+               {str(k): float(v) for k, v in paper.items()}, float(rate),
+               {str(k): float(v) for k, v in fractions.items()}, tuple(str(c) for c in cols),
+               _typed(data, "note", str, source, ""))
+
+
+TABLE_KEYS = ("title", "description", "layout", "columns", "average", "heatmap", "checks",
+              "paper_average")
+
+
+def load_tables(names: Sequence[str], experiments_dir: str | Path | None = None
+                ) -> list[Table]:
+    """The named tables (with their rows, in ``order``), every file checked."""
+    root = _root(experiments_dir)
+    valid = table_names(experiments_dir)
+    bad = [n for n in names if n not in valid]
+    if bad:
+        raise ExperimentError(f"unknown table(s) {bad}; tables: {valid}")
+    # every row of every table: same_as may point across tables
+    raw: dict[str, tuple[dict[str, Any], str]] = {}
+    for t in valid:
+        for res in sorted(root.joinpath(t).iterdir(), key=lambda p: p.name):
+            if res.name.endswith(".toml") and not res.name.startswith("_"):
+                source = f"experiments/{t}/{res.name}"
+                raw[f"{t}/{res.name[:-5]}"] = (_read_toml(res, source), source)
+    tables = []
+    for t in names:
+        source = f"experiments/{t}/_table.toml"
+        data = _read_toml(root.joinpath(t, "_table.toml"), source)
+        _keys(data, TABLE_KEYS, source)
+        layout = _typed(data, "layout", str, source, "matrix")
+        if layout not in LAYOUTS:
+            raise ExperimentError(f"{source}: layout: must be one of {list(LAYOUTS)}, got "
+                                  f"{layout!r}")
+        cols_data = _typed(data, "columns", list, source, [])
+        if not cols_data:
+            raise ExperimentError(f"{source}: columns: needs at least one [[columns]] table")
+        columns = tuple(_column(c, f"{source}: columns[{i}]") for i, c in enumerate(cols_data))
+        names_seen = [c.name for c in columns]
+        if len(set(names_seen)) != len(names_seen):
+            raise ExperimentError(f"{source}: columns: names must be unique, got {names_seen}")
+        rows = []
+        for key, (row_data, row_source) in raw.items():
+            if key.startswith(f"{t}/"):
+                row = _row(t, key.split("/", 1)[1], row_data, row_source, raw)
+                unknown = [c for c in row.columns if c not in names_seen]
+                unknown += [c for c in row.paper if c not in names_seen and c != "average"]
+                if unknown:
+                    raise ExperimentError(f"{row_source}: columns / paper name {unknown}; the "
+                                          f"table's columns: {names_seen} (and 'average')")
+                rows.append(row)
+        if not rows:
+            raise ExperimentError(f"experiments/{t}: no row files")
+        checks = tuple(_typed(data, "checks", list, source, []))
+        for i, chk in enumerate(checks):
+            if not isinstance(chk, dict) or chk.get("kind") not in CHECKS:
+                raise ExperimentError(f"{source}: checks[{i}]: needs kind = one of "
+                                      f"{list(CHECKS)}")
+        tables.append(Table(t, _typed(data, "title", str, source, t),
+                            _typed(data, "description", str, source, ""), layout, columns,
+                            tuple(sorted(rows, key=lambda r: (r.order, r.name))),
+                            bool(_typed(data, "average", bool, source, False)),
+                            bool(_typed(data, "heatmap", bool, source, False)), checks,
+                            bool(_typed(data, "paper_average", bool, source, True))))
+    return tables
+
+
+# ---- a row's run for one seed and budget ---------------------------------------------
+
+def _set_path(data: dict[str, Any], path: str, value: Any) -> None:
+    """``data[a][b] = value`` for ``path`` ``"a.b"`` (copying the tables on the way; the
+    run-file loader then rejects a setting that does not exist)."""
+    keys = path.split(".")
+    node = data
+    for k in keys[:-1]:
+        node[k] = dict(node[k]) if isinstance(node.get(k), dict) else {}
+        node = node[k]
+    node[keys[-1]] = value
+
+
+def row_config(row: Row, seed: int, budget_min: float, steps: int | None = None,
+               wandb: str = "disabled") -> TrainConfig:
+    """The TrainConfig of ``row`` for seed index ``seed`` under ``budget_min`` minutes."""
+    if not 0 <= seed < EVAL_SEED_BASE:
+        raise ExperimentError(f"training seeds must be in [0, {EVAL_SEED_BASE}), got {seed}")
+    total = int(steps) if steps else max(1, int(round(budget_min * row.steps_per_minute)))
+    data = dict(row.run)
+    data.update(name=f"{row.table}-{row.name}-s{seed}", seed=seed, total_steps=total,
+                time_limit_s=float(budget_min) * 60.0, wandb=wandb, num_workers=1,
+                keep_checkpoints=1, eval_every=0, video_every=0)
+    for path, frac in row.fractions.items():
+        _set_path(data, path, max(1, int(total * frac)))
+    if row.scenarios:
+        data["scenario"] = row.scenarios[0]
+    try:
+        cfg = parse_run(data, row.source)
+        if row.hp:
+            from alphatank.training.presets import run_scenario
+            n = len(run_scenario(cfg).learner_seats)
+            cfg = with_hp(cfg, parse_hp([("hp", ",".join(row.hp))]), n)
+    except ValueError as exc:
+        msg = str(exc)
+        raise ExperimentError(msg if msg.startswith(row.source) else
+                              f"{row.source}: {msg}") from None
+    return cfg
+
+
+def digest(obj: Any) -> str:
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:10]
+
+
+def run_digest(cfg: TrainConfig, scenarios: Sequence[str]) -> str:
+    """Hash of what a run does (its settings without the name, and its scenario mix)."""
+    data = cfg.to_dict()
+    data.pop("name")
+    return digest({"cfg": data, "scenarios": list(scenarios)})
+
+
+# ---- the plan: runs (row x seed, shared when equal) and their evaluations ----------------
+
+@dataclass
+class EvalSpec:
+    """One evaluation of a run: a column's target, resolved."""
+
+    column: str
+    scenario: str
+    bot: str | None
+    map: str | None
+    weakness: float
+    games: int
+    seed: int
+
+    @property
+    def key(self) -> str:
+        return f"{self.column}-{digest(dataclasses.asdict(self))}"
+
+
+@dataclass
+class Job:
+    """One training run and the evaluations its rows ask for."""
+
+    key: str
+    run_dir: str
+    cfg: dict[str, Any]
+    scenarios: list[str]
+    evals: list[EvalSpec]
+    rows: list[str]
+    seed: int
+
+    @property
+    def done_file(self) -> Path:
+        return Path(self.run_dir) / "done.json"
+
+    def eval_file(self, spec: EvalSpec) -> Path:
+        return Path(self.run_dir) / "eval" / f"{spec.key}.json"
+
+    def complete(self) -> bool:
+        return self.done_file.is_file() and all(self.eval_file(s).is_file()
+                                                for s in self.evals)
+
+    def started(self) -> bool:
+        return Path(self.run_dir).exists()
+
+
+@dataclass
+class Plan:
+    tables: list[Table]
+    jobs: list[Job]
+    cells: dict[tuple[str, int], tuple[Job, dict[str, EvalSpec]]]  # (row id, seed)
+    out: Path
+    seeds: int
+    budget_min: float
+    games: int
+
+
+def _eval_spec(col: Column, cfg: TrainConfig, games: int, seed: int) -> EvalSpec:
+    scenario = col.scenario or cfg.scenario
+    map_name = col.map if col.map is not None else (cfg.map if col.scenario is None else None)
+    return EvalSpec(col.name, scenario, col.bot, map_name, col.weakness, games,
+                    EVAL_SEED_BASE + seed)
+
+
+def make_plan(tables: Sequence[Table], out: str | Path, seeds: int = 1,
+              budget_min: float = DEFAULT_BUDGET_MIN, games: int = DEFAULT_GAMES,
+              steps: int | None = None, wandb: str = "disabled",
+              rows: Sequence[str] | None = None) -> Plan:
+    """Every (row, seed) of ``tables`` as jobs in ``out``; rows with equal runs share one
+    job. ``rows`` keeps only those row names (or ``table/row`` ids)."""
+    if seeds < 1:
+        raise ExperimentError(f"--seeds must be >= 1, got {seeds}")
+    if not budget_min > 0:
+        raise ExperimentError(f"--budget must be > 0 minutes, got {budget_min}")
+    if games < 1:
+        raise ExperimentError(f"--games must be >= 1, got {games}")
+    if steps is not None and steps < 1:
+        raise ExperimentError(f"--steps must be >= 1, got {steps}")
+    out = Path(out)
+    if rows:
+        known = {r.name for t in tables for r in t.rows} | {r.id for t in tables for r in t.rows}
+        bad = [r for r in rows if r not in known]
+        if bad:
+            raise ExperimentError(f"--rows: unknown row(s) {bad}; rows: "
+                                  f"{sorted(r.id for t in tables for r in t.rows)}")
+        tables = [dataclasses.replace(t, rows=tuple(r for r in t.rows
+                                                    if r.name in rows or r.id in rows))
+                  for t in tables]
+        tables = [t for t in tables if t.rows]
+    jobs: dict[str, Job] = {}
+    cells: dict[tuple[str, int], tuple[Job, dict[str, EvalSpec]]] = {}
+    for table in tables:
+        for row in table.rows:
+            for s in range(seeds):
+                cfg = row_config(row, s, budget_min, steps, wandb)
+                d = run_digest(cfg, row.scenarios)
+                job = jobs.get(d)
+                if job is None:
+                    found = sorted((out / "runs").glob(f"*-{d}")) if (out / "runs").is_dir() \
+                        else []
+                    run_dir = found[0] if found else out / "runs" / f"{row.name}-s{s}-{d}"
+                    job = jobs[d] = Job(d, str(run_dir), cfg.to_dict(), list(row.scenarios),
+                                        [], [], s)
+                job.rows.append(row.id)
+                specs = {}
+                for col in table.row_columns(row):
+                    spec = _eval_spec(col, cfg, games, s)
+                    if all(e.key != spec.key for e in job.evals):
+                        job.evals.append(spec)
+                    specs[col.name] = spec
+                cells[(row.id, s)] = (job, specs)
+    return Plan(list(tables), list(jobs.values()), cells, out, seeds, budget_min, games)
+
+
+# ---- running one job (in this process or a worker) -----------------------------------
+
+def _write_json(path: Path, data: Any) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    tmp.write_text(json.dumps(data, indent=1, default=str) + "\n", encoding="utf-8")
+    os.replace(tmp, path)
+
+
+def read_json(path: Path) -> Any:
+    return json.loads(Path(path).read_text(encoding="utf-8"))
+
+
+def _train(job: Job) -> dict[str, Any]:
+    from alphatank.training.learners import learner_class
+    from alphatank.training.runner import Trainer
+
+    cfg = TrainConfig.from_dict(job.cfg)
+    run_dir = Path(job.run_dir)
+    if run_dir.exists():  # an unfinished run: start it again from scratch
+        shutil.rmtree(run_dir)
+    run_dir.mkdir(parents=True)
+    _write_json(run_dir / "row.json", {"rows": job.rows, "seed": job.seed, "cfg": job.cfg,
+                                       "scenarios": job.scenarios, "digest": job.key})
+    env = None
+    if job.scenarios:
+        from alphatank.training.mixed import MixedVectorEnv
+
+        inputs = sorted({x for spec in run_learners(cfg, 1)
+                         for x in learner_class(spec.algo).inputs})
+        env = MixedVectorEnv(job.scenarios, cfg.num_envs, cfg.seed, cfg.observation,
+                             cfg.game or None, cfg.rewards or None, inputs=inputs)
+    t0 = time.time()
+    trainer = Trainer(cfg, run_dir, env=env, progress=False)
+    summary = trainer.train()
+    league = trainer.schedule.table() if hasattr(trainer.schedule, "table") else None
+    done = {"summary": summary, "wall_s": time.time() - t0, "total_steps": cfg.total_steps,
+            "stopped_by": "steps" if summary["global_step"] >= cfg.total_steps else "time",
+            "league": league, "finished_at": time.strftime("%Y-%m-%d %H:%M:%S")}
+    _write_json(job.done_file, done)
+    return done
+
+
+def _evaluate(job: Job, spec: EvalSpec) -> dict[str, Any]:
+    from alphatank.training.evaluate import evaluate_checkpoint
+
+    t0 = time.time()
+    res = evaluate_checkpoint(job.run_dir, [spec.bot], games=spec.games, seed=spec.seed,
+                              scenario=spec.scenario, weakness=spec.weakness,
+                              map_name=spec.map, num_envs=min(EVAL_ENVS, spec.games),
+                              label=Path(job.run_dir).name)[0]
+    data = {**res.as_dict(per_game=True), "spec": dataclasses.asdict(spec),
+            "lengths": res.lengths, "wall_s": time.time() - t0}
+    _write_json(job.eval_file(spec), data)
+    return data
+
+
+def run_job(job: Job) -> tuple[str, str | None, float]:
+    """Train (unless finished) and evaluate what is missing (each evaluation on its own: one
+    that fails does not stop the others); returns (key, error or None, seconds). Failures
+    are written to ``<run_dir>/error.txt`` and do not raise."""
+    from alphatank.training.threads import limit_threads
+
+    t0 = time.time()
+    err = Path(job.run_dir) / "error.txt"
+    errors: list[tuple[str, str]] = []  # (one line, traceback)
+
+    def failed(exc: Exception) -> None:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+        errors.append((f"{type(exc).__name__}: {first}", traceback.format_exc()))
+
+    limit_threads()
+    try:
+        if not job.done_file.is_file():
+            _train(job)
+    except Exception as exc:  # a failed row is reported; the others go on
+        failed(exc)
+    else:
+        for spec in job.evals:
+            if not job.eval_file(spec).is_file():
+                try:
+                    _evaluate(job, spec)
+                except Exception as exc:
+                    failed(exc)
+    if not errors:
+        if err.exists():
+            err.unlink()
+        return job.key, None, time.time() - t0
+    try:
+        err.parent.mkdir(parents=True, exist_ok=True)
+        err.write_text("\n".join(tb for _, tb in errors), encoding="utf-8")
+    except OSError:
+        pass
+    return job.key, "; ".join(line for line, _ in errors), time.time() - t0
+
+
+def execute(jobs: Sequence[Job], workers: int = 1, progress: bool = True,
+            on_done: Callable[[Job, str | None, float], None] | None = None
+            ) -> dict[str, str]:
+    """Run ``jobs`` (``workers`` processes; 1: in this process) with a progress bar over
+    them; returns {job key: error} of the failed ones."""
+    failed: dict[str, str] = {}
+    if not jobs:
+        return failed
+    bar = None
+    if progress:
+        from tqdm import tqdm
+        bar = tqdm(total=len(jobs), unit="run", dynamic_ncols=True, desc="experiments")
+
+    def finish(job: Job, error: str | None, seconds: float) -> None:
+        if error is not None:
+            failed[job.key] = error
+        if on_done is not None:
+            on_done(job, error, seconds)
+        if bar is not None:
+            bar.update(1)
+
+    try:
+        if workers <= 1:
+            for job in jobs:
+                if bar is not None:
+                    bar.set_postfix_str(", ".join(job.rows), refresh=True)
+                _, error, seconds = run_job(job)
+                finish(job, error, seconds)
+        else:
+            import multiprocessing as mp
+            from concurrent.futures import ProcessPoolExecutor, as_completed
+
+            with ProcessPoolExecutor(max_workers=workers,
+                                     mp_context=mp.get_context("spawn")) as pool:
+                futures = {pool.submit(run_job, job): job for job in jobs}
+                for fut in as_completed(futures):
+                    job = futures[fut]
+                    try:
+                        _, error, seconds = fut.result()
+                    except Exception as exc:  # the worker process died
+                        error, seconds = f"worker died: {type(exc).__name__}: {exc}", 0.0
+                    finish(job, error, seconds)
+    finally:
+        if bar is not None:
+            bar.close()
+    return failed
+
+
+def estimate_minutes(plan: Plan, jobs: Sequence[Job], workers: int) -> float:
+    """Rough wall time of ``jobs``: the budget per run plus ~1.5 min per evaluation of 200
+    games (200 games of up to 1,200 ticks took 1-3 min on a shared 2-core machine),
+    spread over the workers."""
+    total = sum(plan.budget_min + 1.5 * len(j.evals) * plan.games / DEFAULT_GAMES
+                for j in jobs)
+    return total / max(1, workers)

@@ -1,0 +1,211 @@
+"""A league: prioritised fictitious self-play (PFSP) over bots at several weaknesses and
+the learner's own past snapshots, with one openskill table over all of them.
+
+:class:`LeagueSchedule` is an opponent schedule (``schedule.kind = "league"`` in a run
+file). The trainer calls it like the others: :meth:`~LeagueSchedule.apply` before every
+rollout, :meth:`~LeagueSchedule.record` for every finished episode. At each ``apply``:
+
+* every ``snapshot_every`` env steps it freezes the learner (weights and observation
+  statistics, no optimiser) and adds the snapshot to the pool; the newest ``snapshots``
+  stay playable, older ones leave the pool but keep their rating;
+* it draws each env's opponent for that env's next episode (named opponents of the
+  vector env, :meth:`set_env_opponents`): opponent ``o`` with probability proportional
+  to ``max(floor, (1 - s_o) ** power)``, where ``s_o`` is the learner's score against
+  ``o`` (wins + draws / 2) over its last ``window`` games against it (an opponent never
+  played has ``s_o = 0``: it is tried first). Draws come from a generator seeded by
+  ``(seed, step)``, so a run is reproducible.
+
+Bots are named ``NAME@WEAKNESS`` (a seat spec, e.g. ``smart@0.5``); snapshots
+``self@STEP``. Every finished game rates the learner against its opponent in one
+openskill (Plackett-Luce) table (draws are ties), logged as ``league/*`` and kept in the
+checkpoint's schedule state (ratings and results; snapshot weights are not saved: a
+resumed league starts its snapshot pool afresh).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from alphatank.stats import League
+from alphatank.training.schedules import OpponentSchedule
+
+DEFAULT_BOTS = ("random", "aggressive", "defensive", "dodge", "smart")
+SCORE = {"win": 1.0, "draw": 0.5, "loss": 0.0}
+RATED = {"win": 1, "draw": 0, "loss": -1}
+LEARNER = "learner"
+
+
+def opponent_name(label: str) -> str:
+    """The league name in an episode's opponent label: ``B:smart@0.5`` -> ``smart@0.5``;
+    ``B:self@4096/3`` (env 3's copy of a snapshot) -> ``self@4096``."""
+    first = label.split(", ")[0]
+    name = first.partition(":")[2] if ":" in first else first
+    return name.split("/")[0]
+
+
+class LeagueSchedule(OpponentSchedule):
+    """PFSP over bots and snapshots (see the module docstring)."""
+
+    kind = "league"
+
+    def __init__(self, bots: Sequence[str] = DEFAULT_BOTS,
+                 weaknesses: Sequence[float] = (0.25, 0.5, 1.0),
+                 snapshot_every: int = 200_000, snapshots: int = 8, power: float = 2.0,
+                 floor: float = 0.1, window: int = 50, seed: int = 0):
+        from alphatank.game.scenarios import bot_names
+
+        valid = bot_names()
+        bad = [b for b in bots if b not in valid]
+        if bad or not bots:
+            raise ValueError(f"league bots must be some of {list(valid)}, got {list(bots)}")
+        if not weaknesses or any(not 0.0 < float(w) <= 1.0 for w in weaknesses):
+            raise ValueError(f"league weaknesses must be in (0, 1], got {list(weaknesses)}")
+        if snapshot_every < 0 or snapshots < 0:
+            raise ValueError(f"league snapshot_every and snapshots must be >= 0 (0: no "
+                             f"snapshots), got {snapshot_every}, {snapshots}")
+        if power < 0 or not 0.0 < floor <= 1.0 or window < 1:
+            raise ValueError(f"league needs power >= 0, floor in (0, 1] and window >= 1, got "
+                             f"{power}, {floor}, {window}")
+        self.bots = [f"{b}@{float(w):g}" for b in bots for w in weaknesses]
+        self.snapshot_every, self.max_snapshots = int(snapshot_every), int(snapshots)
+        self.power, self.floor, self.window, self.seed = float(power), float(floor), \
+            int(window), int(seed)
+        self.results: dict[str, deque[float]] = {}
+        self.league = League([LEARNER])
+        self.index: dict[str, int] = {}
+        for name in self.bots:
+            self._add(name)
+        self.pool: deque[str] = deque()  # playable snapshots, oldest first
+        self.last_snapshot: int | None = None
+        self.trainer: Any = None
+        self._env: Any = None  # the env the bots were registered with
+        self.games = 0
+
+    # ---- set-up ---------------------------------------------------------------------
+
+    def _add(self, name: str) -> None:
+        self.results[name] = deque(maxlen=self.window)
+        me = self.league.ratings[0]
+        self.index[name] = self.league.add(name, me.mu if name.startswith("self@") else None,
+                                           me.sigma if name.startswith("self@") else None)
+
+    def bind(self, trainer: Any) -> None:
+        """Keep the trainer: snapshots copy its (single) learner."""
+        if self.max_snapshots and self.snapshot_every and len(trainer.specs) != 1:
+            raise ValueError(f"league snapshots need one learner, the run has "
+                             f"{[s.name for s in trainer.specs]} (set snapshots = 0)")
+        self.trainer = trainer
+
+    # ---- the schedule ---------------------------------------------------------------
+
+    def opponents(self) -> list[str]:
+        """Playable opponents: the bots, then the snapshots in the pool."""
+        return [*self.bots, *self.pool]
+
+    def score(self, name: str) -> float:
+        res = self.results[name]
+        return float(np.mean(res)) if res else 0.0
+
+    def probabilities(self) -> np.ndarray:
+        """Sampling probability of each of :meth:`opponents`."""
+        w = np.array([max(self.floor, (1.0 - self.score(n)) ** self.power)
+                      for n in self.opponents()])
+        return w / w.sum()
+
+    def _snapshot(self, env: Any, step: int) -> None:
+        from alphatank.training.checkpoint import LivePolicy
+        from alphatank.training.learners import make_learner
+        from alphatank.training.selfplay import frozen_state
+
+        tr = self.trainer
+        spec = tr.specs[0]
+        learner = make_learner(spec, tr.D, 1, self.seed, input_dims=tr.input_dims)
+        learner.load_state_dict(frozen_state(tr.learners[spec.name].state_dict()),
+                                weights_only=True)
+        name = f"self@{step}"
+        meta = dict(tr.observation_meta)
+        if meta["kind"] != "paper":  # room for the walls of every map the env plays
+            cores = [b.core for b in getattr(env, "blocks", [env]) if hasattr(b, "core")]
+            meta["max_walls"] = max([int(meta["max_walls"]),
+                                     *(c.batch.walls.shape[1] for c in cores)])
+        # one Policy object per env: a policy keeps one match's observation state
+        for e in range(env.num_envs):
+            env.add_opponent(f"{name}/{e}", LivePolicy({spec.name: learner}, meta, spec.name))
+        if name not in self.index:
+            self._add(name)
+        self.pool.append(name)
+        while len(self.pool) > self.max_snapshots:
+            self.pool.popleft()
+        self.last_snapshot = step
+
+    def apply(self, env: Any, step: int) -> dict[str, float]:
+        if self._env is not env:
+            for name in self.bots:
+                env.add_opponent(name, name)
+            self._env = env
+        if (self.trainer is not None and self.max_snapshots and self.snapshot_every
+                and (self.last_snapshot is None
+                     or step - self.last_snapshot >= self.snapshot_every)):
+            self._snapshot(env, step)
+        names = self.opponents()
+        rng = np.random.default_rng([self.seed, int(step), 0x1EA6])
+        picks = rng.choice(len(names), size=env.num_envs, p=self.probabilities())
+        env.set_env_opponents([names[i] if names[i] in self.bots else f"{names[i]}/{e}"
+                               for e, i in enumerate(picks)])
+        return self.metrics()
+
+    def record(self, opponent: str, outcome: str) -> None:
+        name = opponent_name(opponent)
+        if name not in self.results or outcome not in SCORE:
+            return  # an episode begun before the league set this env's opponent
+        self.results[name].append(SCORE[outcome])
+        self.league.record(0, self.index[name], RATED[outcome])
+        self.games += 1
+
+    def metrics(self) -> dict[str, float]:
+        me = self.league.ratings[0]
+        m = {"league/mu": me.mu, "league/sigma": me.sigma, "league/ordinal": me.ordinal(),
+             "league/snapshots": float(len(self.pool)), "league/games": float(self.games)}
+        for name in self.bots:
+            if self.results[name]:
+                m[f"league/score/{name}"] = self.score(name)
+        if self.pool:
+            m["league/score/newest_self"] = self.score(self.pool[-1])
+        return m
+
+    def table(self) -> list[tuple[str, float, float, float]]:
+        """(name, mu, sigma, ordinal), best first: the learner, bots and snapshots."""
+        return self.league.table()
+
+    # ---- persistence (JSON-able; snapshot weights are not kept) ------------------------
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"results": {n: list(r) for n, r in self.results.items()},
+                "ratings": [{"name": n, "mu": r.mu, "sigma": r.sigma}
+                            for n, r in zip(self.league.names, self.league.ratings,
+                                            strict=True)],
+                "games": self.games}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        if not state:
+            return
+        rows = state["ratings"]
+        self.league = League([LEARNER])
+        self.league.ratings[0] = self.league.model.rating(mu=rows[0]["mu"],
+                                                          sigma=rows[0]["sigma"], name=LEARNER)
+        self.index, self.results = {}, {}
+        for r in rows[1:]:
+            self.index[r["name"]] = self.league.add(r["name"], r["mu"], r["sigma"])
+            self.results[r["name"]] = deque(state["results"].get(r["name"], []),
+                                            maxlen=self.window)
+        for name in self.bots:
+            if name not in self.index:
+                self._add(name)
+        self.games = int(state.get("games", 0))
+        self.pool.clear()
+        self.last_snapshot = None
+        self._env = None
