@@ -324,3 +324,43 @@ def test_bot_costs_reports_every_bot_and_smart_stays_cheap():
     match = Match(GameConfig(), load_map("maze"), ["A", "B"], seed=0)
     bot.reset(match, 0, 1)
     assert bot.nav is nav_grid(load_map("maze"))
+
+
+# ---- behaviour pins -------------------------------------------------------------------
+
+def bot_game_digest(specs: tuple[str, ...], map_name: str, teams: tuple[str, ...],
+                    seed: int, max_steps: int = 500) -> str:
+    """sha256 (16 hex digits) of every tick's joint actions and the final state of one
+    seeded game between bots given as spec strings: any change in what a bot decides
+    changes it."""
+    import hashlib
+
+    digest = hashlib.sha256()
+    bots = [bot_from_spec(s) for s in specs]
+    ep = start_episode(GameConfig(max_steps=max_steps), [load_map(map_name)], list(teams),
+                       bots, seed, hooks=[_Watch(lambda m, a: digest.update(a.tobytes()))]).run()
+    digest.update(ep.match.state_hash().encode())
+    digest.update(str((ep.match.tick, ep.winner)).encode())
+    return digest.hexdigest()[:16]
+
+
+# Pinned behaviour of every bot in seeded games (bank-shot searches, dodges, routes,
+# teammates in the line of fire): performance work on the bots must leave these unchanged.
+# They also pin the physics: a change to the match tick that moves any bit changes them.
+PINNED_GAMES = {
+    (("smart", "smart"), "maze", 3): "0e0b42db7bb7599d",
+    (("random", "smart"), "maze", 4): "8033aed691668fb5",
+    (("aggressive", "smart"), "battlefield", 5): "393186cf6ed2e0d1",
+    (("defensive", "smart"), "battlefield", 6): "dc70fff4d8983ee6",
+    (("dodge", "smart"), "maze", 7): "d0cec751969056c5",
+    (("smart", "dodge"), "open", 8): "73d17a4b82bf7f67",
+    (("smart:ricochet=false", "smart@0.5"), "maze", 12): "ee3d44def0272a1b",
+    (("smart",) * 4, "arena4", 9): "5126d0ac952289df",
+}
+
+
+@pytest.mark.parametrize("case", sorted(PINNED_GAMES), ids=lambda c: f"{'-'.join(c[0])}-{c[2]}")
+def test_bot_games_are_pinned(case):
+    specs, map_name, seed = case
+    teams = ("A", "B") if len(specs) == 2 else ("A", "A", "B", "B")
+    assert bot_game_digest(specs, map_name, teams, seed) == PINNED_GAMES[case]
