@@ -364,3 +364,49 @@ def test_bot_games_are_pinned(case):
     specs, map_name, seed = case
     teams = ("A", "B") if len(specs) == 2 else ("A", "A", "B", "B")
     assert bot_game_digest(specs, map_name, teams, seed) == PINNED_GAMES[case]
+
+
+@pytest.mark.parametrize("map_name", ["maze", "battlefield", "arena8"])
+def test_wall_sight_answers_like_the_world(map_name):
+    """The bots' fast wall queries give pymunk's answers: random segments, many ending on
+    or near wall corners and edges (grazing contacts), zero-length ones, several radii."""
+    from alphatank.bots.sight import wall_sight
+    from alphatank.sim.world import WALLS_ONLY
+
+    spec = load_map(map_name)
+    m = Match(GameConfig(), spec, ["A", "B"], seed=1)
+    sight = wall_sight(m.world)
+    assert wall_sight(m.world) is sight
+    rng = np.random.default_rng(3)
+    corners = np.array([(x, y) for x0, y0, x1, y1 in spec.wall_rects
+                        for x, y in ((x0, y0), (x1, y0), (x0, y1), (x1, y1))])
+    agree = hits = 0
+    for k in range(3000):
+        if k % 3 == 0:  # near a corner, offset by about a radius
+            p = corners[rng.integers(len(corners))] + rng.normal(0, 4, 2)
+        else:
+            p = rng.uniform(0, [spec.width, spec.height])
+        q = p + rng.normal(0, 120, 2) if k % 5 else p.copy()
+        r = float(rng.choice([0.0, 3.0, 14.0, 16.0]))
+        (x0, y0), (x1, y1) = p.tolist(), q.tolist()
+        quick = m.world.space.segment_query_first((x0, y0), (x1, y1), r, WALLS_ONLY) is None
+        exact = m.world.ray((x0, y0), (x1, y1), r) is None
+        assert sight.clear(x0, y0, x1, y1, r) == quick
+        assert sight.ray_clear(x0, y0, x1, y1, r) == exact
+        agree += quick == exact
+        hits += not exact
+    assert hits > 300 and 3000 - hits > 100 and agree < 3000  # both answers; tests differ
+
+
+def test_bots_pickle_after_reset_without_their_wall_queries():
+    import pickle
+
+    m = Match(GameConfig(), load_map("maze"), ["A", "B"], seed=2)
+    bot = make_bot("smart", seed=1)
+    bot.reset(m, 0, 5)
+    a = bot.act(m, 0)
+    clone = pickle.loads(pickle.dumps(bot))
+    assert clone._sight is None
+    clone.reset(m, 0, 5)
+    bot.reset(m, 0, 5)
+    assert np.array_equal(clone.act(m, 0), bot.act(m, 0)) and np.array_equal(a, bot.act(m, 0))

@@ -300,9 +300,11 @@ class RewardTracker:
         (E_sl, len(TERMS), n) view of this tick's terms."""
         cfg = self.cfg
         terms = self.terms[sl]
-        terms[...] = 0.0
-        for k, e in enumerate(range(len(matches))[sl]):
-            self._events(terms[k], matches[e])
+        terms.fill(0.0)
+        for k, m in enumerate(matches[sl]):
+            ev = m.events
+            if ev.hits or ev.fired or m.terminated or m.truncated:
+                self._events(terms[k], m)
         alive = batch.alive[sl]
         if self.on_progress:
             self._progress(sl, batch, terms)
@@ -398,22 +400,23 @@ class RewardTracker:
         compare."""
         prev = self.bullet_prev[sl]
         act = batch.bullet_active[sl][:, self._rw_b]
-        if not act.any():
-            prev[...] = np.nan
+        if not np.count_nonzero(act):
+            prev.fill(np.nan)
             return
         d = batch.bullet_xy[sl][:, self._rw_b, None, :] - batch.tank_xy[sl][:, None]
         dist = np.hypot(d[..., 0], d[..., 1])  # (E, nr, n)
         ok = self.rw_enemy & batch.alive[sl][:, None, :]
+        ok &= act[..., None]  # an inactive slot has no distance (NaN)
         now = np.fmin.reduce(np.where(ok, dist, np.nan), axis=-1)
-        now[~act] = np.nan
         closer, farther = bullet_progress(prev, now)
         E, cap = closer.shape[0], self.capacity
         seats = self._rw_s
+        add = np.add.reduce
         terms[:, T["bullet_close"], seats] = (
-            self.cfg.bullet_close * closer.reshape(E, -1, cap).sum(axis=-1))
+            self.cfg.bullet_close * add(closer.reshape(E, -1, cap), axis=-1))
         terms[:, T["bullet_away"], seats] = (
-            self.cfg.bullet_away * farther.reshape(E, -1, cap).sum(axis=-1))
-        prev[...] = now
+            self.cfg.bullet_away * add(farther.reshape(E, -1, cap), axis=-1))
+        np.copyto(prev, now)
 
     def _rotation(self, sl: slice, batch: StateBatch, terms: np.ndarray) -> None:
         cfg = self.cfg
