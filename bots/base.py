@@ -14,9 +14,9 @@ from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 
 import numpy as np
 
-from alphatank.bots.sight import WallSight, wall_sight
 from alphatank.sim.ballistics import path_hits, predict_path
 from alphatank.sim.navigation import NavGrid, nav_grid
+from alphatank.sim.sight import WallSight, wall_sight
 
 if TYPE_CHECKING:
     from alphatank.sim.match import Match
@@ -345,8 +345,11 @@ class Evader:
         can_hit[seat] = False
         self.shooters = [int(k) for k in np.flatnonzero(can_hit)]
         self.shooter_mask = can_hit
-        # Bullet slots of those tanks (slot owners are fixed for a world's lifetime).
-        self._slots = [int(b) for b in np.flatnonzero(can_hit[match.bullet_owner])]
+        # Runs (lo, hi) of the bullet slots of those tanks (slot owners are fixed for a
+        # world's lifetime).
+        slots = np.flatnonzero(can_hit[match.bullet_owner])
+        cuts = np.flatnonzero(np.diff(slots) != 1) + 1
+        self._runs = [(int(r[0]), int(r[-1]) + 1) for r in np.split(slots, cuts) if r.size]
         self._soon = float(self.times[-1] * 2)
         self._danger2 = self.danger ** 2
 
@@ -354,26 +357,32 @@ class Evader:
         """Indices (ascending) of bullets that can hit ``seat`` and pass within danger
         soon. Plain Python over the few live bullets: a handful of numpy calls on arrays
         this small cost several times more."""
-        counts = match.bullets_alive
-        if not any(counts[k] for k in self.shooters):
+        counts = match.bullets_alive.tolist()
+        for k in self.shooters:
+            if counts[k]:
+                break
+        else:
             return []
         active = match.bullet_active.tolist()
-        live = [b for b in self._slots if active[b]]
-        if not live:
-            return []
-        x, y = match.tank_xy[seat].tolist()
-        bxy, bvel = match.bullet_xy, match.bullet_vel
+        x = y = None
         soon, danger2 = self._soon, self._danger2
         out = []
-        for b in live:
-            bx, by = bxy[b].tolist()
-            vx, vy = bvel[b].tolist()
-            rx, ry = bx - x, by - y
-            v2 = vx * vx + vy * vy
-            t = -(rx * vx + ry * vy) / (1e-9 if v2 < 1e-9 else v2)  # np.maximum
-            mx, my = rx + vx * t, ry + vy * t
-            if 0 < t < soon and mx * mx + my * my < danger2:
-                out.append(b)
+        for lo, hi in self._runs:
+            if True not in active[lo:hi]:
+                continue
+            if x is None:
+                x, y = match.tank_xy[seat].tolist()
+            pos, vel = match.bullet_xy[lo:hi].tolist(), match.bullet_vel[lo:hi].tolist()
+            for j in range(hi - lo):
+                if not active[lo + j]:
+                    continue
+                (bx, by), (vx, vy) = pos[j], vel[j]
+                rx, ry = bx - x, by - y
+                v2 = vx * vx + vy * vy
+                t = -(rx * vx + ry * vy) / (1e-9 if v2 < 1e-9 else v2)  # np.maximum
+                mx, my = rx + vx * t, ry + vy * t
+                if 0 < t < soon and mx * mx + my * my < danger2:
+                    out.append(lo + j)
         return out
 
     def evade(self, match: Match, seat: int, threats: list[int],

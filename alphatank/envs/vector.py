@@ -166,17 +166,20 @@ class VectorMatchEnv:
         """One tick in every env, with SAME_STEP autoreset of ended envs."""
         if not self._started:
             raise RuntimeError("step() before reset()")
+        return self._step(check_actions(actions, self._shape, self._name))
+
+    def _step(self, acts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                               np.ndarray, dict[str, Any]]:
+        """:meth:`step` with validated int64 (num_envs, L, 3) actions."""
         core = self.core
-        acts = check_actions(actions, self._shape, self._name)
         terms, obs = core.step(acts)
         lt = terms[:, :, core.driven_idx]  # (E, T, L)
         rewards = lt.sum(axis=1)
         self._return += rewards
         self._terms += lt
         self._length += 1
-        terminated = np.fromiter((m.terminated for m in core.matches), bool, self.num_envs)
-        truncated = np.fromiter((m.truncated for m in core.matches), bool, self.num_envs)
-        final_obs = np.zeros_like(obs)
+        terminated, truncated = core.terminated.copy(), core.truncated.copy()
+        final_obs = np.zeros(obs.shape, dtype=obs.dtype)
         episodes = []
         done = np.flatnonzero(terminated | truncated)
         if done.size:
@@ -373,8 +376,14 @@ class SubprocVectorMatchEnv:
                                           dict[str, Any]]:
         if not self._started:
             raise RuntimeError("step() before reset()")
+        return self._step(check_actions(actions, self._shared.arr["actions"].shape,
+                                        self._name))
+
+    def _step(self, acts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                               np.ndarray, dict[str, Any]]:
+        """:meth:`step` with validated int64 (num_envs, L, 3) actions."""
         a = self._shared.arr
-        a["actions"][...] = check_actions(actions, a["actions"].shape, self._name)
+        a["actions"][...] = acts
         episodes = [ep for part in self._broadcast("step") for ep in part]
         info = {"final_obs": a["final_obs"].copy(), "episodes": episodes}
         return (a["obs"].copy(), a["rewards"].copy(), a["terminated"].copy(),
@@ -500,7 +509,7 @@ class TankBattleVectorEnv(VectorEnv):
         if not self._started:
             raise RuntimeError("step() before reset()")
         acts = check_actions(actions, self._shape, self._name)
-        obs, rew, term, trunc, info = self.engine.step(acts[:, None, :])
+        obs, rew, term, trunc, info = self.engine._step(acts[:, None, :])
         infos: dict[str, Any] = {}
         episodes = info["episodes"]
         if episodes:
