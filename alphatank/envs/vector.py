@@ -42,6 +42,7 @@ arrays through shared memory. :func:`make_vector_env` picks one by ``num_workers
 from __future__ import annotations
 
 import multiprocessing as mp
+import pickle
 import traceback
 from collections.abc import Mapping, Sequence
 from multiprocessing import shared_memory
@@ -171,21 +172,35 @@ class VectorMatchEnv:
     def _step(self, acts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray,
                                                np.ndarray, dict[str, Any]]:
         """:meth:`step` with validated int64 (num_envs, L, 3) actions."""
+        E, L, D = self.num_envs, self.num_learners, self.obs_dim
+        obs, final_obs = np.empty((E, L, D), np.float32), np.zeros((E, L, D), np.float32)
+        rewards = np.empty((E, L), np.float32)
+        terminated, truncated = np.empty(E, bool), np.empty(E, bool)
+        episodes = self._step_into(acts, obs, rewards, terminated, truncated, final_obs)
+        return obs, rewards, terminated, truncated, {"final_obs": final_obs,
+                                                     "episodes": episodes}
+
+    def _step_into(self, acts: np.ndarray, obs: np.ndarray, rewards: np.ndarray,
+                   terminated: np.ndarray, truncated: np.ndarray,
+                   final_obs: np.ndarray) -> list[dict[str, Any]]:
+        """One step written into the given arrays (``final_obs``: only the rows of ended
+        episodes are written; the caller keeps the others zero). Returns the episode
+        records."""
         core = self.core
-        terms, obs = core.step(acts)
+        terms, built = core.step(acts)
         lt = terms[:, :, core.driven_idx]  # (E, T, L)
-        rewards = lt.sum(axis=1)
-        self._return += rewards
+        reward = lt.sum(axis=1)
+        self._return += reward
         self._terms += lt
         self._length += 1
-        terminated, truncated = core.terminated.copy(), core.truncated.copy()
-        final_obs = np.zeros(obs.shape, dtype=obs.dtype)
+        np.copyto(rewards, reward)
+        np.copyto(terminated, core.terminated)
+        np.copyto(truncated, core.truncated)
         episodes = []
         done = np.flatnonzero(terminated | truncated)
         if done.size:
-            final_obs[done] = obs[done]
-            for e in done:
-                e = int(e)
+            final_obs[done] = built[done]
+            for e in done.tolist():
                 m = core.matches[e]
                 episodes.append({
                     "env": self.env_ids[e], "return": self._return[e].copy(),
@@ -194,9 +209,9 @@ class VectorMatchEnv:
                     "map": core.map_name(e),
                     "terms": dict(zip(TERMS, self._terms[e].copy(), strict=True))})
                 self._reset_env(e)
-            obs = core.obs.build()
-        info = {"final_obs": final_obs, "episodes": episodes}
-        return obs.copy(), rewards.astype(np.float32), terminated, truncated, info
+            built = core.obs.build()
+        np.copyto(obs, built)
+        return episodes
 
     def _name(self, idx: tuple[int, ...]) -> str:
         e, slot = idx
@@ -244,25 +259,34 @@ class _Shared:
         self.mem.clear()
 
 
+_STEP = b"s"  # the per-step command and its answer travel as raw bytes, not pickles
+
+
 def _worker(conn: Any, kwargs: dict, lo: int, hi: int, specs: dict, names: dict) -> None:
-    """Own envs lo..hi-1; answer commands from the parent until 'close'."""
+    """Own envs lo..hi-1; answer commands from the parent until 'close'. A step reads
+    the validated actions from shared memory and writes every result there; its answer
+    is empty bytes, or the pickled episode records when episodes ended."""
     shared = _Shared(specs, names)
     a = shared.arr
     try:
         env = VectorMatchEnv(num_envs=hi - lo, env_ids=range(lo, hi), **kwargs)
+        out = [a[k][lo:hi] for k in ("obs", "rewards", "terminated", "truncated", "final_obs")]
+        final_obs, dirty = out[-1], False
         conn.send(("ok", None))
         while True:
-            cmd, arg = conn.recv()
-            if cmd == "step":
-                obs, rew, term, trunc, info = env.step(a["actions"][lo:hi])
-                a["obs"][lo:hi] = obs
-                a["rewards"][lo:hi] = rew
-                a["terminated"][lo:hi] = term
-                a["truncated"][lo:hi] = trunc
-                a["final_obs"][lo:hi] = info["final_obs"]
-                conn.send(("ok", info["episodes"]))
-            elif cmd == "reset":
+            msg = conn.recv_bytes()
+            if msg == _STEP:
+                if dirty:  # last step's final observations
+                    final_obs.fill(0.0)
+                episodes = env._step_into(a["actions"][lo:hi], *out)
+                dirty = bool(episodes)
+                conn.send_bytes(pickle.dumps(("ok", episodes)) if episodes else b"")
+                continue
+            cmd, arg = pickle.loads(msg)
+            if cmd == "reset":
                 a["obs"][lo:hi] = env.reset(arg)
+                final_obs.fill(0.0)
+                dirty = False
                 conn.send(("ok", None))
             elif cmd == "call":
                 name, args = arg
@@ -332,11 +356,17 @@ class SubprocVectorMatchEnv:
         return (f"env {e}, learner {slot} (seat {self.learner_seats[slot]}, team "
                 f"{self.learner_teams[slot]})")
 
-    def _gather(self) -> list:
+    def _gather(self, raw: bool = False) -> list:
+        """Every worker's answer, in worker order; ``raw``: answers to a step (empty
+        bytes: no episodes)."""
         out = []
         for conn in self._conns:
             try:
-                status, payload = conn.recv()
+                if raw:
+                    msg = conn.recv_bytes()
+                    status, payload = pickle.loads(msg) if msg else ("ok", [])
+                else:
+                    status, payload = conn.recv()
             except (EOFError, OSError):
                 status, payload = "error", (
                     "the worker process exited without answering (with the 'spawn' start "
@@ -383,8 +413,12 @@ class SubprocVectorMatchEnv:
                                                np.ndarray, dict[str, Any]]:
         """:meth:`step` with validated int64 (num_envs, L, 3) actions."""
         a = self._shared.arr
-        a["actions"][...] = acts
-        episodes = [ep for part in self._broadcast("step") for ep in part]
+        np.copyto(a["actions"], acts)
+        for conn in self._conns:
+            conn.send_bytes(_STEP)
+        episodes = []
+        for part in self._gather(raw=True):
+            episodes.extend(part)
         info = {"final_obs": a["final_obs"].copy(), "episodes": episodes}
         return (a["obs"].copy(), a["rewards"].copy(), a["terminated"].copy(),
                 a["truncated"].copy(), info)

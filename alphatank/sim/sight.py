@@ -67,11 +67,9 @@ class WallSight:
             ptr = shape._shape
             bb = lib.cpShapeGetBB(ptr)
             self._walls.append((bb.l, bb.b, bb.r, bb.t, ptr, shape))
-        spec = world.spec
-        self._cell = float(spec.cell)
-        self._last_row, self._last_col = spec.walls.shape[0] - 1, spec.walls.shape[1] - 1
-        self._bands = [(self._band(wb, self._last_row), self._band(wt, self._last_row),
-                        self._band(wl, self._last_col), self._band(wr, self._last_col))
+        # Grid bands (int(v / cell): monotone, so band ranges of boxes that meet overlap).
+        self._inv = inv = 1.0 / float(world.spec.cell)
+        self._bands = [(int(wb * inv), int(wt * inv), int(wl * inv), int(wr * inv))
                        for wl, wb, wr, wt, _, _ in self._walls]
         self._near: dict[tuple[int, int, int, int], list] = {}
         self._filter = ffi.new("cpShapeFilter *", tuple(WALLS_ONLY))[0]
@@ -79,29 +77,30 @@ class WallSight:
         self._point = ffi.new("cpPointQueryInfo *")
         self._null = ffi.NULL
 
-    def _band(self, v: float, last: int) -> int:
-        """Grid row or column of coordinate ``v``, clipped to the grid."""
-        return min(max(int(v // self._cell), 0), last)
-
-    def _candidates(self, left: float, bottom: float, right: float, top: float) -> list:
-        """Walls whose box meets the box (left, bottom, right, top) (cpBBIntersects)."""
-        cell, last_row, last_col = self._cell, self._last_row, self._last_col
-        key = (min(max(int(bottom // cell), 0), last_row), min(max(int(top // cell), 0), last_row),
-               min(max(int(left // cell), 0), last_col), min(max(int(right // cell), 0), last_col))
+    def _candidates(self, x0: float, y0: float, x1: float, y1: float, radius: float
+                    ) -> list:
+        """Walls whose box meets first_wall_hit's query box, ``min(x0, x1) - radius`` ..
+        ``max(y0, y1) + radius`` (cpBBIntersects)."""
+        if x0 <= x1:
+            left, right = x0 - radius, x1 + radius
+        else:
+            left, right = x1 - radius, x0 + radius
+        if y0 <= y1:
+            bottom, top = y0 - radius, y1 + radius
+        else:
+            bottom, top = y1 - radius, y0 + radius
+        inv = self._inv
+        key = (int(bottom * inv), int(top * inv), int(left * inv), int(right * inv))
         near = self._near.get(key)
         if near is None:  # walls sharing a band with the box in both axes: a superset
             r0, r1, c0, c1 = key
             near = self._near[key] = [w for w, (b0, b1, a0, a1) in zip(self._walls, self._bands,
                                                                        strict=True)
                                       if b0 <= r1 and r0 <= b1 and a0 <= c1 and c0 <= a1]
+        if not near:
+            return near
         return [w for w in near
                 if w[0] <= right and left <= w[2] and w[1] <= top and bottom <= w[3]]
-
-    def _grown_box(self, x0: float, y0: float, x1: float, y1: float, radius: float
-                   ) -> tuple[float, float, float, float]:
-        """first_wall_hit's query box: ``min(x0, x1) - radius`` ... ``max(y0, y1) + radius``."""
-        return (min(x0, x1) - radius, min(y0, y1) - radius, max(x0, x1) + radius,
-                max(y0, y1) + radius)
 
     def clear(self, x0: float, y0: float, x1: float, y1: float, radius: float) -> bool:
         """``space.segment_query_first((x0, y0), (x1, y1), radius, WALLS_ONLY) is None``."""
@@ -110,7 +109,7 @@ class WallSight:
 
     def ray_clear(self, x0: float, y0: float, x1: float, y1: float, radius: float) -> bool:
         """``world.ray((x0, y0), (x1, y1), radius) is None``."""
-        walls = self._candidates(*self._grown_box(x0, y0, x1, y1, radius))
+        walls = self._candidates(x0, y0, x1, y1, radius)
         if walls:
             query, info, a, b = lib.cpShapeSegmentQuery, self._seg, (x0, y0), (x1, y1)
             for w in walls:
@@ -123,7 +122,7 @@ class WallSight:
                   ) -> WallHit | pymunk.SegmentQueryInfo | None:
         """``first_wall_hit(space, x0, y0, x1, y1, radius, skip)`` (``space`` must be this
         world's): a :func:`alphatank.sim.world.trace` query."""
-        walls = self._candidates(*self._grown_box(x0, y0, x1, y1, radius))
+        walls = self._candidates(x0, y0, x1, y1, radius)
         if not walls:
             return None
         query, info, a, b = lib.cpShapeSegmentQuery, self._seg, (x0, y0), (x1, y1)
