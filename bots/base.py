@@ -198,10 +198,9 @@ class Bot:
             gx, gy = centers[me]
             return gx, gy
         r = DRIVE_RADIUS - 2.0
-        ray_clear = self.sight(match).ray_clear
         for k in (nav.waypoint_idx(me, goal, DRIVE_RADIUS), int(nav.next_table[me, goal])):
             gx, gy = centers[k]
-            if k >= 0 and ray_clear(x, y, gx, gy, r):
+            if k >= 0 and self.ray_clear(match, x, y, gx, gy, r):
                 return gx, gy
         gx, gy = centers[me]
         return gx, gy
@@ -267,6 +266,16 @@ class Bot:
         x, y = xy[seat]
         tx, ty = xy[target]
         return self.clear(match, x, y, tx, ty, self.cfg.bullet_radius)
+
+    def ray_clear(self, match: Match, x0: float, y0: float, x1: float, y1: float,
+                  radius: float) -> bool:
+        """``match.world.ray((x0, y0), (x1, y1), radius) is None``: a circle of ``radius``
+        travels the segment without touching a wall. Off the bullet radius the world asks
+        :func:`alphatank.sim.world.first_wall_hit`, answered here without pymunk's
+        wrappers; at the bullet radius the world's own query answers."""
+        if radius == self.cfg.bullet_radius:
+            return match.world.ray((x0, y0), (x1, y1), radius) is None
+        return self.sight(match).ray_clear(x0, y0, x1, y1, radius)
 
     def clear(self, match: Match, x0: float, y0: float, x1: float, y1: float,
               radius: float) -> bool:
@@ -340,6 +349,10 @@ class Evader:
                                                            self.dt, horizon_ticks)
         self.raster = bot.nav.clearance_map()  # distance to walls, 5 px raster
         self.res = 5.0
+        h_r, w_r = self.raster.shape
+        self._raster_last = np.array([w_r - 1, h_r - 1]).reshape(2, 1, 1)
+        self._coef = np.zeros((3, 2, 1, 1))  # (x, y), (c, s), (-s, c) of evade()
+        self._pos, self._tmp = np.zeros((2,) + self.fwd.shape), np.zeros((2,) + self.fwd.shape)
         # tanks whose bullets can hit this seat (own bullets never: grace, self_hit off)
         can_hit = match.world.can_hit[:, seat].copy()
         can_hit[seat] = False
@@ -368,15 +381,15 @@ class Evader:
         soon, danger2 = self._soon, self._danger2
         out = []
         for lo, hi in self._runs:
-            if True not in active[lo:hi]:
+            live = active[lo:hi]
+            if True not in live:
                 continue
             if x is None:
                 x, y = match.tank_xy[seat].tolist()
             pos, vel = match.bullet_xy[lo:hi].tolist(), match.bullet_vel[lo:hi].tolist()
-            for j in range(hi - lo):
-                if not active[lo + j]:
+            for j, (on, (bx, by), (vx, vy)) in enumerate(zip(live, pos, vel, strict=True)):
+                if not on:
                     continue
-                (bx, by), (vx, vy) = pos[j], vel[j]
                 rx, ry = bx - x, by - y
                 v2 = vx * vx + vy * vy
                 t = -(rx * vx + ry * vy) / (1e-9 if v2 < 1e-9 else v2)  # np.maximum
@@ -389,23 +402,28 @@ class Evader:
               aim_err: float = 0.0) -> tuple[int, int]:
         """Best (rotate, move) against ``threats`` (bullet indices); among equally safe
         choices, the one turning towards ``aim_err`` (radians to the bot's aim)."""
-        x, y = match.tank_xy[seat]
+        x, y = match.tank_xy[seat].tolist()
         h = float(match.tank_angle[seat])
         c, s = math.cos(h), math.sin(h)
-        px = x + c * self.fwd - s * self.side  # (9, K)
-        py = y + s * self.fwd + c * self.side
-        bxy = match.bullet_xy[threats]
-        bv = match.bullet_vel[threats]
-        bx = bxy[:, 0:1] + bv[:, 0:1] * self.times  # (T, K)
-        by = bxy[:, 1:2] + bv[:, 1:2] * self.times
-        dx = px[:, None, :] - bx[None]
-        dy = py[:, None, :] - by[None]
-        gap2 = (dx * dx + dy * dy).reshape(9, -1).min(axis=1)
+        # Candidate positions, x and y stacked (2, 9, K): (x + c fwd) - s side and
+        # (y + s fwd) + c side, the same operations as one axis at a time.
+        coef, pos, tmp = self._coef, self._pos, self._tmp
+        coef.reshape(-1)[:] = (x, y, c, s, -s, c)
+        np.multiply(coef[1], self.fwd, out=tmp)
+        np.add(coef[0], tmp, out=pos)
+        np.multiply(coef[2], self.side, out=tmp)
+        pos += tmp
+        bxy = match.bullet_xy[threats][:, :, None]
+        bv = match.bullet_vel[threats][:, :, None]
+        bpos = bxy + bv * self.times  # (T, 2, K)
+        d = pos[:, :, None, :] - bpos.transpose(1, 0, 2)[:, None]  # (2, 9, T, K)
+        d *= d
+        gap2 = (d[0] + d[1]).reshape(9, -1).min(axis=1)
         score = np.sqrt(np.minimum(gap2, 4 * self.danger * self.danger))
-        h_r, w_r = self.raster.shape
-        r = np.minimum(np.maximum((py * (1 / self.res)).astype(np.intp), 0), h_r - 1)
-        q = np.minimum(np.maximum((px * (1 / self.res)).astype(np.intp), 0), w_r - 1)
-        wall = self.raster[r, q].min(axis=1)
+        cell = (pos * (1 / self.res)).astype(np.intp)  # raster (column, row) per point
+        np.maximum(cell, 0, out=cell)
+        np.minimum(cell, self._raster_last, out=cell)
+        wall = self.raster[cell[1], cell[0]].min(axis=1)
         score[wall < self.wall_margin] -= 2 * self.danger
         turn = self.bot.steer(aim_err)
         score[3 * turn:3 * turn + 3] += 0.5

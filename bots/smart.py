@@ -157,8 +157,8 @@ class SmartBot(Bot):
         a = float(match.tank_angle[seat])
         c, s = math.cos(a), math.sin(a)
         d, reach = self.muzzle_offset, max(reach, self.muzzle_offset)
-        return self.sight(match).ray_clear(x + c * d, y + s * d, x + c * reach,
-                                           y + s * reach, self.cfg.bullet_radius)
+        return match.world.ray((x + c * d, y + s * d), (x + c * reach, y + s * reach),
+                               self.cfg.bullet_radius) is None
 
     def _search(self, match: Match, seat: int, me: int, enode: int,
                 target_xy: tuple[float, float]) -> None:
