@@ -436,6 +436,8 @@ class ObservationBuilder:
         if self.kind != "paper":
             return
         b, at = self.batch, self.at
+        self._corner_vu[e, 0, 0] = b.corner_v[e, 0]
+        self._corner_vu[e, 0, 1] = b.corner_u[e, 0]
         inv = b.inv[e, 0]
         m = b.wall_mask[e][:, None]
         vw = self.v_wall[e]
@@ -466,39 +468,45 @@ class ObservationBuilder:
         """Buffers of the ``paper`` kind: every feature an observation copies unchanged
         (own tank, other tanks' table fields, own bullets, zone flags) is computed once
         per tank or bullet slot into one float64 source row per env, then copied to all
-        observers with one ``take`` and one ``put`` through precomputed flat indices."""
+        observers with one ``take`` and one ``put`` through precomputed flat indices.
+        Tanks and bullets sit in consecutive rows of ``StateBatch.raw``, so one operation
+        scales the positions (and one the velocities) of both."""
         b, lay, at = self.batch, self.layout, self.at
         E, L, D = self.out.shape
         n, nb = b.n, b.n_bullets
-        T = len(TANK_FIELDS) - 2  # x .. c3y: the tank table without alive and wall
-        parts = {"T": n * T, "F": 4 * n, "C": 2 * n, "B": 4 * nb, "A": nb}
+        parts = {"P": 4 * (n + nb), "T": 10 * n, "F": 4 * n, "C": 2 * n, "A": nb}
         start, S = {}, 0
         for k, size in parts.items():
             start[k] = S
             S += size
         self._src = src = np.zeros((E, S))
-        self._src_t = src[:, start["T"]:start["F"]].reshape(E, n, T)
+        # x, y, vx, vy of tanks then bullets (tank_table / bullet_table fields)
+        body = src[:, start["P"]:start["T"]].reshape(E, n + nb, 4)
+        self._body_xy, self._body_v = body[..., 0:2], body[..., 2:4]
+        self._raw_xy, self._raw_v = b.raw[:, :n + nb, 0:2], b.raw[:, :n + nb, 3:5]
+        self._v_scale = np.r_[np.full(n, 1.0 / self.cfg.tank_speed),
+                              np.full(nb, 1.0 / self.cfg.bullet_speed)][:, None]
+        self._bullets = body[:, n:]  # bullet_table(): inactive slots zeroed
+        tab = src[:, start["T"]:start["F"]].reshape(E, n, 10)  # TANK_COLS
+        self._sin, self._cos = tab[..., 0], tab[..., 1]
+        self._sin_cos = tab[..., 0:2, None, None]  # (E, n, 2, 1, 1)
+        self._corners = tab[..., 2:10].reshape(E, n, 4, 2)
+        self._corner_parts = np.zeros((E, n, 2, 4, 2))
+        self._corner_vu = np.zeros((E, 1, 2, 4, 2))  # corner_v, corner_u (set_static)
+        self._tank_xy4 = self._body_xy[:, :n, None, :]
         self._src_f = src[:, start["F"]:start["C"]].reshape(E, 4, n)  # alive, wall, zones
-        self._src_c = src[:, start["C"]:start["B"]].reshape(E, n, 2)  # reload, bullets
-        self._src_b = src[:, start["B"]:start["A"]].reshape(E, nb, 4)  # bullet_table
+        self._src_c = src[:, start["C"]:start["A"]].reshape(E, n, 2)  # reload, bullets
         self._src_a = src[:, start["A"]:]  # bullet active
-        t_xy, t_sin, t_cos = self._src_t[..., 0:2], self._src_t[..., 2], self._src_t[..., 3]
-        self._t_xy, self._t_sin, self._t_cos = t_xy, t_sin, t_cos
-        self._t_v = self._src_t[..., 4:6]
-        self._t_corners = self._src_t[..., 6:14].reshape(E, n, 4, 2)
-        self._t_cos4, self._t_sin4 = t_cos[..., None, None], t_sin[..., None, None]
-        self._t_xy4 = t_xy[:, :, None, :]
-        self._corner_tmp = np.zeros((E, n, 4, 2))
-        self._tank_scale = 1.0 / self.cfg.tank_speed
-        self._bullet_scale = 1.0 / self.cfg.bullet_speed
-        self._b_xy, self._b_v = self._src_b[..., 0:2], self._src_b[..., 2:4]
-        self._b_on = self._src_a[..., None]
+        self._active = self._src_a[..., None]
         self._counts_t = b.counts.transpose(0, 2, 1)  # (E, n, 2) view
+        table = ("x", "y", "vx", "vy")
 
         def tank_src(j: int, field: str) -> int:
             if field in ("alive", "wall"):
                 return start["F"] + ("alive", "wall").index(field) * n + j
-            return start["T"] + j * T + TANK_FIELDS.index(field) - 1
+            if field in table:
+                return start["P"] + 4 * j + table.index(field)
+            return start["T"] + 10 * j + TANK_COLS.index(field)
 
         pairs: list[tuple[int, int]] = []  # (column in one env's L*D block, src column)
         for li, o in enumerate(self.observers):
@@ -517,7 +525,7 @@ class ObservationBuilder:
             for k, slot in enumerate(self.own_bidx[li]):
                 put(f"own_bullet[{k}].mask", start["A"] + slot)
                 for c, f in enumerate(BULLET_FIELDS):
-                    put(f"own_bullet[{k}].{f}", start["B"] + 4 * slot + c)
+                    put(f"own_bullet[{k}].{f}", start["P"] + 4 * (n + slot) + c)
             put("zone.in_buff", start["F"] + 2 * n + o)
             put("zone.in_debuff", start["F"] + 3 * n + o)
         dst, col = np.array(pairs, dtype=np.intp).reshape(-1, 2).T
@@ -569,26 +577,22 @@ class ObservationBuilder:
         :func:`tank_table` / :func:`bullet_table` with the same operations, in fewer
         numpy calls."""
         b, at = self.batch, self.at
-        # Tank table (x .. c3y) and the flags, counts and bullets, once per tank / slot.
-        xy = self._t_xy
-        np.multiply(b.tank_xy, b.inv, out=xy)
+        # Tank and bullet fields, once per tank / slot.
+        xy = self._body_xy
+        np.multiply(self._raw_xy, b.inv, out=xy)
         xy -= 1.0
-        np.sin(b.tank_angle, out=self._t_sin)
-        np.cos(b.tank_angle, out=self._t_cos)
-        np.multiply(b.tank_vel, self._tank_scale, out=self._t_v)
-        corners, tmp = self._t_corners, self._corner_tmp
-        np.multiply(self._t_cos4, b.corner_u, out=corners)
-        np.multiply(self._t_sin4, b.corner_v, out=tmp)
-        corners += tmp
-        corners += self._t_xy4
+        np.multiply(self._raw_v, self._v_scale, out=self._body_v)
+        np.sin(b.tank_angle, out=self._sin)
+        np.cos(b.tank_angle, out=self._cos)
+        # corners: cos u + sin v + xy, the products stacked and summed (two terms)
+        parts = np.multiply(self._sin_cos, self._corner_vu, out=self._corner_parts)
+        np.add.reduce(parts, axis=2, out=self._corners)
+        self._corners += self._tank_xy4
         np.copyto(self._src_f, b.flags)
         np.multiply(self._counts_t, self._count_scale, out=self._src_c)
-        bt, bxy = self._src_b, self._b_xy  # bullet_table(), inactive slots zeroed
-        np.multiply(b.bullet_xy, b.inv, out=bxy)
-        bxy -= 1.0
-        np.multiply(b.bullet_vel, self._bullet_scale, out=self._b_v)
         np.copyto(self._src_a, b.bullet_active)
-        bt *= self._b_on
+        bt = self._bullets
+        bt *= self._active
         # Copied fields of every observer.
         self._src_flat.take(self._take, out=self._moved)
         self._out_flat.put(self._put, self._moved)
@@ -724,6 +728,11 @@ class ObservationBuilder:
         near = np.maximum(tmin, 0.0)
         d = np.where(tmax >= near, near, np.inf).min(axis=-1)
         return np.minimum(d, self.ray_length, out=d)
+
+
+TANK_COLS = ("sin", "cos", "c0x", "c0y", "c1x", "c1y", "c2x", "c2y", "c3x", "c3y")  # per tank,
+# in the paper builder's source row (x, y, vx, vy sit with the bullets', alive and wall with
+# the flags)
 
 
 def pick(arr: np.ndarray, idx: np.ndarray) -> np.ndarray | None:
