@@ -22,8 +22,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--preset", default="paper", help="game preset (paper, long_range)")
     p.add_argument("--env", action="store_true", help="also measure env steps/s (per core, "
                    "as ratios to a bare 1v1 match tick and to the pymunk floor)")
-    p.add_argument("--floor", metavar="DIR", help="with --env: folder of the shared pymunk "
-                   "prototype (default: ../shared/bench/proto from here or the project root)")
     p.add_argument("--bots", action="store_true", help="also measure bot decision cost")
     p.add_argument("--render", action="store_true", help="also measure renderer fps")
     p.add_argument("--json", metavar="FILE", help="write the figures as JSON")
@@ -65,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
     if args.env:
         from alphatank.commands.benchenv import env_bench
 
-        results["env"] = env_bench(floor=args.floor)
+        results["env"] = env_bench()
     if args.bots:
         from alphatank.bots.benchmark import bot_costs
 

@@ -3,8 +3,8 @@
 First two references, measured in the same run and on the same clock: a bare 1v1 match
 tick (no bots, observations or rewards; the ``maze`` map, steering held 15 ticks, firing
 every tick: ``bench/floor_ratio.py``'s protocol) and, when the shared prototype is found
-(``--floor DIR``, default ``../shared/bench/proto`` from the working directory or the
-project root), the bare pymunk floor tick of ``floor_ratio.py``.
+(``--floor DIR``, default: the nearest ``shared/bench/proto`` above the project or the
+working folder), the bare pymunk floor tick of ``floor_ratio.py``.
 
 Then for each scenario: steps per CPU-second in one process (one core) and the
 microseconds per step as a ratio to the match tick and to the floor (lower is better;
@@ -41,8 +41,7 @@ from alphatank.game.observe import OBS_KINDS
 
 DEFAULT_SCENARIOS = ("vs_random", "vs_aggressive", "vs_defensive", "vs_dodge", "vs_smart",
                      "team", "mixed_teams")
-FLOOR_DIR = Path("..") / "shared" / "bench" / "proto"
-PROJECT_ROOT = Path(__file__).resolve().parents[2]
+FLOOR_DIR = Path("shared", "bench", "proto")
 
 
 def _rates(env: Any, steps: int, seed: int, layers: bool = True, repeats: int = 3,
@@ -100,14 +99,19 @@ def match_tick_us(ticks: int = 1500, repeats: int = 3, seed: int = 0,
 
 
 def find_floor(floor: str | None = None) -> Path | None:
-    """The shared prototype's folder: ``floor`` if given, else ``../shared/bench/proto``
-    from the working directory or from the project root; None when absent."""
+    """The shared prototype's folder: ``floor`` if given, else the nearest
+    ``shared/bench/proto`` in the ancestors of this project's source tree or of the working
+    folder; None when absent."""
     if floor is not None:
-        return Path(floor) if (Path(floor) / "sim_core.py").exists() else None
-    for base in (Path.cwd(), PROJECT_ROOT):
-        path = base / FLOOR_DIR
-        if (path / "sim_core.py").exists():
-            return path
+        folder = Path(floor)
+        if not (folder / "sim_core.py").is_file() or not (folder / "maze_0.txt").is_file():
+            raise FileNotFoundError(f"--floor {floor}: no sim_core.py and maze_0.txt there "
+                                    "(the bare pymunk prototype's folder)")
+        return folder
+    for top in (Path(__file__).resolve().parents[2], Path.cwd().resolve()):
+        for folder in (top, *top.parents):
+            if (folder / FLOOR_DIR / "sim_core.py").is_file():
+                return folder / FLOOR_DIR
     return None
 
 
@@ -250,12 +254,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", type=int, default=2, help="processes for the shared-memory "
                    "variant (1: skip it)")
     p.add_argument("--floor", metavar="DIR", help="folder of the shared pymunk prototype "
-                   "(default: ../shared/bench/proto from here or the project root)")
+                   "(default: the nearest shared/bench/proto above the project or here)")
 
 
 def run(args: argparse.Namespace) -> int:
-    env_bench(args.scenarios, args.observation, args.num_envs, args.steps, args.workers,
-              floor=args.floor)
+    try:
+        env_bench(args.scenarios, args.observation, args.num_envs, args.steps, args.workers,
+                  floor=args.floor)
+    except FileNotFoundError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
     return 0
 
 
