@@ -89,13 +89,27 @@ def _cpu_clock(pids: Sequence[int]) -> Callable[[], float]:
 
 def match_tick_us(ticks: int = 1500, repeats: int = 3, seed: int = 0,
                   map_name: str = "maze") -> float:
-    """CPU microseconds of one bare 1v1 match tick (best of ``repeats``), with
-    ``floor_ratio.py``'s actions: steering held 15 ticks, firing every tick."""
-    from alphatank.commands.bench import match_ticks_per_second
+    """CPU microseconds of one bare 1v1 match tick (no bots, observations or rewards;
+    best of ``repeats``), driven like ``floor_ratio.py``'s match (and ``alphatank bench``'s):
+    steering held 15 ticks, firing every tick, actions drawn before timing."""
+    from alphatank.sim.config import game_config
+    from alphatank.sim.mapspec import load_map
+    from alphatank.sim.match import Match
 
-    return min(1e6 / match_ticks_per_second(map_name, ["A", "B"], ticks, seed=seed + r,
-                                            clock=time.process_time)[0]
-               for r in range(repeats))
+    best = float("inf")
+    for r in range(repeats):
+        match = Match(game_config(), load_map(map_name), ["A", "B"], seed=seed + r)
+        rng = np.random.default_rng(seed + r)
+        held = rng.integers(0, 3, size=(ticks // 15 + 1, 2, 2))
+        acts = np.repeat(held, 15, axis=0)[:ticks]
+        acts = np.concatenate([acts, np.ones((ticks, 2, 1), dtype=acts.dtype)], axis=2)
+        start = time.process_time()
+        for t in range(ticks):
+            match.step(acts[t])
+            if match.done:
+                match.reset(seed + r + t + 1)
+        best = min(best, (time.process_time() - start) / ticks * 1e6)
+    return best
 
 
 def find_floor(floor: str | None = None) -> Path | None:
