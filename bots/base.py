@@ -9,13 +9,14 @@ screen, which is what ``rotate = 2`` does.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, ClassVar, NamedTuple
+import weakref
+from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 
 import numpy as np
 
 from alphatank.sim.ballistics import path_hits, predict_path
 from alphatank.sim.navigation import NavGrid, nav_grid
-from alphatank.sim.world import WALLS_ONLY
+from alphatank.sim.sight import WallSight, wall_sight
 
 if TYPE_CHECKING:
     from alphatank.sim.match import Match
@@ -27,12 +28,25 @@ MOVE_CONE = math.radians(35.0)  # drive only while the heading error is below th
 REVERSE_CONE = math.radians(110.0)  # reverse instead of turning round beyond this
 DRIVE_RADIUS = 16.0  # clearance used for straight driving legs (tank half-length + 1)
 ARRIVE_PX = 6.0
-_NONE = np.zeros(0, dtype=np.int64)
 
 
 def wrap(a: float) -> float:
     """Angle wrapped to [-pi, pi)."""
     return (a + math.pi) % TAU - math.pi
+
+
+_map_tables: weakref.WeakKeyDictionary[NavGrid, dict[Any, Any]] = weakref.WeakKeyDictionary()
+
+
+def map_tables(nav: NavGrid) -> dict[Any, Any]:
+    """Per-map values bots derive from a NavGrid, shared by every bot and episode on that
+    map: plain-Python copies of the node and centre tables (``"node_rows"``,
+    ``"centers"``) plus whatever a bot caches under its own keys."""
+    tables = _map_tables.get(nav)
+    if tables is None:
+        tables = _map_tables[nav] = {"node_rows": nav.node.tolist(),
+                                     "centers": nav.centers.tolist()}
+    return tables
 
 
 class Engagement(NamedTuple):
@@ -62,6 +76,12 @@ class Bot:
     def __repr__(self) -> str:
         return f"{type(self).__name__}(seed={self.seed!r})"
 
+    def __getstate__(self) -> dict:
+        """Everything but the wall queries of the live world (chipmunk pointers)."""
+        state = self.__dict__.copy()
+        state["_sight"] = None
+        return state
+
     # ---- Policy protocol ------------------------------------------------------------
 
     def reset(self, match: Match, seat: int, seed: int | None = None) -> None:
@@ -73,6 +93,11 @@ class Bot:
         cfg = match.cfg
         self.cfg = cfg
         self.nav: NavGrid = nav_grid(match.spec)
+        nav = self.nav
+        self.tables = map_tables(nav)
+        self._node_rows: list[list[int]] = self.tables["node_rows"]
+        self._centers: list[list[float]] = self.tables["centers"]
+        self._sight: WallSight | None = wall_sight(match.world)
         self.turn_step = math.radians(cfg.rotation_speed) / cfg.tick_hz
         self.hit_radius = cfg.tank_height / 2 + cfg.bullet_radius
         self.muzzle_offset = cfg.tank_width / 2 + cfg.bullet_radius + 0.5
@@ -84,6 +109,21 @@ class Bot:
         self._unstick_until = -1
         self._unstick_move = BACK
         self.on_reset(match, seat)
+
+    def sight(self, match: Match) -> WallSight:
+        """Fast exact wall queries on ``match``'s current world."""
+        s = self._sight
+        if s is None or s.world is not match.world:
+            s = self._sight = wall_sight(match.world)
+        return s
+
+    def node_of(self, x: float, y: float) -> int:
+        """``nav.node_of(x, y)`` from plain-Python tables: the floor node of a pixel."""
+        rows = self._node_rows
+        cell = self.nav.cell
+        r = min(max(int(y // cell), 0), len(rows) - 1)
+        row = rows[r]
+        return row[min(max(int(x // cell), 0), len(row) - 1)]
 
     def act(self, match: Match, seat: int) -> np.ndarray:
         if not match.alive[seat]:
@@ -152,18 +192,18 @@ class Bot:
         """Next point to drive to on the BFS route from node ``me`` to node ``goal``: the
         farthest path cell a straight leg from the tank reaches, else the next cell, else
         the centre of the tank's own cell (so corners are turned from the cell centre)."""
-        nav = self.nav
+        nav, centers = self.nav, self._centers
         self._route = (me, goal)
         if me == goal:
-            gx, gy = nav.centers[me]
-            return float(gx), float(gy)
+            gx, gy = centers[me]
+            return gx, gy
         r = DRIVE_RADIUS - 2.0
-        for k in (nav.waypoint_idx(me, goal, DRIVE_RADIUS), nav.next_table[me, goal]):
-            gx, gy = nav.centers[k]
-            if k >= 0 and match.world.ray((x, y), (float(gx), float(gy)), r) is None:
-                return float(gx), float(gy)
-        gx, gy = nav.centers[me]
-        return float(gx), float(gy)
+        for k in (nav.waypoint_idx(me, goal, DRIVE_RADIUS), int(nav.next_table[me, goal])):
+            gx, gy = centers[k]
+            if k >= 0 and self.ray_clear(match, x, y, gx, gy, r):
+                return gx, gy
+        gx, gy = centers[me]
+        return gx, gy
 
     def enemies(self, match: Match, seat: int) -> list[int]:
         """Live tanks on other teams (a handful: plain Python is cheapest)."""
@@ -172,10 +212,11 @@ class Bot:
 
     def nearest(self, match: Match, seat: int, tanks: list[int]) -> int:
         """Tank in ``tanks`` nearest in straight-line distance (-1 if none)."""
-        x, y = match.tank_xy[seat]
+        xy = match.tank_xy.tolist()
+        x, y = xy[seat]
         best, best_d = -1, math.inf
         for k in tanks:
-            ex, ey = match.tank_xy[k]
+            ex, ey = xy[k]
             d = (ex - x) ** 2 + (ey - y) ** 2
             if d < best_d:
                 best, best_d = k, d
@@ -187,8 +228,9 @@ class Bot:
         target = self.nearest(match, seat, self.enemies(match, seat))
         if target < 0:
             return None
-        x, y = match.tank_xy[seat]
-        ex, ey = match.tank_xy[target]
+        xy = match.tank_xy.tolist()
+        x, y = xy[seat]
+        ex, ey = xy[target]
         return Engagement(target, x, y, ex, ey, math.hypot(ex - x, ey - y),
                           float(match.tank_angle[seat]))
 
@@ -201,9 +243,10 @@ class Bot:
     def lead_angle(self, match: Match, seat: int, target: int) -> float:
         """Angle to shoot a straight bullet that meets ``target`` moving at its current
         velocity (falls back to the direct angle when no intercept exists)."""
-        x, y = match.tank_xy[seat]
-        ex, ey = match.tank_xy[target]
-        vx, vy = match.tank_vel[target]
+        xy = match.tank_xy.tolist()
+        x, y = xy[seat]
+        ex, ey = xy[target]
+        vx, vy = match.tank_vel[target].tolist()
         rx, ry = ex - x, ey - y
         s, d0 = self.cfg.bullet_speed, self.muzzle_offset
         # |r + v t| = d0 + s t  ->  (v.v - s^2) t^2 + 2 (r.v - d0 s) t + (r.r - d0^2) = 0
@@ -219,19 +262,28 @@ class Bot:
 
     def clear_shot(self, match: Match, seat: int, target: int) -> bool:
         """A bullet-thick straight line from this tank to ``target`` misses every wall."""
-        x, y = match.tank_xy[seat]
-        tx, ty = match.tank_xy[target]
-        return self.clear(match, float(x), float(y), float(tx), float(ty),
-                          self.cfg.bullet_radius)
+        xy = match.tank_xy.tolist()
+        x, y = xy[seat]
+        tx, ty = xy[target]
+        return self.clear(match, x, y, tx, ty, self.cfg.bullet_radius)
 
-    @staticmethod
-    def clear(match: Match, x0: float, y0: float, x1: float, y1: float, radius: float) -> bool:
+    def ray_clear(self, match: Match, x0: float, y0: float, x1: float, y1: float,
+                  radius: float) -> bool:
+        """``match.world.ray((x0, y0), (x1, y1), radius) is None``: a circle of ``radius``
+        travels the segment without touching a wall. Off the bullet radius the world asks
+        :func:`alphatank.sim.world.first_wall_hit`, answered here without pymunk's
+        wrappers; at the bullet radius the world's own query answers."""
+        if radius == self.cfg.bullet_radius:
+            return match.world.ray((x0, y0), (x1, y1), radius) is None
+        return self.sight(match).ray_clear(x0, y0, x1, y1, radius)
+
+    def clear(self, match: Match, x0: float, y0: float, x1: float, y1: float,
+              radius: float) -> bool:
         """Quick thick line-of-sight test for aiming decisions (pymunk's space-level
         segment query, ~3x cheaper than ``world.ray`` but it can miss a corner grazed only
         by the rim, harmless at bullet radius). Driving legs use the exact ``world.ray``:
         a tank-wide leg clips corners the thin segment's bounding box never reaches."""
-        return match.world.space.segment_query_first((x0, y0), (x1, y1), radius,
-                                                     WALLS_ONLY) is None
+        return self.sight(match).clear(x0, y0, x1, y1, radius)
 
     def shot_hits(self, match: Match, seat: int, heading: float | None = None,
                   hit_radius: float | None = None, exact: bool = True
@@ -262,12 +314,12 @@ class Bot:
         if rot == NONE and move == STOP:
             self._stuck_since = -1
             return rot, move
-        x, y = match.tank_xy[seat]
+        x, y = match.tank_xy[seat].tolist()
         a = float(match.tank_angle[seat])
         sx, sy, sa = self._stuck_pose
         if (self._stuck_since < 0 or (x - sx) ** 2 + (y - sy) ** 2 > 64.0
                 or abs(wrap(a - sa)) > 0.14):
-            self._stuck_since, self._stuck_pose = t, (float(x), float(y), a)
+            self._stuck_since, self._stuck_pose = t, (x, y, a)
             return rot, move
         if t - self._stuck_since >= 20:
             probe = np.array([[x + 30 * math.cos(a), y + 30 * math.sin(a)],
@@ -293,62 +345,112 @@ class Evader:
         self.horizon = horizon_ticks
         self.danger = danger_px + cfg.bullet_radius
         self.wall_margin = cfg.tank_height / 2 + 1.0
-        k = np.arange(1, horizon_ticks + 1, dtype=np.float64)  # ticks ahead
-        rot = np.repeat(np.array([-1.0, 0.0, 1.0]), 3)  # candidate c = 3 * rot + move
-        move = np.tile(np.array([-1.0, 0.0, 1.0]), 3)
-        # Each candidate's path in the tank's own frame (heading 0), once: a tick's motion
-        # follows the heading at its start. At run time it is only rotated and shifted.
-        turn = rot[:, None] * bot.turn_step * (k[None, :] - 1)  # (9, K)
-        step = move[:, None] * cfg.tank_speed * self.dt
-        self.fwd = np.cumsum(np.cos(turn) * step, axis=1)  # (9, K) along the heading
-        self.side = np.cumsum(np.sin(turn) * step, axis=1)  # (9, K) clockwise of it
-        self.times = k * self.dt  # (K,) seconds
+        self.fwd, self.side, self.times = _candidate_paths(bot.turn_step, cfg.tank_speed,
+                                                           self.dt, horizon_ticks)
         self.raster = bot.nav.clearance_map()  # distance to walls, 5 px raster
         self.res = 5.0
+        h_r, w_r = self.raster.shape
+        self._raster_last = np.array([w_r - 1, h_r - 1]).reshape(2, 1, 1)
+        self._coef = np.zeros((3, 2, 1, 1))  # (x, y), (c, s), (-s, c) of evade()
+        self._pos, self._tmp = np.zeros((2,) + self.fwd.shape), np.zeros((2,) + self.fwd.shape)
         # tanks whose bullets can hit this seat (own bullets never: grace, self_hit off)
         can_hit = match.world.can_hit[:, seat].copy()
         can_hit[seat] = False
         self.shooters = [int(k) for k in np.flatnonzero(can_hit)]
         self.shooter_mask = can_hit
+        # Runs (lo, hi) of the bullet slots of those tanks (slot owners are fixed for a
+        # world's lifetime).
+        slots = np.flatnonzero(can_hit[match.bullet_owner])
+        cuts = np.flatnonzero(np.diff(slots) != 1) + 1
+        self._runs = [(int(r[0]), int(r[-1]) + 1) for r in np.split(slots, cuts) if r.size]
+        self._soon = float(self.times[-1] * 2)
+        self._danger2 = self.danger ** 2
 
-    def threats(self, match: Match, seat: int) -> np.ndarray:
-        """Indices of bullets that can hit ``seat`` and pass within danger soon."""
-        if not any(match.bullets_alive[k] for k in self.shooters):
-            return _NONE
-        active = np.flatnonzero(match.bullet_active)
-        active = active[self.shooter_mask[match.bullet_owner[active]]]
-        rel = match.bullet_xy[active] - match.tank_xy[seat]
-        vel = match.bullet_vel[active]
-        v2 = (vel * vel).sum(axis=1)
-        t = -(rel * vel).sum(axis=1) / np.maximum(v2, 1e-9)
-        miss = rel + vel * t[:, None]
-        close = (t > 0) & (t < self.times[-1] * 2) & ((miss * miss).sum(axis=1)
-                                                        < self.danger ** 2)
-        return active[close]
+    def threats(self, match: Match, seat: int) -> list[int]:
+        """Indices (ascending) of bullets that can hit ``seat`` and pass within danger
+        soon. Plain Python over the few live bullets: a handful of numpy calls on arrays
+        this small cost several times more."""
+        counts = match.bullets_alive.tolist()
+        for k in self.shooters:
+            if counts[k]:
+                break
+        else:
+            return []
+        active = match.bullet_active.tolist()
+        x = y = None
+        soon, danger2 = self._soon, self._danger2
+        out = []
+        for lo, hi in self._runs:
+            live = active[lo:hi]
+            if True not in live:
+                continue
+            if x is None:
+                x, y = match.tank_xy[seat].tolist()
+            pos, vel = match.bullet_xy[lo:hi].tolist(), match.bullet_vel[lo:hi].tolist()
+            for j, (on, (bx, by), (vx, vy)) in enumerate(zip(live, pos, vel, strict=True)):
+                if not on:
+                    continue
+                rx, ry = bx - x, by - y
+                v2 = vx * vx + vy * vy
+                t = -(rx * vx + ry * vy) / (1e-9 if v2 < 1e-9 else v2)  # np.maximum
+                mx, my = rx + vx * t, ry + vy * t
+                if 0 < t < soon and mx * mx + my * my < danger2:
+                    out.append(lo + j)
+        return out
 
-    def evade(self, match: Match, seat: int, threats: np.ndarray,
+    def evade(self, match: Match, seat: int, threats: list[int],
               aim_err: float = 0.0) -> tuple[int, int]:
         """Best (rotate, move) against ``threats`` (bullet indices); among equally safe
         choices, the one turning towards ``aim_err`` (radians to the bot's aim)."""
-        x, y = match.tank_xy[seat]
+        x, y = match.tank_xy[seat].tolist()
         h = float(match.tank_angle[seat])
         c, s = math.cos(h), math.sin(h)
-        px = x + c * self.fwd - s * self.side  # (9, K)
-        py = y + s * self.fwd + c * self.side
-        bxy = match.bullet_xy[threats]
-        bv = match.bullet_vel[threats]
-        bx = bxy[:, 0:1] + bv[:, 0:1] * self.times  # (T, K)
-        by = bxy[:, 1:2] + bv[:, 1:2] * self.times
-        dx = px[:, None, :] - bx[None]
-        dy = py[:, None, :] - by[None]
-        gap2 = (dx * dx + dy * dy).reshape(9, -1).min(axis=1)
+        # Candidate positions, x and y stacked (2, 9, K): (x + c fwd) - s side and
+        # (y + s fwd) + c side, the same operations as one axis at a time.
+        coef, pos, tmp = self._coef, self._pos, self._tmp
+        coef.reshape(-1)[:] = (x, y, c, s, -s, c)
+        np.multiply(coef[1], self.fwd, out=tmp)
+        np.add(coef[0], tmp, out=pos)
+        np.multiply(coef[2], self.side, out=tmp)
+        pos += tmp
+        bxy = match.bullet_xy[threats][:, :, None]
+        bv = match.bullet_vel[threats][:, :, None]
+        bpos = bxy + bv * self.times  # (T, 2, K)
+        d = pos[:, :, None, :] - bpos.transpose(1, 0, 2)[:, None]  # (2, 9, T, K)
+        d *= d
+        gap2 = (d[0] + d[1]).reshape(9, -1).min(axis=1)
         score = np.sqrt(np.minimum(gap2, 4 * self.danger * self.danger))
-        h_r, w_r = self.raster.shape
-        r = np.minimum(np.maximum((py * (1 / self.res)).astype(np.intp), 0), h_r - 1)
-        q = np.minimum(np.maximum((px * (1 / self.res)).astype(np.intp), 0), w_r - 1)
-        wall = self.raster[r, q].min(axis=1)
+        cell = (pos * (1 / self.res)).astype(np.intp)  # raster (column, row) per point
+        np.maximum(cell, 0, out=cell)
+        np.minimum(cell, self._raster_last, out=cell)
+        wall = self.raster[cell[1], cell[0]].min(axis=1)
         score[wall < self.wall_margin] -= 2 * self.danger
         turn = self.bot.steer(aim_err)
         score[3 * turn:3 * turn + 3] += 0.5
         best = int(np.argmax(score))
         return best // 3, best % 3
+
+
+_paths: dict[tuple[float, float, float, int], tuple[np.ndarray, ...]] = {}
+
+
+def _candidate_paths(turn_step: float, speed: float, dt: float, horizon: int
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The 9 (rotate, move) candidates' paths in the tank's own frame (heading 0), and
+    the horizon's times: (fwd (9, K) along the heading, side (9, K) clockwise of it,
+    times (K,) seconds). A tick's motion follows the heading at its start; at run time a
+    path is only rotated and shifted. Cached per setting (read-only arrays)."""
+    key = (turn_step, speed, dt, horizon)
+    got = _paths.get(key)
+    if got is None:
+        k = np.arange(1, horizon + 1, dtype=np.float64)  # ticks ahead
+        rot = np.repeat(np.array([-1.0, 0.0, 1.0]), 3)  # candidate c = 3 * rot + move
+        move = np.tile(np.array([-1.0, 0.0, 1.0]), 3)
+        turn = rot[:, None] * turn_step * (k[None, :] - 1)  # (9, K)
+        step = move[:, None] * speed * dt
+        got = (np.cumsum(np.cos(turn) * step, axis=1), np.cumsum(np.sin(turn) * step, axis=1),
+               k * dt)
+        for a in got:
+            a.setflags(write=False)
+        _paths[key] = got
+    return got

@@ -51,7 +51,7 @@ class DefensiveBot(Bot):
         tolerance = math.atan2(0.6 * self.hit_radius, max(dist, 1.0))
         if self.evader is not None:
             threats = self.evader.threats(match, seat)
-            if threats.size:  # dodge; shoot back if the dodge happens to line up
+            if threats:  # dodge; shoot back if the dodge happens to line up
                 err = wrap(self.lead_angle(match, seat, target) - heading)
                 rot, move = self.evader.evade(match, seat, threats, err)
                 fire = (abs(err) < tolerance and dist <= self.shot_range

@@ -73,7 +73,7 @@ class DodgeBot(Bot):
         err = wrap(self.lead_angle(match, seat, target) - heading)
         tolerance = math.atan2(0.8 * self.hit_radius, max(dist, 1.0))
         threats = self.evader.threats(match, seat)
-        if threats.size:  # dodge first; shoot back if the turn happens to line up
+        if threats:  # dodge first; shoot back if the turn happens to line up
             rot, move = self.evader.evade(match, seat, threats, err)
             fire = (abs(err) < tolerance and dist < self.shot_range
                     and self.can_fire(match, seat) and self.clear_shot(match, seat, target))

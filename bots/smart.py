@@ -43,11 +43,17 @@ class SmartBot(Bot):
         self.evader = Evader(self, match, seat) if self.evade else None
         self.direct_range = self.shot_range  # from the centre; bullets start at the muzzle
         self.lattice = max(1, round(math.tau / self.turn_step))  # reachable headings
-        self._goals: dict[tuple[int, int], int] = {}
+        self._goals: dict[tuple[int, int], int] = self.tables.setdefault(
+            ("smart.goals", self.cfg.bullet_radius, self.shot_range), {})
         self._search_key: tuple[int, int] | None = None
         self._search_k = 0
         self._banks: list[float] = []
-        self.faces = wall_faces(self.nav.rects, match.spec.width, match.spec.height)
+        key = ("faces", match.spec.width, match.spec.height)
+        faces = self.tables.get(key)
+        if faces is None:
+            faces = self.tables[key] = wall_faces(self.nav.rects, match.spec.width,
+                                                  match.spec.height)
+        self.faces = faces
         self._best = (math.inf, 0.0)  # (closest approach px, heading)
         self._solution: float | None = None
 
@@ -78,23 +84,24 @@ class SmartBot(Bot):
         foes = self.enemies(match, seat)
         if not foes:
             return NONE, STOP, 0
-        nav = self.nav
-        x, y = match.tank_xy[seat]
+        xy = match.tank_xy.tolist()  # few tanks: plain Python beats numpy here
+        x, y = xy[seat]
         heading = float(match.tank_angle[seat])
-        me = nav.node_of(x, y)
+        me = self.node_of(x, y)
         target, enode, best = -1, -1, math.inf
-        for f in foes:  # few tanks: plain Python beats numpy here
-            node = nav.node_of(*match.tank_xy[f])
-            steps = nav.dist_table[me, node]
+        steps_from = self.nav.dist_table[me]
+        for f in foes:
+            node = self.node_of(*xy[f])
+            steps = int(steps_from[node])
             steps = math.inf if steps < 0 else steps
             if target < 0 or steps < best:
                 target, enode, best = f, node, steps
-        ex, ey = match.tank_xy[target]
+        ex, ey = xy[target]
         dist = math.hypot(ex - x, ey - y)
 
         if self.evader is not None:
             threats = self.evader.threats(match, seat)
-            if threats.size:  # dodge; shoot back if the dodge happens to line up
+            if threats:  # dodge; shoot back if the dodge happens to line up
                 self._solution = None
                 err = wrap(self.lead_angle(match, seat, target) - heading)
                 rot, move = self.evader.evade(match, seat, threats, err)
@@ -131,7 +138,7 @@ class SmartBot(Bot):
                 if self._solution is not None:
                     return self.steer(err), STOP, fire
             else:
-                self._search(match, seat, me, enode, (float(ex), float(ey)))
+                self._search(match, seat, me, enode, (ex, ey))
                 if self._solution is not None:
                     return self.steer(wrap(self._solution - heading)), STOP, 0
         else:
@@ -146,8 +153,9 @@ class SmartBot(Bot):
     def heading_clear(self, match: Match, seat: int, reach: float) -> bool:
         """A bullet fired now flies ``reach`` px along the heading without touching a
         wall (exact swept-circle query from the muzzle)."""
-        x, y = (float(v) for v in match.tank_xy[seat])
-        c, s = math.cos(match.tank_angle[seat]), math.sin(match.tank_angle[seat])
+        x, y = match.tank_xy[seat].tolist()
+        a = float(match.tank_angle[seat])
+        c, s = math.cos(a), math.sin(a)
         d, reach = self.muzzle_offset, max(reach, self.muzzle_offset)
         return match.world.ray((x + c * d, y + s * d), (x + c * reach, y + s * reach),
                                self.cfg.bullet_radius) is None
@@ -157,7 +165,7 @@ class SmartBot(Bot):
         """Evaluate one heading for a bank shot: first the one-bounce mirror solutions
         (recomputed when this tank or the target changes cell), then a golden-ratio sweep
         over every heading the tank can turn to (multi-bounce shots)."""
-        x, y = (float(v) for v in match.tank_xy[seat])
+        x, y = match.tank_xy[seat].tolist()
         heading = float(match.tank_angle[seat])
         key = (me, enode)
         if key != self._search_key:

@@ -325,3 +325,90 @@ def test_bot_costs_reports_every_bot_and_smart_stays_cheap():
     match = Match(GameConfig(), load_map("maze"), ["A", "B"], seed=0)
     bot.reset(match, 0, 1)
     assert bot.nav is nav_grid(load_map("maze"))
+
+
+# ---- behaviour pins -------------------------------------------------------------------
+
+def bot_game_digest(specs: tuple[str, ...], map_name: str, teams: tuple[str, ...],
+                    seed: int, max_steps: int = 500) -> str:
+    """sha256 (16 hex digits) of every tick's joint actions and the final state of one
+    seeded game between bots given as spec strings: any change in what a bot decides
+    changes it."""
+    import hashlib
+
+    digest = hashlib.sha256()
+    bots = [bot_from_spec(s) for s in specs]
+    ep = start_episode(GameConfig(max_steps=max_steps), [load_map(map_name)], list(teams),
+                       bots, seed, hooks=[_Watch(lambda m, a: digest.update(a.tobytes()))]).run()
+    digest.update(ep.match.state_hash().encode())
+    digest.update(str((ep.match.tick, ep.winner)).encode())
+    return digest.hexdigest()[:16]
+
+
+# Pinned behaviour of every bot in seeded games (bank-shot searches, dodges, routes,
+# teammates in the line of fire): performance work on the bots must leave these unchanged.
+# They also pin the physics: a change to the match tick that moves any bit changes them.
+PINNED_GAMES = {
+    (("smart", "smart"), "maze", 3): "26ba5d81e4065a33",
+    (("random", "smart"), "maze", 4): "c89c7dea27d12ebc",
+    (("aggressive", "smart"), "battlefield", 5): "a450cf568f02b758",
+    (("defensive", "smart"), "battlefield", 6): "dc70fff4d8983ee6",
+    (("dodge", "smart"), "maze", 7): "8a3c38421e1323a7",
+    (("smart", "dodge"), "open", 8): "73d17a4b82bf7f67",
+    (("smart:ricochet=false", "smart@0.5"), "maze", 12): "78d5f4235c9e2a8f",
+    (("smart",) * 4, "arena4", 9): "86c2164a73bb368e",
+}
+
+
+@pytest.mark.parametrize("case", sorted(PINNED_GAMES), ids=lambda c: f"{'-'.join(c[0])}-{c[2]}")
+def test_bot_games_are_pinned(case):
+    specs, map_name, seed = case
+    teams = ("A", "B") if len(specs) == 2 else ("A", "A", "B", "B")
+    assert bot_game_digest(specs, map_name, teams, seed) == PINNED_GAMES[case]
+
+
+@pytest.mark.parametrize("map_name", ["maze", "battlefield", "arena8"])
+def test_wall_sight_answers_like_the_world(map_name):
+    """The bots' fast wall queries give pymunk's answers: random segments, many ending on
+    or near wall corners and edges (grazing contacts), zero-length ones, several radii."""
+    from alphatank.sim.sight import wall_sight
+    from alphatank.sim.world import WALLS_ONLY, first_wall_hit
+
+    spec = load_map(map_name)
+    m = Match(GameConfig(), spec, ["A", "B"], seed=1)
+    sight = wall_sight(m.world)
+    assert wall_sight(m.world) is sight
+    rng = np.random.default_rng(3)
+    corners = np.array([(x, y) for x0, y0, x1, y1 in spec.wall_rects
+                        for x, y in ((x0, y0), (x1, y0), (x0, y1), (x1, y1))])
+    agree = hits = 0
+    for k in range(3000):
+        if k % 3 == 0:  # near a corner, offset by about a radius
+            p = corners[rng.integers(len(corners))] + rng.normal(0, 4, 2)
+        else:
+            p = rng.uniform(0, [spec.width, spec.height])
+        q = p + rng.normal(0, 120, 2) if k % 5 else p.copy()
+        r = float(rng.choice([0.0, 3.0, 14.0, 16.0]))
+        (x0, y0), (x1, y1) = p.tolist(), q.tolist()
+        quick = m.world.space.segment_query_first((x0, y0), (x1, y1), r, WALLS_ONLY) is None
+        exact = first_wall_hit(m.world.space, x0, y0, x1, y1, r) is None
+        assert sight.clear(x0, y0, x1, y1, r) == quick
+        assert sight.ray_clear(x0, y0, x1, y1, r) == exact
+        agree += quick == exact
+        hits += not exact
+    assert hits > 300 and 3000 - hits > 100 and agree < 3000  # both answers; tests differ
+
+
+def test_bots_pickle_after_reset_without_their_wall_queries():
+    import pickle
+
+    m = Match(GameConfig(), load_map("maze"), ["A", "B"], seed=2)
+    bot = make_bot("smart", seed=1)
+    bot.reset(m, 0, 5)
+    a = bot.act(m, 0)
+    clone = pickle.loads(pickle.dumps(bot))
+    assert clone._sight is None
+    clone.reset(m, 0, 5)
+    bot.reset(m, 0, 5)
+    assert np.array_equal(clone.act(m, 0), bot.act(m, 0)) and np.array_equal(a, bot.act(m, 0))
+

@@ -391,3 +391,56 @@ def test_engagement_is_potential_based_and_cannot_be_farmed():
     # ... so the loop earns nothing: undiscounted, -(1 - gamma) x the potentials passed.
     assert -(1 - gamma) * len(plan) * phi0 * 1.01 < sum(rewards) < 0.0
     assert max(rewards) > 0.0  # coming closer did pay on the way back
+
+
+# ---- pinned reward terms --------------------------------------------------------------
+
+# Every term switched on (small weights; the draw never beats the loss).
+ALL_TERMS = {"wall_hit": -0.1, "stationary": -0.05, "bfs_progress": 0.2, "aim_streak": 0.3,
+             "control_change": -0.01, "rotation": -1.0, "team_win": 10.0,
+             "team_win_time_decay": 0.5, "team_loss": -5.0, "team_draw": -6.0,
+             "step_cost": -0.001, "engagement": 1.0, "distance_progress": 0.01,
+             "trajectory_far": -2.0, "rotation_limit_deg": 60.0, "aim_streak_ticks": 2}
+
+
+def episode_terms_digest(scenario: str, observation: str, seed: int, steps: int = 400,
+                         num_envs: int = 3) -> str:
+    """sha256 (16 hex digits) of everything a seeded run of the vector env returns (every
+    reward term of every seat, observations, episode ends and records); random steering
+    held 8 ticks, random firing; short episodes so resets, autoresets and play-outs all
+    happen."""
+    import hashlib
+
+    env = VectorMatchEnv(scenario, num_envs, seed=seed, observation=observation,
+                         game_overrides={"max_steps": 200}, reward_overrides=ALL_TERMS)
+    digest = hashlib.sha256(env.reset().tobytes())
+    rng = np.random.default_rng(seed)
+    core = env.core
+    held = rng.integers(0, [3, 3, 2], size=(steps // 8 + 1, num_envs, env.num_learners, 3))
+    for k in range(steps):
+        acts = held[k // 8].copy()
+        acts[..., 2] = rng.integers(0, 2, size=acts.shape[:-1])
+        obs, rew, term, trunc, info = env.step(acts)
+        for arr in (core.tracker.terms, obs, rew, term, trunc, info["final_obs"]):
+            digest.update(np.ascontiguousarray(arr).tobytes())
+        for ep in info["episodes"]:
+            digest.update(repr(sorted((k, v.tolist() if isinstance(v, np.ndarray) else v)
+                                      for k, v in ep.items() if k != "terms")).encode())
+            digest.update(np.array(list(ep["terms"].values())).tobytes())
+    return digest.hexdigest()[:16]
+
+
+# Rewards are part of the env's definition: a change here must be intended (and the docs
+# and ENV_VERSION follow); speed work must leave them bit-identical. Every term fires in
+# at least one case. Also pins the physics and the bots.
+PINNED_TERMS = {
+    ("vs_smart", "paper", 1): "88b8bea168ddc6e1",
+    ("vs_random", "egocentric", 2): "3800416d80515062",
+    ("team", "paper", 3): "e23cc77b28725a76",
+    ("mixed_teams", "egocentric", 4): "48cc3c9e51e95846",
+}
+
+
+@pytest.mark.parametrize("case", sorted(PINNED_TERMS), ids=lambda c: f"{c[0]}-{c[1]}")
+def test_reward_terms_of_seeded_episodes_are_pinned(case):
+    assert episode_terms_digest(*case) == PINNED_TERMS[case]

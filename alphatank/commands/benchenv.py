@@ -1,20 +1,37 @@
 """Env throughput for ``alphatank bench --env``: env steps/s of the batched vector env.
 
-For each scenario: steps per CPU-second in one process (one core), the same with the
-observation and reward layers switched off (physics + bots + bookkeeping only, so the
-layers' own cost per step is the difference), and with ``workers`` processes
-(``SubprocVectorMatchEnv``): wall-clock steps/s (scales only with that many idle cores)
-and steps per CPU-second of all processes together (parent + workers). One env step =
-one tick of one match with every learner acting (random actions, drawn before timing).
-Run alone: ``python -m alphatank.commands.benchenv``.
+First two references, measured in the same run and on the same clock: a bare 1v1 match
+tick (no bots, observations or rewards; the ``maze`` map, steering held 15 ticks, firing
+every tick: ``bench/floor_ratio.py``'s protocol) and, when the shared prototype is found
+(``--floor DIR``, default: the nearest ``shared/bench/proto`` above the project or the
+working folder), the bare pymunk floor tick of ``floor_ratio.py``.
+
+Then for each scenario: steps per CPU-second in one process (one core) and the
+microseconds per step as a ratio to the match tick and to the floor (lower is better;
+the issue-14 target is ``x floor`` <= 2 for ``vs_smart``); the same with the observation
+and reward layers switched off (their own cost per step is the difference); and with
+``workers`` processes (``SubprocVectorMatchEnv``, ``num_envs`` matches each): wall-clock
+steps/s, its ratio to one process's wall-clock steps/s (the scaling; needs that many idle
+cores), and steps per CPU-second of all processes together (parent + workers). The
+scaling's ceiling on this machine at this moment is measured once, on the first scenario:
+``workers`` independent single-process envs side by side against one alone (no pipes, no
+shared memory, no waiting for each other). One env
+step = one tick of one match with every learner acting (random actions, drawn before
+timing). CPU-time figures are robust to other programs sharing the cores; wall-clock ones
+are not. Run alone: ``python -m alphatank.commands.benchenv``.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
+import multiprocessing as mp
 import os
+import random
+import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -24,13 +41,14 @@ from alphatank.game.observe import OBS_KINDS
 
 DEFAULT_SCENARIOS = ("vs_random", "vs_aggressive", "vs_defensive", "vs_dodge", "vs_smart",
                      "team", "mixed_teams")
+FLOOR_DIR = Path("shared", "bench", "proto")
 
 
-def _steps_per_s(env: Any, steps: int, seed: int, layers: bool = True,
-                 repeats: int = 3, clock: Any = time.process_time) -> float:
-    """Env steps/s (num_envs x steps ticks) after a short warm-up; best of ``repeats``
-    runs. The default clock is this process's CPU time (steps per CPU-second, robust to
-    other processes sharing the cores); worker processes need the wall clock."""
+def _rates(env: Any, steps: int, seed: int, layers: bool = True, repeats: int = 3,
+           cpu: Callable[[], float] = time.process_time) -> tuple[float, float]:
+    """(wall-clock, CPU-time) env steps/s (num_envs x steps ticks) after a short warm-up;
+    each the best of ``repeats`` runs. ``cpu`` is the CPU clock (default: this process's
+    CPU time; worker processes need :func:`_cpu_clock`)."""
     if not layers:
         core = env.core
         core.obs.build = lambda: core.obs.out
@@ -41,16 +59,18 @@ def _steps_per_s(env: Any, steps: int, seed: int, layers: bool = True,
     actions = rng.integers(0, [3, 3, 2], size=shape)
     for k in range(10):
         env.step(actions[k])
-    best = 0.0
+    wall = cpu_rate = 0.0
     for _ in range(repeats):
-        start = clock()
+        w0, c0 = time.perf_counter(), cpu()
         for k in range(steps):
             env.step(actions[k])
-        best = max(best, env.num_envs * steps / (clock() - start))
-    return best
+        n = env.num_envs * steps
+        wall = max(wall, n / (time.perf_counter() - w0))
+        cpu_rate = max(cpu_rate, n / max(cpu() - c0, 1e-9))
+    return wall, cpu_rate
 
 
-def _cpu_clock(pids: Sequence[int]) -> Any:
+def _cpu_clock(pids: Sequence[int]) -> Callable[[], float]:
     """A clock of the CPU seconds used by this process plus the processes ``pids`` (read
     from /proc; Linux). So worker throughput per CPU-second is measurable even when other
     programs share the cores."""
@@ -67,40 +87,175 @@ def _cpu_clock(pids: Sequence[int]) -> Any:
     return clock
 
 
+def match_tick_us(ticks: int = 1500, repeats: int = 3, seed: int = 0,
+                  map_name: str = "maze") -> float:
+    """CPU microseconds of one bare 1v1 match tick (no bots, observations or rewards;
+    best of ``repeats``), driven like ``floor_ratio.py``'s match (and ``alphatank bench``'s):
+    steering held 15 ticks, firing every tick, actions drawn before timing."""
+    from alphatank.sim.config import game_config
+    from alphatank.sim.mapspec import load_map
+    from alphatank.sim.match import Match
+
+    best = float("inf")
+    for r in range(repeats):
+        match = Match(game_config(), load_map(map_name), ["A", "B"], seed=seed + r)
+        rng = np.random.default_rng(seed + r)
+        held = rng.integers(0, 3, size=(ticks // 15 + 1, 2, 2))
+        acts = np.repeat(held, 15, axis=0)[:ticks]
+        acts = np.concatenate([acts, np.ones((ticks, 2, 1), dtype=acts.dtype)], axis=2)
+        start = time.process_time()
+        for t in range(ticks):
+            match.step(acts[t])
+            if match.done:
+                match.reset(seed + r + t + 1)
+        best = min(best, (time.process_time() - start) / ticks * 1e6)
+    return best
+
+
+def find_floor(floor: str | None = None) -> Path | None:
+    """The shared prototype's folder: ``floor`` if given, else the nearest
+    ``shared/bench/proto`` in the ancestors of this project's source tree or of the working
+    folder; None when absent."""
+    if floor is not None:
+        folder = Path(floor)
+        if not (folder / "sim_core.py").is_file() or not (folder / "maze_0.txt").is_file():
+            raise FileNotFoundError(f"--floor {floor}: no sim_core.py and maze_0.txt there "
+                                    "(the bare pymunk prototype's folder)")
+        return folder
+    for top in (Path(__file__).resolve().parents[2], Path.cwd().resolve()):
+        for folder in (top, *top.parents):
+            if (folder / FLOOR_DIR / "sim_core.py").is_file():
+                return folder / FLOOR_DIR
+    return None
+
+
+def floor_tick_us(proto: Path, ticks: int = 1500, repeats: int = 3, seed: int = 0) -> float:
+    """CPU microseconds of one 1v1 tick of the bare pymunk prototype in ``proto`` (best of
+    ``repeats``), set up as ``floor_ratio.py`` sets it up."""
+    sys.path.insert(0, str(proto))
+    try:
+        core = importlib.import_module("sim_core")
+    finally:
+        sys.path.remove(str(proto))
+    text = (proto / "maze_0.txt").read_text()
+    best = float("inf")
+    for r in range(repeats):
+        core.SUB, core.BULLET_SPEED, core.MAX_BOUNCES, core.COOLDOWN = 2, 300.0, 1000, 3
+        sim = core.Sim(text, 2, "pivot")
+        rng = random.Random(seed + r)
+        acts = [[(rng.randrange(3), rng.randrange(3), 1) for _ in range(2)]
+                for _ in range(ticks + 100)]
+        for a in acts[:100]:
+            sim.step(a)
+        start = time.process_time()
+        for a in acts[100:]:
+            sim.step(a)
+        best = min(best, (time.process_time() - start) / ticks * 1e6)
+    return best
+
+
+def _solo(scenario: str, num_envs: int, steps: int, seed: int, observation: str,
+          barrier: Any, out: Any) -> None:
+    """One single-process env run in a child process, started with the others at the
+    barrier; puts its wall-clock seconds on ``out``."""
+    env = VectorMatchEnv(scenario, num_envs, seed, observation)
+    env.reset(seed)
+    rng = np.random.default_rng(seed)
+    actions = rng.integers(0, [3, 3, 2], size=(steps + 10, num_envs, env.num_learners, 3))
+    for k in range(10):
+        env.step(actions[k])
+    barrier.wait()
+    start = time.perf_counter()
+    for k in range(10, steps + 10):
+        env.step(actions[k])
+    out.put(time.perf_counter() - start)
+
+
+def independent_scaling(scenario: str, procs: int, num_envs: int = 16, steps: int = 150,
+                        seed: int = 0, observation: str = "paper", repeats: int = 2) -> float:
+    """Wall-clock steps/s of ``procs`` independent single-process envs run side by side,
+    over one such env run alone (best of ``repeats`` each): what worker processes could
+    reach on this machine now."""
+    ctx = mp.get_context("spawn")
+
+    def rate(k: int) -> float:
+        barrier, out = ctx.Barrier(k), ctx.Queue()
+        ps = [ctx.Process(target=_solo, args=(scenario, num_envs, steps, seed + i,
+                                               observation, barrier, out), daemon=True)
+              for i in range(k)]
+        for p in ps:
+            p.start()
+        took = max(out.get(timeout=600) for _ in ps)
+        for p in ps:
+            p.join()
+        return k * num_envs * steps / took
+
+    one = max(rate(1) for _ in range(repeats))
+    return max(rate(procs) for _ in range(repeats)) / one
+
+
 def env_bench(scenarios: Sequence[str] = DEFAULT_SCENARIOS, observation: str = "paper",
               num_envs: int = 16, steps: int = 150, workers: int = 2, seed: int = 0,
-              verbose: bool = True) -> dict[str, dict[str, float]]:
+              floor: str | None = None, verbose: bool = True) -> dict[str, dict[str, float]]:
     """Measure every scenario; returns {scenario: {steps_per_s (per CPU-second),
-    no_layers_steps_per_s, layers_us_per_step, workers_steps_per_s (wall clock),
-    workers_steps_per_cpu_s (all processes' CPU time)}}."""
-    results: dict[str, dict[str, float]] = {}
+    us_per_step, match_tick_us, over_match_tick, floor_us / over_floor (when the
+    prototype is found), no_layers_steps_per_s, layers_us_per_step, workers_steps_per_s
+    (wall clock), workers_speedup (over one process, wall clock), independent_speedup
+    (the ceiling, see the module docstring), workers_steps_per_cpu_s (all processes' CPU
+    time)}}."""
+    tick = match_tick_us(seed=seed)
+    proto = find_floor(floor)
+    floor_us = floor_tick_us(proto, seed=seed) if proto is not None else None
+    ceiling = (independent_scaling(scenarios[0], workers, num_envs, steps, seed, observation)
+               if workers > 1 and scenarios else None)
     if verbose:
+        where = f"pymunk floor {floor_us:.1f} us ({proto})" if floor_us else (
+            "pymunk floor: prototype not found (--floor DIR)")
+        print(f"references, CPU time per tick: bare 1v1 match tick {tick:.1f} us (maze, "
+              f"firing), {where}")
+        if ceiling is not None:
+            print(f"scaling ceiling now: {workers} independent {scenarios[0]} processes "
+                  f"side by side reach {ceiling:.2f}x one alone (wall clock)")
         print(f"env steps/s, {observation} observations, {num_envs} matches per process, "
               f"random actions, {steps} steps:")
-        print(f"  {'scenario':14s} {'1 core':>9s} {'no obs/rew':>11s} {'obs+rew us':>11s} "
-              f"{f'{workers} procs':>9s} {'per cpu-s':>9s}")
+        print(f"  {'scenario':14s} {'1 core':>8s} {'us/step':>8s} {'x tick':>7s} "
+              f"{'x floor':>7s} {'no obs/rew':>10s} {'obs+rew us':>10s} "
+              f"{f'{workers} procs':>8s} {'x 1 proc':>8s} {'per cpu-s':>9s}")
+    results: dict[str, dict[str, float]] = {}
     for name in scenarios:
-        one = _steps_per_s(VectorMatchEnv(name, num_envs, seed, observation), steps, seed)
-        bare = _steps_per_s(VectorMatchEnv(name, num_envs, seed, observation), steps, seed,
-                            layers=False)
-        row = {"steps_per_s": round(one, 1), "no_layers_steps_per_s": round(bare, 1),
-               "layers_us_per_step": round(1e6 / one - 1e6 / bare, 2)}
+        wall_one, one = _rates(VectorMatchEnv(name, num_envs, seed, observation), steps, seed)
+        _, bare = _rates(VectorMatchEnv(name, num_envs, seed, observation), steps, seed,
+                         layers=False)
+        us = 1e6 / one
+        row = {"steps_per_s": round(one, 1), "us_per_step": round(us, 2),
+               "match_tick_us": round(tick, 2), "over_match_tick": round(us / tick, 2),
+               "no_layers_steps_per_s": round(bare, 1),
+               "layers_us_per_step": round(us - 1e6 / bare, 2)}
+        if floor_us:
+            row["floor_us"] = round(floor_us, 2)
+            row["over_floor"] = round(us / floor_us, 2)
         if workers > 1:
             env = SubprocVectorMatchEnv(name, num_envs * workers, seed, observation,
                                         num_workers=workers)
             try:
-                multi = _steps_per_s(env, steps, seed, clock=time.perf_counter)
                 pids = [p.pid for p in env._procs]
-                cpu = (_steps_per_s(env, steps, seed, clock=_cpu_clock(pids))
-                       if os.path.exists(f"/proc/{pids[0]}/stat") else 0.0)
+                clock = (_cpu_clock(pids) if os.path.exists(f"/proc/{pids[0]}/stat")
+                         else time.process_time)
+                multi, cpu = _rates(env, steps, seed, cpu=clock)
             finally:
                 env.close()
             row["workers_steps_per_s"] = round(multi, 1)
+            if ceiling is not None:
+                row["independent_speedup"] = round(ceiling, 2)
+            row["workers_speedup"] = round(multi / wall_one, 2)
             row["workers_steps_per_cpu_s"] = round(cpu, 1)
         results[name] = row
         if verbose:
-            print(f"  {name:14s} {one:9,.0f} {bare:11,.0f} {row['layers_us_per_step']:11.1f} "
-                  f"{row.get('workers_steps_per_s', 0):9,.0f} "
+            over_floor = f"{row['over_floor']:7.2f}" if floor_us else f"{'-':>7s}"
+            print(f"  {name:14s} {one:8,.0f} {us:8.1f} {row['over_match_tick']:7.2f} "
+                  f"{over_floor} {bare:10,.0f} {row['layers_us_per_step']:10.1f} "
+                  f"{row.get('workers_steps_per_s', 0):8,.0f} "
+                  f"{row.get('workers_speedup', 0):8.2f} "
                   f"{row.get('workers_steps_per_cpu_s', 0):9,.0f}")
     return results
 
@@ -112,10 +267,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--steps", type=int, default=150, help="timed steps per run")
     p.add_argument("--workers", type=int, default=2, help="processes for the shared-memory "
                    "variant (1: skip it)")
+    p.add_argument("--floor", metavar="DIR", help="folder of the shared pymunk prototype "
+                   "(default: the nearest shared/bench/proto above the project or here)")
 
 
 def run(args: argparse.Namespace) -> int:
-    env_bench(args.scenarios, args.observation, args.num_envs, args.steps, args.workers)
+    try:
+        env_bench(args.scenarios, args.observation, args.num_envs, args.steps, args.workers,
+                  floor=args.floor)
+    except FileNotFoundError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
     return 0
 
 

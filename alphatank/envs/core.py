@@ -36,7 +36,7 @@ from alphatank.game.observe import (
     StateBatch,
     slot_counts,
 )
-from alphatank.game.rewards import RewardTracker
+from alphatank.game.rewards import RewardTracker, as_index
 from alphatank.game.scenarios import Scenario, ScenarioError, Seat, load_scenario
 from alphatank.game.seats import make_controller
 from alphatank.sim.episode import episode_match, episode_seeds, reset_controllers
@@ -44,6 +44,7 @@ from alphatank.sim.match import Match
 from alphatank.sim.policy import NOOP, Policy
 
 ACTION_NVEC = np.array([3, 3, 2], dtype=np.int64)
+_NVEC_U = ACTION_NVEC.astype(np.uint64)
 ACTION_HELP = "rotate 0..2 (0 ccw, 1 none, 2 cw), move 0..2 (0 back, 1 stop, 2 forward), fire 0..1"
 
 
@@ -54,7 +55,11 @@ def action_space() -> spaces.MultiDiscrete:
 def check_actions(actions: Any, shape: tuple[int, ...], name_of: Any) -> np.ndarray:
     """Validate an integer action array of ``shape`` (last axis 3); errors name the agent
     (``name_of(index_tuple)``) and the allowed values. Returns an int64 array."""
-    arr = np.asarray(actions)
+    arr = actions if type(actions) is np.ndarray else np.asarray(actions)
+    # Common case first: one comparison (negatives wrap round to huge unsigned values).
+    if (arr.dtype == np.int64 and arr.shape == shape and arr.size
+            and not np.count_nonzero(np.greater_equal(arr.view(np.uint64), _NVEC_U))):
+        return arr
     if arr.dtype == object or not (np.issubdtype(arr.dtype, np.integer)
                                    or arr.dtype == np.bool_):
         raise TypeError(f"actions must be integers ({ACTION_HELP}), got dtype {arr.dtype}")
@@ -123,7 +128,12 @@ class MatchSet:
         self._bots: list[dict[int, tuple[tuple, Policy]]] = [{} for _ in range(E)]
         self._played: list[list[tuple[int, Policy]]] = [[] for _ in range(E)]
         self.joint = np.ones((E, n, 3), dtype=np.int64)
+        self._joint_rows = list(self.joint)  # per-env views
         self.driven_idx = np.array(self.driven, dtype=np.int64)
+        self._driven_sel = as_index(self.driven_idx)
+        # Episode ends of the current step (set as matches end, cleared at reset).
+        self.terminated = np.zeros(E, dtype=bool)
+        self.truncated = np.zeros(E, dtype=bool)
         cap = self.game.bullet_capacity
         self._driven_bullets = np.isin(np.arange(n * cap) // cap, self.driven_idx)
         self.team_of = np.array([sc.seats[s].team for s in self.driven], dtype=object)
@@ -139,7 +149,12 @@ class MatchSet:
         state["controllers"] = [[None] * self.n for _ in range(self.num_envs)]
         state["_bots"] = [{} for _ in range(self.num_envs)]
         state["_played"] = [[] for _ in range(self.num_envs)]
+        del state["_joint_rows"]  # views of ``joint``: rebuilt on unpickling
         return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._joint_rows = list(self.joint)
 
     # ---- spaces ---------------------------------------------------------------------
 
@@ -252,6 +267,7 @@ class MatchSet:
         self.episode_label[e] = self.describe_opponents(e)
         self._played[e] = [(seat, c) for seat, c in enumerate(ctrls) if c is not None]
         self.joint[e] = 1
+        self.terminated[e] = self.truncated[e] = False
         b = self.batch
         b.set_static(e, m)
         b.gather(e, m)
@@ -265,31 +281,36 @@ class MatchSet:
 
     # ---- stepping -------------------------------------------------------------------
 
-    def _tick(self, e: int, driven_actions: np.ndarray | None) -> None:
-        m, joint = self.matches[e], self.joint[e]
-        if driven_actions is not None:
-            joint[self.driven_idx] = driven_actions
-        else:
-            joint[self.driven_idx] = NOOP
+    def _tick(self, e: int) -> None:
+        """One tick of env ``e`` with the driven seats' rows of ``joint`` already set;
+        the set's controllers fill the other live seats."""
+        m, joint = self.matches[e], self._joint_rows[e]
         alive = m.alive
         for seat, ctrl in self._played[e]:
             if alive[seat]:
                 joint[seat] = ctrl.act(m, seat)
         m.step(joint)
         self.batch.gather(e, m)
+        if m.terminated or m.truncated:
+            self.terminated[e], self.truncated[e] = m.terminated, m.truncated
 
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """One tick in every env. ``actions``: validated int (E, L, 3). Returns the
         (E, len(TERMS), n) reward terms of this step and the (E, L, D) observations
-        (internal buffers: copy what you keep)."""
+        (internal buffers: copy what you keep). ``terminated`` / ``truncated`` hold the
+        episode ends."""
         if len(self.matches) < self.num_envs:
             raise RuntimeError("step() before reset() (an unpickled env must be reset)")
-        for e in range(self.num_envs):
-            self._tick(e, actions[e])
-        terms = self.tracker.step(slice(None), self.batch, self.matches, self.joint)
         if len(self.driven):
-            for e, m in enumerate(self.matches):
-                if not m.done and not m.alive[self.driven_idx].any():
+            self.joint[:, self._driven_sel] = actions
+        for e in range(self.num_envs):
+            self._tick(e)
+        terms = self.tracker.step(slice(None), self.batch, self.matches, self.joint)
+        if len(self.driven):  # no driven seat alive: play the match out now
+            gone = np.flatnonzero(~np.logical_or.reduce(
+                self.batch.alive[:, self._driven_sel], axis=1))
+            for e in gone.tolist():
+                if not (self.terminated[e] or self.truncated[e]):
                     self._play_out(e)
         return terms, self.obs.build()
 
@@ -302,7 +323,8 @@ class MatchSet:
         m, sl = self.matches[e], slice(e, e + 1)
         mine = self._driven_bullets
         while not m.done:
-            self._tick(e, None)
+            self.joint[e, self._driven_sel] = NOOP
+            self._tick(e)
             if m.done or (m.bullet_active & mine).any():
                 acc += self.tracker.step(sl, self.batch, self.matches, self.joint)[0]
         self.tracker.terms[e] = acc

@@ -101,6 +101,7 @@ class TankBattleEnv(gym.Env):
         self.observation_space = self.core.observation_space()
         self.action_space = action_space()
         self.metadata = {**self.metadata, "render_fps": self.core.game.tick_hz}
+        self._map = ""  # name of the current episode's map (set at reset)
         self._drawer = (FirstMatchRenderer(self.core, render_mode, self.metadata["render_fps"])
                         if render_mode is not None else None)
 
@@ -121,7 +122,8 @@ class TankBattleEnv(gym.Env):
         obs = self.core.obs.build()[0, 0].copy()
         if self.render_mode == "human":
             self.render()
-        return obs, {"map": self.core.map_name(0), "seat": self.seat}
+        self._map = self.core.map_name(0)
+        return obs, {"map": self._map, "seat": self.seat}
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
         if not self.core.matches:
@@ -129,17 +131,20 @@ class TankBattleEnv(gym.Env):
         m = self.core.matches[0]
         if m.done:
             raise RuntimeError("step() after the episode ended; call reset()")
-        a = check_actions(action, (3,), lambda _: f"seat {self.seat} ({self.scenario.name})")
+        a = check_actions(action, (3,), self._name)
         terms, obs = self.core.step(a.reshape(1, 1, 3))
         col = terms[0, :, self.seat]
         info: dict[str, Any] = {"reward_terms": dict(zip(TERMS, col.tolist(), strict=True)),
-                                "map": self.core.map_name(0)}
-        if m.done:
+                                "map": self._map}
+        if m.terminated or m.truncated:
             info["winner"] = m.winner
             info["outcome"] = self.core.outcome(0)[0]
         if self.render_mode == "human":
             self.render()
         return obs[0, 0].copy(), float(col.sum()), m.terminated, m.truncated, info
+
+    def _name(self, _: tuple[int, ...]) -> str:
+        return f"seat {self.seat} ({self.scenario.name})"
 
     def render(self) -> np.ndarray | None:
         if self.render_mode is None:

@@ -50,6 +50,7 @@ arrays through shared memory. :func:`make_vector_env` picks one by ``num_workers
 from __future__ import annotations
 
 import multiprocessing as mp
+import pickle
 import traceback
 from collections.abc import Mapping, Sequence
 from multiprocessing import shared_memory
@@ -202,26 +203,45 @@ class VectorMatchEnv:
         """One tick in every env, with SAME_STEP autoreset of ended envs."""
         if not self._started:
             raise RuntimeError("step() before reset()")
+        return self._step(check_actions(actions, self._shape, self._name))
+
+    def _step(self, acts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                               np.ndarray, dict[str, Any]]:
+        """:meth:`step` with validated int64 (num_envs, L, 3) actions."""
+        E, L, D = self.num_envs, self.num_learners, self.obs_dim
+        obs, final_obs = np.empty((E, L, D), np.float32), np.zeros((E, L, D), np.float32)
+        rewards = np.empty((E, L), np.float32)
+        terminated, truncated = np.empty(E, bool), np.empty(E, bool)
+        final_inputs = {name: np.zeros_like(a) for name, a in self.inputs.items()}
+        episodes = self._step_into(acts, obs, rewards, terminated, truncated, final_obs,
+                                   final_inputs)
+        return obs, rewards, terminated, truncated, {"final_obs": final_obs,
+                                                     "episodes": episodes,
+                                                     "final_inputs": final_inputs}
+
+    def _step_into(self, acts: np.ndarray, obs: np.ndarray, rewards: np.ndarray,
+                   terminated: np.ndarray, truncated: np.ndarray, final_obs: np.ndarray,
+                   final_inputs: dict[str, np.ndarray]) -> list[dict[str, Any]]:
+        """One step written into the given arrays (``final_obs``, ``final_inputs``: only
+        the rows of ended episodes are written; the caller keeps the others zero).
+        Returns the episode records; ``self.inputs`` holds the step's inputs."""
         core = self.core
-        acts = check_actions(actions, self._shape, self._name)
-        terms, obs = core.step(acts)
+        terms, built = core.step(acts)
         lt = terms[:, :, core.driven_idx]  # (E, T, L)
-        rewards = lt.sum(axis=1)
-        self._return += rewards
+        reward = lt.sum(axis=1)
+        self._return += reward
         self._terms += lt
         self._length += 1
-        terminated = np.fromiter((m.terminated for m in core.matches), bool, self.num_envs)
-        truncated = np.fromiter((m.truncated for m in core.matches), bool, self.num_envs)
-        final_obs = np.zeros_like(obs)
-        final_inputs = {name: np.zeros_like(a) for name, a in self.inputs.items()}
+        np.copyto(rewards, reward)
+        np.copyto(terminated, core.terminated)
+        np.copyto(truncated, core.truncated)
         episodes = []
         done = np.flatnonzero(terminated | truncated)
         if done.size:
-            final_obs[done] = obs[done]
+            final_obs[done] = built[done]
             for name in self._input_names:
                 final_inputs[name][done] = getattr(self, f"input_{name}")()[done]
-            for e in done:
-                e = int(e)
+            for e in done.tolist():
                 m = core.matches[e]
                 episodes.append({
                     "env": self.env_ids[e], "return": self._return[e].copy(),
@@ -230,11 +250,11 @@ class VectorMatchEnv:
                     "map": core.map_name(e),
                     "terms": dict(zip(TERMS, self._terms[e].copy(), strict=True))})
                 self._reset_env(e)
-            obs = core.obs.build()
+            built = core.obs.build()
+        np.copyto(obs, built)
         if self._input_names:
             self.inputs = self._read_inputs()
-        info = {"final_obs": final_obs, "episodes": episodes, "final_inputs": final_inputs}
-        return obs.copy(), rewards.astype(np.float32), terminated, truncated, info
+        return episodes
 
     def _name(self, idx: tuple[int, ...]) -> str:
         e, slot = idx
@@ -282,30 +302,41 @@ class _Shared:
         self.mem.clear()
 
 
+_STEP = b"s"  # the per-step command and its answer travel as raw bytes, not pickles
+
+
 def _worker(conn: Any, kwargs: dict, lo: int, hi: int, specs: dict, names: dict) -> None:
-    """Own envs lo..hi-1; answer commands from the parent until 'close'."""
+    """Own envs lo..hi-1; answer commands from the parent until 'close'. A step reads
+    the validated actions from shared memory and writes every result there; its answer
+    is empty bytes, or the pickled episode records when episodes ended."""
     shared = _Shared(specs, names)
     a = shared.arr
     try:
         env = VectorMatchEnv(num_envs=hi - lo, env_ids=range(lo, hi), **kwargs)
+        out = [a[k][lo:hi] for k in ("obs", "rewards", "terminated", "truncated", "final_obs")]
+        final_inputs = {name: a[f"final:{name}"][lo:hi] for name in env.inputs}
+        finals, dirty = [out[-1], *final_inputs.values()], False
         conn.send(("ok", None))
         while True:
-            cmd, arg = conn.recv()
-            if cmd == "step":
-                obs, rew, term, trunc, info = env.step(a["actions"][lo:hi])
-                a["obs"][lo:hi] = obs
-                a["rewards"][lo:hi] = rew
-                a["terminated"][lo:hi] = term
-                a["truncated"][lo:hi] = trunc
-                a["final_obs"][lo:hi] = info["final_obs"]
+            msg = conn.recv_bytes()
+            if msg == _STEP:
+                if dirty:  # last step's final observations and inputs
+                    for arr in finals:
+                        arr.fill(0)
+                episodes = env._step_into(a["actions"][lo:hi], *out, final_inputs)
                 for name, arr in env.inputs.items():
                     a[f"input:{name}"][lo:hi] = arr
-                    a[f"final:{name}"][lo:hi] = info["final_inputs"][name]
-                conn.send(("ok", info["episodes"]))
-            elif cmd == "reset":
+                dirty = bool(episodes)
+                conn.send_bytes(pickle.dumps(("ok", episodes)) if episodes else b"")
+                continue
+            cmd, arg = pickle.loads(msg)
+            if cmd == "reset":
                 a["obs"][lo:hi] = env.reset(arg)
                 for name, arr in env.inputs.items():
                     a[f"input:{name}"][lo:hi] = arr
+                for arr in finals:
+                    arr.fill(0)
+                dirty = False
                 conn.send(("ok", None))
             elif cmd == "call":
                 name, args = arg
@@ -384,11 +415,17 @@ class SubprocVectorMatchEnv:
     def _inputs(self, kind: str = "input") -> dict[str, np.ndarray]:
         return {name: self._shared.arr[f"{kind}:{name}"].copy() for name in self.input_shapes}
 
-    def _gather(self) -> list:
+    def _gather(self, raw: bool = False) -> list:
+        """Every worker's answer, in worker order; ``raw``: answers to a step (empty
+        bytes: no episodes)."""
         out = []
         for conn in self._conns:
             try:
-                status, payload = conn.recv()
+                if raw:
+                    msg = conn.recv_bytes()
+                    status, payload = pickle.loads(msg) if msg else ("ok", [])
+                else:
+                    status, payload = conn.recv()
             except (EOFError, OSError):
                 status, payload = "error", (
                     "the worker process exited without answering (with the 'spawn' start "
@@ -440,9 +477,19 @@ class SubprocVectorMatchEnv:
                                           dict[str, Any]]:
         if not self._started:
             raise RuntimeError("step() before reset()")
+        return self._step(check_actions(actions, self._shared.arr["actions"].shape,
+                                        self._name))
+
+    def _step(self, acts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                               np.ndarray, dict[str, Any]]:
+        """:meth:`step` with validated int64 (num_envs, L, 3) actions."""
         a = self._shared.arr
-        a["actions"][...] = check_actions(actions, a["actions"].shape, self._name)
-        episodes = [ep for part in self._broadcast("step") for ep in part]
+        np.copyto(a["actions"], acts)
+        for conn in self._conns:
+            conn.send_bytes(_STEP)
+        episodes = []
+        for part in self._gather(raw=True):
+            episodes.extend(part)
         if self.input_shapes:
             self.inputs = self._inputs()
         info = {"final_obs": a["final_obs"].copy(), "episodes": episodes,
@@ -578,7 +625,7 @@ class TankBattleVectorEnv(VectorEnv):
         if not self._started:
             raise RuntimeError("step() before reset()")
         acts = check_actions(actions, self._shape, self._name)
-        obs, rew, term, trunc, info = self.engine.step(acts[:, None, :])
+        obs, rew, term, trunc, info = self.engine._step(acts[:, None, :])
         infos: dict[str, Any] = {}
         episodes = info["episodes"]
         if episodes:

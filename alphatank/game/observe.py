@@ -328,6 +328,14 @@ class ObservationBuilder:
         self._bt = np.zeros((E, batch.n_bullets, len(BULLET_FIELDS)))
         self._count_scale = np.array([1.0 / self.cfg.cooldown_ticks, 1.0 / cap])
         self._ray_angles = np.arange(rays) * (2 * math.pi / rays)
+        # Reads of other tanks and bullets: views when the seat pattern allows (a 1v1 is
+        # all views), else fancy indexing each step.
+        self._self_xy = pick(batch.tank_xy, self.observers[:, None])  # (E, L, 1, 2)
+        self._other_xy = pick(batch.tank_xy, self.other_idx)  # (E, L, O, 2)
+        self._other_act = pick(batch.bullet_active, self.other_bidx)  # (E, L, K)
+        self._bullets_zero = False  # the other-bullet block is all zeros already
+        if kind == "paper":
+            self._paper_plan()
 
     def __reduce__(self) -> tuple:
         return (type(self), self._args)
@@ -428,6 +436,8 @@ class ObservationBuilder:
         if self.kind != "paper":
             return
         b, at = self.batch, self.at
+        self._corner_vu[e, 0, 0] = b.corner_v[e, 0]
+        self._corner_vu[e, 0, 1] = b.corner_u[e, 0]
         inv = b.inv[e, 0]
         m = b.wall_mask[e][:, None]
         vw = self.v_wall[e]
@@ -449,9 +459,89 @@ class ObservationBuilder:
             self._build_paper()
         else:
             self._build_ego()
-        np.minimum(self.out, 1.0, out=self.out)
-        np.maximum(self.out, -1.0, out=self.out)
-        return self.out
+        out = self.out
+        np.minimum(out, 1.0, out=out)
+        np.maximum(out, -1.0, out=out)
+        return out
+
+    def _paper_plan(self) -> None:
+        """Buffers of the ``paper`` kind: every feature an observation copies unchanged
+        (own tank, other tanks' table fields, own bullets, zone flags) is computed once
+        per tank or bullet slot into one float64 source row per env, then copied to all
+        observers with one ``take`` and one ``put`` through precomputed flat indices.
+        Tanks and bullets sit in consecutive rows of ``StateBatch.raw``, so one operation
+        scales the positions (and one the velocities) of both."""
+        b, lay, at = self.batch, self.layout, self.at
+        E, L, D = self.out.shape
+        n, nb = b.n, b.n_bullets
+        parts = {"P": 4 * (n + nb), "T": 10 * n, "F": 4 * n, "C": 2 * n, "A": nb}
+        start, S = {}, 0
+        for k, size in parts.items():
+            start[k] = S
+            S += size
+        self._src = src = np.zeros((E, S))
+        # x, y, vx, vy of tanks then bullets (tank_table / bullet_table fields)
+        body = src[:, start["P"]:start["T"]].reshape(E, n + nb, 4)
+        self._body_xy, self._body_v = body[..., 0:2], body[..., 2:4]
+        self._raw_xy, self._raw_v = b.raw[:, :n + nb, 0:2], b.raw[:, :n + nb, 3:5]
+        self._v_scale = np.r_[np.full(n, 1.0 / self.cfg.tank_speed),
+                              np.full(nb, 1.0 / self.cfg.bullet_speed)][:, None]
+        self._bullets = body[:, n:]  # bullet_table(): inactive slots zeroed
+        tab = src[:, start["T"]:start["F"]].reshape(E, n, 10)  # TANK_COLS
+        self._sin, self._cos = tab[..., 0], tab[..., 1]
+        self._sin_cos = tab[..., 0:2, None, None]  # (E, n, 2, 1, 1)
+        self._corners = tab[..., 2:10].reshape(E, n, 4, 2)
+        self._corner_parts = np.zeros((E, n, 2, 4, 2))
+        self._corner_vu = np.zeros((E, 1, 2, 4, 2))  # corner_v, corner_u (set_static)
+        self._tank_xy4 = self._body_xy[:, :n, None, :]
+        self._src_f = src[:, start["F"]:start["C"]].reshape(E, 4, n)  # alive, wall, zones
+        self._src_c = src[:, start["C"]:start["A"]].reshape(E, n, 2)  # reload, bullets
+        self._src_a = src[:, start["A"]:]  # bullet active
+        self._active = self._src_a[..., None]
+        self._counts_t = b.counts.transpose(0, 2, 1)  # (E, n, 2) view
+        table = ("x", "y", "vx", "vy")
+
+        def tank_src(j: int, field: str) -> int:
+            if field in ("alive", "wall"):
+                return start["F"] + ("alive", "wall").index(field) * n + j
+            if field in table:
+                return start["P"] + 4 * j + table.index(field)
+            return start["T"] + 10 * j + TANK_COLS.index(field)
+
+        pairs: list[tuple[int, int]] = []  # (column in one env's L*D block, src column)
+        for li, o in enumerate(self.observers):
+            base = li * D
+
+            def put(name: str, src_col: int, base: int = base) -> None:
+                pairs.append((base + lay[name].start, src_col))
+
+            for f in TANK_FIELDS:
+                put(f"self.{f}", tank_src(o, f))
+            put("self.reload", start["C"] + 2 * o)
+            put("self.bullets", start["C"] + 2 * o + 1)
+            for k, j in enumerate(self.other_idx[li]):
+                for f in TANK_FIELDS:
+                    put(f"tank[{k}].{f}", tank_src(j, f))
+            for k, slot in enumerate(self.own_bidx[li]):
+                put(f"own_bullet[{k}].mask", start["A"] + slot)
+                for c, f in enumerate(BULLET_FIELDS):
+                    put(f"own_bullet[{k}].{f}", start["P"] + 4 * (n + slot) + c)
+            put("zone.in_buff", start["F"] + 2 * n + o)
+            put("zone.in_debuff", start["F"] + 3 * n + o)
+        dst, col = np.array(pairs, dtype=np.intp).reshape(-1, 2).T
+        envs = np.arange(E, dtype=np.intp)[:, None]
+        self._take = (envs * S + col).reshape(-1)
+        self._put = (envs * (L * D) + dst).reshape(-1)
+        self._moved = np.zeros(self._take.size)
+        self._src_flat = src.reshape(-1)
+        self._out_flat = self.out.reshape(-1)
+        # Other tanks: offsets (px), distances.
+        self._rel = np.zeros((E, L, self.n_others, 2))
+        self._rel_x, self._rel_y = self._rel[..., 0], self._rel[..., 1]
+        self._dist = np.zeros((E, L, self.n_others))
+        self._v_rel = self.v_tank[..., at["tank.rel_x:rel_y"]]
+        self._v_dist = self.v_tank[..., at["tank.dist"]]
+        self._scale4 = b.scale[..., None]
 
     def _self_counts(self, out: np.ndarray) -> None:
         """reload (cooldown / cooldown ticks) and bullets (in flight / capacity)."""
@@ -463,10 +553,14 @@ class ObservationBuilder:
         distance (px), and the active mask; all (E, L, K[, 2]). None (and the block
         zeroed) when no other bullet flies anywhere in the batch."""
         b, bidx = self.batch, self.other_bidx
-        act = b.bullet_active[:, bidx]
-        if not act.any():
-            self.v_bullet[...] = 0.0
+        act = self._other_act
+        act = b.bullet_active[:, bidx] if act is None else act
+        if not np.count_nonzero(act):
+            if not self._bullets_zero:
+                self.v_bullet[...] = 0.0
+                self._bullets_zero = True
             return None
+        self._bullets_zero = False
         rel = b.bullet_xy[:, bidx] - self_xy  # (E, L, K, 2)
         dist = np.hypot(rel[..., 0], rel[..., 1])
         order = np.where(act, dist, np.inf).argsort(axis=-1, kind="stable")
@@ -479,24 +573,41 @@ class ObservationBuilder:
         return bidx[gl, order], rel[ge, gl, order], dist[ge, gl, order], mask
 
     def _build_paper(self) -> None:
+        """The ``paper`` kind (see :meth:`_paper_plan`); same values as
+        :func:`tank_table` / :func:`bullet_table` with the same operations, in fewer
+        numpy calls."""
         b, at = self.batch, self.at
-        tt = tank_table(b, self._tt)
-        obs, oi = self.observers, self.other_idx
-        vs = self.v_self
-        vs[..., at["self.alive:wall"]] = tt[:, obs]
-        self._self_counts(vs[..., at["self.reload:bullets"]])
-        # Other tanks.
-        vt = self.v_tank
-        vt[..., at["tank.alive:wall"]] = tt[:, oi]
-        self_xy = b.tank_xy[:, obs][:, :, None, :]  # (E, L, 1, 2)
-        rel = b.tank_xy[:, oi] - self_xy  # (E, L, O, 2)
-        np.multiply(rel, b.scale[..., None], out=vt[..., at["tank.rel_x:rel_y"]])
-        np.multiply(np.hypot(rel[..., 0], rel[..., 1]), b.idiag, out=vt[..., at["tank.dist"]])
-        # Own bullets in slot order; others nearest first; inactive slots zero.
-        bt = bullet_table(b, self._bt)
-        vo = self.v_own
-        vo[..., at["own_bullet.mask"]] = b.bullet_active[:, self.own_bidx]
-        vo[..., at["own_bullet.x:vy"]] = bt[:, self.own_bidx]
+        # Tank and bullet fields, once per tank / slot.
+        xy = self._body_xy
+        np.multiply(self._raw_xy, b.inv, out=xy)
+        xy -= 1.0
+        np.multiply(self._raw_v, self._v_scale, out=self._body_v)
+        np.sin(b.tank_angle, out=self._sin)
+        np.cos(b.tank_angle, out=self._cos)
+        # corners: cos u + sin v + xy, the products stacked and summed (two terms)
+        parts = np.multiply(self._sin_cos, self._corner_vu, out=self._corner_parts)
+        np.add.reduce(parts, axis=2, out=self._corners)
+        self._corners += self._tank_xy4
+        np.copyto(self._src_f, b.flags)
+        np.multiply(self._counts_t, self._count_scale, out=self._src_c)
+        np.copyto(self._src_a, b.bullet_active)
+        bt = self._bullets
+        bt *= self._active
+        # Copied fields of every observer.
+        self._src_flat.take(self._take, out=self._moved)
+        self._out_flat.put(self._put, self._moved)
+        # Other tanks: offsets and distances.
+        self_xy = self._self_xy
+        if self_xy is None:
+            self_xy = b.tank_xy[:, self.observers][:, :, None, :]  # (E, L, 1, 2)
+        other_xy = self._other_xy
+        if other_xy is None:
+            other_xy = b.tank_xy[:, self.other_idx]
+        rel = np.subtract(other_xy, self_xy, out=self._rel)
+        np.multiply(rel, self._scale4, out=self._v_rel)
+        dist = np.hypot(self._rel_x, self._rel_y, out=self._dist)
+        np.multiply(dist, b.idiag, out=self._v_dist)
+        # Other tanks' bullets nearest first; inactive slots zero.
         others = self._other_bullets(self_xy)
         if others is not None:
             sel, brel, bdist, mask = others
@@ -505,8 +616,6 @@ class ObservationBuilder:
             k = mask * b.scale
             np.multiply(brel, k[..., None], out=vb[..., at["bullet.rel_x:rel_y"]])
             np.multiply(bdist, k * (b.idiag / b.scale), out=vb[..., at["bullet.dist"]])
-        self.v_zone[..., at["zone.in_buff"]] = b.in_buff[:, obs]
-        self.v_zone[..., at["zone.in_debuff"]] = b.in_debuff[:, obs]
 
     def _ego_tables(self) -> None:
         """Column maps of the egocentric kind: every relative position (other tanks, own
@@ -619,6 +728,30 @@ class ObservationBuilder:
         near = np.maximum(tmin, 0.0)
         d = np.where(tmax >= near, near, np.inf).min(axis=-1)
         return np.minimum(d, self.ray_length, out=d)
+
+
+TANK_COLS = ("sin", "cos", "c0x", "c0y", "c1x", "c1y", "c2x", "c2y", "c3x", "c3y")  # per tank,
+# in the paper builder's source row (x, y, vx, vy sit with the bullets', alive and wall with
+# the flags)
+
+
+def pick(arr: np.ndarray, idx: np.ndarray) -> np.ndarray | None:
+    """``arr[:, idx]`` as a read-only strided view when ``idx`` (2-D, indices into axis 1)
+    is affine in both its axes (a 1v1, or every seat in order), else None (index it)."""
+    idx = np.asarray(idx)
+    if idx.ndim != 2 or idx.size == 0:
+        return None
+    a = int(idx[0, 0])
+    s0 = int(idx[1, 0] - idx[0, 0]) if idx.shape[0] > 1 else 0
+    s1 = int(idx[0, 1] - idx[0, 0]) if idx.shape[1] > 1 else 0
+    grid = a + s0 * np.arange(idx.shape[0])[:, None] + s1 * np.arange(idx.shape[1])
+    if not np.array_equal(grid, idx) or s0 < 0 or s1 < 0:
+        return None
+    st = arr.strides
+    view = np.lib.stride_tricks.as_strided(
+        arr[:, a:], shape=(arr.shape[0], *idx.shape, *arr.shape[2:]),
+        strides=(st[0], s0 * st[1], s1 * st[1], *st[2:]), writeable=False)
+    return view
 
 
 def _span(names: Sequence[str], first: str, last: str) -> slice:

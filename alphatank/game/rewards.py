@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Sequence
+from types import SimpleNamespace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -247,6 +248,8 @@ class RewardTracker:
         self.rw_bullets = (self.rw_seats[:, None] * cap + np.arange(cap)).reshape(-1)
         self.rw_enemy = self.enemy[self.rw_bullets]  # (nr, n)
         self._rw_b, self._rw_s = as_index(self.rw_bullets), as_index(self.rw_seats)
+        self._progress_w = np.array([[cfg.bullet_close], [cfg.bullet_away]])
+        self._pv: SimpleNamespace | None = None  # _progress views of the whole batch
         self.bullet_prev = np.full((E, len(self.rw_bullets)), np.nan)
         self.wall_count = np.zeros((E, n), dtype=np.int64)
         self.still_count = np.zeros((E, n), dtype=np.int64)
@@ -270,6 +273,10 @@ class RewardTracker:
         self.on_bfs = on["bfs_progress"] or on["engagement"]
         self.on = on
         check_team_outcome(cfg)
+
+    def __getstate__(self) -> dict:
+        """Everything but cached views (they would unpickle as detached copies)."""
+        return {**self.__dict__, "_pv": None}
 
     def reset_env(self, e: int, match: Match) -> None:
         """Start env ``e``'s counters for a new episode of ``match``."""
@@ -300,9 +307,11 @@ class RewardTracker:
         (E_sl, len(TERMS), n) view of this tick's terms."""
         cfg = self.cfg
         terms = self.terms[sl]
-        terms[...] = 0.0
-        for k, e in enumerate(range(len(matches))[sl]):
-            self._events(terms[k], matches[e])
+        terms.fill(0.0)
+        for k, m in enumerate(matches[sl]):
+            ev = m.events
+            if ev.hits or ev.fired or m.terminated or m.truncated:
+                self._events(terms[k], m)
         alive = batch.alive[sl]
         if self.on_progress:
             self._progress(sl, batch, terms)
@@ -396,24 +405,56 @@ class RewardTracker:
         farther from its nearest live enemy than on the previous tick. A slot is only ever
         re-fired after a tick in which it was inactive (NaN), so fresh bullets never
         compare."""
-        prev = self.bullet_prev[sl]
-        act = batch.bullet_active[sl][:, self._rw_b]
-        if not act.any():
-            prev[...] = np.nan
+        v = self._progress_views(sl, batch, terms)
+        if not np.count_nonzero(v.act):
+            v.prev.fill(np.nan)
             return
-        d = batch.bullet_xy[sl][:, self._rw_b, None, :] - batch.tank_xy[sl][:, None]
-        dist = np.hypot(d[..., 0], d[..., 1])  # (E, nr, n)
-        ok = self.rw_enemy & batch.alive[sl][:, None, :]
-        now = np.fmin.reduce(np.where(ok, dist, np.nan), axis=-1)
-        now[~act] = np.nan
-        closer, farther = bullet_progress(prev, now)
-        E, cap = closer.shape[0], self.capacity
+        np.subtract(v.bullet_xy, v.tank_xy, out=v.d)
+        np.hypot(v.dx, v.dy, out=v.dist)  # (E, nr, n)
+        np.logical_and(self.rw_enemy, v.alive, out=v.ok)
+        np.logical_and(v.ok, v.act_n, out=v.ok)  # an inactive slot has no distance (NaN)
+        now = np.fmin.reduce(np.where(v.ok, v.dist, np.nan), axis=-1, out=v.now)
+        np.less(now, v.prev, out=v.closer)  # bullet_progress()
+        np.greater(now, v.prev, out=v.farther)
+        np.add.reduce(v.per_slot, axis=-1, out=v.counts)  # (2, E, seats)
+        if v.terms is not None:
+            np.multiply(v.counts_t, self._progress_w, out=v.terms)
+        else:
+            terms[:, T["bullet_close"]:T["bullet_away"] + 1, self._rw_s] = (
+                v.counts_t * self._progress_w)
+        np.copyto(v.prev, now)
+
+    def _progress_views(self, sl: slice, batch: StateBatch, terms: np.ndarray
+                        ) -> SimpleNamespace:
+        """Views and buffers of :meth:`_progress` for the envs ``sl``; cached for the whole
+        batch (every step) when the rewarded seats are contiguous (reads are views), else
+        built afresh (play-outs, scattered seats)."""
+        full = (sl == slice(None) and isinstance(self._rw_b, slice)
+                and isinstance(self._rw_s, slice))
+        if full and self._pv is not None and self._pv.batch is batch:
+            return self._pv
+        rw_b = self._rw_b
+        act = batch.bullet_active[sl][:, rw_b]
+        E, nr = act.shape
+        n, cap = self.n, self.capacity
+        d = np.zeros((E, nr, n, 2))
+        cmp = np.zeros((2, E, nr), dtype=bool)
+        counts = np.zeros((2, E, nr // cap), dtype=np.int64)
+        close = T["bullet_close"]
+        assert T["bullet_away"] == close + 1
         seats = self._rw_s
-        terms[:, T["bullet_close"], seats] = (
-            self.cfg.bullet_close * closer.reshape(E, -1, cap).sum(axis=-1))
-        terms[:, T["bullet_away"], seats] = (
-            self.cfg.bullet_away * farther.reshape(E, -1, cap).sum(axis=-1))
-        prev[...] = now
+        v = SimpleNamespace(
+            batch=batch, act=act, act_n=act[..., None], prev=self.bullet_prev[sl],
+            bullet_xy=batch.bullet_xy[sl][:, rw_b, None, :], tank_xy=batch.tank_xy[sl][:, None],
+            alive=batch.alive[sl][:, None, :], d=d, dx=d[..., 0], dy=d[..., 1],
+            dist=np.zeros((E, nr, n)), ok=np.zeros((E, nr, n), dtype=bool),
+            now=np.zeros((E, nr)), closer=cmp[0], farther=cmp[1],
+            per_slot=cmp.reshape(2, E, -1, cap), counts=counts,
+            counts_t=counts.transpose(1, 0, 2),
+            terms=terms[:, close:close + 2, seats] if isinstance(seats, slice) else None)
+        if full:
+            self._pv = v
+        return v
 
     def _rotation(self, sl: slice, batch: StateBatch, terms: np.ndarray) -> None:
         cfg = self.cfg
