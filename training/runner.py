@@ -422,7 +422,8 @@ class Trainer:
         summary; ``stopped`` says why it ended early (None: it reached ``total_steps``)
         and ``exit_code`` is 130 / 143 after SIGINT / SIGTERM, else 0."""
         cfg = self.cfg
-        self.stop = StopFlag(cfg.time_limit_s)
+        start = time.perf_counter() - self.elapsed  # elapsed counts the whole run
+        self.stop = StopFlag(cfg.time_limit_s)  # the budget counts this call only
         self.stopped = {}
         bar = None
         if self.progress:
@@ -433,7 +434,7 @@ class Trainer:
             lr.interrupt = self.stop  # polled between gradient steps (Learner protocol)
         with stop_on_signals(self.stop):
             try:
-                self._run(bar, time.perf_counter() - self.elapsed)
+                self._run(bar, start)
             finally:
                 for lr in self.learners.values():
                     lr.interrupt = None

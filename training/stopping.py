@@ -5,7 +5,8 @@ polled by the loop every vector step (and by learners between gradient steps).
 the duration of a run (main thread only; previous handlers are restored afterwards) and,
 when the flag has a deadline, a ``SIGALRM`` timer so that the budget also ends long
 stretches that do not poll (evaluation, videos) inside :meth:`StopFlag.interruptible`.
-A second SIGINT while stopping aborts at once (``KeyboardInterrupt``).
+A SIGINT while a signal's stop is under way (or a second SIGINT) aborts at once
+(``KeyboardInterrupt``; the previous checkpoint stays intact).
 """
 
 from __future__ import annotations
@@ -23,6 +24,13 @@ SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 class StopRequested(Exception):  # noqa: N818 (a request, not an error)
     """Raised inside :meth:`StopFlag.interruptible` blocks when a stop arrives."""
+
+
+def check_interrupt(interrupt: Any) -> None:
+    """For fixed-rollout learners, between gradient steps: raise :class:`StopRequested`
+    if ``interrupt`` (a learner's ``interrupt`` attribute: None or a callable) says so."""
+    if interrupt is not None and interrupt():
+        raise StopRequested("update interrupted")
 
 
 class StopFlag:
@@ -77,11 +85,15 @@ def stop_on_signals(flag: StopFlag) -> Iterator[StopFlag]:
         yield flag
         return
 
+    interrupts = 0
+
     def on_signal(signum: int, frame: Any) -> None:
-        name = signal.Signals(signum).name
-        if flag.reason is not None and signum == signal.SIGINT and flag.signum is not None:
-            raise KeyboardInterrupt  # a second Ctrl-C: abort without waiting for the save
-        flag.request(name, signum)
+        nonlocal interrupts
+        if signum == signal.SIGINT:
+            interrupts += 1
+            if interrupts > 1 or flag.signum is not None:
+                raise KeyboardInterrupt  # Ctrl-C while stopping: abort without waiting
+        flag.request(signal.Signals(signum).name, signum)
 
     def on_alarm(signum: int, frame: Any) -> None:
         flag.request("time limit")
