@@ -10,8 +10,10 @@ Layout of ``<run>/checkpoints/step_<N>/``::
     <learner>.replay.npz  SAC replay buffer (for exact resume; ``allow_pickle=False``)
 
 A save writes everything into a temporary sibling directory and ``os.replace``-s it into
-place, then updates ``<run>/latest`` (a one-line file, also replaced atomically). Every
-load problem raises :class:`CheckpointError` naming the file and what is wrong.
+place, then updates ``<run>/latest`` (a one-line file, also replaced atomically), so a
+process killed at any moment (even ``kill -9``) leaves the previous save intact and
+``latest`` pointing at a complete one; leftovers of killed saves are removed by the next
+save. Every load problem raises :class:`CheckpointError` naming the file and what is wrong.
 """
 
 from __future__ import annotations
@@ -39,6 +41,9 @@ from alphatank.training.presets import LearnerSpec, TrainConfig
 
 FORMAT = "alphatank-checkpoint"
 VERSION = 1
+# seconds a save sleeps after writing the learner files, before meta.json and the rename
+# (crash tests kill the process there; never set in normal use)
+DELAY_ENV = "ALPHATANK_TEST_SAVE_DELAY"
 
 
 class CheckpointError(InputError, RuntimeError):
@@ -94,10 +99,12 @@ def save_checkpoint(run_dir: str | Path, tag: str, meta: dict[str, Any],
         files[f"{name}.replay.npz"] = _sha256(tmp / f"{name}.replay.npz")
     meta = {"format": FORMAT, "version": VERSION, "saved_at": time.time(), **meta,
             "files": files}
+    if os.environ.get(DELAY_ENV):
+        time.sleep(float(os.environ[DELAY_ENV]))
     (tmp / "meta.json").write_text(json.dumps(meta, indent=1), encoding="utf-8")
-    if final.exists():  # re-saving a tag: move the old one aside first (rename is atomic)
-        old = root / f".{tag}.old-{os.getpid()}"
-        os.replace(final, old)
+    if final.exists():  # re-saving a tag: move the old one aside first (rename is atomic;
+        old = root / f".{tag}.old-{os.getpid()}"  # resolve_checkpoint_dir finds it if the
+        os.replace(final, old)  # process dies before the next rename)
         os.replace(tmp, final)
         shutil.rmtree(old)
     else:
@@ -109,7 +116,24 @@ def save_checkpoint(run_dir: str | Path, tag: str, meta: dict[str, Any],
         for old in saves[:-keep]:
             if old != final:
                 shutil.rmtree(old, ignore_errors=True)
+    _remove_leftovers(root)
     return final
+
+
+def _remove_leftovers(root: Path) -> None:
+    """Delete the temporary folders of saves whose process is gone (killed mid-save)."""
+    for p in root.iterdir():
+        name, _, pid = p.name.rpartition("-")
+        if not (p.name.startswith(".") and (".tmp" in name or ".old" in name) and pid.isdigit()):
+            continue
+        try:
+            os.kill(int(pid), 0)
+            continue  # that process still runs (another save of this run?): leave it
+        except ProcessLookupError:
+            pass
+        except PermissionError:
+            continue
+        shutil.rmtree(p, ignore_errors=True)
 
 
 def resolve_checkpoint_dir(path: str | Path) -> Path:
@@ -125,6 +149,9 @@ def resolve_checkpoint_dir(path: str | Path) -> Path:
     latest = p / "latest"
     if latest.is_file():
         target = p / latest.read_text(encoding="utf-8").strip()
+        moved = sorted(target.parent.glob(f".{target.name}.old-*/meta.json"))
+        if not target.exists() and moved:  # killed while re-saving this tag
+            return moved[-1].parent
         if not (target / "meta.json").exists():
             raise CheckpointError(f"{latest}: points at {target}, which holds no meta.json")
         return target

@@ -21,6 +21,18 @@ returning (num_envs, num_learner_seats, ...) for the current step; see
 
 The runner never asks for the algorithm: rollout length, learning-rate planning,
 per-segment resets and extra checkpoint arrays are all methods below.
+
+Stopping. While a run trains, the runner sets ``learner.interrupt`` to a zero-argument
+callable that turns True when the run must stop (SIGINT, SIGTERM, time limit), and
+resets it to None afterwards. Long updates poll it between gradient steps:
+
+* a learner with a fixed rollout (:attr:`Learner.rollout_steps`) raises
+  :class:`alphatank.training.stopping.StopRequested`; the runner saves its state from
+  before the rollout (its buffers are empty at iteration boundaries, so
+  :meth:`Learner.state_dict` is complete there) and the run collects it again;
+* a learner without one returns early with its state whole after each gradient step
+  (its state dict and arrays are complete after any :meth:`Learner.observe`), keeping
+  the steps it still owes for its next update.
 """
 
 from __future__ import annotations
@@ -40,6 +52,7 @@ class Learner(Protocol):
     obs_dim: int
     num_streams: int
     updates: int  # updates done so far (saved in state_dict)
+    interrupt: Any  # None, or set by the runner: () -> bool, True once the run must stop
 
     def __init__(self, obs_dim: int, num_streams: int, cfg: Any = None, seed: int = 0,
                  mask_dim: int = 0, num_seats: int = 1, **input_dims: int) -> None:

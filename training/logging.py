@@ -2,6 +2,10 @@
 optional TensorBoard, and always a plain ``metrics.jsonl`` the learning-curve plot reads.
 
 Metric names follow the house convention: ``charts/*``, ``losses/*``, ``eval/*``.
+
+A resumed run continues from its checkpoint's step, so rows logged after it (by a run
+that crashed or was killed before its next save) are rewound: ``metrics.jsonl`` is
+rewritten without them (atomically) and TensorBoard hides them (``purge_step``).
 """
 
 from __future__ import annotations
@@ -23,7 +27,10 @@ class RunLogger:
 
     def __init__(self, run_dir: str | Path, config: dict[str, Any], name: str,
                  wandb_mode: str = "offline", project: str = "alphatank",
-                 tensorboard: bool = False, run_id: str | None = None):
+                 tensorboard: bool = False, run_id: str | None = None,
+                 resume_step: int | None = None):
+        """``resume_step``: the step of the checkpoint a resumed run continues from (rows
+        logged after it are rewound; :attr:`rewound` counts them)."""
         if wandb_mode not in WANDB_MODES:
             raise ValueError(f"wandb mode must be one of {WANDB_MODES}, got {wandb_mode!r}")
         if tensorboard:  # before anything is created for the run
@@ -35,6 +42,8 @@ class RunLogger:
                     "tensorboard (or run without --tensorboard)") from None
         self.run_dir = Path(run_dir)
         self.run_dir.mkdir(parents=True, exist_ok=True)
+        self.rewound = (rewind_metrics(self.run_dir / "metrics.jsonl", resume_step)
+                        if resume_step is not None else 0)
         self._jsonl = open(self.run_dir / "metrics.jsonl", "a", encoding="utf-8")  # noqa: SIM115
         self.wandb_run = None
         self.run_id = run_id
@@ -47,7 +56,8 @@ class RunLogger:
             self.run_id = self.wandb_run.id
         self.tb = None
         if tensorboard:
-            self.tb = SummaryWriter(str(self.run_dir / "tensorboard"))
+            self.tb = SummaryWriter(str(self.run_dir / "tensorboard"),
+                                    purge_step=None if resume_step is None else resume_step + 1)
 
     def log(self, metrics: dict[str, float], step: int) -> None:
         clean = {k: float(v) for k, v in metrics.items()
@@ -73,6 +83,31 @@ class RunLogger:
             self.wandb_run = None
         if self.tb is not None:
             self.tb.close()
+
+
+def rewind_metrics(path: str | Path, step: int) -> int:
+    """Drop the rows of a ``metrics.jsonl`` logged after ``step`` (and a line cut short by
+    a crash), rewriting the file atomically; returns how many rows were dropped."""
+    path = Path(path)
+    if not path.is_file():
+        return 0
+    keep, dropped = [], 0
+    with open(path, encoding="utf-8") as f:
+        for line in f:
+            try:
+                row = json.loads(line)
+            except json.JSONDecodeError:
+                row = None
+            if isinstance(row, dict) and isinstance(row.get("step"), int) and \
+                    row["step"] <= step:
+                keep.append(line if line.endswith("\n") else line + "\n")
+            elif line.strip():
+                dropped += 1
+    if dropped:
+        tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+        tmp.write_text("".join(keep), encoding="utf-8")
+        os.replace(tmp, path)
+    return dropped
 
 
 def read_metrics(run_dir: str | Path) -> list[dict[str, float]]:

@@ -40,6 +40,7 @@ from alphatank.training.buffers import RolloutBuffer, compute_gae_masked
 from alphatank.training.hparams import MAPPOConfig
 from alphatank.training.normalize import ObsNormalizer, ReturnNormalizer
 from alphatank.training.ppo import MASKED_LOGIT, NVEC, evaluate_actions, mlp, np_sample
+from alphatank.training.stopping import check_interrupt
 
 
 class ValueNorm:
@@ -173,6 +174,7 @@ class MAPPO:
         self._alive_now = np.ones(num_streams, dtype=bool)  # alive at the last act()
         self.updates = 0
         self.total_updates = 0  # set by the runner for learning-rate annealing
+        self.interrupt: Any = None  # set by the runner; polled between minibatches
 
     # ---- inputs -------------------------------------------------------------------------
 
@@ -314,6 +316,7 @@ class MAPPO:
             approx_kl = torch.zeros(())
             for start in range(0, n - mb_size + 1, mb_size):
                 idx = perm[start:start + mb_size]
+                check_interrupt(self.interrupt)  # the runner rewinds a cut update
                 w = b_w[idx]
                 n_w = w.sum().clamp(min=1.0)
                 value = net.value(b_s[idx])

@@ -64,6 +64,10 @@ class ObsNormalizer:
         self._mean = self.rms.mean.astype(np.float32)
         self._inv_std = (1.0 / np.sqrt(self.rms.var + self.epsilon)).astype(np.float32)
 
+    def stats(self) -> tuple[np.ndarray, np.ndarray]:
+        """The float32 mean and 1 / std in use (fresh arrays after every update)."""
+        return self._mean, self._inv_std
+
     def __call__(self, obs: np.ndarray, update: bool = False) -> np.ndarray:
         """Normalised float32 copy of ``obs`` (..., obs_dim); ``update`` folds it in first."""
         obs = np.asarray(obs, dtype=np.float32)

@@ -18,6 +18,7 @@ from torch import nn
 from alphatank.training.buffers import RolloutBuffer, compute_gae
 from alphatank.training.hparams import PPOConfig
 from alphatank.training.normalize import ObsNormalizer, ReturnNormalizer
+from alphatank.training.stopping import check_interrupt
 
 NVEC = (3, 3, 2)  # rotate, move, fire — the one action layout (RULES.md)
 MASKED_LOGIT = -1e8  # exp() of this is exactly 0 in float32, and 0 * it stays finite
@@ -151,6 +152,7 @@ class PPO:
         self.buffer = RolloutBuffer(cfg.num_steps, num_streams, obs_dim, mask_dim)
         self.updates = 0
         self.total_updates = 0  # set by plan() for learning-rate annealing
+        self.interrupt: Any = None  # set by the runner; polled between minibatches
 
     # ---- run plumbing (the Learner protocol) --------------------------------------------
 
@@ -251,6 +253,7 @@ class PPO:
             approx_kl = torch.zeros(())
             for start in range(0, n - mb_size + 1, mb_size):
                 idx = perm[start:start + mb_size]
+                check_interrupt(self.interrupt)  # the runner rewinds a cut update
                 mask = b_masks[idx] if b_masks is not None else None
                 logprob, entropy = evaluate_actions(net.logits(b_obs[idx], mask),
                                                     b_actions[idx], self.nvec)

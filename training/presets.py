@@ -144,7 +144,8 @@ class TrainConfig:
     tensorboard: bool = hp(False, "also write TensorBoard logs")
     torch_threads: int = hp(1, "torch threads", gt=0)
     time_limit_s: float = hp(0.0, "stop (and checkpoint) after this much wall time in "
-                             "seconds (0: none)", ge=0)
+                             "seconds of one invocation; a resumed run gets it again "
+                             "(0: none)", ge=0)
     map: str | None = hp(None, "map override: shipped map or folder name (e.g. train), "
                          "a .txt path or a folder of maps (none: the scenario's)")
 

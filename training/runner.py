@@ -11,13 +11,29 @@ A checkpoint is an episode boundary: right after saving, every match restarts fr
 seed derived from ``(seed, iteration)``. A run resumed from that checkpoint does the same,
 so its next update equals the uninterrupted run's bit for bit (in-progress episodes are
 cut there and bootstrapped like any time-limit truncation).
+
+Stopping (:mod:`alphatank.training.stopping`): SIGINT, SIGTERM and the time budget of
+this call (``time_limit_s``) set a flag that the loop polls after every vector step and
+learners poll between gradient steps. A stop inside an iteration saves a checkpoint the
+run resumes from:
+
+* every learner has a fixed rollout (PPO, MAPPO): the partial iteration is dropped and
+  the state from its start is saved (taken before every iteration), so the resumed run
+  re-collects it and continues bit for bit like a run that checkpointed there;
+* some learner has none (SAC): a *segment cut* at the current vector step. Off-policy
+  learners keep everything (each gradient step is whole; owed steps are done after
+  resuming), fixed-rollout learners in the same run drop their unfinished rollout. The
+  resumed run restarts every match (seeds from ``(seed, iteration, cut)``) and starts a
+  full iteration there; it is deterministic, but its iterations are shifted.
 """
 
 from __future__ import annotations
 
+import copy
 import math
 import re
 import time
+import warnings
 from collections import deque
 from collections.abc import Callable
 from pathlib import Path
@@ -43,10 +59,15 @@ from alphatank.training.learners import learner_class, make_learner
 from alphatank.training.logging import RunLogger
 from alphatank.training.presets import TrainConfig, learners_fit, run_learners, run_scenario
 from alphatank.training.schedules import make_schedule
+from alphatank.training.stopping import StopFlag, StopRequested, stop_on_signals
 from alphatank.training.threads import limit_threads
 
 WINDOW = 100  # episodes in the rolling win-rate / return windows
 DEFAULT_ROLLOUT_STEPS = 512  # vector steps per iteration when no learner asks for a length
+
+
+class RunWarning(UserWarning):
+    """A run setting that works but probably not as intended (shown as one line)."""
 
 
 def derive_seed(*parts: int) -> int:
@@ -176,13 +197,33 @@ class Trainer:
         self.returns = {n: deque(maxlen=WINDOW) for n in self.learners}
         self.lengths: deque[int] = deque(maxlen=WINDOW)
         self.by_opponent: dict[str, dict[str, deque[float]]] = {n: {} for n in self.learners}
+        self.cut = 0  # vector steps of a stopped iteration inside global_step (0: none)
+        self.saved_step = -1  # global_step of the newest checkpoint written or resumed from
+        self.stop = StopFlag()  # replaced by every train() call
+        self.stopped: dict[str, Any] = {}  # how train() stopped early, if it did
         if resume is not None:
             self._restore(resume)
+            self.saved_step = self.global_step
+        self._check_cadence()
         self.logger = RunLogger(self.run_dir, cfg.to_dict(), cfg.name, cfg.wandb, cfg.project,
-                                cfg.tensorboard, run_id=wandb_id)
+                                cfg.tensorboard, run_id=wandb_id,
+                                resume_step=self.global_step if resume is not None else None)
         self.actions = np.ones((self.E, self.L, 3), dtype=np.int64)
         self.history: list[dict[str, float]] = []
         self.schedule.bind(self)
+
+    def _check_cadence(self) -> None:
+        """Warn when saves come more often than a game can last: every save restarts all
+        matches, so no episode would ever reach its time limit."""
+        every, steps = self.cfg.checkpoint_every, self.rollout_steps
+        max_steps = self.scenario.game_config(**self.cfg.game).max_steps
+        if every and every * steps < max_steps:
+            warnings.warn(
+                f"checkpoint_every {every} x {steps} vector steps per iteration = "
+                f"{every * steps} steps per match between saves, fewer than an episode's "
+                f"max_steps ({max_steps}): every save restarts all matches, so no game can "
+                f"run its full length; use checkpoint_every >= {math.ceil(max_steps / steps)}",
+                RunWarning, stacklevel=4)
 
     # ---- persistence ------------------------------------------------------------------
 
@@ -207,13 +248,16 @@ class Trainer:
         prog = ckpt.meta["progress"]
         self.global_step, self.iteration = int(prog["global_step"]), int(prog["iteration"])
         self.episodes, self.elapsed = int(prog["episodes"]), float(prog["elapsed"])
+        self.cut = int(prog.get("cut", 0))
         self.schedule.load_state_dict(ckpt.meta.get("schedule", {}))
         for name, outs in ckpt.meta.get("windows", {}).get("outcomes", {}).items():
             self.outcomes[name].extend(outs)
         for name, rets in ckpt.meta.get("windows", {}).get("returns", {}).items():
             self.returns[name].extend(rets)
 
-    def save(self) -> Path:
+    def _payload(self) -> dict[str, Any]:
+        """What a checkpoint of the current state holds (:func:`save_checkpoint`'s
+        ``meta``, ``states``, ``arrays``)."""
         meta = {
             "train_config": self.cfg.to_dict(),
             "scenario": scenario_to_dict(self.scenario),
@@ -223,7 +267,7 @@ class Trainer:
                           "scenario_seats": [self.env.learner_seats[c] for c in spec.seats]}
                          for spec in self.specs],
             "progress": {"global_step": self.global_step, "iteration": self.iteration,
-                         "episodes": self.episodes, "elapsed": self.elapsed},
+                         "episodes": self.episodes, "elapsed": self.elapsed, "cut": self.cut},
             "schedule": self.schedule.state_dict(),
             "windows": {"outcomes": {n: list(d) for n, d in self.outcomes.items()},
                         "returns": {n: [float(x) for x in d] for n, d in self.returns.items()}},
@@ -232,8 +276,28 @@ class Trainer:
         }
         states = {n: lr.state_dict() for n, lr in self.learners.items()}
         arrays = {n: a for n, lr in self.learners.items() if (a := lr.arrays())}
-        return save_checkpoint(self.run_dir, f"step_{self.global_step:010d}", meta, states,
-                               arrays, keep=self.cfg.keep_checkpoints)
+        return {"meta": meta, "states": states, "arrays": arrays}
+
+    def save(self, payload: dict[str, Any] | None = None) -> Path:
+        """Write a checkpoint of the current state (or of ``payload``, from
+        :meth:`_payload`)."""
+        payload = payload or self._payload()
+        step = int(payload["meta"]["progress"]["global_step"])
+        path = save_checkpoint(self.run_dir, f"step_{step:010d}", **payload,
+                               keep=self.cfg.keep_checkpoints)
+        self.saved_step = step
+        return path
+
+    def _iteration_start(self) -> Any:
+        """What a stop inside the coming iteration saves in place of learners' unfinished
+        work: with only fixed-rollout learners the whole checkpoint of this moment (None
+        when it is already on disk); otherwise the states of the fixed-rollout learners
+        (their rollouts are empty now)."""
+        fixed = [n for n, lr in self.learners.items() if lr.rollout_steps]
+        if len(fixed) == len(self.learners):
+            return None if self.global_step == self.saved_step else copy.deepcopy(
+                self._payload())
+        return {n: copy.deepcopy(self.learners[n].state_dict()) for n in fixed}
 
     def policy(self, deterministic: bool = False) -> LivePolicy:
         """The current learners as a Policy (for videos and matches in any seat)."""
@@ -241,11 +305,17 @@ class Trainer:
 
     # ---- the loop ---------------------------------------------------------------------
 
+    def _segment_seed(self) -> int:
+        """Seed of a segment reset: from (seed, iteration), and the step of a cut."""
+        if self.cut:
+            return derive_seed(self.cfg.seed, self.iteration, 7, self.global_step)
+        return derive_seed(self.cfg.seed, self.iteration, 7)
+
     def _segment_reset(self) -> np.ndarray:
         """Restart every match from seeds derived from (seed, iteration)."""
         for lr in self.learners.values():
             lr.new_segment()
-        return self.env.reset(seed=derive_seed(self.cfg.seed, self.iteration, 7))
+        return self.env.reset(seed=self._segment_seed())
 
     def _record_episode(self, ep: dict[str, Any], rewards: np.ndarray, scale: float) -> None:
         self.episodes += 1
@@ -268,7 +338,9 @@ class Trainer:
                     rewards[env_row, col] -= (1.0 - scale) * self.victory
 
     def _collect(self, obs: np.ndarray) -> tuple[np.ndarray, dict[str, float]]:
-        """One iteration of ``rollout_steps`` vector steps (updates included)."""
+        """One iteration of ``rollout_steps`` vector steps (updates included); ends early
+        after the vector step in which a stop is requested (an interrupted fixed-rollout
+        update raises :class:`StopRequested`)."""
         metrics: dict[str, float] = {}
         E, D, env = self.E, self.D, self.env
         for _ in range(self.rollout_steps):
@@ -287,6 +359,7 @@ class Trainer:
                     self._record_episode(ep, rewards, scale)
             final = info["final_obs"]
             inputs = env.inputs if self.inputs else {}
+            ready = []
             for name, learner in self.learners.items():
                 cols = self.cols[name]
                 k = len(cols)
@@ -300,10 +373,14 @@ class Trainer:
                                 np.repeat(trunc, k), final[:, cols].reshape(-1, D), active,
                                 **extra, **finals)
                 if learner.ready:
-                    for key, val in learner.update(nxt, **extra).items():
-                        metrics[f"{key}/{name}" if len(self.learners) > 1 else key] = val
+                    ready.append((name, learner, nxt, extra))
             obs = next_obs
             self.global_step += E
+            for name, learner, nxt, extra in ready:  # after every learner has observed
+                for key, val in learner.update(nxt, **extra).items():
+                    metrics[f"{key}/{name}" if len(self.learners) > 1 else key] = val
+            if self.stop():
+                break
         return obs, metrics
 
     def _window_metrics(self) -> dict[str, float]:
@@ -341,59 +418,121 @@ class Trainer:
                                    game_overrides=self.cfg.game)
 
     def train(self) -> dict[str, Any]:
-        """Run until ``total_steps`` (or ``time_limit_s``); returns a summary."""
+        """Run until ``total_steps``, the time budget of this call (``time_limit_s``) or
+        SIGINT / SIGTERM, always ending with a checkpoint to resume from. Returns a
+        summary; ``stopped`` says why it ended early (None: it reached ``total_steps``)
+        and ``exit_code`` is 130 / 143 after SIGINT / SIGTERM, else 0."""
         cfg = self.cfg
+        start = time.perf_counter() - self.elapsed  # elapsed counts the whole run
+        self.stop = StopFlag(cfg.time_limit_s)  # the budget counts this call only
+        self.stopped = {}
         bar = None
         if self.progress:
             from tqdm import tqdm
             bar = tqdm(total=cfg.total_steps, initial=min(self.global_step, cfg.total_steps),
                        unit="step", unit_scale=True, dynamic_ncols=True, desc=cfg.name)
-        obs = self._segment_reset()
-        start = time.perf_counter() - self.elapsed
-        try:
-            while self.global_step < cfg.total_steps:
-                sched = self.schedule.apply(self.env, self.global_step)
-                t0, s0 = time.perf_counter(), self.global_step
-                obs, metrics = self._collect(obs)
-                self.iteration += 1
-                dt = time.perf_counter() - t0
-                self.elapsed = time.perf_counter() - start
-                metrics.update(sched)
-                metrics.update(self._window_metrics())
-                metrics["charts/sps"] = (self.global_step - s0) / dt
-                metrics["charts/iteration"] = float(self.iteration)
-                metrics["charts/elapsed_s"] = self.elapsed
-                last = self.global_step >= cfg.total_steps or (
-                    cfg.time_limit_s and self.elapsed >= cfg.time_limit_s)
-                if cfg.eval_every and (self.iteration % cfg.eval_every == 0 or last):
-                    metrics.update(self.evaluate(cfg.eval_games))
-                if cfg.video_every and self.iteration % cfg.video_every == 0:
-                    video = self.record_video(self.run_dir / "videos" /
-                                              f"step_{self.global_step:010d}.mp4")
-                    if video is not None:
-                        self.logger.video(video, self.global_step)
-                self.logger.log(metrics, self.global_step)
-                self.history.append({"step": self.global_step, **metrics})
+        for lr in self.learners.values():
+            lr.interrupt = self.stop  # polled between gradient steps (Learner protocol)
+        with stop_on_signals(self.stop):
+            try:
+                self._run(bar, start)
+            finally:
+                for lr in self.learners.values():
+                    lr.interrupt = None
                 if bar is not None:
-                    bar.update(min(self.global_step, cfg.total_steps) - bar.n)
-                    win = metrics.get("charts/win_rate",
-                                      next((v for k, v in metrics.items()
-                                            if k.startswith("charts/win_rate/")), float("nan")))
-                    bar.set_postfix(sps=f"{metrics['charts/sps']:.0f}", win=f"{win:.2f}",
-                                    it=self.iteration, refresh=False)
-                if last or (cfg.checkpoint_every and self.iteration % cfg.checkpoint_every == 0):
-                    self.save()
-                    if last:
-                        break
-                    obs = self._segment_reset()
-        finally:
-            if bar is not None:
-                bar.close()
-            self.logger.close()
-            self.env.close()
+                    bar.close()
+                self.logger.close()
+                self.env.close()
+        if self.stop.reason is not None:
+            self.stopped = {"reason": self.stop.reason, "checkpoint_step": self.saved_step,
+                            **self.stopped}
         return {"run_dir": str(self.run_dir), "global_step": self.global_step,
                 "iterations": self.iteration, "episodes": self.episodes,
-                "elapsed_s": self.elapsed, **self._window_metrics()}
+                "elapsed_s": self.elapsed, "stopped": self.stopped or None,
+                "exit_code": self.stop.exit_code, **self._window_metrics()}
+
+    def _run(self, bar: Any, start: float) -> None:
+        """The iterations of :meth:`train` (``start``: the perf_counter of elapsed 0)."""
+        cfg = self.cfg
+        obs = self._segment_reset()
+        while self.global_step < cfg.total_steps and not self.stop():
+            before = self._iteration_start()
+            sched = self.schedule.apply(self.env, self.global_step)
+            t0, s0 = time.perf_counter(), self.global_step
+            try:
+                obs, metrics = self._collect(obs)
+                complete = self.global_step - s0 == self.rollout_steps * self.E
+            except StopRequested:  # a fixed-rollout learner's update was cut short
+                metrics, complete = {}, False
+            self.elapsed = time.perf_counter() - start
+            if not complete:
+                self._save_stopped(before, metrics, sched, s0, t0)
+                return
+            self.cut = 0
+            self.iteration += 1
+            dt = time.perf_counter() - t0
+            metrics.update(sched)
+            metrics.update(self._window_metrics())
+            metrics["charts/sps"] = (self.global_step - s0) / dt
+            metrics["charts/iteration"] = float(self.iteration)
+            metrics["charts/elapsed_s"] = self.elapsed
+            last = self.global_step >= cfg.total_steps or self.stop()
+            evaluate = cfg.eval_every and (self.iteration % cfg.eval_every == 0 or last)
+            video = cfg.video_every and self.iteration % cfg.video_every == 0
+            if evaluate or video:
+                try:
+                    with self.stop.interruptible():  # a stop skips them: nothing to save
+                        if evaluate:
+                            metrics.update(self.evaluate(cfg.eval_games))
+                        if video:
+                            self._video()
+                except StopRequested:
+                    last = True
+            self.logger.log(metrics, self.global_step)
+            self.history.append({"step": self.global_step, **metrics})
+            if bar is not None:
+                bar.update(min(self.global_step, cfg.total_steps) - bar.n)
+                win = metrics.get("charts/win_rate",
+                                  next((v for k, v in metrics.items()
+                                        if k.startswith("charts/win_rate/")), float("nan")))
+                bar.set_postfix(sps=f"{metrics['charts/sps']:.0f}", win=f"{win:.2f}",
+                                it=self.iteration, refresh=False)
+            if last or (cfg.checkpoint_every and self.iteration % cfg.checkpoint_every == 0):
+                self.save()
+                if last:
+                    return
+                obs = self._segment_reset()
+        if self.global_step != self.saved_step:  # stopped between iterations
+            self.save()
+
+    def _save_stopped(self, before: Any, metrics: dict[str, float], sched: dict[str, float],
+                      s0: int, t0: float) -> None:
+        """Save after a stop inside an iteration; ``before``: :meth:`_iteration_start`'s
+        snapshot (see the module docstring)."""
+        if all(lr.rollout_steps for lr in self.learners.values()):
+            self.stopped = {"dropped_steps": self.global_step - s0}
+            if before is not None:  # else the state at the iteration start is on disk
+                before["meta"]["progress"]["elapsed"] = self.elapsed  # the run's whole time
+                self.save(before)
+            return
+        self.cut = (self.global_step - s0) // self.E
+        metrics.update(sched)
+        metrics.update(self._window_metrics())
+        metrics["charts/sps"] = (self.global_step - s0) / max(time.perf_counter() - t0, 1e-9)
+        metrics["charts/iteration"] = float(self.iteration)
+        metrics["charts/elapsed_s"] = self.elapsed
+        self.logger.log(metrics, self.global_step)
+        self.history.append({"step": self.global_step, **metrics})
+        payload = self._payload()
+        payload["states"].update(before)  # fixed-rollout learners drop unfinished rollouts
+        self.save(payload)
+        self.stopped = {"cut_steps": self.global_step - s0,
+                        "dropped_rollouts": sorted(before)}
+
+    def _video(self) -> None:
+        path = self.record_video(self.run_dir / "videos" / f"step_{self.global_step:010d}.mp4")
+        if path is not None:
+            self.logger.video(path, self.global_step)
 
 
 def resume_trainer(path: str | Path, progress: bool = True, env: Any = None,

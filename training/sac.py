@@ -24,6 +24,7 @@ from alphatank.training.ppo import NVEC
 
 LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0
 LOG_2PI = math.log(2 * math.pi)
+STAT_NAMES = ("qf_loss", "actor_loss", "alpha_loss", "q_value", "entropy")
 
 
 def continuous_to_discrete(action: np.ndarray, nvec: tuple[int, ...] | np.ndarray = NVEC
@@ -101,9 +102,54 @@ class SquashedGaussianActor(nn.Module):
         return action, log_prob
 
 
+class NumpyActor:
+    """Float32 numpy copy of a :class:`SquashedGaussianActor` for acting: one pass of a few
+    BLAS calls for every stream of a learner (the torch module costs more in per-call
+    overhead than in arithmetic at these batch sizes). ``sync`` after updates."""
+
+    def __init__(self, actor: SquashedGaussianActor):
+        self.sync(actor)
+
+    def sync(self, actor: SquashedGaussianActor) -> None:
+        def wt(layer: nn.Linear) -> np.ndarray:
+            return np.ascontiguousarray(layer.weight.detach().numpy().T, dtype=np.float32)
+
+        self.w1, self.b1 = wt(actor.trunk[0]), actor.trunk[0].bias.detach().numpy().copy()
+        self.w2, self.b2 = wt(actor.trunk[2]), actor.trunk[2].bias.detach().numpy().copy()
+        self.act_dim = actor.mean.out_features
+        self.wh = np.ascontiguousarray(np.concatenate([wt(actor.mean), wt(actor.log_std)], 1))
+        self.bh = np.concatenate([actor.mean.bias.detach().numpy(),
+                                  actor.log_std.bias.detach().numpy()])
+
+    def forward(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Mean and log-std (B, act_dim) for normalised float32 observations."""
+        h = np.maximum(x @ self.w1 + self.b1, 0.0)
+        h = np.maximum(h @ self.w2 + self.b2, 0.0)
+        out = h @ self.wh + self.bh
+        log_std = np.tanh(out[:, self.act_dim:])
+        log_std = LOG_STD_MIN + 0.5 * (LOG_STD_MAX - LOG_STD_MIN) * (log_std + 1)
+        return out[:, :self.act_dim], log_std
+
+    def sample(self, x: np.ndarray, rng: np.random.Generator,
+               deterministic: bool = False) -> np.ndarray:
+        """Actions in (0, 1)^d: sigmoid of the mean, or of a sample from ``rng``."""
+        mean, log_std = self.forward(x)
+        u = mean
+        if not deterministic:
+            u = mean + np.exp(log_std) * rng.standard_normal(mean.shape, dtype=np.float32)
+        return (1.0 / (1.0 + np.exp(-u))).astype(np.float32)
+
+
 class SAC:
     """One SAC learner over ``num_streams`` = num_envs x its seats (implements
-    :class:`alphatank.training.learners.Learner`)."""
+    :class:`alphatank.training.learners.Learner`).
+
+    Cost: one gradient step (Table 8: batch 256, 256-256 nets) is ~0.8 GFLOP, about 20 ms
+    on one core of the development machine, so ``utd_ratio`` (gradient steps per
+    collected transition) sets the speed of a run: env steps cost ~0.3 ms each, a run of
+    N env steps at ratio r needs about N * r gradient steps. ``alphatank bench --sac``
+    measures both on the machine at hand.
+    """
 
     algo = "sac"
     inputs: tuple[str, ...] = ()
@@ -126,9 +172,13 @@ class SAC:
             self.q2_target = QNetwork(obs_dim, act_dim, cfg.hidden)
         self.q1_target.load_state_dict(self.q1.state_dict())
         self.q2_target.load_state_dict(self.q2.state_dict())
-        self.q_optimizer = torch.optim.Adam(list(self.q1.parameters()) +
-                                            list(self.q2.parameters()), lr=cfg.q_lr)
-        self.actor_optimizer = torch.optim.Adam(self.actor.parameters(), lr=cfg.policy_lr)
+        self._q_params = [*self.q1.parameters(), *self.q2.parameters()]
+        self._target_params = [*self.q1_target.parameters(), *self.q2_target.parameters()]
+        self._actor_params = list(self.actor.parameters())
+        # fused: one kernel per optimiser step instead of a dozen ops per parameter
+        self.q_optimizer = torch.optim.Adam(self._q_params, lr=cfg.q_lr, fused=True)
+        self.actor_optimizer = torch.optim.Adam(self._actor_params, lr=cfg.policy_lr,
+                                                fused=True)
         self.target_entropy = (-float(act_dim) if cfg.target_entropy is None
                                else cfg.target_entropy)
         self.log_alpha = torch.tensor(math.log(cfg.alpha), requires_grad=cfg.autotune)
@@ -138,10 +188,13 @@ class SAC:
         self.rng = np.random.default_rng(seed)
         self.obs_norm = ObsNormalizer(obs_dim, cfg.norm_obs, cfg.obs_clip)
         self.replay = ReplayBuffer(min(cfg.buffer_size, 10**9), obs_dim, act_dim)
+        self.mirror = NumpyActor(self.actor)
         self.transitions = 0
         self.since_update = 0
+        self.owed = 0.0  # gradient steps due but not done (fractions, interrupted rounds)
         self.updates = 0  # update rounds
         self.grad_steps = 0
+        self.interrupt: Any = None  # set by the runner: () -> bool, stop between steps
         self._obs = np.zeros((num_streams, obs_dim), dtype=np.float32)
         self._act = np.zeros((num_streams, act_dim), dtype=np.float32)
 
@@ -166,17 +219,16 @@ class SAC:
 
     # ---- acting -----------------------------------------------------------------------
 
-    @torch.no_grad()
     def act(self, obs: np.ndarray, masks: np.ndarray | None = None) -> np.ndarray:
-        """Discrete actions (num_streams, 3); uniform random until ``start_steps``."""
+        """Discrete actions (num_streams, 3) for all streams in one pass of the numpy
+        actor; uniform random until ``start_steps``."""
         del masks
         self._obs[:] = obs
+        x = self.obs_norm(obs, update=True)
         if self.transitions < self.cfg.start_steps:
             self._act[:] = self.rng.random(self._act.shape, dtype=np.float32)
-            self.obs_norm(obs, update=True)
         else:
-            x = torch.from_numpy(self.obs_norm(obs, update=True))
-            self._act[:] = self.actor.sample(x, self.generator)[0].numpy()
+            self._act[:] = self.mirror.sample(x, self.rng)
         return continuous_to_discrete(self._act, self.nvec)
 
     def observe(self, next_obs: np.ndarray, rewards: np.ndarray, terminated: np.ndarray,
@@ -199,82 +251,106 @@ class SAC:
 
     @property
     def ready(self) -> bool:
-        return (self.transitions >= self.cfg.update_after
-                and self.since_update >= self.cfg.update_every)
+        return self.transitions >= self.cfg.update_after and (
+            self.since_update >= self.cfg.update_every or self.owed >= 1.0)
 
     # ---- learning ---------------------------------------------------------------------
 
     def update(self, next_obs: np.ndarray | None = None) -> dict[str, float]:
-        """One update round: ``since_update * utd_ratio`` gradient steps."""
+        """One update round: ``utd_ratio`` gradient steps per transition collected since
+        the last round (fractions carry over). Between gradient steps it stops early when
+        :attr:`interrupt` says so; the steps left are owed to the next round."""
         del next_obs
-        steps = max(1, int(self.since_update * self.cfg.utd_ratio))
+        self.owed += self.since_update * self.cfg.utd_ratio
         self.since_update = 0
-        sums = {"qf_loss": 0.0, "actor_loss": 0.0, "alpha_loss": 0.0, "q_value": 0.0,
-                "entropy": 0.0}
-        for _ in range(steps):
-            for key, val in self._gradient_step().items():
-                sums[key] += val
+        self._round_stats()
+        sums, steps = torch.zeros(len(STAT_NAMES)), 0
+        while self.owed >= 1.0 and not (self.interrupt is not None and self.interrupt()):
+            sums += self._gradient_step(refresh=False)
+            self.owed -= 1.0
+            steps += 1
         self.updates += 1
-        out = {f"losses/{k}": v / steps for k, v in sums.items()}
+        if steps:
+            self.mirror.sync(self.actor)
+        means = (sums / max(steps, 1)).tolist()
+        out = {f"losses/{k}": v for k, v in zip(STAT_NAMES, means, strict=True)}
         out["losses/alpha"] = self.alpha
         out["losses/grad_steps"] = float(self.grad_steps)
         return out
 
-    def _gradient_step(self) -> dict[str, float]:
+    def _round_stats(self) -> None:
+        """Torch views of the replay arrays and the normaliser's (frozen) statistics."""
+        r = self.replay
+        self._t = {k: torch.from_numpy(getattr(r, k)) for k in
+                   ("obs", "next_obs", "actions", "rewards", "dones")}
+        mean, inv_std = self.obs_norm.stats()
+        self._norm = (torch.from_numpy(mean), torch.from_numpy(inv_std),
+                      self.obs_norm.clip) if self.obs_norm.enabled else None
+
+    def _batch(self) -> tuple[torch.Tensor, ...]:
+        """A uniform sample (with replacement) of ``batch_size`` transitions, observations
+        normalised: (obs, actions, rewards, next_obs, dones)."""
+        idx = torch.from_numpy(self.rng.integers(0, len(self.replay), self.cfg.batch_size))
+        t = self._t
+        obs, nxt = t["obs"].index_select(0, idx), t["next_obs"].index_select(0, idx)
+        if self._norm is not None:
+            mean, inv_std, clip = self._norm
+            for x in (obs, nxt):
+                x.sub_(mean).mul_(inv_std).clamp_(-clip, clip)
+        return (obs, t["actions"].index_select(0, idx), t["rewards"].index_select(0, idx),
+                nxt, t["dones"].index_select(0, idx))
+
+    def _gradient_step(self, refresh: bool = True) -> torch.Tensor:
+        """One gradient step of critics, actor, entropy coefficient and targets; returns
+        the step's statistics (:data:`STAT_NAMES`). ``refresh=False``: inside a round,
+        whose :meth:`_round_stats` are current."""
+        if refresh:
+            self._round_stats()
         cfg = self.cfg
-        obs, act, rew, nxt, done = self.replay.sample(cfg.batch_size, self.rng)
-        obs_t = torch.from_numpy(self.obs_norm(obs))
-        nxt_t = torch.from_numpy(self.obs_norm(nxt))
-        act_t, rew_t, done_t = (torch.from_numpy(a) for a in (act, rew, done))
-        alpha = self.log_alpha.exp().detach()
+        obs, act, rew, nxt, done = self._batch()
+        alpha = self.log_alpha.detach().exp()
         with torch.no_grad():
-            next_act, next_logp = self.actor.sample(nxt_t, self.generator)
-            q_next = torch.min(self.q1_target(nxt_t, next_act), self.q2_target(nxt_t, next_act))
-            target = rew_t + cfg.gamma * (1.0 - done_t) * (q_next - alpha * next_logp)
-        q1, q2 = self.q1(obs_t, act_t), self.q2(obs_t, act_t)
+            next_act, next_logp = self.actor.sample(nxt, self.generator)
+            q_next = torch.min(self.q1_target(nxt, next_act), self.q2_target(nxt, next_act))
+            target = rew + cfg.gamma * (1.0 - done) * (q_next - alpha * next_logp)
+        q1, q2 = self.q1(obs, act), self.q2(obs, act)
         qf_loss = F.mse_loss(q1, target) + F.mse_loss(q2, target)
         self.q_optimizer.zero_grad(set_to_none=True)
         qf_loss.backward()
         self.q_optimizer.step()
 
-        pi, logp = self.actor.sample(obs_t, self.generator)
-        q_pi = torch.min(self.q1(obs_t, pi), self.q2(obs_t, pi))
+        pi, logp = self.actor.sample(obs, self.generator)
+        q_pi = torch.min(self.q1(obs, pi), self.q2(obs, pi))
         actor_loss = (alpha * logp - q_pi).mean()
-        self.actor_optimizer.zero_grad(set_to_none=True)
-        actor_loss.backward()
+        # gradients for the actor only: the critics' weight gradients are not computed
+        grads = torch.autograd.grad(actor_loss, self._actor_params)
+        for param, grad in zip(self._actor_params, grads, strict=True):
+            param.grad = grad
         self.actor_optimizer.step()
 
+        logp = logp.detach()
         alpha_loss = torch.zeros(())
         if self.alpha_optimizer is not None:
-            alpha_loss = -(self.log_alpha.exp() * (logp.detach() + self.target_entropy)).mean()
+            alpha_loss = -(self.log_alpha.exp() * (logp + self.target_entropy)).mean()
             self.alpha_optimizer.zero_grad(set_to_none=True)
             alpha_loss.backward()
             self.alpha_optimizer.step()
 
         with torch.no_grad():
-            for net, tgt in ((self.q1, self.q1_target), (self.q2, self.q2_target)):
-                for p, tp in zip(net.parameters(), tgt.parameters(), strict=True):
-                    tp.mul_(1.0 - cfg.tau).add_(p, alpha=cfg.tau)
+            torch._foreach_lerp_(self._target_params, self._q_params, cfg.tau)
         self.grad_steps += 1
-        return {"qf_loss": float(qf_loss.detach()) / 2, "actor_loss": float(actor_loss.detach()),
-                "alpha_loss": float(alpha_loss.detach()), "q_value": float(q1.detach().mean()),
-                "entropy": float(-logp.detach().mean())}
+        return torch.stack([qf_loss.detach() / 2, actor_loss.detach(), alpha_loss.detach(),
+                            q1.detach().mean(), -logp.mean()])
 
     # ---- inference and persistence ------------------------------------------------------
 
-    @torch.no_grad()
     def policy_actions(self, obs: np.ndarray, deterministic: bool = False,
                        rng: np.random.Generator | None = None) -> np.ndarray:
         """Discrete actions for raw observations (B, obs_dim), frozen statistics;
         ``deterministic`` uses the mean action, else noise from ``rng``."""
-        x = torch.from_numpy(self.obs_norm(np.atleast_2d(obs)))
-        mean, log_std = self.actor(x)
-        if deterministic:
-            u = mean
-        else:
-            eps = (rng or self.rng).standard_normal(mean.shape, dtype=np.float32)
-            u = mean + log_std.exp() * torch.from_numpy(eps)
-        return continuous_to_discrete(torch.sigmoid(u).numpy(), self.nvec)
+        x = self.obs_norm(np.atleast_2d(obs))
+        return continuous_to_discrete(self.mirror.sample(x, rng or self.rng, deterministic),
+                                      self.nvec)
 
     def state_dict(self) -> dict[str, Any]:
         state = {"actor": self.actor.state_dict(), "q1": self.q1.state_dict(),
@@ -286,13 +362,15 @@ class SAC:
                  "obs_norm": self.obs_norm.state_dict(), "generator": self.generator.get_state(),
                  "np_rng": self.rng.bit_generator.state,
                  "counters": torch.tensor([self.transitions, self.since_update, self.updates,
-                                           self.grad_steps])}
+                                           self.grad_steps]),
+                 "owed": torch.tensor(self.owed, dtype=torch.float64)}
         if self.alpha_optimizer is not None:
             state["alpha_optimizer"] = self.alpha_optimizer.state_dict()
         return state
 
     def load_state_dict(self, state: dict[str, Any], weights_only: bool = False) -> None:
         self.actor.load_state_dict(state["actor"])
+        self.mirror.sync(self.actor)
         self.obs_norm.load_state_dict(state["obs_norm"])
         if weights_only:
             return
@@ -306,3 +384,4 @@ class SAC:
         self.rng.bit_generator.state = state["np_rng"]
         self.transitions, self.since_update, self.updates, self.grad_steps = (
             int(v) for v in state["counters"])
+        self.owed = float(state.get("owed", 0.0))

@@ -49,6 +49,10 @@ def run(args: argparse.Namespace) -> int:
     print(f"[demo] training PPO vs the aggressive bot on 'open' for up to {args.minutes:g} min "
           f"({cfg.num_envs} matches, {cfg.num_workers} worker processes) -> {run_dir}")
     summary = Trainer(cfg, run_dir, progress=not args.no_progress).train()
+    if summary["exit_code"]:  # Ctrl-C / SIGTERM: the checkpoint is saved, skip the rest
+        print(f"[demo] stopped by {summary['stopped']['reason']}; the run is saved in "
+              f"{run_dir} (alphatank train --resume {run_dir} continues it)")
+        return summary["exit_code"]
     ckpt = run_dir / (run_dir / "latest").read_text().strip()
     print(f"[demo] trained {summary['global_step']:,} steps in {summary['elapsed_s']:.0f} s; "
           f"evaluating over {args.games} games")

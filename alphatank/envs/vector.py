@@ -49,8 +49,10 @@ arrays through shared memory. :func:`make_vector_env` picks one by ``num_workers
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing as mp
 import pickle
+import signal
 import traceback
 from collections.abc import Mapping, Sequence
 from multiprocessing import shared_memory
@@ -309,6 +311,10 @@ def _worker(conn: Any, kwargs: dict, lo: int, hi: int, specs: dict, names: dict)
     """Own envs lo..hi-1; answer commands from the parent until 'close'. A step reads
     the validated actions from shared memory and writes every result there; its answer
     is empty bytes, or the pickled episode records when episodes ended."""
+    # Ctrl-C reaches the whole process group and `timeout` signals it too: the parent
+    # decides when to stop (it saves a checkpoint first) and closes the workers
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
     shared = _Shared(specs, names)
     a = shared.arr
     try:
@@ -346,7 +352,8 @@ def _worker(conn: Any, kwargs: dict, lo: int, hi: int, specs: dict, names: dict)
                 conn.send(("ok", None))
                 break
     except BaseException as exc:  # report any failure to the parent, then stop
-        conn.send(("error", f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}"))
+        with contextlib.suppress(OSError):  # else the parent is gone: nobody to tell
+            conn.send(("error", f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}"))
     finally:
         shared.close(unlink=False)
         conn.close()

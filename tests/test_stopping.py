@@ -1,0 +1,245 @@
+"""Stopping a run inside an iteration (signals, time budget) and resuming from the save:
+the rewind of fixed-rollout learners is exact, a SAC segment cut keeps every transition
+and resumes deterministically, SAC update rounds stop between gradient steps, metrics
+rows after a checkpoint are rewound, and the time limit is the budget of each call."""
+
+import dataclasses
+import json
+import shutil
+import signal
+
+import numpy as np
+import pytest
+import torch
+
+from alphatank.envs.vector import VectorMatchEnv
+from alphatank.training.checkpoint import load_checkpoint
+from alphatank.training.logging import rewind_metrics
+from alphatank.training.ppo import PPOConfig
+from alphatank.training.presets import LearnerSpec, TrainConfig
+from alphatank.training.runner import RunWarning, Trainer, resume_trainer
+from alphatank.training.sac import SAC, SACConfig
+from alphatank.training.stopping import StopFlag, StopRequested, stop_on_signals
+
+torch.set_num_threads(1)
+pytestmark = pytest.mark.filterwarnings("ignore::alphatank.training.runner.RunWarning")
+
+E = 4
+PPO_TINY = PPOConfig(num_steps=16, update_epochs=2, num_minibatches=2)
+SAC_TINY = SACConfig(batch_size=32, start_steps=32, update_after=32, update_every=16,
+                     buffer_size=4096, hidden=32)
+
+
+class SignalAt(VectorMatchEnv):
+    """The vector env, raising ``signum`` in this process during its ``at``-th step."""
+
+    def __init__(self, *args, at: int | None = None, signum: int = signal.SIGINT, **kw):
+        super().__init__(*args, **kw)
+        self.at, self.signum, self.calls = at, signum, 0
+
+    def step(self, actions):
+        self.calls += 1
+        if self.calls == self.at:
+            signal.raise_signal(self.signum)
+        return super().step(actions)
+
+
+def config(name: str, learner: LearnerSpec, iterations: int, **kw) -> TrainConfig:
+    base = dict(name=name, scenario="vs_aggressive", total_steps=iterations * 16 * E,
+                num_envs=E, num_workers=1, seed=5, wandb="disabled", checkpoint_every=2,
+                rollout_steps=16, game={"max_steps": 30}, learners=(learner,))
+    base.update(kw)
+    return TrainConfig(**base)
+
+
+def trainer(cfg: TrainConfig, run_dir, at: int | None = None,
+            signum: int = signal.SIGINT) -> Trainer:
+    env = SignalAt(cfg.scenario, E, cfg.seed, game_overrides=cfg.game, at=at, signum=signum)
+    return Trainer(cfg, run_dir, env=env, progress=False)
+
+
+def states_equal(a: dict, b: dict) -> bool:
+    if a.keys() != b.keys():
+        return False
+    for key in a:
+        x, y = a[key], b[key]
+        if isinstance(x, dict):
+            if not states_equal(x, y):
+                return False
+        elif isinstance(x, torch.Tensor):
+            if not torch.equal(x, y):
+                return False
+        elif x != y:
+            return False
+    return True
+
+
+def test_a_stop_inside_an_iteration_saves_its_start_and_resumes_exactly(tmp_path):
+    spec = LearnerSpec("ppo", "ppo", (0,), PPO_TINY)
+    # reference: saves after iterations 2 and 3 (its end), then resumed for 2 more
+    ref = trainer(config("ref", spec, 3), tmp_path / "ref")
+    assert ref.train()["stopped"] is None
+    # the same run, 5 iterations, Ctrl-C during the 6th vector step of iteration 4:
+    # iteration 3 was not saved (every 2), so the stop saves the state it began with
+    stopped = trainer(config("stop", spec, 5), tmp_path / "stop", at=3 * 16 + 6)
+    handler = signal.getsignal(signal.SIGINT)
+    summary = stopped.train()
+    assert signal.getsignal(signal.SIGINT) is handler  # restored
+    assert summary["exit_code"] == 130
+    assert summary["stopped"] == {"reason": "SIGINT", "checkpoint_step": 3 * 16 * E,
+                                  "dropped_steps": 6 * E}
+    a, b = load_checkpoint(tmp_path / "ref"), load_checkpoint(tmp_path / "stop")
+    assert a.path.name == b.path.name == f"step_{3 * 16 * E:010d}"
+    assert {k: v for k, v in a.meta["progress"].items() if k != "elapsed"} == \
+        {k: v for k, v in b.meta["progress"].items() if k != "elapsed"}
+    assert a.meta["windows"] == b.meta["windows"]
+    # normaliser statistics and random generators moved during the dropped steps: rewound
+    assert states_equal(a.state("ppo"), b.state("ppo"))
+    rows = [json.loads(x) for x in (tmp_path / "stop" / "metrics.jsonl").read_text().splitlines()]
+    assert [r["step"] for r in rows] == [16 * E, 32 * E, 48 * E]  # nothing for the cut
+    runs = []
+    for name in ("ref", "stop"):
+        tr = resume_trainer(tmp_path / name, progress=False, total_steps=5 * 16 * E)
+        assert tr.train()["stopped"] is None
+        runs.append(tr)
+    assert [h["step"] for h in runs[1].history] == [64 * E, 80 * E]
+    for key in ("losses/policy_loss", "losses/value_loss", "charts/episodes"):
+        assert [h[key] for h in runs[0].history] == [h[key] for h in runs[1].history], key
+    assert states_equal(runs[0].learners["ppo"].state_dict(),
+                        runs[1].learners["ppo"].state_dict())
+
+
+def test_a_sac_stop_cuts_the_segment_keeps_every_transition_and_resumes_deterministically(
+        tmp_path):
+    spec = LearnerSpec("sac", "sac", (0,), SAC_TINY)
+    cfg = config("sac", spec, 6, checkpoint_every=4)
+    tr = trainer(cfg, tmp_path / "sac", at=16 + 5, signum=signal.SIGTERM)
+    summary = tr.train()
+    assert summary["exit_code"] == 143
+    assert summary["stopped"] == {"reason": "SIGTERM", "checkpoint_step": 21 * E,
+                                  "cut_steps": 5 * E, "dropped_rollouts": []}
+    ck = load_checkpoint(tmp_path / "sac")
+    assert ck.meta["progress"]["global_step"] == 21 * E and ck.meta["progress"]["cut"] == 5
+    assert len(ck.replay("sac")["obs"]) == 21 * E  # every transition kept
+    rows = [json.loads(x) for x in (tmp_path / "sac" / "metrics.jsonl").read_text().splitlines()]
+    assert [r["step"] for r in rows] == [16 * E, 21 * E]  # the cut logs its partial row
+    copy = tmp_path / "copy"
+    shutil.copytree(tmp_path / "sac", copy)
+    runs = []
+    for run_dir in (tmp_path / "sac", copy):
+        resumed = resume_trainer(run_dir, progress=False, total_steps=6 * 16 * E)
+        assert resumed.global_step == 21 * E
+        resumed.train()
+        runs.append(resumed)
+    # a full iteration starts at the cut; the same checkpoint gives the same run
+    assert [h["step"] for h in runs[0].history] == [37 * E, 53 * E, 69 * E, 85 * E,
+                                                    101 * E]
+    assert [h["losses/qf_loss"] for h in runs[0].history] == \
+        [h["losses/qf_loss"] for h in runs[1].history]
+    assert states_equal(runs[0].learners["sac"].state_dict(),
+                        runs[1].learners["sac"].state_dict())
+
+
+def test_mixed_runs_cut_and_drop_the_unfinished_ppo_rollout(tmp_path):
+    sac = LearnerSpec("sac", "sac", (1,), SAC_TINY)
+    ppo = LearnerSpec("ppo", "ppo", (0,), PPO_TINY)
+    cfg = config("pair", sac, 4, scenario="pair", learners=(ppo, sac), checkpoint_every=4)
+    env = SignalAt("pair", E, cfg.seed, game_overrides=cfg.game, at=16 + 9)
+    tr = Trainer(cfg, tmp_path / "pair", env=env, progress=False)
+    before = {}
+    original = tr._iteration_start
+
+    def spy():
+        out = original()
+        before.update(out)
+        return out
+
+    tr._iteration_start = spy
+    assert tr.train()["stopped"]["dropped_rollouts"] == ["ppo"]
+    ck = load_checkpoint(tmp_path / "pair")
+    assert ck.meta["progress"]["global_step"] == 25 * E
+    assert states_equal(ck.state("ppo"), before["ppo"])  # as the iteration began
+    assert ck.state("ppo")["obs_norm"]["count"] < 25 * E  # not the 9 dropped steps
+    assert len(ck.replay("sac")["obs"]) == 25 * E
+
+
+def test_sac_update_rounds_stop_between_gradient_steps_and_owe_the_rest():
+    def filled(seed=0):
+        sac = SAC(5, 4, SACConfig(hidden=16, batch_size=8, start_steps=0, update_after=8,
+                                  update_every=8, buffer_size=256), seed=seed)
+        rng = np.random.default_rng(1)
+        for _ in range(8):
+            sac.act(rng.normal(size=(4, 5)).astype(np.float32))
+            sac.observe(rng.normal(size=(4, 5)).astype(np.float32), rng.normal(size=4),
+                        np.zeros(4, bool), np.zeros(4, bool))
+        return sac
+
+    whole, cut = filled(), filled()
+    assert whole.since_update == cut.since_update == 32 - 8 + 4
+    whole.update()
+    assert whole.grad_steps == 28 and whole.owed == 0
+    cut.interrupt = lambda: cut.grad_steps >= 11
+    cut.update()
+    assert cut.grad_steps == 11 and cut.owed == 17 and cut.ready  # the rest is owed
+    cut.interrupt = None
+    cut.update()
+    assert cut.grad_steps == 28
+    a, b = whole.state_dict(), cut.state_dict()
+    assert a.pop("counters")[2] == 1 and b.pop("counters")[2] == 2  # update rounds
+    assert states_equal(a, b)  # the same gradient steps in the same order
+    frac = filled()
+    frac.cfg = dataclasses.replace(frac.cfg, utd_ratio=0.3)
+    frac.update()
+    assert frac.grad_steps == 8 and frac.owed == pytest.approx(0.4)  # 28 x 0.3 = 8.4
+
+
+def test_the_time_limit_is_the_budget_of_each_call(tmp_path):
+    spec = LearnerSpec("ppo", "ppo", (0,), PPO_TINY)
+    cfg = config("timed", spec, 10**6, time_limit_s=1.5, checkpoint_every=100)
+    tr = Trainer(cfg, tmp_path / "timed", progress=False)
+    first = tr.train()
+    assert first["stopped"]["reason"] == "time limit" and first["exit_code"] == 0
+    ck = load_checkpoint(tmp_path / "timed")
+    step1, t1 = ck.meta["progress"]["global_step"], ck.meta["progress"]["elapsed"]
+    assert step1 > 0 and 1.5 <= t1 < 1.5 + 5  # stopped within 5 s of the limit
+    again = resume_trainer(tmp_path / "timed", progress=False)
+    assert again.cfg.time_limit_s == 1.5
+    again.train()
+    ck = load_checkpoint(tmp_path / "timed")
+    # a fresh 1.5 s for this call, not "1.5 s in all" (which would allow one iteration)
+    assert ck.meta["progress"]["elapsed"] >= t1 + 1.5
+    assert ck.meta["progress"]["global_step"] > step1 + 16 * E
+
+
+def test_stop_flag_signals_and_interruptible_blocks():
+    flag = StopFlag()
+    with stop_on_signals(flag):
+        assert not flag()
+        signal.raise_signal(signal.SIGTERM)
+        assert flag() and flag.reason == "SIGTERM" and flag.exit_code == 143
+        with pytest.raises(StopRequested), flag.interruptible():
+            pass  # a pending stop skips the block
+        with pytest.raises(KeyboardInterrupt):
+            signal.raise_signal(signal.SIGINT)  # a second Ctrl-C while stopping aborts
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
+    timed = StopFlag(0.05)
+    with stop_on_signals(timed), pytest.raises(StopRequested), timed.interruptible():
+        signal.pause()  # blocked: only the alarm of the deadline ends it
+    assert timed.reason == "time limit" and timed.exit_code == 0
+    assert signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)
+
+
+def test_saves_more_often_than_an_episode_lasts_are_warned(tmp_path):
+    spec = LearnerSpec("ppo", "ppo", (0,), PPO_TINY)
+    with pytest.warns(RunWarning, match=r"checkpoint_every 1 x 16 .* max_steps \(30\).* >= 2"):
+        Trainer(config("warn", spec, 1, checkpoint_every=1), tmp_path / "w", progress=False)
+
+
+def test_rewind_metrics_drops_rows_after_the_step_and_a_torn_line(tmp_path):
+    path = tmp_path / "metrics.jsonl"
+    rows = [json.dumps({"step": s, "charts/sps": 1.0}) for s in (10, 20, 30)]
+    path.write_text("\n".join(rows) + "\n" + '{"step": 40, "charts/s')
+    assert rewind_metrics(path, 20) == 2
+    assert [json.loads(x)["step"] for x in path.read_text().splitlines()] == [10, 20]
+    assert rewind_metrics(path, 20) == 0
+    assert rewind_metrics(tmp_path / "none.jsonl", 5) == 0

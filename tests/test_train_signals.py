@@ -1,0 +1,117 @@
+"""``alphatank train`` as a real process: Ctrl-C (SIGINT to the process group, workers
+included) and SIGTERM stop it within 5 s with a checkpoint that ``--resume`` continues;
+``kill -9`` in the middle of a checkpoint write leaves the previous one intact, and the
+resumed run picks it and drops the metrics rows logged after it."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+from alphatank.training.checkpoint import DELAY_ENV, load_checkpoint
+
+BASE = ["--wandb", "disabled", "--no-progress", "--total-steps", "100000000"]
+PPO = ["--preset", "ppo_vs_aggressive", "--ppo", "num_steps=16,update_epochs=1"]
+SAC = ["--preset", "sac_vs_aggressive", "--sac",
+       "hidden=32,batch_size=32,start_steps=64,update_after=64,update_every=16,"
+       "utd_ratio=0.5,buffer_size=20000"]
+
+
+def start(runs, name, args, **env) -> subprocess.Popen:
+    cmd = [sys.executable, "-m", "alphatank.cli", "train", "--runs", str(runs), "--name", name,
+           *args, *BASE]
+    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            start_new_session=True, env={**os.environ, **env})
+
+
+def train(runs, args) -> tuple[int, str]:
+    cmd = [sys.executable, "-m", "alphatank.cli", "train", "--runs", str(runs), *args,
+           "--wandb", "disabled", "--no-progress"]
+    res = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    return res.returncode, res.stdout + res.stderr
+
+
+def wait_for(cond, proc: subprocess.Popen, timeout: float = 180.0) -> None:
+    end = time.monotonic() + timeout
+    while not cond():
+        if proc.poll() is not None:
+            raise AssertionError(f"train exited early ({proc.returncode}):\n"
+                                 f"{proc.communicate()[0]}")
+        assert time.monotonic() < end, "timed out waiting for the run"
+        time.sleep(0.05)
+
+
+def rows(run) -> list[dict]:
+    path = run / "metrics.jsonl"
+    return [json.loads(x) for x in path.read_text().splitlines()] if path.exists() else []
+
+
+def stop(proc: subprocess.Popen, signum: int, group: bool) -> tuple[float, str]:
+    """Send ``signum``; seconds until the process ended, and its output."""
+    t = time.monotonic()
+    if group:
+        os.killpg(proc.pid, signum)
+    else:
+        proc.send_signal(signum)
+    out = proc.communicate(timeout=60)[0]
+    print(f"stopped {signal.Signals(signum).name} in {time.monotonic() - t:.2f} s")
+    return time.monotonic() - t, out
+
+
+def test_ctrl_c_stops_a_ppo_run_with_workers_and_resume_continues(tmp_path):
+    run = tmp_path / "ppo"
+    proc = start(tmp_path, "ppo", [*PPO, "--workers", "2", "--num-envs", "4",
+                                   "--checkpoint-every", "1000"])
+    wait_for(lambda: len(rows(run)) >= 2, proc)
+    seconds, out = stop(proc, signal.SIGINT, group=True)  # as Ctrl-C in a terminal
+    assert proc.returncode == 130, out
+    assert seconds < 5, (seconds, out)
+    assert "stopped by SIGINT" in out and f"--resume {run}" in out
+    saved = load_checkpoint(run).meta["progress"]["global_step"]
+    assert saved > 0 and saved % 64 == 0  # an iteration end (the cut one was dropped)
+    code, out = train(tmp_path, ["--resume", str(run), "--total-steps", str(saved + 128)])
+    assert code == 0, out
+    assert load_checkpoint(run).meta["progress"]["global_step"] == saved + 128
+
+
+def test_sigterm_stops_a_sac_run_inside_its_updates_and_resume_continues(tmp_path):
+    run = tmp_path / "sac"
+    proc = start(tmp_path, "sac", [*SAC, "--num-envs", "2"])
+    wait_for(lambda: len(rows(run)) >= 1, proc)
+    time.sleep(0.5)  # inside a later iteration (512 vector steps), updates under way
+    seconds, out = stop(proc, signal.SIGTERM, group=False)
+    assert proc.returncode == 143, out
+    assert seconds < 5, (seconds, out)
+    assert "stopped by SIGTERM" in out
+    ck = load_checkpoint(run)
+    saved = ck.meta["progress"]["global_step"]
+    assert ck.meta["progress"]["cut"] > 0 and len(ck.replay("sac")["obs"]) == saved
+    assert rows(run)[-1]["step"] == saved  # the cut iteration's own row
+    code, out = train(tmp_path, ["--resume", str(run), "--total-steps", str(saved + 64)])
+    assert code == 0, out
+    assert load_checkpoint(run).meta["progress"]["global_step"] == saved + 512 * 2
+
+
+def test_kill_9_during_a_checkpoint_write_keeps_the_previous_one(tmp_path):
+    run = tmp_path / "k9"
+    proc = start(tmp_path, "k9", [*PPO, "--num-envs", "2", "--checkpoint-every", "1"],
+                 **{DELAY_ENV: "2"})
+    wait_for(lambda: (run / "latest").exists(), proc)
+    first = (run / "latest").read_text()
+    writing = lambda: [p for p in (run / "checkpoints").iterdir()  # noqa: E731
+                       if p.name.startswith(".step_") and ".tmp-" in p.name]
+    wait_for(lambda: bool(writing()), proc)  # the second save sleeps in the middle
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.communicate(timeout=30)
+    assert (run / "latest").read_text() == first
+    saved = load_checkpoint(run).meta["progress"]["global_step"]
+    assert f"step_{saved:010d}" in first
+    assert max(r["step"] for r in rows(run)) > saved  # logged before the killed save
+    code, out = train(tmp_path, ["--resume", str(run), "--total-steps", str(saved + 96)])
+    assert code == 0, out
+    assert "metrics rows logged after that checkpoint dropped" in out
+    steps = [r["step"] for r in rows(run)]
+    assert steps == sorted(set(steps)) and steps[-1] == saved + 96  # no step twice
+    assert not writing()  # the killed save's leftovers are gone

@@ -1,0 +1,116 @@
+"""Stopping a training run cleanly: a flag set by SIGINT / SIGTERM or a time budget and
+polled by the loop every vector step (and by learners between gradient steps).
+
+:class:`StopFlag` is the flag; :func:`stop_on_signals` installs the signal handlers for
+the duration of a run (main thread only; previous handlers are restored afterwards) and,
+when the flag has a deadline, a ``SIGALRM`` timer so that the budget also ends long
+stretches that do not poll (evaluation, videos) inside :meth:`StopFlag.interruptible`.
+A SIGINT while a signal's stop is under way (or a second SIGINT) aborts at once
+(``KeyboardInterrupt``; the previous checkpoint stays intact).
+"""
+
+from __future__ import annotations
+
+import math
+import signal
+import threading
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from typing import Any
+
+SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+class StopRequested(Exception):  # noqa: N818 (a request, not an error)
+    """Raised inside :meth:`StopFlag.interruptible` blocks when a stop arrives."""
+
+
+def check_interrupt(interrupt: Any) -> None:
+    """For fixed-rollout learners, between gradient steps: raise :class:`StopRequested`
+    if ``interrupt`` (a learner's ``interrupt`` attribute: None or a callable) says so."""
+    if interrupt is not None and interrupt():
+        raise StopRequested("update interrupted")
+
+
+class StopFlag:
+    """Why (and whether) a run should stop. Calling it polls: True once a stop was
+    requested or ``time_limit_s`` (> 0) seconds have passed since it was made."""
+
+    def __init__(self, time_limit_s: float = 0.0):
+        self.reason: str | None = None
+        self.signum: int | None = None
+        self.deadline = (time.monotonic() + time_limit_s if time_limit_s > 0
+                         else math.inf)
+        self._interruptible = 0
+
+    def __call__(self) -> bool:
+        if self.reason is None and time.monotonic() >= self.deadline:
+            self.reason = "time limit"
+        return self.reason is not None
+
+    def request(self, reason: str, signum: int | None = None) -> None:
+        """Ask the run to stop (the first reason given is kept)."""
+        if self.reason is None:
+            self.reason, self.signum = reason, signum
+        if self._interruptible:
+            raise StopRequested(reason)
+
+    @property
+    def exit_code(self) -> int:
+        """128 + the signal's number for a signal (130 for SIGINT, 143 for SIGTERM), else 0
+        (a time limit is a normal end)."""
+        return 128 + self.signum if self.signum is not None else 0
+
+    @contextmanager
+    def interruptible(self) -> Iterator[None]:
+        """A block that a stop ends at once by raising :class:`StopRequested` (work whose
+        result the checkpoint does not need, e.g. evaluation). Skipped entirely when a
+        stop is already pending."""
+        if self():
+            raise StopRequested(self.reason)
+        self._interruptible += 1
+        try:
+            yield
+        finally:
+            self._interruptible -= 1
+
+
+@contextmanager
+def stop_on_signals(flag: StopFlag) -> Iterator[StopFlag]:
+    """SIGINT and SIGTERM (and the deadline, through SIGALRM) set ``flag`` while the block
+    runs; previous handlers and timers are restored on exit. Outside the main thread
+    (where Python cannot handle signals) the flag is only polled."""
+    if threading.current_thread() is not threading.main_thread():
+        yield flag
+        return
+
+    interrupts = 0
+
+    def on_signal(signum: int, frame: Any) -> None:
+        nonlocal interrupts
+        if signum == signal.SIGINT:
+            interrupts += 1
+            if interrupts > 1 or flag.signum is not None:
+                raise KeyboardInterrupt  # Ctrl-C while stopping: abort without waiting
+        flag.request(signal.Signals(signum).name, signum)
+
+    def on_alarm(signum: int, frame: Any) -> None:
+        flag.request("time limit")
+
+    previous = {s: signal.signal(s, on_signal) for s in SIGNALS}
+    timed = math.isfinite(flag.deadline)
+    if timed:
+        previous[signal.SIGALRM] = signal.signal(signal.SIGALRM, on_alarm)
+        began = time.monotonic()
+        timer = signal.setitimer(signal.ITIMER_REAL, max(1e-3, flag.deadline - began))
+    try:
+        yield flag
+    finally:
+        if timed:
+            signal.setitimer(signal.ITIMER_REAL, 0)
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+        if timed and timer[0] > 0:  # someone else's timer was running: re-arm what is left
+            left = timer[0] - (time.monotonic() - began)
+            signal.setitimer(signal.ITIMER_REAL, max(1e-3, left), timer[1])
