@@ -21,6 +21,7 @@ COMMANDS = {
              "matrix and league.",
     "bench": "Measure ticks/s of the match, env steps/s, bot and renderer cost.",
     "maps": "List shipped maps or validate and print some.",
+    "agents": "List the trained agents shipped with the package (agent:NAME), or export one.",
 }
 
 

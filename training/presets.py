@@ -129,8 +129,13 @@ class TrainConfig:
     observation: str | None = hp(None, "observation kind (none: the scenario's)")
     game: dict[str, Any] = hp({}, "GameConfig overrides on top of the scenario's")
     rewards: dict[str, Any] = hp({}, "RewardConfig overrides on top of the scenario's")
-    schedule: dict[str, Any] = hp({}, "opponent schedule: kind = none | curriculum | cycle, "
-                                  "and its parameters")
+    schedule: dict[str, Any] = hp({}, "opponent schedule: kind = none | curriculum | cycle | "
+                                  "winrate, and its parameters")
+    selfplay: dict[str, Any] = hp({}, "self-play pool: the learner seats no learner drives "
+                                  "are played by past snapshots of a learner (keys: learner, "
+                                  "window, latest_share, every)")
+    init_from: str = hp("", "warm start: every learner starts from the PPO learner of this "
+                        "checkpoint (a run or checkpoint folder, or agent:NAME); empty: none")
     rollout_steps: int = hp(0, "vector steps per iteration (0: the longest rollout any "
                             "learner wants, 512 if none)", ge=0)
     checkpoint_every: int = hp(10, "iterations per checkpoint (0: only at the end)", ge=0)
@@ -190,9 +195,45 @@ def default_learners(num_learners: int, algo: str = "ppo", config: Any = None
     return tuple(LearnerSpec(f"{algo}_{i}", algo, (i,), config) for i in range(num_learners))
 
 
-def learners_fit(specs: Sequence[LearnerSpec], num_learners: int) -> bool:
-    """True when ``specs`` drive each of ``num_learners`` learner seats exactly once."""
-    return sorted(s for spec in specs for s in spec.seats) == list(range(num_learners))
+def learners_fit(specs: Sequence[LearnerSpec], num_learners: int, selfplay: bool = False
+                 ) -> bool:
+    """True when ``specs`` drive each of ``num_learners`` learner seats exactly once (with
+    ``selfplay``: at most once, leaving at least one seat to the snapshot pool)."""
+    seats = sorted(s for spec in specs for s in spec.seats)
+    if selfplay:
+        return (len(set(seats)) == len(seats) < num_learners
+                and all(0 <= s < num_learners for s in seats))
+    return seats == list(range(num_learners))
+
+
+SELFPLAY_KEYS = ("learner", "window", "latest_share", "every")
+
+
+def selfplay_pool_args(cfg: TrainConfig) -> tuple[str, dict[str, Any]]:
+    """(learner name, SnapshotPool keyword arguments) of a run's ``selfplay`` table; a
+    bad key or value is a one-line ValueError naming it."""
+    table = dict(cfg.selfplay)
+    bad = sorted(set(table) - set(SELFPLAY_KEYS))
+    if bad:
+        raise ValueError(f"selfplay.{bad[0]}: unknown key; valid keys: {list(SELFPLAY_KEYS)}")
+    names = [s.name for s in cfg.learners]
+    learner = table.pop("learner", names[0] if names else "")
+    if learner not in names:
+        raise ValueError(f"selfplay.learner: {learner!r} is not one of the run's learners "
+                         f"{names} (self-play needs its learners listed)")
+    for key, kind in (("window", int), ("every", int), ("latest_share", float)):
+        value = table.get(key)
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int | float)
+                                  or (kind is int and not float(value).is_integer())):
+            raise ValueError(f"selfplay.{key}: must be a number, got {value!r}")
+        if value is not None:
+            table[key] = kind(value)
+    from alphatank.training.selfplay import check_pool_args
+    try:
+        check_pool_args(**table)
+    except ValueError as exc:
+        raise ValueError(f"selfplay: {exc}") from None
+    return learner, table
 
 
 def run_learners(cfg: TrainConfig, num_learners: int) -> tuple[LearnerSpec, ...]:
@@ -272,12 +313,17 @@ def parse_run(data: dict[str, Any], source: str, base: Path | None = None,
         raise ValueError(f"{source}: scenario: required (a shipped scenario name or a path "
                          f"to a scenario .toml)")
     if base is not None:
-        for key in ("scenario", "map"):
+        for key in ("scenario", "map", "init_from"):
             value = data.get(key)
             if isinstance(value, str) and ("/" in value or value.endswith((".toml", ".txt"))) \
                     and not Path(value).is_absolute() and (base / value).exists():
                 data[key] = str(base / value)
     cfg = TrainConfig.from_dict(data, f"{source}: ")
+    if cfg.selfplay:
+        try:
+            selfplay_pool_args(cfg)
+        except ValueError as exc:
+            raise ValueError(f"{source}: {exc}") from None
     from alphatank.training.schedules import make_schedule
     try:
         make_schedule(cfg.schedule, cfg.total_steps)

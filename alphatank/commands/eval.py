@@ -20,6 +20,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--greedy", action="store_true", help="most likely actions, no sampling")
     p.add_argument("--seed", type=int, default=0, help="seed of the game sequence")
     p.add_argument("--num-envs", type=int, default=16, help="matches played at once")
+    p.add_argument("--team-stats", action="store_true",
+                   help="also measure cooperation in the checkpoint's own scenario: share of "
+                        "won games in which every teammate hit an enemy, kills in crossfire, "
+                        "hits per seat (--games games, one policy per seat)")
     p.add_argument("--csv", metavar="FILE", help="also write the rows as CSV")
     p.add_argument("--json", metavar="FILE", help="also write the rows as JSON")
 
@@ -53,4 +57,21 @@ def run(args: argparse.Namespace) -> int:
         write_csv(results, args.csv)
     if args.json:
         write_json(results, args.json)
+    if args.team_stats:
+        import json
+        from pathlib import Path
+
+        from alphatank.training.teamstats import format_team_stats, team_stats
+        stats = []
+        try:
+            for arg in args.checkpoints:
+                stats.append(team_stats(checkpoint_source(arg), games=args.games,
+                                        seed=args.seed, scenario=args.scenario, team=args.team))
+                print(format_team_stats(stats[-1]))
+        except (CheckpointError, ValueError) as exc:
+            print(f"error: {exc}")
+            return 2
+        if args.json:
+            path = Path(args.json).with_suffix(".team.json")
+            path.write_text(json.dumps(stats, indent=1) + "\n", encoding="utf-8")
     return 0
