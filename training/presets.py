@@ -418,12 +418,13 @@ def get_preset(name: str) -> TrainConfig:
 def hyperparameter_help() -> str:
     """Every hyperparameter of every registered algorithm: default, type, range, help."""
     lines = []
+    width = max(len(f"{n}.{f.name}") for n, a in ALGORITHMS.items() for f in describe(a.config))
     for name, algo in sorted(ALGORITHMS.items()):
         lines.append(f"{name}: {algo.description} ({algo.config.__name__})")
         for f in describe(algo.config):
             kind = f"{f.type} {f.allowed}".strip()
-            lines.append(f"  {name + '.' + f.name:24s} {_show(f.default):>9s}  {kind:22s} "
-                         f"{f.help}")
+            lines.append(f"  {name + '.' + f.name:{width}s} {_show(f.default):>9s}  "
+                         f"{kind:22s} {f.help}")
     return "\n".join(lines)
 
 
