@@ -54,7 +54,14 @@ def test_presets_keep_the_papers_settings():
     assert sac_vs_ppo.learners[1].config == PPOConfig(clip_coef=0.1, ent_coef=0.02,
                                                       update_epochs=20)  # Table 9
     assert sac_vs_ppo.total_steps == 200_000 and sac_vs_ppo.scenario == "pair"
-    assert get_preset("ppo_vs_smart").learners[0].config == ppo  # Table 7
+    assert get_preset("ppo_vs_random").learners[0].config == ppo  # Table 7
+    for name in ("ppo_vs_smart", "ppo_vs_aggressive", "ppo_vs_dodge"):  # Table 3 rows as
+        row = get_preset(name)  # shipped: Table 7 but 128 steps x 4 epochs, 15 min at most
+        assert row.learners[0].config == PPOConfig(num_steps=128, update_epochs=4)
+        assert row.time_limit_s == 900 and row.rewards == {} and "Table 7" in row.description
+    for name in ("team_vs_2smart", "team_vs_def", "team_vs_def_2smart", "team_vs_four_bots",
+                 "ppo_vs_defensive"):  # rows with other rewards say so
+        assert "not the paper's rewards" in get_preset(name).description
     demo = get_preset("demo")
     assert demo.learners[0].config == PPOConfig(num_steps=128, update_epochs=4,
                                                 num_minibatches=4, anneal_lr=True)
