@@ -38,6 +38,7 @@ COMMANDS = {
              "matrix and league.",
     "bench": "Measure ticks/s of the match, env steps/s, bot and renderer cost; --soak.",
     "maps": "List shipped maps or validate and print some.",
+    "agents": "List the trained agents shipped with the package (agent:NAME), or export one.",
 }
 EXIT_BAD_INPUT = 2
 EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE, what a shell reports for a program killed by it

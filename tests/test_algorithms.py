@@ -169,7 +169,8 @@ def test_env_inputs_match_in_process_and_worker_envs():
 def test_table_names_configs_and_lazy_learner_classes():
     assert get_algorithm("ppo").config is PPOConfig and get_algorithm("sac").config is SACConfig
     assert get_algorithm("ppo").learner_class() is PPO
-    with pytest.raises(ValueError, match=r"unknown algorithm 'dqn'; registered: \['ppo', 'sac'"):
+    with pytest.raises(ValueError,
+                       match=r"unknown algorithm 'dqn'; registered: \['mappo', 'ppo', 'sac'"):
         get_algorithm("dqn")
     with pytest.raises(ValueError, match="module:Class"):
         register("x", PPOConfig, "alphatank.training.ppo.PPO")

@@ -65,7 +65,7 @@ def run_toy(cfg: MAPPOConfig, updates: int, seed: int = 0) -> tuple[MAPPO, list[
             m.observe(obs, rew, term, trunc)
             total += float(rew.mean())
         means.append(total / cfg.num_steps)
-        m.update(obs, next_state=state)
+        m.update(obs, state=state)
     return m, means
 
 
@@ -150,7 +150,7 @@ def test_dead_rows_do_not_change_the_update():
         nxt, nstate = _rollout(m, SeatToy(2, 2, 0), dead_from=4, scramble=scramble)
         assert m.buffer.active[:, 1].tolist() == [True] * 4 + [False] * 8
         assert m.buffer.active[:, [0, 2, 3]].all()
-        m.update(nxt, next_state=nstate)
+        m.update(nxt, state=nstate)
         params.append([p.detach().clone() for p in m.net.parameters()])
     for pa, pb in zip(*params, strict=True):
         assert torch.equal(pa, pb)
@@ -164,7 +164,7 @@ def test_posthumous_credit_bootstraps_from_the_living_teammate():
     rng = np.random.default_rng(0)
     m.value_norm.update(torch.tensor([5.0, 9.0]))  # non-trivial denormalisation
     nxt, nstate = _rollout(m, env, dead_from=2, scramble=rng)
-    adv, ret, values = m.advantages(nxt, next_state=nstate)
+    adv, ret, values = m.advantages(nxt, state=nstate)
     v_next = m._values(nstate, nxt)
     assert m._team_values(v_next, nxt[:, 0] > 0.5)[1] == pytest.approx(v_next[0])
     # Seat 1 acted on rows 0-1, then received 0.5 per row while dead; the tail after
@@ -250,7 +250,7 @@ def test_mappo_team_learns_to_shoot_a_helpless_bot(tmp_path):
             obs, rew, term, trunc, info = env.step(a.reshape(E, 2, 3))
             m.observe(None, rew.reshape(-1), np.repeat(term, 2), np.repeat(trunc, 2))
             won += [ep["outcome"][0] == "win" for ep in info["episodes"]]
-        m.update(obs.reshape(-1, env.obs_dim), next_state=st.build().reshape(-1, st.size))
+        m.update(obs.reshape(-1, env.obs_dim), state=st.build().reshape(-1, st.size))
         wins.append(won)
     first = np.mean(sum(wins[:6], []))  # ~0.35: random shots often hit on this range
     last = np.mean(sum(wins[-6:], []))

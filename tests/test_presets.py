@@ -24,7 +24,9 @@ from alphatank.training.presets import (
 PAPER_PRESETS = {"ppo_vs_ppo", "sac_vs_sac", "sac_vs_ppo", "ppo_vs_smart", "ppo_vs_aggressive",
                  "ppo_vs_dodge", "ppo_vs_defensive", "ppo_vs_random", "sac_vs_aggressive",
                  "ppo_cycle", "ppo_curriculum_smart", "team_vs_2smart", "team_vs_def",
-                 "team_vs_def_2smart", "team_vs_four_bots", "team_ppo_vs_ppo", "demo"}
+                 "team_vs_def_2smart", "team_vs_four_bots", "team_ppo_vs_ppo", "demo",
+                 "team_vs_2smart_ippo", "team_vs_def_ippo", "team_vs_def_2smart_ippo",
+                 "team_vs_four_bots_ippo", "team_ppo_vs_ppo_ippo"}
 
 
 def roundtrip(cfg: TrainConfig) -> TrainConfig:
@@ -37,7 +39,7 @@ def test_every_preset_loads_fits_its_scenario_and_round_trips(name):
     assert cfg.name == name and cfg.description
     sc = load_scenario(cfg.scenario)
     n = len(sc.learner_seats)
-    assert learners_fit(run_learners(cfg, n), n)
+    assert learners_fit(run_learners(cfg, n), n, selfplay=bool(cfg.selfplay))
     assert roundtrip(cfg) == cfg
     assert TrainConfig.from_dict(cfg.to_dict()) == cfg  # the checkpoint path
 
@@ -52,7 +54,14 @@ def test_presets_keep_the_papers_settings():
     assert sac_vs_ppo.learners[1].config == PPOConfig(clip_coef=0.1, ent_coef=0.02,
                                                       update_epochs=20)  # Table 9
     assert sac_vs_ppo.total_steps == 200_000 and sac_vs_ppo.scenario == "pair"
-    assert get_preset("ppo_vs_smart").learners[0].config == ppo  # Table 7
+    assert get_preset("ppo_vs_random").learners[0].config == ppo  # Table 7
+    for name in ("ppo_vs_smart", "ppo_vs_aggressive", "ppo_vs_dodge"):  # Table 3 rows as
+        row = get_preset(name)  # shipped: Table 7 but 128 steps x 4 epochs, 15 min at most
+        assert row.learners[0].config == PPOConfig(num_steps=128, update_epochs=4)
+        assert row.time_limit_s == 900 and row.rewards == {} and "Table 7" in row.description
+    for name in ("team_vs_2smart", "team_vs_def", "team_vs_def_2smart", "team_vs_four_bots",
+                 "ppo_vs_defensive"):  # rows with other rewards say so
+        assert "not the paper's rewards" in get_preset(name).description
     demo = get_preset("demo")
     assert demo.learners[0].config == PPOConfig(num_steps=128, update_epochs=4,
                                                 num_minibatches=4, anneal_lr=True)
@@ -62,8 +71,15 @@ def test_presets_keep_the_papers_settings():
         "mode": "adaptive", "interval": 100_000}
     assert get_preset("ppo_curriculum_smart").schedule == {
         "kind": "curriculum", "start": 0.1, "end": 0.8, "shape": "sigmoid"}
-    assert [s.seats for s in get_preset("team_ppo_vs_ppo").learners] == [(0,), (1,), (2,),
-                                                                          (3,)]
+    assert [s.seats for s in get_preset("team_ppo_vs_ppo_ippo").learners] == [
+        (0,), (1,), (2,), (3,)]
+    for name in ("team_vs_2smart", "team_vs_def", "team_vs_def_2smart", "team_vs_four_bots"):
+        ippo = get_preset(f"{name}_ippo")  # the paper's rows: independent PPO, Table 5
+        assert [(s.algo, s.seats) for s in ippo.learners] == [("ppo", (0,)), ("ppo", (1,))]
+        assert ippo.rewards == {} and ippo.learners[0].config == ppo
+    sp = get_preset("team_ppo_vs_ppo")  # self-play against a window of snapshots
+    assert [(s.algo, s.seats) for s in sp.learners] == [("mappo", (0, 1))]
+    assert sp.selfplay["window"] >= 1 and "not the paper's rewards" in sp.description
 
 
 def test_every_setting_round_trips_including_none_and_tables(tmp_path):

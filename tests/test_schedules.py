@@ -142,6 +142,26 @@ def test_winrate_curriculum_steps_up_when_the_team_wins():
     assert d.apply(rec, 30)["schedule/weakness"] == 1.0 and rec.calls[-1] == ("weakness", 1.0)
 
 
+def test_winrate_curriculum_can_step_down_when_the_team_stops_winning():
+    c = WinRateCurriculum(levels=(0.1, 0.5, 1.0), threshold=0.6, window=10, min_episodes=5,
+                          demote=0.2)
+    for _ in range(5):
+        c.record("B:defensive(w=0.1)", "win")
+    assert c.level == 1
+    for out in ["loss", "draw", "loss", "win"]:  # fewer than min_episodes: stays
+        c.record("B:defensive(w=0.5)", out)
+    assert c.level == 1
+    c.record("B:defensive(w=0.5)", "loss")  # 1/5 = 0.2: not below 0.2
+    assert c.level == 1
+    c.record("B:defensive(w=0.5)", "loss")  # 1/6 < 0.2: one level down
+    assert c.level == 0 and c.weakness == 0.1 and not c.results
+    for _ in range(10):
+        c.record("B:defensive(w=0.1)", "loss")
+    assert c.level == 0  # the bottom level stays
+    with pytest.raises(ValueError, match="demote"):
+        WinRateCurriculum(threshold=0.5, demote=0.5)
+
+
 def test_winrate_curriculum_reaches_the_bots_of_the_next_episode():
     env = VectorMatchEnv("team_vs_def_bot", 2, seed=0, game_overrides={"max_steps": 5})
     env.reset()

@@ -106,7 +106,7 @@ def test_help_and_list_show_every_hyperparameter(capsys):
         assert name in text, name
     assert main(["train", "--list"]) == 0
     out = capsys.readouterr().out
-    assert re.search(r"team_ppo_vs_ppo +team +ppo x4 +4\.5\.1", out)
+    assert re.search(r"team_ppo_vs_ppo_ippo +team +ppo x4 +4\.5\.1", out)
     assert "sac + ppo" in out and "sac.buffer_size" in out
 
 

@@ -14,7 +14,7 @@ import importlib
 from dataclasses import dataclass
 from typing import Any
 
-from alphatank.training.hparams import PPOConfig, SACConfig
+from alphatank.training.hparams import MAPPOConfig, PPOConfig, SACConfig
 
 
 @dataclass(frozen=True)
@@ -55,3 +55,6 @@ register("ppo", PPOConfig, "alphatank.training.ppo:PPO",
          "PPO, independent learners (the paper's Table 7)")
 register("sac", SACConfig, "alphatank.training.sac:SAC",
          "SAC on discrete actions via equation (33) (Tables 8/9)")
+register("mappo", MAPPOConfig, "alphatank.training.mappo:MAPPO",
+         "MAPPO: one shared actor per team (seat id), centralised critic over the "
+         "agent-specific state, death masking, team credit")

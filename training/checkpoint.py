@@ -24,6 +24,7 @@ import math
 import os
 import shutil
 import time
+import weakref
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -79,10 +80,12 @@ def _write_atomic_text(path: Path, text: str) -> None:
 def save_checkpoint(run_dir: str | Path, tag: str, meta: dict[str, Any],
                     states: dict[str, dict[str, Any]],
                     arrays: dict[str, dict[str, np.ndarray]] | None = None,
-                    keep: int = 0) -> Path:
+                    keep: int = 0, extra: dict[str, dict[str, Any]] | None = None) -> Path:
     """Write ``<run_dir>/checkpoints/<tag>`` atomically and point ``<run_dir>/latest`` at
     it. ``states``: learner name -> torch state dict; ``arrays``: learner name -> arrays
-    for ``<name>.replay.npz``. ``keep`` > 0 prunes all but the newest ``keep`` saves."""
+    for ``<name>.replay.npz``; ``extra``: other run state (the self-play pool) -> torch
+    state dict, saved as ``extra/<key>.pt`` (no learner name can clash with a folder).
+    ``keep`` > 0 prunes all but the newest ``keep`` saves."""
     root = Path(run_dir) / "checkpoints"
     root.mkdir(parents=True, exist_ok=True)
     final = root / tag
@@ -97,6 +100,10 @@ def save_checkpoint(run_dir: str | Path, tag: str, meta: dict[str, Any],
     for name, arrs in (arrays or {}).items():
         np.savez(tmp / f"{name}.replay.npz", **arrs)
         files[f"{name}.replay.npz"] = _sha256(tmp / f"{name}.replay.npz")
+    for key, state in (extra or {}).items():
+        (tmp / "extra").mkdir(exist_ok=True)
+        torch.save(state, tmp / "extra" / f"{key}.pt")
+        files[f"extra/{key}.pt"] = _sha256(tmp / "extra" / f"{key}.pt")
     meta = {"format": FORMAT, "version": VERSION, "saved_at": time.time(), **meta,
             "files": files}
     if os.environ.get(DELAY_ENV):
@@ -218,6 +225,17 @@ class Checkpoint:
                                   "the training diverged or the file was altered")
         return state
 
+    def extra_state(self, key: str) -> dict[str, Any]:
+        """``torch.load(weights_only=True)`` of the run state ``extra/<key>.pt``."""
+        file = self.path / "extra" / f"{key}.pt"
+        self._check_file(file, f"extra/{key}.pt")
+        try:
+            return torch.load(file, map_location="cpu", weights_only=True)
+        except Exception as exc:
+            raise CheckpointError(f"{file}: cannot be loaded: {type(exc).__name__}: "
+                                  f"{str(exc).strip().splitlines()[0] if str(exc).strip() else ''}"
+                                  ) from None
+
     def replay(self, name: str) -> dict[str, np.ndarray] | None:
         file = self.path / f"{name}.replay.npz"
         if f"{name}.replay.npz" not in self.meta.get("files", {}):
@@ -233,8 +251,8 @@ class Checkpoint:
             raise CheckpointError(f"{file}: array {bad!r} holds NaN or infinite values")
         return arrays
 
-    def _check_file(self, file: Path) -> None:
-        want = self.meta.get("files", {}).get(file.name)
+    def _check_file(self, file: Path, key: str | None = None) -> None:
+        want = self.meta.get("files", {}).get(key or file.name)
         if not file.is_file():
             raise CheckpointError(f"{file}: missing from the checkpoint")
         if want is not None and _sha256(file) != want:
@@ -326,9 +344,15 @@ def _check_meta(meta: dict[str, Any], meta_file: Path) -> None:
         raise fail("learners", "must be a non-empty list of objects with a 'name'")
     files = meta["files"]
     if not isinstance(files, dict) or not all(
-            isinstance(k, str) and "/" not in k and "\\" not in k and isinstance(v, str)
-            for k, v in files.items()):
-        raise fail("files", "must map file names in the checkpoint folder to SHA-256 digests")
+            isinstance(k, str) and _file_key(k) and isinstance(v, str) for k, v in files.items()):
+        raise fail("files", "must map file names in the checkpoint folder (or extra/NAME) to "
+                            "SHA-256 digests")
+
+
+def _file_key(key: str) -> bool:
+    """A checkpoint file name: ``NAME`` or ``extra/NAME`` (no other folder, no ``..``)."""
+    name = key.removeprefix("extra/")
+    return bool(name) and "/" not in name and "\\" not in name and name not in (".", "..")
 
 
 def non_finite(state: Any, prefix: str = "") -> str | None:
@@ -357,12 +381,15 @@ class NetworkPolicy:
 
     The learner is picked per seat at :meth:`reset`: ``learner`` if given, else the one
     that trained in that scenario seat, else the first. Observations are built for the
-    seat with the env's own :class:`~alphatank.game.observe.ObservationBuilder`.
+    seat with the env's own :class:`~alphatank.game.observe.ObservationBuilder`. One
+    object may fill several seats of several matches at once: everything per seat (the
+    learner, the observation builder, the random generator, MAPPO's seat id) is kept per
+    (match, seat) and replaced at that seat's next :meth:`reset`.
     """
 
     def __init__(self, observation: dict[str, Any], learner_names: list[str],
                  learner: str | None = None, deterministic: bool = False,
-                 source: str = "policy"):
+                 source: str = "policy", trained_as: str = ""):
         if learner is not None and learner not in learner_names:
             raise CheckpointError(f"{source}: no learner {learner!r}; learners: "
                                   f"{learner_names}")
@@ -374,10 +401,15 @@ class NetworkPolicy:
         self.team_flags = bool(observation["team_flags"])
         self.seat_learner = {int(k): v for k, v in observation["seat_learner"].items()}
         self.n_tanks = int(observation["tanks"])
-        self._builders: dict[tuple, Any] = {}
-        self.rng = np.random.default_rng(0)
-        self.learner: Any = None
-        self.builder: Any = None
+        self.trained_as = trained_as  # the training scenario, for error messages
+        self._seats: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {**self.__dict__, "_seats": None}  # per-match state stays with the matches
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._seats = weakref.WeakKeyDictionary()
 
     def name_for_seat(self, seat: int) -> str:
         if self.learner_name is not None:
@@ -387,13 +419,30 @@ class NetworkPolicy:
     def get_learner(self, name: str) -> Any:
         raise NotImplementedError
 
+    def seat_id(self, match: Any, seat: int, name: str, num_seats: int) -> int:
+        """The seat id a learner that tells its seats apart (MAPPO) gets for ``seat``: its
+        index among the seats it trained in, else its rank within its team (mod the
+        learner's seat count)."""
+        trained = sorted(s for s, n in self.seat_learner.items() if n == name)
+        if seat in trained and len(trained) == num_seats:
+            return trained.index(seat)
+        mates = [s for s in range(match.n) if match.teams[s] == match.teams[seat]]
+        return mates.index(seat) % num_seats
+
+    def _fit_hint(self) -> str:
+        return (f"; it fits seats of matches with {self.n_tanks} tanks and the same team "
+                f"sizes as {self.trained_as}" if self.trained_as else "")
+
     def reset(self, match: Any, seat: int, seed: int | None = None) -> None:
         from alphatank.game.observe import ObservationBuilder, StateBatch
 
-        self.learner = self.get_learner(self.name_for_seat(seat))
-        self.rng = np.random.default_rng(seed)
-        key = (match.cfg, tuple(match.teams), seat)
-        if key not in self._builders:
+        name = self.name_for_seat(seat)
+        learner = self.get_learner(name)
+        per_match = self._seats.setdefault(match, {})
+        old = per_match.get(seat)
+        builder = old[1] if old is not None and old[4] == (match.cfg, tuple(match.teams)) \
+            else None
+        if builder is None:
             walls, buffs, debuffs = self.slots
             need = len(match.spec.wall_rects)
             if self.kind == "paper" and need > walls:
@@ -407,9 +456,12 @@ class NetworkPolicy:
                 raise CheckpointError(
                     f"{self.source}: expects {self.obs_dim} observation features "
                     f"({self.kind}, {self.n_tanks} tanks); seat {seat} of this match "
-                    f"({match.n} tanks, teams {match.teams}) gives {builder.layout.size}")
-            self._builders[key] = builder
-        self.builder = builder = self._builders[key]
+                    f"({match.n} tanks, teams {match.teams}) gives {builder.layout.size}"
+                    f"{self._fit_hint()}")
+        num_seats = getattr(learner, "num_seats", None)  # learners with seat ids (MAPPO)
+        sid = None if num_seats is None else self.seat_id(match, seat, name, num_seats)
+        per_match[seat] = (learner, builder, np.random.default_rng(seed), sid,
+                           (match.cfg, tuple(match.teams)))
         builder.batch.set_static(0, match)
         builder.batch.gather(0, match)
         builder.set_static(0)
@@ -417,9 +469,12 @@ class NetworkPolicy:
     def act(self, match: Any, seat: int) -> np.ndarray:
         if not match.alive[seat]:
             return NOOP.copy()
-        self.builder.batch.gather(0, match)
-        obs = self.builder.build()[0]
-        return self.learner.policy_actions(obs, self.deterministic, self.rng)[0]
+        learner, builder, rng, sid, _ = self._seats[match][seat]
+        builder.batch.gather(0, match)
+        obs = builder.build()[0]
+        if sid is None:
+            return learner.policy_actions(obs, self.deterministic, rng)[0]
+        return learner.policy_actions(obs, self.deterministic, rng, seat=sid)[0]
 
 
 class LivePolicy(NetworkPolicy):
@@ -439,8 +494,12 @@ class CheckpointPolicy(NetworkPolicy):
 
     def __init__(self, ckpt: Checkpoint, learner: str | None = None,
                  deterministic: bool = False):
+        sc = ckpt.meta.get("scenario", {})
+        teams = [str(t.get("team", "?")) for t in sc.get("seats", [])]
+        trained = (f"its training scenario {sc.get('name', '?')!r} (teams {teams})"
+                   if teams else "")
         super().__init__(ckpt.meta["observation"], ckpt.learner_names(), learner,
-                         deterministic, str(ckpt.path))
+                         deterministic, str(ckpt.path), trained)
         self.ckpt = ckpt
         wanted = [learner] if learner is not None else ckpt.learner_names()
         self.learners = {name: ckpt.load_learner(name, weights_only=True) for name in wanted}

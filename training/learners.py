@@ -45,7 +45,7 @@ from alphatank.training.algorithms import get_algorithm
 
 
 class Learner(Protocol):
-    """What PPO and SAC provide (see :class:`alphatank.training.ppo.PPO`)."""
+    """What PPO, SAC and MAPPO provide (see :class:`alphatank.training.ppo.PPO`)."""
 
     algo: ClassVar[str]  # its name in the algorithm table
     inputs: ClassVar[tuple[str, ...]]  # extra per-stream inputs from the env (see above)
@@ -95,7 +95,9 @@ class Learner(Protocol):
     def policy_actions(self, obs: np.ndarray, deterministic: bool = False,
                        rng: np.random.Generator | None = None) -> np.ndarray:
         """Actions for raw observations (B, obs_dim) with frozen statistics and no
-        recording (evaluation, videos, checkpoints as policies)."""
+        recording (evaluation, videos, checkpoints as policies). A learner that tells its
+        seats apart (MAPPO's seat one-hot) has a ``num_seats`` attribute and also takes
+        ``seat=`` (each row's seat id; default: rows are (env, seat) pairs, env-major)."""
 
     def state_dict(self) -> dict[str, Any]:
         """Everything to resume exactly, as tensors and plain values

@@ -134,11 +134,14 @@ class MAPPO:
     """
 
     algo = "mappo"
+    inputs: tuple[str, ...] = ("state", "alive")
 
     def __init__(self, obs_dim: int, num_streams: int, cfg: MAPPOConfig | None = None,
                  seed: int = 0, mask_dim: int = 0, *, num_seats: int = 1, state_dim: int = 0,
-                 alive_index: int | None = None):
+                 alive_dim: int = 1, alive_index: int | None = None):
         self.cfg = cfg = cfg or MAPPOConfig()
+        if alive_dim != 1:
+            raise ValueError(f"the alive input is one flag per stream, got alive_dim {alive_dim}")
         if num_seats < 1 or num_streams % num_seats:
             raise ValueError(f"num_streams ({num_streams}) must be a multiple of num_seats "
                              f"({num_seats}): streams are (env, seat) pairs, env-major")
@@ -173,8 +176,28 @@ class MAPPO:
         self.onehot = np.eye(num_seats, dtype=np.float32)
         self._alive_now = np.ones(num_streams, dtype=bool)  # alive at the last act()
         self.updates = 0
-        self.total_updates = 0  # set by the runner for learning-rate annealing
+        self.total_updates = 0  # set by plan() for learning-rate annealing
         self.interrupt: Any = None  # set by the runner; polled between minibatches
+
+    # ---- run plumbing (the Learner protocol) --------------------------------------------
+
+    @property
+    def rollout_steps(self) -> int:
+        return self.cfg.num_steps
+
+    def plan(self, total_steps: int) -> None:
+        """Anneal the learning rates (``anneal_lr``) over ``total_steps`` observe calls."""
+        self.total_updates = total_steps // self.cfg.num_steps
+
+    def new_segment(self) -> None:
+        """Fresh episodes everywhere: restart the discounted returns of reward scaling."""
+        self.ret_norm.returns[:] = 0.0
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {}
+
+    def load_arrays(self, arrays: dict[str, np.ndarray]) -> None:
+        """MAPPO keeps everything in :meth:`state_dict`."""
 
     # ---- inputs -------------------------------------------------------------------------
 
@@ -192,7 +215,12 @@ class MAPPO:
         state = np.asarray(state, dtype=np.float32).reshape(-1, self.state_dim)
         return self.state_norm(state, update=update)
 
-    def _alive(self, obs: np.ndarray | None) -> np.ndarray | None:
+    def _alive(self, obs: np.ndarray | None, alive: np.ndarray | None = None
+               ) -> np.ndarray | None:
+        """Which streams are alive: the ``alive`` input if given, else the
+        ``alive_index`` column of ``obs``, else unknown (None)."""
+        if alive is not None:
+            return np.asarray(alive).reshape(-1) > 0.5
         if obs is None or self.alive_index is None:
             return None
         return np.asarray(obs)[:, self.alive_index] > 0.5
@@ -217,9 +245,10 @@ class MAPPO:
     # ---- acting -------------------------------------------------------------------------
 
     def act(self, obs: np.ndarray, masks: np.ndarray | None = None, *,
-            state: np.ndarray | None = None) -> np.ndarray:
+            state: np.ndarray | None = None, alive: np.ndarray | None = None) -> np.ndarray:
         """Sample actions (num_streams, 3) for raw observations and record the step;
-        ``state``: (num_streams, state_dim) agent-specific states for the critic."""
+        ``state``: (num_streams, state_dim) agent-specific states for the critic;
+        ``alive``: (num_streams,) 1 where the seat lives (default: ``alive_index``)."""
         buf = self.buffer
         t = buf.step
         x = self._actor_input(obs, self.seat_of, update=True)
@@ -238,18 +267,20 @@ class MAPPO:
         buf.actions[t] = torch.from_numpy(actions)
         buf.logprobs[t] = torch.from_numpy(logprob)
         buf.values[t] = torch.from_numpy(values)  # normalised (value_norm units)
-        alive = self._alive(obs)
-        self._alive_now = alive if alive is not None else np.ones(self.num_streams, bool)
+        live = self._alive(obs, alive)
+        self._alive_now = live if live is not None else np.ones(self.num_streams, bool)
         return actions
 
     def observe(self, next_obs: np.ndarray, rewards: np.ndarray, terminated: np.ndarray,
                 truncated: np.ndarray, final_obs: np.ndarray | None = None,
-                active: np.ndarray | None = None, *,
-                final_state: np.ndarray | None = None) -> None:
+                active: np.ndarray | None = None, *, state: np.ndarray | None = None,
+                alive: np.ndarray | None = None, final_state: np.ndarray | None = None,
+                final_alive: np.ndarray | None = None) -> None:
         """Record the outcome of the last :meth:`act` (as PPO's). ``active``: the seat was
-        alive when it acted (default: from ``alive_index`` of the acted-on obs).
-        ``final_state``: states of ended streams, read only with ``bootstrap_timeouts``."""
-        del next_obs
+        alive when it acted (default: as :meth:`act` saw it). ``final_state`` /
+        ``final_alive``: inputs of ended streams, read only with ``bootstrap_timeouts``;
+        ``state`` / ``alive`` (of ``next_obs``) are read at the next :meth:`act`."""
+        del next_obs, state, alive
         buf, cfg = self.buffer, self.cfg
         t = buf.step
         ended = np.logical_or(terminated, truncated)
@@ -263,9 +294,9 @@ class MAPPO:
             if final_obs is None or (self.state_dim and final_state is None):
                 raise ValueError("bootstrap_timeouts needs final_obs (and final_state with a "
                                  "state critic) for truncated streams")
-            alive = self._alive(final_obs)
+            live = self._alive(final_obs, final_alive)
             values = self._team_values(self._values(final_state, final_obs),
-                                       act if alive is None else alive)
+                                       act if live is None else live)
             buf.bootstrap[t] = torch.from_numpy(np.where(boot, values, 0.0).astype(np.float32))
         buf.step += 1
 
@@ -275,11 +306,11 @@ class MAPPO:
 
     # ---- learning -----------------------------------------------------------------------
 
-    def update(self, next_obs: np.ndarray, *, next_state: np.ndarray | None = None,
-               next_active: np.ndarray | None = None) -> dict[str, float]:
-        """One MAPPO update on the full rollout. ``next_obs`` / ``next_state`` follow its
-        last row; ``next_active`` (default: from ``alive_index``) says which seats are
-        alive there: dead ones bootstrap from their living teammates' values."""
+    def update(self, next_obs: np.ndarray, *, state: np.ndarray | None = None,
+               alive: np.ndarray | None = None) -> dict[str, float]:
+        """One MAPPO update on the full rollout. ``next_obs`` and ``state`` follow its
+        last row; ``alive`` (default: from ``alive_index``) says which seats are alive
+        there: dead ones bootstrap from their living teammates' values."""
         cfg, buf, net = self.cfg, self.buffer, self.net
         if not buf.full:
             raise RuntimeError(f"rollout has {buf.step}/{buf.num_steps} steps; update when ready")
@@ -287,8 +318,7 @@ class MAPPO:
             frac = max(0.0, 1.0 - self.updates / self.total_updates)
             self.optimizer.param_groups[0]["lr"] = frac * cfg.learning_rate
             self.optimizer.param_groups[1]["lr"] = frac * cfg.critic_learning_rate
-        advantages, returns, values = self.advantages(next_obs, next_state=next_state,
-                                                      next_active=next_active)
+        advantages, returns, values = self.advantages(next_obs, state=state, alive=alive)
         n = buf.num_steps * buf.num_streams
         b_active = buf.active.reshape(n)
         b_w = b_active.float()
@@ -365,17 +395,16 @@ class MAPPO:
                     "charts/learning_rate": float(self.optimizer.param_groups[0]["lr"])})
         return out
 
-    def advantages(self, next_obs: np.ndarray, *, next_state: np.ndarray | None = None,
-                   next_active: np.ndarray | None = None
+    def advantages(self, next_obs: np.ndarray, *, state: np.ndarray | None = None,
+                   alive: np.ndarray | None = None
                    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """(advantages, returns, values) (T, B) of the recorded rollout, values
         denormalised; see :meth:`update` for the arguments."""
         cfg, buf = self.cfg, self.buffer
-        alive = (np.asarray(next_active, dtype=bool) if next_active is not None
-                 else self._alive(next_obs))
-        last = self._values(next_state, next_obs)
-        if alive is not None:
-            last = self._team_values(last, alive)
+        live = self._alive(next_obs, alive)
+        last = self._values(state, next_obs)
+        if live is not None:
+            last = self._team_values(last, live)
         with torch.no_grad():
             values = self.value_norm.denormalize(buf.values.double()).float()
             term = buf.terminated if cfg.bootstrap_timeouts else torch.clamp(

@@ -130,8 +130,13 @@ class TrainConfig:
     observation: str | None = hp(None, "observation kind (none: the scenario's)")
     game: dict[str, Any] = hp({}, "GameConfig overrides on top of the scenario's")
     rewards: dict[str, Any] = hp({}, "RewardConfig overrides on top of the scenario's")
-    schedule: dict[str, Any] = hp({}, "opponent schedule: kind = none | curriculum | cycle, "
-                                  "and its parameters")
+    schedule: dict[str, Any] = hp({}, "opponent schedule: kind = none | curriculum | cycle | "
+                                  "winrate, and its parameters")
+    selfplay: dict[str, Any] = hp({}, "self-play pool: the learner seats no learner drives "
+                                  "are played by past snapshots of a learner (keys: learner, "
+                                  "window, latest_share, every)")
+    init_from: str = hp("", "warm start: every learner starts from the PPO learner of this "
+                        "checkpoint (a run or checkpoint folder, or agent:NAME); empty: none")
     rollout_steps: int = hp(0, "vector steps per iteration (0: the longest rollout any "
                             "learner wants, 512 if none)", ge=0)
     checkpoint_every: int = hp(10, "iterations per checkpoint (0: only at the end)", ge=0)
@@ -192,9 +197,53 @@ def default_learners(num_learners: int, algo: str = "ppo", config: Any = None
     return tuple(LearnerSpec(f"{algo}_{i}", algo, (i,), config) for i in range(num_learners))
 
 
-def learners_fit(specs: Sequence[LearnerSpec], num_learners: int) -> bool:
-    """True when ``specs`` drive each of ``num_learners`` learner seats exactly once."""
-    return sorted(s for spec in specs for s in spec.seats) == list(range(num_learners))
+def learners_fit(specs: Sequence[LearnerSpec], num_learners: int, selfplay: bool = False
+                 ) -> bool:
+    """True when ``specs`` drive each of ``num_learners`` learner seats exactly once (with
+    ``selfplay``: at most once, leaving at least one seat to the snapshot pool)."""
+    seats = sorted(s for spec in specs for s in spec.seats)
+    if selfplay:
+        return (len(set(seats)) == len(seats) < num_learners
+                and all(0 <= s < num_learners for s in seats))
+    return seats == list(range(num_learners))
+
+
+SELFPLAY_KEYS = ("learner", "window", "latest_share", "every")
+
+
+def check_pool_args(window: int = 8, latest_share: float = 0.5, every: int = 200_000) -> None:
+    """Raise ValueError unless these are valid :class:`SnapshotPool` settings."""
+    if window < 1 or every < 1:
+        raise ValueError(f"snapshot pool needs window >= 1 and every >= 1, got {window}, "
+                         f"{every}")
+    if not 0.0 <= latest_share <= 1.0:
+        raise ValueError(f"latest_share must be in [0, 1], got {latest_share}")
+
+
+def selfplay_pool_args(cfg: TrainConfig) -> tuple[str, dict[str, Any]]:
+    """(learner name, SnapshotPool keyword arguments) of a run's ``selfplay`` table; a
+    bad key or value is a one-line ValueError naming it."""
+    table = dict(cfg.selfplay)
+    bad = sorted(set(table) - set(SELFPLAY_KEYS))
+    if bad:
+        raise ValueError(f"selfplay.{bad[0]}: unknown key; valid keys: {list(SELFPLAY_KEYS)}")
+    names = [s.name for s in cfg.learners]
+    learner = table.pop("learner", names[0] if names else "")
+    if learner not in names:
+        raise ValueError(f"selfplay.learner: {learner!r} is not one of the run's learners "
+                         f"{names} (self-play needs its learners listed)")
+    for key, kind in (("window", int), ("every", int), ("latest_share", float)):
+        value = table.get(key)
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int | float)
+                                  or (kind is int and not float(value).is_integer())):
+            raise ValueError(f"selfplay.{key}: must be a number, got {value!r}")
+        if value is not None:
+            table[key] = kind(value)
+    try:
+        check_pool_args(**table)
+    except ValueError as exc:
+        raise ValueError(f"selfplay: {exc}") from None
+    return learner, table
 
 
 def run_learners(cfg: TrainConfig, num_learners: int) -> tuple[LearnerSpec, ...]:
@@ -274,12 +323,17 @@ def parse_run(data: dict[str, Any], source: str, base: Path | None = None,
         raise ValueError(f"{source}: scenario: required (a shipped scenario name or a path "
                          f"to a scenario .toml)")
     if base is not None:
-        for key in ("scenario", "map"):
+        for key in ("scenario", "map", "init_from"):
             value = data.get(key)
             if isinstance(value, str) and ("/" in value or value.endswith((".toml", ".txt"))) \
                     and not Path(value).is_absolute() and (base / value).exists():
                 data[key] = str(base / value)
     cfg = TrainConfig.from_dict(data, f"{source}: ")
+    if cfg.selfplay:
+        try:
+            selfplay_pool_args(cfg)
+        except ValueError as exc:
+            raise ValueError(f"{source}: {exc}") from None
     from alphatank.training.schedules import make_schedule
     try:
         make_schedule(cfg.schedule, cfg.total_steps)
@@ -374,12 +428,13 @@ def get_preset(name: str) -> TrainConfig:
 def hyperparameter_help() -> str:
     """Every hyperparameter of every registered algorithm: default, type, range, help."""
     lines = []
+    width = max(len(f"{n}.{f.name}") for n, a in ALGORITHMS.items() for f in describe(a.config))
     for name, algo in sorted(ALGORITHMS.items()):
         lines.append(f"{name}: {algo.description} ({algo.config.__name__})")
         for f in describe(algo.config):
             kind = f"{f.type} {f.allowed}".strip()
-            lines.append(f"  {name + '.' + f.name:24s} {_show(f.default):>9s}  {kind:22s} "
-                         f"{f.help}")
+            lines.append(f"  {name + '.' + f.name:{width}s} {_show(f.default):>9s}  "
+                         f"{kind:22s} {f.help}")
     return "\n".join(lines)
 
 

@@ -57,8 +57,15 @@ from alphatank.training.checkpoint import (
 )
 from alphatank.training.learners import learner_class, make_learner
 from alphatank.training.logging import RunLogger
-from alphatank.training.presets import TrainConfig, learners_fit, run_learners, run_scenario
+from alphatank.training.presets import (
+    TrainConfig,
+    learners_fit,
+    run_learners,
+    run_scenario,
+    selfplay_pool_args,
+)
 from alphatank.training.schedules import make_schedule
+from alphatank.training.selfplay import SelfPlay, Snapshot, SnapshotPool
 from alphatank.training.stopping import StopFlag, StopRequested, stop_on_signals
 from alphatank.training.threads import limit_threads
 
@@ -125,14 +132,24 @@ class Trainer:
                                    or run_scenario(cfg))
         n_learners = len(self.scenario.learner_seats)
         self.specs = specs = list(run_learners(cfg, n_learners))
-        if not learners_fit(specs, n_learners):
+        if not learners_fit(specs, n_learners, selfplay=bool(cfg.selfplay)):
             owned = sorted(s for spec in specs for s in spec.seats)
+            if cfg.selfplay:
+                raise ValueError(f"self-play: learners must drive some of the scenario's "
+                                 f"{n_learners} learner seats at most once and leave the "
+                                 f"others to the snapshot pool; they drive {owned}")
             raise ValueError(f"learners must drive each of the scenario's {n_learners} learner "
                              f"seats exactly once; they drive {owned} "
                              f"({[(s.name, list(s.seats)) for s in specs]})")
+        # env columns: the learner seats the learners drive (all of them without self-play),
+        # each learner's columns in ascending seat order (MAPPO's seat ids follow it)
+        driven = sorted(s for spec in specs for s in spec.seats)
+        self.cols = {spec.name: [driven.index(s) for s in sorted(spec.seats)] for spec in specs}
         # extra per-stream inputs the learners need from the env (Learner.inputs)
         self.inputs = sorted({x for spec in specs for x in learner_class(spec.algo).inputs})
-        extra = {"inputs": self.inputs} if self.inputs else {}
+        extra: dict[str, Any] = {"inputs": self.inputs} if self.inputs else {}
+        if cfg.selfplay:
+            extra["learner_seats"] = [self.scenario.learner_seats[s] for s in driven]
         self.env = env if env is not None else make_vector_env(
             self.scenario, cfg.num_envs, seed=cfg.seed, num_workers=cfg.num_workers,
             observation=cfg.observation, game_overrides=cfg.game or None,
@@ -149,7 +166,6 @@ class Trainer:
         if cfg.video_every:
             require("video", "training videos (video_every)")
         self.E, self.L, self.D = env.num_envs, env.num_learners, env.obs_dim
-        self.cols = {spec.name: list(spec.seats) for spec in specs}
         mask_dim = int(ACTION_NVEC.sum()) if self.action_mask is not None else 0
         supplied = getattr(env, "input_shapes", {})
         missing = [x for x in self.inputs if x not in supplied]
@@ -171,7 +187,8 @@ class Trainer:
         self.total_iterations = max(1, math.ceil(cfg.total_steps / steps_per_iter))
         for lr in self.learners.values():
             lr.plan(self.total_iterations * self.rollout_steps)
-        self.rivals = opposing_learners(specs, list(env.learner_teams))
+        self.rivals = opposing_learners(specs, [self.scenario.seats[s].team
+                                                for s in self.scenario.learner_seats])
         layout = getattr(env, "layout", None)
         self.alive_col = (layout["self.alive"].start
                           if layout is not None and "self.alive" in layout else None)
@@ -182,7 +199,7 @@ class Trainer:
         walls, buffs, debuffs = slot_counts(game, self.scenario.map_specs())
         seat_learner = {}
         for spec in specs:
-            for col in spec.seats:
+            for col in self.cols[spec.name]:
                 seat_learner[str(env.learner_seats[col])] = spec.name
         self.observation_meta = {
             "kind": cfg.observation or self.scenario.observation, "obs_dim": self.D,
@@ -201,9 +218,13 @@ class Trainer:
         self.saved_step = -1  # global_step of the newest checkpoint written or resumed from
         self.stop = StopFlag()  # replaced by every train() call
         self.stopped: dict[str, Any] = {}  # how train() stopped early, if it did
+        self.selfplay = self._make_selfplay() if cfg.selfplay else None
+        self.warm_start: dict[str, dict[str, int]] = {}
         if resume is not None:
             self._restore(resume)
             self.saved_step = self.global_step
+        elif cfg.init_from:
+            self._warm_start(cfg.init_from)
         self._check_cadence()
         self.logger = RunLogger(self.run_dir, cfg.to_dict(), cfg.name, cfg.wandb, cfg.project,
                                 cfg.tensorboard, run_id=wandb_id,
@@ -224,6 +245,39 @@ class Trainer:
                 f"max_steps ({max_steps}): every save restarts all matches, so no game can "
                 f"run its full length; use checkpoint_every >= {math.ceil(max_steps / steps)}",
                 RunWarning, stacklevel=4)
+
+    def _make_selfplay(self) -> SelfPlay:
+        """The snapshot pool that plays the learner seats no learner drives."""
+        name, args = selfplay_pool_args(self.cfg)
+        spec = next(s for s in self.specs if s.name == name)
+        pool = SnapshotPool(**args, seed=derive_seed(self.cfg.seed, 11), learner=name)
+
+        def make_policy(snap: Snapshot) -> LivePolicy:
+            def make() -> Any:
+                return make_learner(spec, self.D, len(spec.seats), 0,
+                                    input_dims=self.input_dims)
+            return LivePolicy({name: pool.frozen(snap.id, make)}, self.observation_meta,
+                              learner=name)
+
+        return SelfPlay(pool, make_policy, self.E, learner=name)
+
+    def _warm_start(self, source: str) -> None:
+        """Start every PPO/MAPPO learner from the PPO learner of checkpoint ``source``."""
+        from alphatank.game.seats import checkpoint_source
+        from alphatank.training.warmstart import warm_start_from_checkpoint
+
+        try:
+            path = checkpoint_source(source)
+            for spec in self.specs:
+                seat = self.scenario.learner_seats[spec.seats[0]]
+                team = self.scenario.seats[seat].team
+                mates = sum(s.team == team for s in self.scenario.seats) - 1
+                self.warm_start[spec.name] = warm_start_from_checkpoint(
+                    self.learners[spec.name], path, self.env.layout, mates)
+        except (ValueError, KeyError) as exc:
+            if isinstance(exc, CheckpointError):
+                raise
+            raise CheckpointError(f"init_from {source!r}: {str(exc).splitlines()[0]}") from None
 
     # ---- persistence ------------------------------------------------------------------
 
@@ -254,6 +308,8 @@ class Trainer:
             self.outcomes[name].extend(outs)
         for name, rets in ckpt.meta.get("windows", {}).get("returns", {}).items():
             self.returns[name].extend(rets)
+        if self.selfplay is not None:
+            self.selfplay.load_state_dict(ckpt.extra_state("selfplay"))
 
     def _payload(self) -> dict[str, Any]:
         """What a checkpoint of the current state holds (:func:`save_checkpoint`'s
@@ -264,7 +320,8 @@ class Trainer:
             "observation": self.observation_meta,
             "input_dims": self.input_dims,
             "learners": [{**spec.to_dict(),
-                          "scenario_seats": [self.env.learner_seats[c] for c in spec.seats]}
+                          "scenario_seats": [self.env.learner_seats[c]
+                                             for c in self.cols[spec.name]]}
                          for spec in self.specs],
             "progress": {"global_step": self.global_step, "iteration": self.iteration,
                          "episodes": self.episodes, "elapsed": self.elapsed, "cut": self.cut},
@@ -276,7 +333,8 @@ class Trainer:
         }
         states = {n: lr.state_dict() for n, lr in self.learners.items()}
         arrays = {n: a for n, lr in self.learners.items() if (a := lr.arrays())}
-        return {"meta": meta, "states": states, "arrays": arrays}
+        extra = {"selfplay": self.selfplay.state_dict()} if self.selfplay is not None else None
+        return {"meta": meta, "states": states, "arrays": arrays, "extra": extra}
 
     def save(self, payload: dict[str, Any] | None = None) -> Path:
         """Write a checkpoint of the current state (or of ``payload``, from
@@ -315,7 +373,14 @@ class Trainer:
         """Restart every match from seeds derived from (seed, iteration)."""
         for lr in self.learners.values():
             lr.new_segment()
-        return self.env.reset(seed=self._segment_seed())
+        sp = self.selfplay
+        if sp is None:
+            return self.env.reset(seed=self._segment_seed())
+        sp.snapshot(self.env, self.learners[sp.learner], self.global_step)
+        sp.before_reset(self.env)
+        obs = self.env.reset(seed=self._segment_seed())
+        sp.after_reset(self.env)
+        return obs
 
     def _record_episode(self, ep: dict[str, Any], rewards: np.ndarray, scale: float) -> None:
         self.episodes += 1
@@ -343,6 +408,9 @@ class Trainer:
         update raises :class:`StopRequested`)."""
         metrics: dict[str, float] = {}
         E, D, env = self.E, self.D, self.env
+        sp = self.selfplay
+        if sp is not None:
+            sp.snapshot(env, self.learners[sp.learner], self.global_step)
         for _ in range(self.rollout_steps):
             masks = self.action_mask(obs) if self.action_mask is not None else None
             inputs = env.inputs if self.inputs else {}
@@ -357,6 +425,8 @@ class Trainer:
                 scale = self.schedule.victory_scale(self.global_step)
                 for ep in info["episodes"]:
                     self._record_episode(ep, rewards, scale)
+                if sp is not None:
+                    sp.on_episodes(env, info["episodes"], trunc, self.cols[sp.learner][0])
             final = info["final_obs"]
             inputs = env.inputs if self.inputs else {}
             ready = []
@@ -381,6 +451,8 @@ class Trainer:
                     metrics[f"{key}/{name}" if len(self.learners) > 1 else key] = val
             if self.stop():
                 break
+        if sp is not None:
+            metrics.update(sp.metrics())
         return obs, metrics
 
     def _window_metrics(self) -> dict[str, float]:

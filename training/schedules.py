@@ -194,7 +194,9 @@ class CycleSchedule(OpponentSchedule):
 class WinRateCurriculum(OpponentSchedule):
     """Bot weakness in steps (``levels``), one level up each time the win rate over the
     last ``window`` episodes played at the current level reaches ``threshold`` (with at
-    least ``min_episodes`` of them). Only wins count; draws and losses do not.
+    least ``min_episodes`` of them). Only wins count; draws and losses do not. With
+    ``demote`` > 0 it also steps one level down when that win rate falls below
+    ``demote`` (a team that stopped winning practises where it still wins).
 
     Episodes whose opponent label names another weakness (``smart(w=0.1)``: finished
     before the new level reached the env) are not counted. Evaluation is not affected:
@@ -204,7 +206,8 @@ class WinRateCurriculum(OpponentSchedule):
     kind = "winrate"
 
     def __init__(self, levels: tuple[float, ...] | list[float] = (0.1, 0.25, 0.5, 0.75, 1.0),
-                 threshold: float = 0.6, window: int = 100, min_episodes: int = 50):
+                 threshold: float = 0.6, window: int = 100, min_episodes: int = 50,
+                 demote: float = 0.0):
         levels = tuple(float(w) for w in levels)
         if not levels or any(not 0.0 <= w <= 1.0 for w in levels):
             raise ValueError(f"winrate curriculum levels must be weaknesses in [0, 1], "
@@ -216,7 +219,10 @@ class WinRateCurriculum(OpponentSchedule):
         if window <= 0 or not 0 < min_episodes <= window:
             raise ValueError(f"winrate curriculum needs window > 0 and 0 < min_episodes <= "
                              f"window, got {window}, {min_episodes}")
-        self.levels, self.threshold = levels, float(threshold)
+        if not 0.0 <= demote < threshold:
+            raise ValueError(f"winrate curriculum demote must be in [0, threshold), got "
+                             f"{demote}")
+        self.levels, self.threshold, self.demote = levels, float(threshold), float(demote)
         self.window, self.min_episodes = int(window), int(min_episodes)
         self.level = 0
         self.results: deque[float] = deque(maxlen=self.window)
@@ -241,9 +247,13 @@ class WinRateCurriculum(OpponentSchedule):
         if seen and round(self.weakness, 4) not in seen:
             return
         self.results.append(1.0 if outcome == "win" else 0.0)
-        if (self.level < len(self.levels) - 1 and len(self.results) >= self.min_episodes
-                and self.win_rate() >= self.threshold):
+        if len(self.results) < self.min_episodes:
+            return
+        if self.level < len(self.levels) - 1 and self.win_rate() >= self.threshold:
             self.level += 1
+            self.results.clear()
+        elif self.level > 0 and self.win_rate() < self.demote:
+            self.level -= 1
             self.results.clear()
 
     def state_dict(self) -> dict[str, Any]:

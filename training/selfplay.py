@@ -9,15 +9,18 @@ for the learner and every snapshot ever added (a new snapshot starts at the lear
 current rating); decided games and double knock-outs are rated, games cut by the time
 limit are not (a timeout says nothing about who is better).
 
-Driving it (the runner's job): every ``every`` env steps ``add(learner.state_dict(),
-step)``; at each env's episode start put ``frozen(opponent_for(env, episode), make)``
-(as a Policy) in the opponent seats; at its end ``record(id, outcome, truncated)``.
+:class:`SelfPlay` drives a pool inside a training run: every ``every`` env steps it adds
+a snapshot of the learner and registers it with the vector env as a named opponent (a
+frozen Policy, :meth:`~alphatank.envs.vector.VectorMatchEnv.add_opponent`); before each
+env's next episode starts it names that episode's snapshot
+(:meth:`~alphatank.envs.vector.VectorMatchEnv.set_env_opponents`), and it rates every
+finished game.
 """
 
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -25,6 +28,7 @@ import numpy as np
 import torch
 
 from alphatank.stats import League
+from alphatank.training.presets import check_pool_args
 
 # Parts of a learner's state_dict a frozen opponent does not need.
 TRAINING_ONLY = ("optimizer", "generator", "np_rng", "ret_norm")
@@ -60,11 +64,7 @@ class SnapshotPool:
 
     def __init__(self, window: int = 8, latest_share: float = 0.5, every: int = 200_000,
                  seed: int = 0, learner: str = "learner"):
-        if window < 1 or every < 1:
-            raise ValueError(f"snapshot pool needs window >= 1 and every >= 1, got {window}, "
-                             f"{every}")
-        if not 0.0 <= latest_share <= 1.0:
-            raise ValueError(f"latest_share must be in [0, 1], got {latest_share}")
+        check_pool_args(window, latest_share, every)
         self.window, self.latest_share, self.every = int(window), float(latest_share), int(every)
         self.seed = int(seed)
         self.snapshots: deque[Snapshot] = deque(maxlen=self.window)
@@ -178,3 +178,80 @@ class SnapshotPool:
         self.next_id = int(state["next_id"])
         self.last_step = None if state["last_step"] is None else int(state["last_step"])
         self.games = {k: int(v) for k, v in state["games"].items()}
+
+
+def opponent_name(snap_id: int) -> str:
+    """The env's name of a snapshot opponent; per-opponent win rates show it as
+    ``selfplay``."""
+    return f"selfplay(snap{snap_id})"
+
+
+class SelfPlay:
+    """A :class:`SnapshotPool` inside a training run over ``num_envs`` envs.
+
+    ``make_policy(snapshot)`` turns a snapshot into the Policy that fills the pool's seats
+    (the seats no learner drives). Each env's ``k``-th episode since the run started plays
+    ``pool.opponent_for(env, k)``: chosen before that episode starts (the vector env resets
+    ended episodes inside ``step``), so a run and its resume play the same games.
+    """
+
+    def __init__(self, pool: SnapshotPool, make_policy: Callable[[Snapshot], Any],
+                 num_envs: int, learner: str = "learner"):
+        self.pool, self.make_policy, self.num_envs = pool, make_policy, int(num_envs)
+        self.learner = learner  # the name of the learner the snapshots are taken of
+        self.games = np.zeros(self.num_envs, dtype=np.int64)  # episodes started per env
+        self.current: list[int | None] = [None] * self.num_envs
+        self.next: list[int] = [0] * self.num_envs
+        self._registered: set[int] = set()
+
+    def snapshot(self, env: Any, learner: Any, step: int) -> None:
+        """Add a snapshot of ``learner`` when one is due at env step ``step``, and
+        register every snapshot of the window the env does not know yet."""
+        if self.pool.due(step):
+            self.pool.add(learner.state_dict(), step)
+        for snap in self.pool.snapshots:
+            if snap.id not in self._registered:
+                env.add_opponent(opponent_name(snap.id), self.make_policy(snap))
+                self._registered.add(snap.id)
+
+    def _choose(self, env: Any, envs: Sequence[int]) -> None:
+        for e in envs:
+            self.next[e] = self.pool.opponent_for(e, int(self.games[e]))
+        env.set_env_opponents([opponent_name(i) for i in self.next])
+
+    def before_reset(self, env: Any) -> None:
+        """Every env is about to start a new episode (``env.reset``)."""
+        self._choose(env, range(self.num_envs))
+
+    def after_reset(self, env: Any) -> None:
+        self.current = list(self.next)
+        self.games += 1
+        self._choose(env, range(self.num_envs))
+
+    def on_episodes(self, env: Any, episodes: Sequence[dict], truncated: np.ndarray,
+                    col: int) -> None:
+        """Rate the finished ``episodes`` (outcome of learner column ``col``; truncated
+        games are not rated); their envs already play the next episode's snapshot."""
+        ended = []
+        for ep in episodes:
+            e = int(ep["env"])
+            self.pool.record(self.current[e], ep["outcome"][col], bool(truncated[e]))
+            self.current[e] = self.next[e]
+            self.games[e] += 1
+            ended.append(e)
+        if ended:
+            self._choose(env, ended)
+
+    def metrics(self) -> dict[str, float]:
+        return self.pool.metrics()
+
+    def state_dict(self) -> dict[str, Any]:
+        return {"pool": self.pool.state_dict(), "games": torch.from_numpy(self.games.copy())}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.pool.load_state_dict(state["pool"])
+        games = state["games"].numpy()
+        k = min(len(games), self.num_envs)  # a resume may change num_envs
+        self.games[:] = 0
+        self.games[:k] = games[:k]
+        self._registered.clear()

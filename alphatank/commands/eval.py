@@ -8,6 +8,8 @@ generator its actions are drawn from), so results do not change with ``--num-env
 from __future__ import annotations
 
 import argparse
+import json
+from pathlib import Path
 
 from alphatank.commands.argtypes import positive_int, seed
 from alphatank.errors import InputError, as_input_error
@@ -30,6 +32,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--greedy", action="store_true", help="most likely actions, no sampling")
     p.add_argument("--seed", type=seed, default=0, help="seed of the game sequence")
     p.add_argument("--num-envs", type=positive_int, default=16, help="matches played at once")
+    p.add_argument("--team-stats", action="store_true",
+                   help="also measure cooperation in the checkpoint's own scenario: share of "
+                        "won games in which every teammate hit an enemy, kills in crossfire, "
+                        "hits per seat (--games games, one policy per seat)")
     p.add_argument("--csv", metavar="FILE", help="also write the rows as CSV")
     p.add_argument("--json", metavar="FILE",
                    help="also write the rows as JSON (with every game's outcome)")
@@ -69,11 +75,24 @@ def run(args: argparse.Namespace) -> int:
     if args.ratings:
         print("\nopenskill (Plackett-Luce) ratings from these games (draws are ties):")
         print(rating_table(results_league(results)))
+    stats = []
+    if args.team_stats:
+        from alphatank.training.teamstats import format_team_stats, team_stats
+        try:
+            for arg in args.checkpoints:
+                stats.append(team_stats(checkpoint_source(arg), games=args.games,
+                                        seed=args.seed, scenario=args.scenario, team=args.team))
+                print(format_team_stats(stats[-1]))
+        except ValueError as exc:
+            raise as_input_error(exc) from None
     try:
         if args.csv:
             write_csv(results, args.csv)
         if args.json:
             write_json(results, args.json, per_game=True)
+            if stats:
+                Path(args.json).with_suffix(".team.json").write_text(
+                    json.dumps(stats, indent=1) + "\n", encoding="utf-8")
     except OSError as exc:
         raise InputError(f"cannot write {exc.filename}: {exc.strerror}") from None
     return 0

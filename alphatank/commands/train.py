@@ -39,7 +39,7 @@ DEFAULT_PRESET = "ppo_vs_aggressive"
 SCHEDULES = ("none", "cycle:fixed", "cycle:random", "cycle:adaptive")
 SHAPES = ("linear", "sigmoid")
 NEW_RUN_ONLY = ("preset", "config", "scenario", "map", "schedule", "curriculum", "hp", "ppo",
-                "sac")
+                "sac", "init_from")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -65,6 +65,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     what.add_argument("--curriculum", nargs="?", const=True, metavar="START:END[:SHAPE]",
                       help="raise the bots' weakness (probability of acting per tick) over "
                            "the run; default 0.1:0.8, shape linear or sigmoid")
+    what.add_argument("--init-from", metavar="CHECKPOINT",
+                      help="warm start: every learner starts from the PPO learner of this "
+                           "checkpoint (a run or checkpoint folder, or agent:NAME, e.g. a 1v1 "
+                           "agent for a team run; new inputs start at zero weight)")
     what.add_argument("--hp", action="append", default=[], metavar="ALGO.FIELD=VALUE,...",
                       help="set a hyperparameter of every learner of that algorithm, e.g. "
                            "ppo.update_epochs=4 (repeatable; see the list below)")
@@ -200,13 +204,21 @@ def build_run(args: argparse.Namespace) -> TrainConfig:
         cfg = dataclasses.replace(cfg, scenario=args.scenario)
     if args.map is not None:
         cfg = dataclasses.replace(cfg, map=args.map)
+    if args.init_from is not None:
+        from alphatank.game.seats import checkpoint_source
+        from alphatank.training.checkpoint import CheckpointError, resolve_checkpoint_dir
+        try:
+            resolve_checkpoint_dir(checkpoint_source(args.init_from))
+        except (CheckpointError, ValueError) as exc:
+            raise ValueError(f"--init-from: {exc}") from None
+        cfg = dataclasses.replace(cfg, init_from=args.init_from)
     try:
         sc = run_scenario(cfg)
     except ValueError as exc:
         raise ValueError(f"{'--map: ' if args.map is not None else ''}{exc}") from None
     n = len(sc.learner_seats)
-    if not learners_fit(run_learners(cfg, n), n):
-        if args.scenario is None:
+    if not learners_fit(run_learners(cfg, n), n, selfplay=bool(cfg.selfplay)):
+        if args.scenario is None or cfg.selfplay:
             raise ValueError(f"learners {[(s.name, list(s.seats)) for s in cfg.learners]} do "
                              f"not drive scenario {sc.name!r}'s {n} learner seats exactly once")
         first = cfg.learners[0]
@@ -281,6 +293,10 @@ def run(args: argparse.Namespace) -> int:
         from alphatank.training.runner import Trainer
         with _one_line_warnings():
             trainer = Trainer(cfg, run_dir, progress=progress)
+        for name, counts in trainer.warm_start.items():
+            print(f"warm start {name} from {cfg.init_from}: {counts['mapped']} features "
+                  f"mapped, {counts['new']} new (zero weight), {counts['dropped']} dropped"
+                  f"{', critic copied' if counts['critic'] else ', critic fresh'}")
     summary = trainer.train()
     code = report(summary)
     # the process ends now: spare it the final garbage collections over torch's objects

@@ -117,6 +117,7 @@ class VectorMatchEnv:
         self._started = False
         self._shape = (num_envs, L, 3)
         self._input_names = tuple(inputs)
+        self._agent_state: Any = None  # built on first use of input_state
         for name in inputs:
             check_input(self, name)
         self.inputs: dict[str, np.ndarray] = self._read_inputs()
@@ -131,6 +132,16 @@ class VectorMatchEnv:
     def input_alive(self) -> np.ndarray:
         """(num_envs, L): 1 where the learner seat's tank is alive."""
         return self.core.batch.alive[:, self.core.driven_idx]
+
+    def input_state(self) -> np.ndarray:
+        """(num_envs, L, S): each learner seat's agent-specific global state for a
+        centralised critic (:class:`~alphatank.game.state.AgentState`; zeros but the seat
+        id once the seat is dead)."""
+        if self._agent_state is None:
+            from alphatank.game.state import AgentState
+            core = self.core
+            self._agent_state = AgentState(core.batch, core.teams, core.driven)
+        return self._agent_state.build()
 
     @property
     def layout(self) -> ObsLayout:

@@ -1,0 +1,55 @@
+"""``alphatank agents``: list the trained agents shipped with the package (they load by
+name wherever a checkpoint does: ``agent:NAME``), or export a run's checkpoint as one."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    sub = p.add_subparsers(dest="action")
+    sub.add_parser("list", help="list the shipped agents (the default)")
+    ex = sub.add_parser("export", help="write a checkpoint as an agent folder (weights only)")
+    ex.add_argument("checkpoint", help="checkpoint folder or run folder (its latest save)")
+    ex.add_argument("dest", help="agent folder to write (e.g. alphatank/data/agents/NAME)")
+    ex.add_argument("--description", default="", help="one line about the agent")
+    ex.add_argument("--eval", metavar="FILE.json",
+                    help="an `alphatank eval --json` file to record with the agent")
+    ex.add_argument("--command", action="append", default=[], metavar="TEXT",
+                    help="a command that made or evaluated it (repeatable)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from alphatank.training.checkpoint import CheckpointError
+
+    if args.action == "export":
+        from alphatank.training.agents import export_agent
+        record = {"description": args.description, "commands": list(args.command)}
+        try:
+            if args.eval:
+                record["eval"] = json.loads(Path(args.eval).read_text(encoding="utf-8"))
+            dest = export_agent(args.checkpoint, args.dest, record)
+        except (CheckpointError, OSError, json.JSONDecodeError) as exc:
+            print(f"error: {exc}")
+            return 2
+        size = sum(f.stat().st_size for f in dest.iterdir())
+        print(f"agent {dest.name}: {dest} ({size / 1e6:.2f} MB)")
+        return 0
+    from alphatank.game.seats import agent_path, shipped_agents
+    from alphatank.training.agents import agent_summary
+
+    names = shipped_agents()
+    if not names:
+        print("no shipped agents")
+        return 0
+    print(f"{'agent':20s} {'scenario':18s} {'steps':>10s} {'train s':>8s}  win rate (eval)")
+    for name in names:
+        s = agent_summary(agent_path(name))
+        rows = s["eval"] if isinstance(s["eval"], list) else [s["eval"]]
+        win = ", ".join(f"{100 * r['win_rate']:.0f}% [{100 * r['ci95_low']:.0f}, "
+                        f"{100 * r['ci95_high']:.0f}] of {r['games']}"
+                        for r in rows if r and "win_rate" in r)
+        print(f"{name:20s} {s['scenario']:18s} {s['steps']:>10,d} {s['elapsed_s']:>8.0f}  {win}")
+    return 0

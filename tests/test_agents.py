@@ -1,0 +1,69 @@
+"""Shipped agents: every Table 3 row ships, loads with weights_only=True and plays a game
+in its own scenario; export strips training state; unknown names list the shipped ones."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+import torch
+
+from alphatank.cli import main
+from alphatank.game.lineup import build_lineup
+from alphatank.game.seats import SeatError, agent_path, shipped_agents
+from alphatank.training.checkpoint import load_checkpoint, load_policy
+from alphatank.training.hparams import PPOConfig
+from alphatank.training.presets import LearnerSpec, TrainConfig
+from alphatank.training.runner import Trainer
+
+TABLE3 = ("ppo_vs_smart", "ppo_vs_aggressive", "ppo_vs_dodge", "ppo_vs_defensive",
+          "team_vs_2smart", "team_vs_def", "team_vs_def_2smart", "team_vs_four_bots")
+
+
+def test_every_table3_row_ships_in_under_10_mb():
+    assert set(TABLE3) <= set(shipped_agents())
+    size = sum(f.stat().st_size for name in shipped_agents()
+               for f in Path(agent_path(name)).iterdir())
+    assert size < 10e6
+
+
+@pytest.mark.parametrize("name", shipped_agents())
+def test_shipped_agent_loads_weights_only_and_plays_its_scenario(name):
+    path = Path(agent_path(name))
+    for pt in path.glob("*.pt"):
+        state = torch.load(pt, weights_only=True)
+        assert "optimizer" not in state and "net" in state
+    ckpt = load_checkpoint(path)
+    assert ckpt.meta["agent"]["progress"]["global_step"] > 0
+    lineup = build_lineup(ckpt.scenario, learner=f"agent:{name}")
+    ep = lineup.start(seed=1, tick_limit=120).run()
+    assert ep.ticks > 0
+    assert all(type(c).__name__ == "CheckpointPolicy"
+               for s, c in zip(ckpt.scenario.seats, lineup.controllers, strict=True)
+               if s.controller == "learner")
+
+
+def test_unknown_agent_lists_the_shipped_ones():
+    with pytest.raises(SeatError, match="unknown agent 'nobody'; shipped agents: "):
+        agent_path("nobody")
+
+
+def test_export_strips_training_state_and_lists(tmp_path, capsys):
+    cfg = TrainConfig(name="one", scenario="vs_aggressive", total_steps=64, num_envs=2,
+                      wandb="disabled", game={"max_steps": 40}, learners=(LearnerSpec(
+                          "ppo", "ppo", (0,), PPOConfig(num_steps=16, update_epochs=1)),))
+    Trainer(cfg, tmp_path / "one", progress=False).train()
+    (tmp_path / "e.json").write_text(json.dumps([{"win_rate": 0.5, "games": 2}]))
+    assert main(["agents", "export", str(tmp_path / "one"), str(tmp_path / "agent"),
+                 "--description", "tiny", "--eval", str(tmp_path / "e.json")]) == 0
+    state = torch.load(tmp_path / "agent" / "ppo.pt", weights_only=True)
+    assert set(state) == {"net", "obs_norm", "updates"}
+    meta = load_checkpoint(tmp_path / "agent").meta
+    assert meta["agent"]["description"] == "tiny" and meta["agent"]["eval"][0]["games"] == 2
+    assert "windows" not in meta
+    pol = load_policy(tmp_path / "agent")
+    assert pol.learners["ppo"].obs_dim == load_checkpoint(tmp_path / "one").obs_dim
+    assert main(["agents"]) == 0
+    out = capsys.readouterr().out
+    assert all(name in out for name in shipped_agents()) or "no shipped agents" in out

@@ -1,0 +1,65 @@
+"""Shipped agents: trained checkpoints that come with the package
+(``alphatank/data/agents/<NAME>/``) and load by name wherever a checkpoint does
+(``agent:NAME`` seats, ``alphatank eval agent:NAME``, ``--init-from agent:NAME``).
+
+An agent folder is a checkpoint folder stripped to what inference and warm starts need:
+``meta.json`` (with an ``agent`` record: where it came from, its training budget and its
+evaluation) and one ``<learner>.pt`` per learner without optimiser, generator or reward
+scaling states. It loads with ``torch.load(weights_only=True)`` like any checkpoint; it
+cannot be resumed (``alphatank train --resume`` needs the optimiser), but a new run can
+start from it with ``--init-from agent:NAME``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from alphatank.training.checkpoint import _sha256, load_checkpoint
+
+# What a learner's state_dict holds only to continue training.
+TRAINING_ONLY = ("optimizer", "generator", "np_rng", "ret_norm")
+
+
+def export_agent(source: str | Path, dest: str | Path, record: dict[str, Any] | None = None
+                 ) -> Path:
+    """Write the checkpoint at ``source`` (a checkpoint or run folder) as an agent folder
+    ``dest`` (replaced atomically if it exists); ``record`` (description, evaluation,
+    commands, ...) is stored as ``meta["agent"]`` beside the source's progress."""
+    ckpt = load_checkpoint(source)
+    dest = Path(dest)
+    tmp = dest.with_name(f".{dest.name}.tmp-{os.getpid()}")
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    tmp.mkdir(parents=True)
+    files = {}
+    for name in ckpt.learner_names():
+        state = {k: v for k, v in ckpt.state(name).items() if k not in TRAINING_ONLY}
+        torch.save(state, tmp / f"{name}.pt")
+        files[f"{name}.pt"] = _sha256(tmp / f"{name}.pt")
+    meta = {k: v for k, v in ckpt.meta.items() if k not in ("windows", "wandb_id", "files")}
+    meta["agent"] = {"source": str(ckpt.path), "progress": ckpt.meta.get("progress", {}),
+                     **(record or {})}
+    meta["files"] = files
+    (tmp / "meta.json").write_text(json.dumps(meta, indent=1) + "\n", encoding="utf-8")
+    if dest.exists():
+        shutil.rmtree(dest)
+    os.replace(tmp, dest)
+    return dest
+
+
+def agent_summary(path: str | Path) -> dict[str, Any]:
+    """Name, scenario, learners, training steps and time, and the recorded evaluation of
+    an agent folder (for ``alphatank agents``)."""
+    ckpt = load_checkpoint(path)
+    rec = ckpt.meta.get("agent", {})
+    prog = rec.get("progress", ckpt.meta.get("progress", {}))
+    return {"name": Path(path).name, "scenario": ckpt.meta["scenario"].get("name", "?"),
+            "learners": ", ".join(f"{s.name} ({s.algo})" for s in ckpt.learner_specs),
+            "steps": int(prog.get("global_step", 0)), "elapsed_s": float(prog.get("elapsed", 0)),
+            "description": rec.get("description", ""), "eval": rec.get("eval", {})}
