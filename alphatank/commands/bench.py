@@ -45,6 +45,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--env", action="store_true", help="also measure env steps/s")
     p.add_argument("--bots", action="store_true", help="also measure bot decision cost")
     p.add_argument("--render", action="store_true", help="also measure renderer fps")
+    p.add_argument("--train", action="store_true",
+                   help="also measure PPO training steps/s against the raw env steps/s of the "
+                        "same workers and envs (alternating rounds; see benchtrain)")
+    p.add_argument("--train-preset", default="ppo_vs_smart", metavar="NAME",
+                   help="preset of --train (default: ppo_vs_smart, 128-step x 4-epoch PPO)")
+    p.add_argument("--train-workers", type=positive_int, default=2, metavar="N",
+                   help="env worker processes of --train (default: 2)")
+    p.add_argument("--train-envs", type=positive_int, default=32, metavar="N",
+                   help="matches stepped together in --train (default: 32)")
+    p.add_argument("--sac", action="store_true",
+                   help="also measure one SAC gradient step against its bare-torch floor, and "
+                        "SAC training steps/s per update-to-data ratio")
     p.add_argument("--json", metavar="FILE", help="write the figures as JSON")
     p.add_argument("--soak", action="store_true",
                    help="instead: soak test, --steps random-action env steps over --scenarios "
@@ -168,6 +180,15 @@ def run(args: argparse.Namespace) -> int:
         fps = render_bench()
         results["render_fps"] = fps
         print(f"renderer 4v4 with overlays: {fps:,.0f} frames/s")
+    if args.train:
+        from alphatank.commands.benchtrain import train_bench
+
+        results["train"] = train_bench(args.train_preset, args.train_workers, args.train_envs)
+    if args.sac:
+        from alphatank.commands.benchtrain import sac_step_bench, sac_train_bench
+
+        results["sac_step"] = sac_step_bench()
+        results["sac_train"] = sac_train_bench()
     _write_json(args.json, results)
     return 0
 

@@ -10,7 +10,7 @@
   Adam steps) with nothing else; and the env steps/s of SAC training at several
   update-to-data ratios.
 
-Run alone: ``python -m alphatank.commands.benchtrain --help``.
+Also runs alone: ``python -m alphatank.commands.benchtrain --help``.
 """
 
 from __future__ import annotations
