@@ -14,6 +14,7 @@ host, ``ray start --address HOST:PORT`` on the others; docs/distributed.md).
 from __future__ import annotations
 
 import os
+import socket
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -52,6 +53,24 @@ class Connection:
             ray.shutdown()
 
 
+PROBE_TIMEOUT_S = 5.0
+
+
+def _reachable(address: str) -> None:
+    """Fail fast (ClusterError) when nothing listens at ``HOST:PORT``: Ray itself keeps
+    retrying for minutes. Other address forms (``auto``, ``ray://...``) go to Ray as
+    they are."""
+    host, sep, port = address.rpartition(":")
+    if not sep or not host or not port.isdigit() or "/" in address:
+        return
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), PROBE_TIMEOUT_S).close()
+    except OSError as exc:
+        raise ClusterError(f"--ray {address}: nothing answers there ({exc.strerror or exc}); "
+                           f"start a head node with `ray start --head --port {port}` "
+                           f"(docs/distributed.md)") from None
+
+
 def ray_module(feature: str) -> Any:
     """``import ray``, or :class:`~alphatank.extras.MissingExtraError` naming ``feature``
     and the pip line that installs the extra."""
@@ -73,6 +92,7 @@ def connect(address: str | None = None, *, num_cpus: int | None = None,
         owned = True
         opts: dict[str, Any] = {"logging_level": "WARNING", "log_to_driver": True}
         if address:
+            _reachable(address)
             try:
                 ray.init(address=address, **opts)
             except (ConnectionError, ValueError, RuntimeError) as exc:

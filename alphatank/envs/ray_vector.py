@@ -23,6 +23,7 @@ Ray is imported when the env is built, never at module import.
 
 from __future__ import annotations
 
+import contextlib
 import time
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -78,6 +79,7 @@ class RayVectorMatchEnv:
     workers). Connects to Ray first if this process has not (a local instance)."""
 
     render_mode = None
+    can_lose_rollouts = True  # step() may raise RolloutLost (the Trainer collects again)
 
     def __init__(self, scenario: str | Scenario, num_envs: int, seed: int = 0,
                  observation: str | None = None, game_overrides: dict | None = None,
@@ -300,8 +302,6 @@ class RayVectorMatchEnv:
             return
         self._closed = True
         for r in self.runners:
-            try:
+            with contextlib.suppress(Exception):  # already gone, or the cluster is down
                 self._ray.kill(r, no_restart=True)
-            except Exception:  # already gone, or the cluster is shut down
-                pass
         self.runners = []
