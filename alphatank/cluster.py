@@ -101,6 +101,10 @@ def connect(address: str | None = None, *, num_cpus: int | None = None,
                                    f"({type(exc).__name__}: {first}); start one with "
                                    f"`ray start --head` (docs/distributed.md)") from None
         else:
+            # Ray runs its workers at nice 15 (below the raylet); env runners are the hot
+            # path, so a local instance runs them at the driver's priority (as the worker
+            # processes of --workers); a cluster's nodes set it at `ray start`
+            os.environ.setdefault("RAY_worker_niceness", "0")
             ray.init(address="local", num_cpus=num_cpus or os.cpu_count() or 1,
                      include_dashboard=False, **opts)
             local = True

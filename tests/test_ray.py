@@ -233,3 +233,13 @@ def test_without_the_extra_the_commands_say_how_to_install_it(tmp_path, verb):
     assert res.stderr.strip().splitlines()[-1] == (
         f"alphatank {verb[0]} --ray needs the 'ray' extra: pip install 'alphatank[ray]'")
     assert "Traceback" not in res.stderr
+
+
+def test_without_ray_flag_ray_is_never_imported(tmp_path):
+    code = ("import sys; from alphatank.cli import main; rc = main(sys.argv[1:]); "
+            "assert 'ray' not in sys.modules, 'ray was imported'; raise SystemExit(rc)")
+    res = subprocess.run([sys.executable, "-c", code, "train", "--runs", str(tmp_path), *TINY,
+                          "--total-steps", "64", "--workers", "2"],
+                         capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert "64 steps" in res.stdout

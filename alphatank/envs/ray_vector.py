@@ -37,6 +37,7 @@ from alphatank.sim.policy import Policy
 
 DEFAULT_MAX_RESTARTS = 3
 RESTART_TIMEOUT_S = 300.0  # how long to wait for Ray to bring a lost runner back
+START_TIMEOUT_S = 120.0  # how long the runners may wait for free CPUs on the cluster
 
 
 class RolloutLost(RuntimeError):
@@ -131,7 +132,15 @@ class RayVectorMatchEnv:
         self._started = False
         self._shape = (num_envs, self.num_learners, 3)
         try:
-            self._gather([r.pid.remote() for r in self.runners])
+            pids = [r.pid.remote() for r in self.runners]
+            ready, _ = ray.wait(pids, num_returns=len(pids), timeout=START_TIMEOUT_S)
+            if len(ready) < len(pids):
+                free = ray.available_resources().get("CPU", 0.0)
+                raise RuntimeError(f"{len(pids) - len(ready)} of {num_runners} env runners "
+                                   f"did not start within {START_TIMEOUT_S:.0f} s: the Ray "
+                                   f"cluster has {free:g} of {cpus:g} CPUs free (each runner "
+                                   f"needs one)")
+            self._gather(pids)
         except BaseException:
             self.close()
             raise
@@ -147,6 +156,10 @@ class RayVectorMatchEnv:
         """Results of one call per runner; a runner that died is brought back (settings
         replayed) and :class:`RolloutLost` raised once every runner answered."""
         ray = self._ray
+        try:
+            return ray.get(list(refs))  # one call: the common case
+        except (ray.exceptions.RayError, RolloutLost):
+            pass  # find out which runner failed, and how
         out: list[Any] = []
         lost: list[tuple[int, BaseException]] = []
         for k, ref in enumerate(refs):
