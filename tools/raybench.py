@@ -7,7 +7,9 @@ Env steps/s (random actions drawn in advance, seeded; no learner) for: one proce
 ``--workers 1/2`` (SubprocVectorMatchEnv) and ``--env-runners 1/2`` (RayVectorMatchEnv
 on a local instance), measured round-robin ``--repeats`` times (medians); Ray's start-up
 (``ray.init`` of a local instance) and the first runners' start; PPO updates/s of the
-shipped ``ppo_vs_aggressive`` learner (128 steps x 16 envs x 4 epochs) on one thread.
+shipped ``ppo_vs_aggressive`` learner (128 steps x 16 envs x 4 epochs) and of Table 7 as
+is (512 steps x 60 epochs) on one thread; training env steps/s of that run with N
+worker processes and N env runners.
 """
 
 from __future__ import annotations
@@ -37,8 +39,11 @@ def steps_per_s(env, acts: np.ndarray, warmup: int = 20) -> float:
     return (len(acts) - warmup) * env.num_envs / (time.perf_counter() - t0)
 
 
-def learner_rate(num_envs: int, repeats: int) -> dict[str, float]:
-    """Seconds per PPO update (rollout filled with real observations of the scenario)."""
+def learner_rate(num_envs: int, repeats: int, **ppo: int) -> dict[str, float]:
+    """A PPO learner's own time on one thread (rollout of real observations): seconds per
+    update, and acting + observing per vector step; what it absorbs when envs are free."""
+    import dataclasses
+
     from alphatank.envs.vector import VectorMatchEnv
     from alphatank.training.learners import make_learner
     from alphatank.training.presets import get_preset
@@ -46,23 +51,31 @@ def learner_rate(num_envs: int, repeats: int) -> dict[str, float]:
 
     limit_threads(1)
     spec = get_preset("ppo_vs_aggressive").learners[0]
+    spec = dataclasses.replace(spec, config=dataclasses.replace(spec.config, **ppo))
     env = VectorMatchEnv(SCENARIO, num_envs, seed=0)
     lr = make_learner(spec, env.obs_dim, num_envs, seed=0)
     obs = env.reset(seed=0)[:, 0]
-    times = []
+    updates, acting = [], []
     for _ in range(repeats):
+        spent = 0.0
         for _ in range(lr.rollout_steps):
+            t0 = time.perf_counter()
             act = lr.act(obs)
+            spent += time.perf_counter() - t0
             nxt, rew, term, trunc, info = env.step(act[:, None])
+            t0 = time.perf_counter()
             lr.observe(nxt[:, 0], rew[:, 0], term, trunc, info["final_obs"][:, 0])
+            spent += time.perf_counter() - t0
             obs = nxt[:, 0]
+        acting.append(spent)
         t0 = time.perf_counter()
         lr.update(obs)
-        times.append(time.perf_counter() - t0)
-    sec = statistics.median(times)
-    return {"update_s": sec, "updates_per_s": 1.0 / sec,
-            "env_steps_per_update": lr.rollout_steps * num_envs,
-            "absorbs_env_steps_per_s": lr.rollout_steps * num_envs / sec}
+        updates.append(time.perf_counter() - t0)
+    upd, act_s = statistics.median(updates), statistics.median(acting)
+    steps = lr.rollout_steps * num_envs
+    return {"num_steps": lr.rollout_steps, "update_epochs": spec.config.update_epochs,
+            "update_s": upd, "acting_s": act_s, "updates_per_s": 1.0 / (upd + act_s),
+            "env_steps_per_update": steps, "absorbs_env_steps_per_s": steps / (upd + act_s)}
 
 
 def training_rate(iterations: int, tmp: str) -> dict[str, float]:
@@ -128,6 +141,7 @@ def main() -> None:
     out["ray_overhead"] = {n: 1.0 - med[f"ray runners={n}"] / med[f"workers={n}"]
                            for n in (1, 2)}
     out["learner"] = learner_rate(args.envs, args.repeats)
+    out["learner_table7"] = learner_rate(args.envs, 1, num_steps=512, update_epochs=60)
     if args.train_iterations:
         import tempfile
 
@@ -148,10 +162,11 @@ def main() -> None:
     print(f"ray start (local instance): {out['ray_start_s']:.1f} s; first runner up in "
           f"{out['first_runner_start_s']:.1f} s (2 worker processes: "
           f"{out['workers_start_s']:.1f} s)")
-    lr = out["learner"]
-    print(f"PPO learner: {lr['update_s']:.2f} s per update of {lr['env_steps_per_update']} "
-          f"env steps = {lr['updates_per_s']:.2f} updates/s, absorbs "
-          f"{lr['absorbs_env_steps_per_s']:.0f} env steps/s")
+    for lr in (out["learner"], out["learner_table7"]):
+        print(f"PPO learner {lr['num_steps']} steps x {lr['update_epochs']} epochs: "
+              f"{lr['update_s']:.2f} s per update + {lr['acting_s']:.2f} s acting per "
+              f"{lr['env_steps_per_update']} env steps = {lr['updates_per_s']:.2f} updates/s, "
+              f"absorbs {lr['absorbs_env_steps_per_s']:.0f} env steps/s")
     if args.json:
         with open(args.json, "w", encoding="utf-8") as f:
             json.dump(out, f, indent=1)
