@@ -14,7 +14,9 @@ host, ``ray start --address HOST:PORT`` on the others; docs/distributed.md).
 from __future__ import annotations
 
 import os
+import signal
 import socket
+import threading
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -39,6 +41,7 @@ class Connection:
     seconds: float
     local: bool
     owned: bool
+    handlers: tuple[Any, ...] = ()  # SIGINT, SIGTERM handlers from before ray.init
 
     def describe(self) -> str:
         how = ("started a local Ray instance" if self.local else
@@ -51,9 +54,14 @@ class Connection:
 
         if self.owned and ray.is_initialized():
             ray.shutdown()
+        if self.handlers and threading.current_thread() is threading.main_thread():
+            for sig, handler in zip(SIGNALS, self.handlers, strict=True):
+                if handler is not None:  # None: not set from Python
+                    signal.signal(sig, handler)  # ray.init replaced them
 
 
 PROBE_TIMEOUT_S = 5.0
+SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
 def _reachable(address: str) -> None:
@@ -88,8 +96,10 @@ def connect(address: str | None = None, *, num_cpus: int | None = None,
     ray = ray_module(feature)
     t0 = time.perf_counter()
     owned = local = False
+    handlers: tuple[Any, ...] = ()
     if not ray.is_initialized():
         owned = True
+        handlers = tuple(signal.getsignal(s) for s in SIGNALS)
         opts: dict[str, Any] = {"logging_level": "WARNING", "log_to_driver": True}
         if address:
             _reachable(address)
@@ -113,4 +123,5 @@ def connect(address: str | None = None, *, num_cpus: int | None = None,
     ctx = ray.get_runtime_context()
     return Connection(address=str(getattr(ctx, "gcs_address", address or "local")),
                       cpus=float(resources.get("CPU", 0.0)), nodes=nodes,
-                      seconds=time.perf_counter() - t0, local=local, owned=owned)
+                      seconds=time.perf_counter() - t0, local=local, owned=owned,
+                      handlers=handlers)

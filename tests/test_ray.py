@@ -97,11 +97,13 @@ def test_a_wrong_address_is_one_line(tmp_path):
 
 @pytest.fixture(scope="module")
 def cluster():
+    before = signal.getsignal(signal.SIGTERM)
     conn = connect(num_cpus=2)
     assert conn.local and conn.cpus == 2
     yield conn
     conn.close()
     assert not ray.is_initialized()
+    assert signal.getsignal(signal.SIGTERM) == before  # ray.init's handler is gone
 
 
 def test_env_runners_match_worker_processes_and_a_killed_one_comes_back(cluster):

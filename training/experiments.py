@@ -622,10 +622,12 @@ def run_job(job: Job) -> tuple[str, str | None, float]:
 
 def execute(jobs: Sequence[Job], workers: int = 1, progress: bool = True,
             on_done: Callable[[Job, str | None, float], None] | None = None,
-            ray: bool = False) -> dict[str, str]:
-    """Run ``jobs`` (``workers`` processes; 1: in this process; ``ray``: as tasks on the
-    connected Ray cluster, :mod:`alphatank.training.ray_jobs`) with a progress bar over
-    them; returns {job key: error} of the failed ones."""
+            runner: Callable[[Sequence[Job], Callable[[Job, str | None, float], None]],
+                             None] | None = None) -> dict[str, str]:
+    """Run ``jobs`` (``workers`` processes; 1: in this process; or ``runner(jobs,
+    finish)``, e.g. :func:`alphatank.training.ray_jobs.run_on_ray`, calling ``finish``
+    as each job ends) with a progress bar over them; returns {job key: error} of the
+    failed ones."""
     failed: dict[str, str] = {}
     if not jobs:
         return failed
@@ -643,10 +645,8 @@ def execute(jobs: Sequence[Job], workers: int = 1, progress: bool = True,
             bar.update(1)
 
     try:
-        if ray:
-            from alphatank.training.ray_jobs import run_on_ray
-
-            run_on_ray(jobs, finish)
+        if runner is not None:
+            runner(jobs, finish)
         elif workers <= 1:
             for job in jobs:
                 if bar is not None:

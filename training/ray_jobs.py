@@ -15,8 +15,8 @@ host nothing is needed. A row is finished when its ``done.json`` and evaluation 
 exist, as without Ray: the driver submits only what is missing (``--resume``), and a
 retried task skips what an earlier attempt finished, so finished rows are never redone.
 
-Ray is imported only here, and this module only by :func:`alphatank.training.experiments.
-execute` with ``ray=True``.
+Ray is imported only in :func:`run_on_ray`, which ``alphatank experiments --ray`` hands
+to :func:`alphatank.training.experiments.execute`.
 """
 
 from __future__ import annotations

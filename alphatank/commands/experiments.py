@@ -106,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
     command = _command(args)
     failed: dict[str, str] = {}
     if not args.report_only and todo:
-        connection = None
+        connection = runner = None
         workers, where = args.workers, f"{args.workers} worker(s)"
         if args.ray is not None:
             from alphatank.cluster import connect
@@ -114,6 +114,7 @@ def run(args: argparse.Namespace) -> int:
             connection = connect(args.ray or None, feature="alphatank experiments --ray")
             print(connection.describe(), flush=True)
             workers, where = max(1, int(connection.cpus)), f"Ray ({connection.cpus:g} CPUs)"
+            from alphatank.training.ray_jobs import run_on_ray as runner
         eta = estimate_minutes(plan, todo, workers)
         print(f"experiments {', '.join(t.name for t in plan.tables)}: {len(plan.jobs)} runs, "
               f"{len(todo)} to do, about {eta:.0f} min with {where} -> "
@@ -127,7 +128,7 @@ def run(args: argparse.Namespace) -> int:
 
         try:
             failed = execute(todo, args.workers, progress=not args.no_progress,
-                             on_done=on_done, ray=connection is not None)
+                             on_done=on_done, runner=runner)
         except KeyboardInterrupt:
             print("interrupted: finished runs and evaluations are kept; --resume finishes "
                   "the rest", file=sys.stderr)
