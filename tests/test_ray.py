@@ -16,6 +16,8 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -194,6 +196,22 @@ def test_a_run_goes_on_when_an_env_runner_is_killed(cluster, tmp_path, capsys):
     assert [r["step"] for r in rows if "charts/sps" in r] == [64, 128, 192]
 
 
+def kill_first(title: str, killed: list[int], stop: threading.Event) -> None:
+    """SIGKILL the first process whose title starts with ``title`` (a Ray worker running
+    that task), once."""
+    while not stop.is_set():
+        for proc in Path("/proc").iterdir():
+            try:
+                if proc.name.isdigit() and (proc / "cmdline").read_bytes().startswith(
+                        title.encode()):
+                    os.kill(int(proc.name), signal.SIGKILL)
+                    killed.append(int(proc.name))
+                    return
+            except OSError:
+                continue
+        time.sleep(0.02)
+
+
 def test_two_row_experiment_as_ray_tasks_and_resume(cluster, tmp_path, capsys):
     from test_experiments import write_rows
 
@@ -201,7 +219,16 @@ def test_two_row_experiment_as_ray_tasks_and_resume(cluster, tmp_path, capsys):
     out = tmp_path / "out"
     args = ["experiments", "tiny", "--experiments-dir", str(root), "--out", str(out),
             "--steps", "256", "--games", "2", "--budget", "2", "--no-progress", "--ray"]
-    assert main(args) == 0
+    killed: list[int] = []
+    stop = threading.Event()
+    killer = threading.Thread(target=kill_first, args=("ray::train_task", killed, stop))
+    killer.start()
+    try:
+        assert main(args) == 0  # the killed training task was retried (max_retries)
+    finally:
+        stop.set()
+        killer.join()
+    assert len(killed) == 1
     text = capsys.readouterr().out
     assert "2 runs, 2 to do" in text and "with Ray (2 CPUs)" in text
     assert text.count(" seed 0: done") == 2  # progress, one line per finished row
