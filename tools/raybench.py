@@ -108,6 +108,7 @@ def main() -> None:
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--train-iterations", type=int, default=4,
                    help="PPO iterations per training measurement (0: none)")
+    p.add_argument("--no-learner", action="store_true", help="skip the learner rates")
     p.add_argument("--json", metavar="FILE")
     args = p.parse_args()
 
@@ -140,8 +141,9 @@ def main() -> None:
     out["steps_per_s"] = med
     out["ray_overhead"] = {n: 1.0 - med[f"ray runners={n}"] / med[f"workers={n}"]
                            for n in (1, 2)}
-    out["learner"] = learner_rate(args.envs, args.repeats)
-    out["learner_table7"] = learner_rate(args.envs, 1, num_steps=512, update_epochs=60)
+    if not args.no_learner:
+        out["learner"] = learner_rate(args.envs, args.repeats)
+        out["learner_table7"] = learner_rate(args.envs, 1, num_steps=512, update_epochs=60)
     if args.train_iterations:
         import tempfile
 
@@ -162,7 +164,7 @@ def main() -> None:
     print(f"ray start (local instance): {out['ray_start_s']:.1f} s; first runner up in "
           f"{out['first_runner_start_s']:.1f} s (2 worker processes: "
           f"{out['workers_start_s']:.1f} s)")
-    for lr in (out["learner"], out["learner_table7"]):
+    for lr in (out[k] for k in ("learner", "learner_table7") if k in out):
         print(f"PPO learner {lr['num_steps']} steps x {lr['update_epochs']} epochs: "
               f"{lr['update_s']:.2f} s per update + {lr['acting_s']:.2f} s acting per "
               f"{lr['env_steps_per_update']} env steps = {lr['updates_per_s']:.2f} updates/s, "
