@@ -101,6 +101,35 @@ def training_rate(iterations: int, tmp: str) -> dict[str, float]:
     return out
 
 
+def head_node_start() -> dict[str, float]:
+    """Seconds of ``ray start --head`` (2 CPUs, 127.0.0.1) and of a driver joining it."""
+    import os
+    import secrets
+    import socket
+    import subprocess
+    import sys
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    env = {**os.environ, "RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": secrets.token_hex(16),
+           "RAY_USAGE_STATS_ENABLED": "0"}
+    ray_cli = [sys.executable, "-m", "ray.scripts.scripts"]
+    t0 = time.perf_counter()
+    subprocess.run([*ray_cli, "start", "--head", "--node-ip-address", "127.0.0.1", "--port",
+                    str(port), "--num-cpus", "2", "--include-dashboard", "false"],
+                   check=True, capture_output=True, env=env)
+    start = time.perf_counter() - t0
+    try:
+        join = subprocess.run(
+            [sys.executable, "-c", "from alphatank.cluster import connect; "
+             f"print(connect('127.0.0.1:{port}').seconds)"],
+            check=True, capture_output=True, text=True, env=env)
+    finally:
+        subprocess.run([*ray_cli, "stop", "--force"], capture_output=True, env=env)
+    return {"ray_start_head_s": start, "join_s": float(join.stdout.strip().splitlines()[-1])}
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--envs", type=int, default=16)
@@ -109,6 +138,8 @@ def main() -> None:
     p.add_argument("--train-iterations", type=int, default=4,
                    help="PPO iterations per training measurement (0: none)")
     p.add_argument("--no-learner", action="store_true", help="skip the learner rates")
+    p.add_argument("--head", action="store_true",
+                   help="also time `ray start --head` and a driver joining it")
     p.add_argument("--json", metavar="FILE")
     args = p.parse_args()
 
@@ -169,6 +200,10 @@ def main() -> None:
               f"{lr['update_s']:.2f} s per update + {lr['acting_s']:.2f} s acting per "
               f"{lr['env_steps_per_update']} env steps = {lr['updates_per_s']:.2f} updates/s, "
               f"absorbs {lr['absorbs_env_steps_per_s']:.0f} env steps/s")
+    if args.head:
+        out["head"] = head = head_node_start()
+        print(f"ray start --head: {head['ray_start_head_s']:.1f} s; a driver joins it in "
+              f"{head['join_s']:.1f} s")
     if args.json:
         with open(args.json, "w", encoding="utf-8") as f:
             json.dump(out, f, indent=1)
