@@ -1,5 +1,5 @@
 # Set-up on a fresh machine is part of every target: .venv is created and filled on demand,
-# with every extra (train, video, sb3) and the dev tools; constraints.txt pins torch.
+# with every extra (train, video, sb3, ray) and the dev tools; constraints.txt pins torch.
 PY ?= python3.11
 VENV := .venv
 BIN := $(VENV)/bin

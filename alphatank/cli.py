@@ -88,8 +88,10 @@ def main(argv: list[str] | None = None) -> int:
     except MissingExtraError as exc:  # an ImportError, not bad input: its own message
         if os.environ.get("ALPHATANK_TRACEBACK"):
             raise
-        print(f"alphatank {args.command} needs the '{exc.extra}' extra: "
-              f"{install_hint(exc.extra)}", file=sys.stderr)
+        who = f"alphatank {args.command}"  # or the option that needs it (--ray)
+        who = exc.feature if exc.feature.startswith(who + " ") else who
+        print(f"{who} needs the '{exc.extra}' extra: {install_hint(exc.extra)}",
+              file=sys.stderr)
         return EXIT_BAD_INPUT
     except (InputError, OSError) as exc:
         if os.environ.get("ALPHATANK_TRACEBACK"):

@@ -15,6 +15,7 @@ EXTRAS: dict[str, tuple[str, ...]] = {
     "train": ("torch", "wandb", "tqdm", "matplotlib", "openskill"),
     "video": ("imageio", "imageio_ffmpeg"),
     "sb3": ("stable_baselines3",),
+    "ray": ("ray",),  # --ray: experiments and env runners on a Ray cluster
 }
 
 

@@ -559,50 +559,75 @@ def _evaluate(job: Job, spec: EvalSpec) -> dict[str, Any]:
     return data
 
 
-def run_job(job: Job) -> tuple[str, str | None, float]:
-    """Train (unless finished) and evaluate what is missing (each evaluation on its own: one
-    that fails does not stop the others); returns (key, error or None, seconds). Failures
-    are written to ``<run_dir>/error.txt`` and do not raise."""
+Failure = tuple[str, str]  # (one line: type and message, the traceback)
+
+
+def train_step(job: Job) -> Failure | None:
+    """Train ``job`` unless it is finished; a failure is returned, not raised."""
     from alphatank.training.threads import limit_threads
-
-    t0 = time.time()
-    err = Path(job.run_dir) / "error.txt"
-    errors: list[tuple[str, str]] = []  # (one line, traceback)
-
-    def failed(exc: Exception) -> None:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
-        errors.append((f"{type(exc).__name__}: {first}", traceback.format_exc()))
 
     limit_threads()
     try:
         if not job.done_file.is_file():
             _train(job)
     except Exception as exc:  # a failed row is reported; the others go on
-        failed(exc)
-    else:
-        for spec in job.evals:
-            if not job.eval_file(spec).is_file():
-                try:
-                    _evaluate(job, spec)
-                except Exception as exc:
-                    failed(exc)
-    if not errors:
+        return _failure(exc)
+    return None
+
+
+def eval_step(job: Job, spec: EvalSpec) -> Failure | None:
+    """Evaluate ``job`` on ``spec`` unless that is on disk; a failure is returned."""
+    from alphatank.training.threads import limit_threads
+
+    limit_threads()
+    try:
+        if not job.eval_file(spec).is_file():
+            _evaluate(job, spec)
+    except Exception as exc:
+        return _failure(exc)
+    return None
+
+
+def _failure(exc: Exception) -> Failure:
+    first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    return f"{type(exc).__name__}: {first}", traceback.format_exc()
+
+
+def record_failures(job: Job, failures: Sequence[Failure]) -> str | None:
+    """Write the tracebacks to ``<run_dir>/error.txt`` (removed when there are none);
+    the failures in one line, or None."""
+    err = Path(job.run_dir) / "error.txt"
+    if not failures:
         if err.exists():
             err.unlink()
-        return job.key, None, time.time() - t0
+        return None
     try:
         err.parent.mkdir(parents=True, exist_ok=True)
-        err.write_text("\n".join(tb for _, tb in errors), encoding="utf-8")
+        err.write_text("\n".join(tb for _, tb in failures), encoding="utf-8")
     except OSError:
         pass
-    return job.key, "; ".join(line for line, _ in errors), time.time() - t0
+    return "; ".join(line for line, _ in failures)
+
+
+def run_job(job: Job) -> tuple[str, str | None, float]:
+    """Train (unless finished) and evaluate what is missing (each evaluation on its own: one
+    that fails does not stop the others); returns (key, error or None, seconds). Failures
+    are written to ``<run_dir>/error.txt`` and do not raise."""
+    t0 = time.time()
+    failure = train_step(job)
+    failures = [failure] if failure else [f for spec in job.evals
+                                          if (f := eval_step(job, spec))]
+    return job.key, record_failures(job, failures), time.time() - t0
 
 
 def execute(jobs: Sequence[Job], workers: int = 1, progress: bool = True,
-            on_done: Callable[[Job, str | None, float], None] | None = None
-            ) -> dict[str, str]:
-    """Run ``jobs`` (``workers`` processes; 1: in this process) with a progress bar over
-    them; returns {job key: error} of the failed ones."""
+            on_done: Callable[[Job, str | None, float], None] | None = None,
+            runner: Callable[[Sequence[Job], Callable[[Job, str | None, float], None]],
+                             None] | None = None) -> dict[str, str]:
+    """Run ``jobs`` (``workers`` processes; 1: in this process; or ``runner(jobs,
+    finish)``, e.g. :func:`alphatank.training.ray_jobs.run_on_ray`, calling ``finish``
+    as each job ends) with a progress bar over them; returns {job key: error} of the
+    failed ones."""
     failed: dict[str, str] = {}
     if not jobs:
         return failed
@@ -620,7 +645,9 @@ def execute(jobs: Sequence[Job], workers: int = 1, progress: bool = True,
             bar.update(1)
 
     try:
-        if workers <= 1:
+        if runner is not None:
+            runner(jobs, finish)
+        elif workers <= 1:
             for job in jobs:
                 if bar is not None:
                     bar.set_postfix_str(", ".join(job.rows), refresh=True)

@@ -74,6 +74,10 @@ class Learner(Protocol):
         """Every stream restarts from a fresh episode (after a checkpoint): forget
         per-episode running statistics such as discounted returns."""
 
+    def drop_rollout(self) -> None:
+        """Forget the unfinished rollout (a fixed-rollout learner; the runner then loads
+        the state from the rollout's start): its matches were lost (an env runner died)."""
+
     def act(self, obs: np.ndarray, masks: np.ndarray | None = None,
             **inputs: np.ndarray) -> np.ndarray:
         """Actions (num_streams, 3) int64 for raw observations (num_streams, obs_dim)."""

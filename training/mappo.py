@@ -193,6 +193,10 @@ class MAPPO:
         """Fresh episodes everywhere: restart the discounted returns of reward scaling."""
         self.ret_norm.returns[:] = 0.0
 
+    def drop_rollout(self) -> None:
+        """Forget the unfinished rollout (its matches were lost)."""
+        self.buffer.clear()
+
     def arrays(self) -> dict[str, np.ndarray]:
         return {}
 

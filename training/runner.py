@@ -32,6 +32,7 @@ from __future__ import annotations
 import copy
 import math
 import re
+import sys
 import time
 import warnings
 from collections import deque
@@ -43,6 +44,7 @@ import numpy as np
 
 from alphatank.envs.core import ACTION_NVEC
 from alphatank.envs.ids import env_id
+from alphatank.envs.ray_vector import RolloutLost
 from alphatank.envs.vector import make_vector_env
 from alphatank.extras import require
 from alphatank.game.observe import slot_counts
@@ -111,6 +113,12 @@ class Trainer:
     """Runs a :class:`TrainConfig` in ``run_dir``. ``env`` (a vector env) and
     ``scenario`` may be given instead of being built from ``cfg.scenario``.
 
+    ``env_runners`` > 0 (and no ``env``): the matches run in that many Ray actors
+    (:class:`~alphatank.envs.ray_vector.RayVectorMatchEnv`, in place of ``num_workers``
+    processes, same results); a runner that dies costs the iteration in flight, which is
+    collected again (:attr:`lost_rollouts`, a ``warning`` on stderr and ``charts/
+    lost_rollouts`` in the log).
+
     ``action_mask``: optional hook ``f(obs (E, L, D)) -> bool (E, L, 8)`` over the
     concatenated choices (rotate 3, move 3, fire 2); learners that take masks (PPO) never
     sample a masked choice and their losses use the same masks.
@@ -120,7 +128,7 @@ class Trainer:
                  resume: Checkpoint | None = None, progress: bool = True,
                  wandb_id: str | None = None,
                  action_mask: Callable[[np.ndarray], np.ndarray] | None = None,
-                 scenario: Scenario | None = None):
+                 scenario: Scenario | None = None, env_runners: int = 0):
         self.cfg = cfg
         self.action_mask = action_mask
         self.run_dir = Path(run_dir)
@@ -150,10 +158,19 @@ class Trainer:
         extra: dict[str, Any] = {"inputs": self.inputs} if self.inputs else {}
         if cfg.selfplay:
             extra["learner_seats"] = [self.scenario.learner_seats[s] for s in driven]
-        self.env = env if env is not None else make_vector_env(
-            self.scenario, cfg.num_envs, seed=cfg.seed, num_workers=cfg.num_workers,
-            observation=cfg.observation, game_overrides=cfg.game or None,
-            reward_overrides=cfg.rewards or None, **extra)
+        if env is not None:
+            self.env = env
+        elif env_runners:  # env shards in Ray actors: the same results as that many workers
+            from alphatank.envs.ray_vector import RayVectorMatchEnv
+            self.env = RayVectorMatchEnv(
+                self.scenario, cfg.num_envs, seed=cfg.seed, num_runners=env_runners,
+                observation=cfg.observation, game_overrides=cfg.game or None,
+                reward_overrides=cfg.rewards or None, **extra)
+        else:
+            self.env = make_vector_env(
+                self.scenario, cfg.num_envs, seed=cfg.seed, num_workers=cfg.num_workers,
+                observation=cfg.observation, game_overrides=cfg.game or None,
+                reward_overrides=cfg.rewards or None, **extra)
         try:
             self._setup(specs, resume, wandb_id)
         except BaseException:
@@ -215,6 +232,8 @@ class Trainer:
         self.lengths: deque[int] = deque(maxlen=WINDOW)
         self.by_opponent: dict[str, dict[str, deque[float]]] = {n: {} for n in self.learners}
         self.cut = 0  # vector steps of a stopped iteration inside global_step (0: none)
+        self.lost_rollouts = 0  # iterations collected again after an env runner died
+        self.notes: list[str] = []  # what happened to the run (lost rollouts), in words
         self.saved_step = -1  # global_step of the newest checkpoint written or resumed from
         self.stop = StopFlag()  # replaced by every train() call
         self.stopped: dict[str, Any] = {}  # how train() stopped early, if it did
@@ -369,16 +388,17 @@ class Trainer:
             return derive_seed(self.cfg.seed, self.iteration, 7, self.global_step)
         return derive_seed(self.cfg.seed, self.iteration, 7)
 
-    def _segment_reset(self) -> np.ndarray:
-        """Restart every match from seeds derived from (seed, iteration)."""
+    def _segment_reset(self, seed: int | None = None) -> np.ndarray:
+        """Restart every match from seeds derived from (seed, iteration) (or ``seed``)."""
+        seed = self._segment_seed() if seed is None else seed
         for lr in self.learners.values():
             lr.new_segment()
         sp = self.selfplay
         if sp is None:
-            return self.env.reset(seed=self._segment_seed())
+            return self.env.reset(seed=seed)
         sp.snapshot(self.env, self.learners[sp.learner], self.global_step)
         sp.before_reset(self.env)
-        obs = self.env.reset(seed=self._segment_seed())
+        obs = self.env.reset(seed=seed)
         sp.after_reset(self.env)
         return obs
 
@@ -521,7 +541,8 @@ class Trainer:
         return {"run_dir": str(self.run_dir), "global_step": self.global_step,
                 "iterations": self.iteration, "episodes": self.episodes,
                 "elapsed_s": self.elapsed, "stopped": self.stopped or None,
-                "exit_code": self.stop.exit_code, **self._window_metrics()}
+                "exit_code": self.stop.exit_code, "notes": list(self.notes),
+                **self._window_metrics()}
 
     def _run(self, bar: Any, start: float) -> None:
         """The iterations of :meth:`train` (``start``: the perf_counter of elapsed 0)."""
@@ -529,6 +550,7 @@ class Trainer:
         obs = self._segment_reset()
         while self.global_step < cfg.total_steps and not self.stop():
             before = self._iteration_start()
+            rollback = self._rollback_point()
             sched = self.schedule.apply(self.env, self.global_step)
             t0, s0 = time.perf_counter(), self.global_step
             try:
@@ -536,6 +558,9 @@ class Trainer:
                 complete = self.global_step - s0 == self.rollout_steps * self.E
             except StopRequested:  # a fixed-rollout learner's update was cut short
                 metrics, complete = {}, False
+            except RolloutLost as lost:  # an env runner died: collect the iteration again
+                obs = self._lost_rollout(lost, rollback, s0)
+                continue
             self.elapsed = time.perf_counter() - start
             if not complete:
                 self._save_stopped(before, metrics, sched, s0, t0)
@@ -577,6 +602,37 @@ class Trainer:
         if self.global_step != self.saved_step:  # stopped between iterations
             self.save()
 
+    def _rollback_point(self) -> dict[str, Any] | None:
+        """With an env that can lose a rollout (env runners in Ray actors): the states of
+        the fixed-rollout learners at the iteration start (their rollouts are empty)."""
+        if not getattr(self.env, "can_lose_rollouts", False):
+            return None
+        return {n: copy.deepcopy(lr.state_dict()) for n, lr in self.learners.items()
+                if lr.rollout_steps}
+
+    def _lost_rollout(self, lost: RolloutLost, rollback: dict[str, Any] | None,
+                      s0: int) -> np.ndarray:
+        """An env runner died mid-iteration (Ray restarted it): fixed-rollout learners go
+        back to the iteration start and drop their partial rollouts (an off-policy
+        learner keeps its whole transitions), the step count goes back to ``s0``, and
+        every match restarts; returns the first observations. Says so on stderr and in
+        the log (``charts/lost_rollouts``)."""
+        if rollback is None:
+            raise lost
+        for name, state in rollback.items():
+            self.learners[name].load_state_dict(state)
+            self.learners[name].drop_rollout()
+        self.lost_rollouts += 1
+        dropped = self.global_step - s0
+        self.global_step = s0
+        note = (f"iteration {self.iteration + 1}: {lost}; the rollout in flight "
+                f"({dropped:,} steps) was dropped and is collected again")
+        self.notes.append(note)
+        print(f"warning: {note}", file=sys.stderr, flush=True)
+        self.logger.log({"charts/lost_rollouts": float(self.lost_rollouts)}, self.global_step)
+        return self._segment_reset(derive_seed(self.cfg.seed, self.iteration, 13,
+                                               self.lost_rollouts))
+
     def _save_stopped(self, before: Any, metrics: dict[str, float], sched: dict[str, float],
                       s0: int, t0: float) -> None:
         """Save after a stop inside an iteration; ``before``: :meth:`_iteration_start`'s
@@ -608,10 +664,12 @@ class Trainer:
 
 
 def resume_trainer(path: str | Path, progress: bool = True, env: Any = None,
-                   **overrides: Any) -> Trainer:
+                   env_runners: int = 0, **overrides: Any) -> Trainer:
     """A :class:`Trainer` continuing the run saved at ``path`` (checkpoint or run dir);
-    ``overrides`` change run settings such as ``total_steps``."""
+    ``overrides`` change run settings such as ``total_steps``; ``env_runners``: as for
+    :class:`Trainer`."""
     ckpt = load_checkpoint(path)
     cfg = ckpt.train_config.with_overrides(**overrides)
     return Trainer(cfg, ckpt.path.parent.parent, env=env, resume=ckpt, progress=progress,
-                   wandb_id=ckpt.meta.get("wandb_id"), scenario=ckpt.scenario)
+                   wandb_id=ckpt.meta.get("wandb_id"), scenario=ckpt.scenario,
+                   env_runners=env_runners)

@@ -210,6 +210,9 @@ class SAC:
     def new_segment(self) -> None:
         """Nothing per episode to forget (transitions are stored whole)."""
 
+    def drop_rollout(self) -> None:
+        """No rollout to drop: every observed transition is whole and kept."""
+
     def arrays(self) -> dict[str, np.ndarray]:
         """The replay buffer, saved beside the checkpoint for an exact resume."""
         return self.replay.arrays()

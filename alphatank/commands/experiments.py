@@ -47,6 +47,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="wandb mode of the runs (default: %(default)s; metrics.jsonl is "
                         "always written)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--ray", nargs="?", const="", metavar="ADDRESS",
+                   help="run every training run and evaluation as a Ray task: join the "
+                        "cluster at HOST:PORT, or without ADDRESS start a local Ray "
+                        "instance (the ray extra; --out must be on a file system every node "
+                        "sees: docs/distributed.md)")
 
 
 def _error(msg: str) -> int:
@@ -66,6 +71,9 @@ def run(args: argparse.Namespace) -> int:
 
     if args.workers < 1:
         return _error(f"--workers must be >= 1, got {args.workers}")
+    if args.ray is not None and args.workers != 1:
+        return _error("--workers and --ray: give one (with --ray the cluster's CPUs decide "
+                      "how many runs train at once)")
     if Path(args.out).exists() and not Path(args.out).is_dir():
         return _error(f"--out {args.out}: exists and is not a folder")
     try:
@@ -98,9 +106,18 @@ def run(args: argparse.Namespace) -> int:
     command = _command(args)
     failed: dict[str, str] = {}
     if not args.report_only and todo:
-        eta = estimate_minutes(plan, todo, args.workers)
+        connection = runner = None
+        workers, where = args.workers, f"{args.workers} worker(s)"
+        if args.ray is not None:
+            from alphatank.cluster import connect
+
+            connection = connect(args.ray or None, feature="alphatank experiments --ray")
+            print(connection.describe(), flush=True)
+            workers, where = max(1, int(connection.cpus)), f"Ray ({connection.cpus:g} CPUs)"
+            from alphatank.training.ray_jobs import run_on_ray as runner
+        eta = estimate_minutes(plan, todo, workers)
         print(f"experiments {', '.join(t.name for t in plan.tables)}: {len(plan.jobs)} runs, "
-              f"{len(todo)} to do, about {eta:.0f} min with {args.workers} worker(s) -> "
+              f"{len(todo)} to do, about {eta:.0f} min with {where} -> "
               f"{args.out}", flush=True)
 
         def on_done(job, error, seconds):  # noqa: ANN001, ANN202
@@ -111,11 +128,14 @@ def run(args: argparse.Namespace) -> int:
 
         try:
             failed = execute(todo, args.workers, progress=not args.no_progress,
-                             on_done=on_done)
+                             on_done=on_done, runner=runner)
         except KeyboardInterrupt:
             print("interrupted: finished runs and evaluations are kept; --resume finishes "
                   "the rest", file=sys.stderr)
             return 130
+        finally:
+            if connection is not None:
+                connection.close()
     from alphatank.training.report import write_report
 
     for table in plan.tables:

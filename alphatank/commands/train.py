@@ -111,6 +111,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                      help="also write TensorBoard logs (needs the tensorboard package)")
     run.add_argument("--torch-threads", type=int, help="torch threads (default: 1)")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
+    cluster = p.add_argument_group("Ray cluster (the ray extra; docs/distributed.md)")
+    cluster.add_argument("--ray", nargs="?", const="", metavar="ADDRESS",
+                         help="step the matches in Ray actors: join the cluster at "
+                              "HOST:PORT, or without ADDRESS start a local Ray instance")
+    cluster.add_argument("--env-runners", type=int, metavar="N",
+                         help="with --ray: env-runner actors (one CPU each), in place of "
+                              "--workers processes; the same seed and N give the same run as "
+                              "--workers N (default: the run's workers, at least 2)")
 
 
 # TrainConfig field -> the flag that sets it (run settings, also allowed with --resume)
@@ -258,6 +266,39 @@ def run(args: argparse.Namespace) -> int:
         print(hyperparameter_help())
         return 0
     progress = not args.no_progress
+    if args.env_runners is not None and args.ray is None:
+        raise InputError("--env-runners: needs --ray (env runners are Ray actors; --workers "
+                         "sets local worker processes)")
+    if args.env_runners is not None and args.env_runners < 1:
+        raise InputError(f"--env-runners: must be >= 1, got {args.env_runners}")
+    if args.ray is not None and not args.print_config:
+        from alphatank.cluster import connect
+        connection = connect(args.ray or None, feature="alphatank train --ray")
+        print(connection.describe(), flush=True)
+        try:
+            return _run(args, progress, connection.cpus)
+        finally:
+            connection.close()
+    return _run(args, progress)
+
+
+def _env_runners(args: argparse.Namespace, cfg: TrainConfig, cpus: float) -> int:
+    """Env-runner actors of a ``--ray`` run (0 without --ray); a count the cluster cannot
+    place is bad input."""
+    if args.ray is None:
+        return 0
+    n = args.env_runners or min(max(2, cfg.num_workers), cfg.num_envs)
+    if n > cfg.num_envs:
+        raise InputError(f"--env-runners: {n} runners for {cfg.num_envs} envs; at most "
+                         f"--num-envs")
+    if n > cpus:
+        raise InputError(f"--env-runners: {n} runners need {n} CPUs; the Ray cluster has "
+                         f"{cpus:g}")
+    return n
+
+
+def _run(args: argparse.Namespace, progress: bool, cpus: float = 0.0) -> int:
+    """:func:`run` after the Ray connection (``cpus``: the cluster's) when --ray."""
     if args.resume:
         given = [f"--{k}" for k in NEW_RUN_ONLY if getattr(args, k) not in (None, "", [])]
         if given:
@@ -270,8 +311,10 @@ def run(args: argparse.Namespace) -> int:
             if args.print_config:
                 print(run_toml(cfg), end="")
                 return 0
+            runners = _env_runners(args, cfg, cpus)
             with _one_line_warnings():
-                trainer = resume_trainer(args.resume, progress=progress, **_overrides(args))
+                trainer = resume_trainer(args.resume, progress=progress, env_runners=runners,
+                                         **_overrides(args))
         except ValueError as exc:
             raise as_input_error(exc) from None
         rewound = trainer.logger.rewound
@@ -291,8 +334,9 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(f"{run_dir} already holds a run; continue it with --resume "
                              f"{run_dir} or pick another --name")
         from alphatank.training.runner import Trainer
+        runners = _env_runners(args, cfg, cpus)
         with _one_line_warnings():
-            trainer = Trainer(cfg, run_dir, progress=progress)
+            trainer = Trainer(cfg, run_dir, progress=progress, env_runners=runners)
         for name, counts in trainer.warm_start.items():
             print(f"warm start {name} from {cfg.init_from}: {counts['mapped']} features "
                   f"mapped, {counts['new']} new (zero weight), {counts['dropped']} dropped"
@@ -341,4 +385,6 @@ def report(summary: dict[str, Any]) -> int:
         if key.startswith("charts/win_rate"):
             print(f"  {key} (last 100 episodes): {val:.2f}")
     print(f"  checkpoint: {run_dir / 'latest'} -> {latest}")
+    for note in summary.get("notes") or ():
+        print(f"  note: {note}")
     return int(summary.get("exit_code") or 0)

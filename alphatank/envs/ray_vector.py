@@ -1,0 +1,320 @@
+"""The vector env over a Ray cluster: env shards in Ray actors (``alphatank train --ray
+--env-runners N``).
+
+:class:`RayVectorMatchEnv` has the interface of
+:class:`~alphatank.envs.vector.SubprocVectorMatchEnv` (arrays in and out, opponent
+controls, extra learner inputs) and, for the same seed, its results bit for bit: env
+runner ``k`` is a Ray actor (:class:`EnvRunner`, one CPU) owning a
+:class:`~alphatank.envs.vector.VectorMatchEnv` over the same contiguous block of env ids
+as worker ``k`` of the subprocess env. Every step sends each runner its block of actions,
+all runners step at once, and their observations come back through Ray's object store.
+
+Failures: Ray restarts a runner whose process or node dies (``max_restarts``); the
+restarted actor rebuilds its envs from the constructor arguments and this env replays the
+opponent settings made since (the last call of each kind, in order). The matches of that
+shard are gone, so the rollout in flight is lost: :meth:`step` raises
+:class:`RolloutLost` (after the runner is back), the caller drops the partial rollout and
+resets (the Trainer does; see :mod:`alphatank.training.runner`). A runner lost during
+:meth:`reset` costs nothing: the reset is redone. A runner out of restarts ends the run
+with a RuntimeError naming it.
+
+Ray is imported when the env is built, never at module import.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from alphatank.envs.core import check_actions
+from alphatank.envs.vector import VectorMatchEnv
+from alphatank.game.scenarios import Scenario
+from alphatank.sim.policy import Policy
+
+DEFAULT_MAX_RESTARTS = 3
+RESTART_TIMEOUT_S = 300.0  # how long to wait for Ray to bring a lost runner back
+START_TIMEOUT_S = 120.0  # how long the runners may wait for free CPUs on the cluster
+
+
+class RolloutLost(RuntimeError):
+    """An env runner died mid-rollout and was restarted: every match must be reset and
+    the partial rollout dropped. The message says which runner and what happened."""
+
+
+class EnvRunner:
+    """One shard: a :class:`VectorMatchEnv` over env ids ``lo..hi-1`` (a Ray actor)."""
+
+    def __init__(self, kwargs: dict[str, Any], lo: int, hi: int):
+        self.env = VectorMatchEnv(num_envs=hi - lo, env_ids=range(lo, hi), **kwargs)
+        self.started = False
+
+    def configure(self, calls: Sequence[tuple[str, tuple]]) -> None:
+        """Apply opponent settings (method name, arguments) in order."""
+        for name, args in calls:
+            getattr(self.env, name)(*args)
+
+    def reset(self, seed: int | None) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        obs = self.env.reset(seed)
+        self.started = True
+        return obs, self.env.inputs
+
+    def step(self, actions: np.ndarray) -> tuple:
+        if not self.started:  # Ray restarted this actor since the last reset
+            raise RolloutLost("the env runner was restarted; its matches were not reset")
+        obs, rew, term, trunc, info = self.env.step(actions)
+        return obs, rew, term, trunc, info, self.env.inputs
+
+    def pid(self) -> int:
+        import os
+
+        return os.getpid()
+
+
+class RayVectorMatchEnv:
+    """:class:`VectorMatchEnv` split over ``num_runners`` Ray actors (same interface and
+    results as :class:`~alphatank.envs.vector.SubprocVectorMatchEnv` with that many
+    workers). Connects to Ray first if this process has not (a local instance)."""
+
+    render_mode = None
+    can_lose_rollouts = True  # step() may raise RolloutLost (the Trainer collects again)
+
+    def __init__(self, scenario: str | Scenario, num_envs: int, seed: int = 0,
+                 observation: str | None = None, game_overrides: dict | None = None,
+                 reward_overrides: dict | None = None, *, num_runners: int = 2,
+                 seat_policies: Mapping[int, Policy] | None = None,
+                 learner_seats: Sequence[int] | None = None, inputs: Sequence[str] = (),
+                 max_restarts: int = DEFAULT_MAX_RESTARTS):
+        from alphatank.cluster import connect
+
+        if not 1 <= num_runners <= num_envs:
+            raise ValueError(f"env runners must be in 1..num_envs={num_envs}, got "
+                             f"{num_runners}")
+        if max_restarts < 0:
+            raise ValueError(f"max_restarts must be >= 0, got {max_restarts}")
+        connect()
+        import ray
+
+        cpus = ray.cluster_resources().get("CPU", 0.0)
+        if num_runners > cpus:
+            raise ValueError(f"{num_runners} env runners need {num_runners} CPUs; the Ray "
+                             f"cluster has {cpus:g}")
+        self._ray = ray
+        probe = VectorMatchEnv(scenario, 1, seed, observation, game_overrides,
+                               reward_overrides, seat_policies=seat_policies,
+                               learner_seats=learner_seats, inputs=inputs)
+        self.scenario = probe.scenario
+        self.num_envs, self.num_learners = num_envs, probe.num_learners
+        self.learner_seats, self.learner_teams = probe.learner_seats, probe.learner_teams
+        self.observation_space, self.action_space = probe.observation_space, probe.action_space
+        self.obs_dim, self.layout, self.seed = probe.obs_dim, probe.layout, int(seed)
+        self.input_shapes = probe.input_shapes
+        self.inputs = {name: np.zeros((num_envs, self.num_learners, *shape), np.float32)
+                       for name, shape in self.input_shapes.items()}
+        self.max_restarts = max_restarts
+        kwargs = {"scenario": self.scenario, "seed": seed, "observation": observation,
+                  "game_overrides": game_overrides, "reward_overrides": reward_overrides,
+                  "seat_policies": seat_policies, "learner_seats": learner_seats,
+                  "inputs": tuple(inputs)}
+        bounds = np.linspace(0, num_envs, num_runners + 1).round().astype(int)
+        self._blocks = list(zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True))
+        actor = ray.remote(EnvRunner).options(num_cpus=1, max_restarts=max_restarts,
+                                              max_task_retries=0)
+        self.runners = [actor.remote(kwargs, lo, hi) for lo, hi in self._blocks]
+        self.restarts = [0] * num_runners  # restarts seen per runner
+        self.lost_rollouts = 0
+        self._settings: dict[Any, tuple[str, list[tuple]]] = {}  # replayed after a restart
+        self._lost: str | None = None  # a loss seen outside step(), raised by the next step
+        self._closed = False
+        self._started = False
+        self._shape = (num_envs, self.num_learners, 3)
+        try:
+            pids = [r.pid.remote() for r in self.runners]
+            ready, _ = ray.wait(pids, num_returns=len(pids), timeout=START_TIMEOUT_S)
+            if len(ready) < len(pids):
+                free = ray.available_resources().get("CPU", 0.0)
+                raise RuntimeError(f"{len(pids) - len(ready)} of {num_runners} env runners "
+                                   f"did not start within {START_TIMEOUT_S:.0f} s: the Ray "
+                                   f"cluster has {free:g} of {cpus:g} CPUs free (each runner "
+                                   f"needs one)")
+            self._gather(pids)
+        except BaseException:
+            self.close()
+            raise
+
+    def _name(self, idx: tuple[int, ...]) -> str:
+        e, slot = idx
+        return (f"env {e}, learner {slot} (seat {self.learner_seats[slot]}, team "
+                f"{self.learner_teams[slot]})")
+
+    # ---- remote calls and recovery ---------------------------------------------------
+
+    def _gather(self, refs: Sequence[Any]) -> list:
+        """Results of one call per runner; a runner that died is brought back (settings
+        replayed) and :class:`RolloutLost` raised once every runner answered."""
+        ray = self._ray
+        try:
+            return ray.get(list(refs))  # one call: the common case
+        except (ray.exceptions.RayError, RolloutLost):
+            pass  # find out which runner failed, and how
+        out: list[Any] = []
+        lost: list[tuple[int, BaseException]] = []
+        for k, ref in enumerate(refs):
+            try:
+                out.append(ray.get(ref))
+            except (ray.exceptions.RayActorError, RolloutLost) as exc:
+                out.append(None)
+                lost.append((k, exc))
+            except ray.exceptions.RayTaskError as exc:
+                raise RuntimeError(f"env runner {k} failed: {exc}") from None
+        if lost:
+            notes = [self._recover(k, exc) for k, exc in lost]
+            self._started = False
+            raise RolloutLost("; ".join(notes))
+        return out
+
+    def _recover(self, k: int, exc: BaseException) -> str:
+        """Wait for Ray to restart runner ``k`` and replay the opponent settings; a line
+        saying what happened."""
+        ray = self._ray
+        lo, hi = self._blocks[k]
+        what = f"env runner {k} (envs {lo}-{hi - 1})"
+        cause = type(exc).__name__ if isinstance(exc, RolloutLost) else (
+            f"{type(exc).__name__}: {str(exc).strip().splitlines()[0]}")
+        calls = self._replay_order(k)
+        deadline = time.monotonic() + RESTART_TIMEOUT_S
+        while True:
+            try:
+                ray.get(self.runners[k].configure.remote(calls))
+                break
+            except ray.exceptions.ActorUnavailableError:
+                if time.monotonic() > deadline:
+                    raise RuntimeError(f"{what} was lost ({cause}) and Ray did not bring "
+                                       f"it back within {RESTART_TIMEOUT_S:.0f} s") from None
+                time.sleep(0.1)
+            except ray.exceptions.RayActorError as died:
+                raise RuntimeError(f"{what} died and Ray cannot restart it (max_restarts="
+                                   f"{self.max_restarts} used up): "
+                                   f"{str(died).strip().splitlines()[0]}") from None
+        self.restarts[k] += 1
+        return (f"{what} was lost ({cause}); Ray restarted it (restart {self.restarts[k]}, "
+                f"max_restarts={self.max_restarts}) and its opponent settings were replayed")
+
+    def _replay_order(self, k: int) -> list[tuple[str, tuple]]:
+        """Runner ``k``'s settings: registrations first, then the others in the order
+        last made."""
+        calls = [(name, args[k]) for name, args in self._settings.values()]
+        return ([c for c in calls if c[0] == "add_opponent"]
+                + [c for c in calls if c[0] != "add_opponent"])
+
+    def _setting(self, key: Any, name: str, args: tuple,
+                 per_runner: Sequence[tuple] | None = None) -> None:
+        """Send one opponent setting to every runner (``per_runner``: each its own
+        arguments) and remember it for replay after a restart."""
+        if self._closed:
+            raise RuntimeError("the env is closed")
+        each = list(per_runner) if per_runner is not None else [args] * self.num_runners
+        self._settings.pop(key, None)
+        self._settings[key] = (name, each)
+        refs = [r.configure.remote([(name, each[k])]) for k, r in enumerate(self.runners)]
+        try:
+            self._gather(refs)
+        except RolloutLost as lost:  # the runner is back with every setting; the next
+            self._lost = str(lost)   # step tells the caller that the rollout is gone
+
+    # ---- opponents (from each env's next episode), as on VectorMatchEnv ----------------
+
+    def set_bot_weakness(self, weakness: float) -> None:
+        if not 0.0 <= weakness <= 1.0:
+            raise ValueError(f"weakness must be in [0, 1], got {weakness!r}")
+        self._setting("weakness", "set_bot_weakness", (weakness,))
+
+    def set_opponents(self, bot_names: Sequence[str] | None,
+                      weakness: float | None = None) -> None:
+        if bot_names is not None:
+            from alphatank.game.scenarios import bot_names as valid_names
+            valid = valid_names()
+            bad = [b for b in bot_names if b not in valid]
+            if bad or not bot_names:
+                raise ValueError(f"unknown bot name(s) {bad or bot_names}; valid: {list(valid)}")
+            bot_names = list(bot_names)
+        self._setting("opponents", "set_opponents", (bot_names, weakness))
+
+    def set_opponent_policy(self, policy: Policy | None) -> None:
+        self._setting("opponent_policy", "set_opponent_policy", (policy,))
+
+    def add_opponent(self, name: str, opponent: str | Policy) -> None:
+        self._setting(("add_opponent", name), "add_opponent", (name, opponent))
+
+    def set_env_opponents(self, names: Sequence[str | None]) -> None:
+        if len(names) != self.num_envs:
+            raise ValueError(f"need one opponent name per env ({self.num_envs}), got "
+                             f"{len(names)}")
+        names = list(names)
+        self._setting("env_opponents", "set_env_opponents", (names,),
+                      [(names[lo:hi],) for lo, hi in self._blocks])
+
+    # ---- episodes ---------------------------------------------------------------------
+
+    def reset(self, seed: int | None = None) -> np.ndarray:
+        if seed is not None:
+            self.seed = int(seed)
+        for _ in range(self.num_runners * (self.max_restarts + 1) + 1):
+            try:
+                parts = self._gather([r.reset.remote(seed) for r in self.runners])
+                break
+            except RolloutLost:  # nothing was in flight: reset again
+                continue
+        else:  # pragma: no cover - _recover raises first once restarts are used up
+            raise RuntimeError("env runners keep dying during reset")
+        self._lost = None
+        self._started = True
+        self.inputs = {name: np.concatenate([p[1][name] for p in parts])
+                       for name in self.input_shapes}
+        return np.concatenate([p[0] for p in parts])
+
+    def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                          dict[str, Any]]:
+        if self._lost is not None:
+            lost, self._lost = self._lost, None
+            self._started = False
+            self.lost_rollouts += 1
+            raise RolloutLost(lost)
+        if not self._started:
+            raise RuntimeError("step() before reset()")
+        acts = check_actions(actions, self._shape, self._name)
+        refs = [r.step.remote(acts[lo:hi]) for r, (lo, hi) in zip(self.runners, self._blocks,
+                                                                   strict=True)]
+        try:
+            parts = self._gather(refs)
+        except RolloutLost:
+            self.lost_rollouts += 1
+            raise
+        infos = [p[4] for p in parts]
+        if self.input_shapes:
+            self.inputs = {name: np.concatenate([p[5][name] for p in parts])
+                           for name in self.input_shapes}
+        info = {"final_obs": np.concatenate([i["final_obs"] for i in infos]),
+                "episodes": [ep for i in infos for ep in i["episodes"]],
+                "final_inputs": {name: np.concatenate([i["final_inputs"][name] for i in infos])
+                                 for name in self.input_shapes}}
+        return (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]),
+                np.concatenate([p[2] for p in parts]), np.concatenate([p[3] for p in parts]),
+                info)
+
+    @property
+    def num_runners(self) -> int:
+        return len(self.runners)
+
+    def close(self) -> None:
+        """Stop the runners (the cluster itself stays up)."""
+        if self._closed:
+            return
+        self._closed = True
+        for r in self.runners:
+            with contextlib.suppress(Exception):  # already gone, or the cluster is down
+                self._ray.kill(r, no_restart=True)
+        self.runners = []
