@@ -55,6 +55,10 @@ def weights(trainer: Trainer) -> str:
     return h.hexdigest()
 
 
+# `ray stop` (the head-node test) stops every Ray process on the host, so all Ray tests
+# must share one pytest-xdist worker: pyproject's addopts say `--dist loadfile`
+
+
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
