@@ -5,7 +5,7 @@ import subprocess
 import sys
 
 from alphatank.cli import main
-from alphatank.commands.bench import find_floor
+from alphatank.commands.benchfloor import find_floor
 
 
 def test_maps_lists_shipped_maps(capsys):

@@ -105,6 +105,35 @@ class RolloutBuffer:
         self.bootstrap.zero_()
 
 
+class OnPolicyPlumbing:
+    """The Learner protocol's run plumbing shared by the fixed-rollout learners (PPO,
+    MAPPO): they hold ``cfg.num_steps``, a :class:`RolloutBuffer` ``buffer``, a return
+    normaliser ``ret_norm`` and ``total_updates``, and keep all their state in
+    ``state_dict``."""
+
+    @property
+    def rollout_steps(self) -> int:
+        return self.cfg.num_steps
+
+    def plan(self, total_steps: int) -> None:
+        """Anneal the learning rate(s) (``anneal_lr``) over ``total_steps`` observe calls."""
+        self.total_updates = total_steps // self.cfg.num_steps
+
+    def new_segment(self) -> None:
+        """Fresh episodes everywhere: restart the discounted returns of reward scaling."""
+        self.ret_norm.returns[:] = 0.0
+
+    def drop_rollout(self) -> None:
+        """Forget the unfinished rollout (its matches were lost)."""
+        self.buffer.clear()
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {}
+
+    def load_arrays(self, arrays: dict[str, np.ndarray]) -> None:
+        """Everything is in ``state_dict``: nothing to load."""
+
+
 class ReplayBuffer:
     """Fixed-size cyclic buffer of (s, a, r, s', d); the newest transitions overwrite the
     oldest. Stores raw observations (normalised at sampling time with current statistics)."""

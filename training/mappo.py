@@ -36,7 +36,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from alphatank.training.buffers import RolloutBuffer, compute_gae_masked
+from alphatank.training.buffers import OnPolicyPlumbing, RolloutBuffer, compute_gae_masked
 from alphatank.training.hparams import MAPPOConfig
 from alphatank.training.normalize import ObsNormalizer, ReturnNormalizer
 from alphatank.training.ppo import MASKED_LOGIT, NVEC, evaluate_actions, mlp, np_sample
@@ -124,7 +124,7 @@ class NumpyMLP:
         return np.tanh(np.tanh(x @ w1 + b1) @ w2 + b2) @ w3 + b3
 
 
-class MAPPO:
+class MAPPO(OnPolicyPlumbing):
     """One MAPPO learner for ``num_streams`` = num_envs x ``num_seats`` streams of a team.
 
     Per env step: :meth:`act` (raw obs, masks, ``state=``), then :meth:`observe`; when
@@ -178,30 +178,6 @@ class MAPPO:
         self.updates = 0
         self.total_updates = 0  # set by plan() for learning-rate annealing
         self.interrupt: Any = None  # set by the runner; polled between minibatches
-
-    # ---- run plumbing (the Learner protocol) --------------------------------------------
-
-    @property
-    def rollout_steps(self) -> int:
-        return self.cfg.num_steps
-
-    def plan(self, total_steps: int) -> None:
-        """Anneal the learning rates (``anneal_lr``) over ``total_steps`` observe calls."""
-        self.total_updates = total_steps // self.cfg.num_steps
-
-    def new_segment(self) -> None:
-        """Fresh episodes everywhere: restart the discounted returns of reward scaling."""
-        self.ret_norm.returns[:] = 0.0
-
-    def drop_rollout(self) -> None:
-        """Forget the unfinished rollout (its matches were lost)."""
-        self.buffer.clear()
-
-    def arrays(self) -> dict[str, np.ndarray]:
-        return {}
-
-    def load_arrays(self, arrays: dict[str, np.ndarray]) -> None:
-        """MAPPO keeps everything in :meth:`state_dict`."""
 
     # ---- inputs -------------------------------------------------------------------------
 

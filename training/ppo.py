@@ -15,7 +15,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from alphatank.training.buffers import RolloutBuffer, compute_gae
+from alphatank.training.buffers import OnPolicyPlumbing, RolloutBuffer, compute_gae
 from alphatank.training.hparams import PPOConfig
 from alphatank.training.normalize import ObsNormalizer, ReturnNormalizer
 from alphatank.training.stopping import check_interrupt
@@ -122,7 +122,7 @@ def np_sample(logits: np.ndarray, nvec: tuple[int, ...], rng: np.random.Generato
     return actions, logprob
 
 
-class PPO:
+class PPO(OnPolicyPlumbing):
     """One PPO learner controlling ``num_streams`` = num_envs x its seats (implements
     :class:`alphatank.training.learners.Learner`).
 
@@ -153,30 +153,6 @@ class PPO:
         self.updates = 0
         self.total_updates = 0  # set by plan() for learning-rate annealing
         self.interrupt: Any = None  # set by the runner; polled between minibatches
-
-    # ---- run plumbing (the Learner protocol) --------------------------------------------
-
-    @property
-    def rollout_steps(self) -> int:
-        return self.cfg.num_steps
-
-    def plan(self, total_steps: int) -> None:
-        """Anneal the learning rate (``anneal_lr``) over ``total_steps`` observe calls."""
-        self.total_updates = total_steps // self.cfg.num_steps
-
-    def new_segment(self) -> None:
-        """Fresh episodes everywhere: restart the discounted returns of reward scaling."""
-        self.ret_norm.returns[:] = 0.0
-
-    def drop_rollout(self) -> None:
-        """Forget the unfinished rollout (its matches were lost)."""
-        self.buffer.clear()
-
-    def arrays(self) -> dict[str, np.ndarray]:
-        return {}
-
-    def load_arrays(self, arrays: dict[str, np.ndarray]) -> None:
-        """PPO keeps everything in :meth:`state_dict`."""
 
     # ---- acting -----------------------------------------------------------------------
 

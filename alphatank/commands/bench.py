@@ -9,26 +9,21 @@ workload in runs interleaved with the match's.
 from __future__ import annotations
 
 import argparse
-import importlib
 import json
 import os
-import random
 import statistics
-import sys
 import time
 from pathlib import Path
-from types import ModuleType
 
 import numpy as np
 
 from alphatank.commands.argtypes import positive_int
+from alphatank.commands.benchfloor import find_floor, floor_us_per_tick
 from alphatank.commands.benchsoak import DEFAULT_SOAK_SCENARIOS, soak
 from alphatank.game.scenarios import ScenarioError
 from alphatank.sim.config import game_config
 from alphatank.sim.mapspec import load_map
 from alphatank.sim.match import Match
-
-FLOOR_DIR = Path("shared", "bench", "proto")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -87,49 +82,6 @@ def match_ticks_per_second(map_name: str, teams: list[str], ticks: int, seed: in
         if match.done:
             match.reset(seed + t + 1)
     return ticks / (time.perf_counter() - start), shots
-
-
-def find_floor(given: str | None) -> Path | None:
-    """The prototype folder: ``given``, else the nearest ``shared/bench/proto`` in the
-    ancestors of this project's source tree or of the working folder, else None."""
-    if given is not None:
-        folder = Path(given)
-        if not (folder / "sim_core.py").is_file() or not (folder / "maze_0.txt").is_file():
-            raise FileNotFoundError(f"--floor {given}: no sim_core.py and maze_0.txt there "
-                                    "(the bare pymunk prototype's folder)")
-        return folder
-    for top in (Path(__file__).resolve().parents[2], Path.cwd().resolve()):
-        for folder in (top, *top.parents):
-            if (folder / FLOOR_DIR / "sim_core.py").is_file():
-                return folder / FLOOR_DIR
-    return None
-
-
-def _load_floor(folder: Path) -> ModuleType:
-    """Import the prototype's ``sim_core`` (it imports its sibling ``scene`` by name)."""
-    sys.path.insert(0, str(folder))
-    try:
-        return importlib.import_module("sim_core")
-    finally:
-        sys.path.remove(str(folder))
-
-
-def floor_us_per_tick(folder: Path, n: int, ticks: int, seed: int = 0) -> float:
-    """Microseconds per tick of the prototype with ``n`` tanks, set up and driven as
-    ``floor_ratio.py`` does (2 substeps, paper bullet speed, a shot every 3 ticks that
-    never expires; random actions, 100 ticks of warm-up)."""
-    core = _load_floor(folder)
-    core.SUB, core.BULLET_SPEED, core.MAX_BOUNCES, core.COOLDOWN = 2, 300.0, 1000, 3
-    sim = core.Sim((folder / "maze_0.txt").read_text(), n, "pivot")
-    rng = random.Random(seed)
-    acts = [[(rng.randrange(3), rng.randrange(3), 1) for _ in range(n)]
-            for _ in range(ticks + 100)]
-    for a in acts[:100]:
-        sim.step(a)
-    start = time.perf_counter()
-    for a in acts[100:]:
-        sim.step(a)
-    return (time.perf_counter() - start) / ticks * 1e6
 
 
 def run(args: argparse.Namespace) -> int:

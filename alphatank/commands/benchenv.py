@@ -24,10 +24,8 @@ are not. Run alone: ``python -m alphatank.commands.benchenv``.
 from __future__ import annotations
 
 import argparse
-import importlib
 import multiprocessing as mp
 import os
-import random
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -36,12 +34,12 @@ from typing import Any
 
 import numpy as np
 
+from alphatank.commands.benchfloor import find_floor, floor_us_per_tick
 from alphatank.envs.vector import SubprocVectorMatchEnv, VectorMatchEnv
 from alphatank.game.observe import OBS_KINDS
 
 DEFAULT_SCENARIOS = ("vs_random", "vs_aggressive", "vs_defensive", "vs_dodge", "vs_smart",
                      "team", "mixed_teams")
-FLOOR_DIR = Path("shared", "bench", "proto")
 
 
 def _rates(env: Any, steps: int, seed: int, layers: bool = True, repeats: int = 3,
@@ -112,46 +110,11 @@ def match_tick_us(ticks: int = 1500, repeats: int = 3, seed: int = 0,
     return best
 
 
-def find_floor(floor: str | None = None) -> Path | None:
-    """The shared prototype's folder: ``floor`` if given, else the nearest
-    ``shared/bench/proto`` in the ancestors of this project's source tree or of the working
-    folder; None when absent."""
-    if floor is not None:
-        folder = Path(floor)
-        if not (folder / "sim_core.py").is_file() or not (folder / "maze_0.txt").is_file():
-            raise FileNotFoundError(f"--floor {floor}: no sim_core.py and maze_0.txt there "
-                                    "(the bare pymunk prototype's folder)")
-        return folder
-    for top in (Path(__file__).resolve().parents[2], Path.cwd().resolve()):
-        for folder in (top, *top.parents):
-            if (folder / FLOOR_DIR / "sim_core.py").is_file():
-                return folder / FLOOR_DIR
-    return None
-
-
 def floor_tick_us(proto: Path, ticks: int = 1500, repeats: int = 3, seed: int = 0) -> float:
     """CPU microseconds of one 1v1 tick of the bare pymunk prototype in ``proto`` (best of
     ``repeats``), set up as ``floor_ratio.py`` sets it up."""
-    sys.path.insert(0, str(proto))
-    try:
-        core = importlib.import_module("sim_core")
-    finally:
-        sys.path.remove(str(proto))
-    text = (proto / "maze_0.txt").read_text()
-    best = float("inf")
-    for r in range(repeats):
-        core.SUB, core.BULLET_SPEED, core.MAX_BOUNCES, core.COOLDOWN = 2, 300.0, 1000, 3
-        sim = core.Sim(text, 2, "pivot")
-        rng = random.Random(seed + r)
-        acts = [[(rng.randrange(3), rng.randrange(3), 1) for _ in range(2)]
-                for _ in range(ticks + 100)]
-        for a in acts[:100]:
-            sim.step(a)
-        start = time.process_time()
-        for a in acts[100:]:
-            sim.step(a)
-        best = min(best, (time.process_time() - start) / ticks * 1e6)
-    return best
+    return min(floor_us_per_tick(proto, 2, ticks, seed + r, clock=time.process_time)
+               for r in range(repeats))
 
 
 def _solo(scenario: str, num_envs: int, steps: int, seed: int, observation: str,

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from alphatank.envs.core import check_actions
-from alphatank.envs.vector import VectorMatchEnv
+from alphatank.envs.vector import ShardedEnv, VectorMatchEnv
 from alphatank.game.scenarios import Scenario
 from alphatank.sim.policy import Policy
 
@@ -74,7 +74,7 @@ class EnvRunner:
         return os.getpid()
 
 
-class RayVectorMatchEnv:
+class RayVectorMatchEnv(ShardedEnv):
     """:class:`VectorMatchEnv` split over ``num_runners`` Ray actors (same interface and
     results as :class:`~alphatank.envs.vector.SubprocVectorMatchEnv` with that many
     workers). Connects to Ray first if this process has not (a local instance)."""
@@ -103,24 +103,12 @@ class RayVectorMatchEnv:
             raise ValueError(f"{num_runners} env runners need {num_runners} CPUs; the Ray "
                              f"cluster has {cpus:g}")
         self._ray = ray
-        probe = VectorMatchEnv(scenario, 1, seed, observation, game_overrides,
-                               reward_overrides, seat_policies=seat_policies,
-                               learner_seats=learner_seats, inputs=inputs)
-        self.scenario = probe.scenario
-        self.num_envs, self.num_learners = num_envs, probe.num_learners
-        self.learner_seats, self.learner_teams = probe.learner_seats, probe.learner_teams
-        self.observation_space, self.action_space = probe.observation_space, probe.action_space
-        self.obs_dim, self.layout, self.seed = probe.obs_dim, probe.layout, int(seed)
-        self.input_shapes = probe.input_shapes
+        kwargs = self._plan_shards(scenario, num_envs, num_runners, seed, observation,
+                                   game_overrides, reward_overrides, seat_policies,
+                                   learner_seats, inputs)
         self.inputs = {name: np.zeros((num_envs, self.num_learners, *shape), np.float32)
                        for name, shape in self.input_shapes.items()}
         self.max_restarts = max_restarts
-        kwargs = {"scenario": self.scenario, "seed": seed, "observation": observation,
-                  "game_overrides": game_overrides, "reward_overrides": reward_overrides,
-                  "seat_policies": seat_policies, "learner_seats": learner_seats,
-                  "inputs": tuple(inputs)}
-        bounds = np.linspace(0, num_envs, num_runners + 1).round().astype(int)
-        self._blocks = list(zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True))
         actor = ray.remote(EnvRunner).options(num_cpus=1, max_restarts=max_restarts,
                                               max_task_retries=0)
         self.runners = [actor.remote(kwargs, lo, hi) for lo, hi in self._blocks]
@@ -144,11 +132,6 @@ class RayVectorMatchEnv:
         except BaseException:
             self.close()
             raise
-
-    def _name(self, idx: tuple[int, ...]) -> str:
-        e, slot = idx
-        return (f"env {e}, learner {slot} (seat {self.learner_seats[slot]}, team "
-                f"{self.learner_teams[slot]})")
 
     # ---- remote calls and recovery ---------------------------------------------------
 

@@ -332,6 +332,7 @@ def _worker(conn: Any, kwargs: dict, lo: int, hi: int, specs: dict, names: dict)
         env = VectorMatchEnv(num_envs=hi - lo, env_ids=range(lo, hi), **kwargs)
         out = [a[k][lo:hi] for k in ("obs", "rewards", "terminated", "truncated", "final_obs")]
         final_inputs = {name: a[f"final:{name}"][lo:hi] for name in env.inputs}
+        input_rows = {name: a[f"input:{name}"][lo:hi] for name in env.inputs}
         finals, dirty = [out[-1], *final_inputs.values()], False
         conn.send(("ok", None))
         while True:
@@ -341,16 +342,16 @@ def _worker(conn: Any, kwargs: dict, lo: int, hi: int, specs: dict, names: dict)
                     for arr in finals:
                         arr.fill(0)
                 episodes = env._step_into(a["actions"][lo:hi], *out, final_inputs)
-                for name, arr in env.inputs.items():
-                    a[f"input:{name}"][lo:hi] = arr
+                for name, rows in input_rows.items():
+                    rows[...] = env.inputs[name]
                 dirty = bool(episodes)
                 conn.send_bytes(pickle.dumps(("ok", episodes)) if episodes else b"")
                 continue
             cmd, arg = pickle.loads(msg)
             if cmd == "reset":
                 a["obs"][lo:hi] = env.reset(arg)
-                for name, arr in env.inputs.items():
-                    a[f"input:{name}"][lo:hi] = arr
+                for name, rows in input_rows.items():
+                    rows[...] = env.inputs[name]
                 for arr in finals:
                     arr.fill(0)
                 dirty = False
@@ -370,7 +371,41 @@ def _worker(conn: Any, kwargs: dict, lo: int, hi: int, specs: dict, names: dict)
         conn.close()
 
 
-class SubprocVectorMatchEnv:
+class ShardedEnv:
+    """What the sharded vector envs (worker processes here, Ray actors in
+    :mod:`alphatank.envs.ray_vector`) share: the description of the batch, taken from a
+    one-match probe, the keyword arguments each shard's :class:`VectorMatchEnv` is made
+    with, and the blocks of env ids the shards own."""
+
+    def _plan_shards(self, scenario: str | Scenario, num_envs: int, num_shards: int,
+                     seed: int, observation: str | None, game_overrides: dict | None,
+                     reward_overrides: dict | None, seat_policies: Mapping[int, Policy] | None,
+                     learner_seats: Sequence[int] | None, inputs: Sequence[str]) -> dict:
+        """Describe the batch, set ``_blocks`` ((lo, hi) env ids per shard) and return the
+        shards' VectorMatchEnv keyword arguments."""
+        probe = VectorMatchEnv(scenario, 1, seed, observation, game_overrides,
+                               reward_overrides, seat_policies=seat_policies,
+                               learner_seats=learner_seats, inputs=inputs)
+        self.scenario = probe.scenario
+        self.num_envs, self.num_learners = num_envs, probe.num_learners
+        self.learner_seats, self.learner_teams = probe.learner_seats, probe.learner_teams
+        self.observation_space, self.action_space = probe.observation_space, probe.action_space
+        self.obs_dim, self.layout, self.seed = probe.obs_dim, probe.layout, int(seed)
+        self.input_shapes = probe.input_shapes
+        bounds = np.linspace(0, num_envs, num_shards + 1).round().astype(int)
+        self._blocks = list(zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True))
+        return {"scenario": self.scenario, "seed": seed, "observation": observation,
+                "game_overrides": game_overrides, "reward_overrides": reward_overrides,
+                "seat_policies": seat_policies, "learner_seats": learner_seats,
+                "inputs": tuple(inputs)}
+
+    def _name(self, idx: tuple[int, ...]) -> str:
+        e, slot = idx
+        return (f"env {e}, learner {slot} (seat {self.learner_seats[slot]}, team "
+                f"{self.learner_teams[slot]})")
+
+
+class SubprocVectorMatchEnv(ShardedEnv):
     """:class:`VectorMatchEnv` split over ``num_workers`` processes (shared-memory arrays,
     same interface, bit-identical results for the same seed). Workers start with
     ``start_method`` ("spawn": safe next to torch threads; a script must then create the
@@ -388,34 +423,22 @@ class SubprocVectorMatchEnv:
         if not 1 <= num_workers <= num_envs:
             raise ValueError(f"num_workers must be in 1..num_envs={num_envs}, "
                              f"got {num_workers}")
-        probe = VectorMatchEnv(scenario, 1, seed, observation, game_overrides,
-                               reward_overrides, seat_policies=seat_policies,
-                               learner_seats=learner_seats, inputs=inputs)
-        self.scenario = probe.scenario
-        self.num_envs, self.num_learners = num_envs, probe.num_learners
-        self.learner_seats, self.learner_teams = probe.learner_seats, probe.learner_teams
-        self.observation_space, self.action_space = probe.observation_space, probe.action_space
-        self.obs_dim, self.layout, self.seed = probe.obs_dim, probe.layout, int(seed)
+        kwargs = self._plan_shards(scenario, num_envs, num_workers, seed, observation,
+                                   game_overrides, reward_overrides, seat_policies,
+                                   learner_seats, inputs)
         E, L, D = num_envs, self.num_learners, self.obs_dim
         specs = {"obs": ((E, L, D), "float32"), "final_obs": ((E, L, D), "float32"),
                  "rewards": ((E, L), "float32"), "terminated": ((E,), "bool"),
                  "truncated": ((E,), "bool"), "actions": ((E, L, 3), "int64")}
-        self.input_shapes = probe.input_shapes
         for name, shape in self.input_shapes.items():
             specs[f"input:{name}"] = specs[f"final:{name}"] = ((E, L, *shape), "float32")
         self._shared = _Shared(specs)
         self.inputs = self._inputs()
-        kwargs = {"scenario": self.scenario, "seed": seed, "observation": observation,
-                  "game_overrides": game_overrides, "reward_overrides": reward_overrides,
-                  "seat_policies": seat_policies, "learner_seats": learner_seats,
-                  "inputs": tuple(inputs)}
-        bounds = np.linspace(0, E, num_workers + 1).round().astype(int)
-        self._blocks = list(zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True))
         ctx = mp.get_context(start_method)
         self._conns, self._procs = [], []
-        for lo, hi in zip(bounds[:-1], bounds[1:], strict=True):
+        for lo, hi in self._blocks:
             parent, child = ctx.Pipe()
-            p = ctx.Process(target=_worker, args=(child, kwargs, int(lo), int(hi), specs,
+            p = ctx.Process(target=_worker, args=(child, kwargs, lo, hi, specs,
                                                   self._shared.names), daemon=True)
             p.start()
             child.close()
@@ -424,11 +447,6 @@ class SubprocVectorMatchEnv:
         self._closed = False
         self._gather()
         self._started = False
-
-    def _name(self, idx: tuple[int, ...]) -> str:
-        e, slot = idx
-        return (f"env {e}, learner {slot} (seat {self.learner_seats[slot]}, team "
-                f"{self.learner_teams[slot]})")
 
     def _inputs(self, kind: str = "input") -> dict[str, np.ndarray]:
         return {name: self._shared.arr[f"{kind}:{name}"].copy() for name in self.input_shapes}
