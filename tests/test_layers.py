@@ -36,6 +36,7 @@ LAYER_OF = {  # module prefix -> layer; the longest matching prefix wins
     "alphatank.stats": "base",
     "alphatank.extras": "base",  # optional-dependency checks
     "alphatank.errors": "base",  # InputError, the base of every bad-input error
+    "alphatank.files": "base",  # text files in (UTF-8 checks) and out (atomic writes)
     "alphatank.cluster": "base",  # the door to Ray (--ray), an optional dependency
     "alphatank.sim": "sim",
     "alphatank.ui": "render",

@@ -16,6 +16,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from alphatank.envs.core import MatchSet
+from alphatank.files import write_text_atomic
 from alphatank.game.observe import BLOCK_HELP, FIELD_HELP, OBS_KINDS, ObsLayout
 from alphatank.game.scenarios import load_scenario, shipped_scenarios
 
@@ -91,7 +92,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.check:
         print(f"{DOC}: generated sections are out of date; run python tools/envdocs.py")
         return 1
-    DOC.write_text(new, encoding="utf-8")
+    write_text_atomic(DOC, new)
     print(f"{DOC}: regenerated {', '.join(SECTIONS)}")
     return 0
 

@@ -20,6 +20,7 @@ from pathlib import Path
 
 from alphatank.cli import Parser, broken_pipe_exit
 from alphatank.errors import InputError, one_line
+from alphatank.files import write_text_atomic
 from alphatank.mapgen import (
     ALGORITHMS,
     SYMMETRIES,
@@ -103,8 +104,7 @@ def options_from_args(args: argparse.Namespace, i: int = 0, seed: int | None = N
 def _write(spec: MapSpec, path: Path, force: bool) -> None:
     if path.exists() and not force:
         raise FileExistsError(f"{path} exists (use --force to overwrite)")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(map_text(spec), encoding="utf-8")
+    write_text_atomic(path, map_text(spec))
     load_map(path)  # what was written loads with the game's loader
 
 

@@ -33,6 +33,7 @@ import numpy as np
 import torch
 
 from alphatank.errors import InputError
+from alphatank.files import write_text_atomic
 from alphatank.game.scenarios import Scenario, ScenarioError, parse_scenario
 from alphatank.game.seats import agent_path
 from alphatank.sim.config import check_value
@@ -69,12 +70,6 @@ def _sha256(path: Path) -> str:
         for chunk in iter(lambda: f.read(1 << 20), b""):
             h.update(chunk)
     return h.hexdigest()
-
-
-def _write_atomic_text(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
 
 
 def save_checkpoint(run_dir: str | Path, tag: str, meta: dict[str, Any],
@@ -116,7 +111,7 @@ def save_checkpoint(run_dir: str | Path, tag: str, meta: dict[str, Any],
         shutil.rmtree(old)
     else:
         os.replace(tmp, final)
-    _write_atomic_text(Path(run_dir) / "latest", f"checkpoints/{tag}\n")
+    write_text_atomic(Path(run_dir) / "latest", f"checkpoints/{tag}\n")
     if keep > 0:
         saves = sorted((p for p in root.iterdir() if p.is_dir() and not p.name.startswith(".")),
                        key=lambda p: p.stat().st_mtime)

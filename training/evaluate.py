@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import io
 import json
 from collections import Counter
 from collections.abc import Callable, Iterable, Sequence
@@ -25,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from alphatank.envs.core import MatchSet
+from alphatank.files import write_text_atomic
 from alphatank.game.scenarios import Scenario, Seat, load_scenario
 from alphatank.sim.policy import Policy
 from alphatank.stats import League, wilson_interval
@@ -386,13 +388,13 @@ def results_league(results: Sequence[EvalResult]) -> League:
 def write_csv(results: Sequence[EvalResult], path: str | Path) -> None:
     rows = [r.as_dict() for r in results]
     fields = list(rows[0]) if rows else list(EvalResult("", "").as_dict())
-    with open(path, "w", newline="", encoding="utf-8") as f:
-        writer = csv.DictWriter(f, fieldnames=fields)
-        writer.writeheader()
-        writer.writerows(rows)
+    text = io.StringIO(newline="")
+    writer = csv.DictWriter(text, fieldnames=fields)
+    writer.writeheader()
+    writer.writerows(rows)
+    write_text_atomic(path, text.getvalue(), newline="")
 
 
 def write_json(results: Sequence[EvalResult], path: str | Path, per_game: bool = False
                ) -> None:
-    Path(path).write_text(json.dumps([r.as_dict(per_game) for r in results], indent=1) + "\n",
-                          encoding="utf-8")
+    write_text_atomic(path, json.dumps([r.as_dict(per_game) for r in results], indent=1) + "\n")

@@ -29,7 +29,6 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import os
 import shutil
 import time
 import tomllib
@@ -40,6 +39,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from alphatank.files import write_text_atomic
 from alphatank.training.presets import (
     TrainConfig,
     get_preset,
@@ -505,10 +505,7 @@ def make_plan(tables: Sequence[Table], out: str | Path, seeds: int = 1,
 # ---- running one job (in this process or a worker) -----------------------------------
 
 def _write_json(path: Path, data: Any) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    tmp.write_text(json.dumps(data, indent=1, default=str) + "\n", encoding="utf-8")
-    os.replace(tmp, path)
+    write_text_atomic(path, json.dumps(data, indent=1, default=str) + "\n")
 
 
 def read_json(path: Path) -> Any:

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from alphatank.errors import MissingPackageError
+from alphatank.files import write_text_atomic
 from alphatank.training.presets import WANDB_MODES
 
 
@@ -104,9 +105,7 @@ def rewind_metrics(path: str | Path, step: int) -> int:
             elif line.strip():
                 dropped += 1
     if dropped:
-        tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-        tmp.write_text("".join(keep), encoding="utf-8")
-        os.replace(tmp, path)
+        write_text_atomic(path, "".join(keep))
     return dropped
 
 

@@ -18,7 +18,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from alphatank.sim.mapspec import read_text
+from alphatank.files import read_text
 from alphatank.training.algorithms import ALGORITHMS, get_algorithm
 from alphatank.training.fields import (
     FieldError,

@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from alphatank.files import write_text_atomic
 from alphatank.stats import wilson_interval
 from alphatank.training.aggregate import iqm, median, stratified_bootstrap
 from alphatank.training.evaluate import markdown_table, rate_games, rating_table
@@ -356,13 +357,6 @@ def ratings(results: list[RowResult]) -> Any:
 
 # ---- the files -------------------------------------------------------------------------
 
-def _write_text(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
-
-
 def _figures(plan: Plan, table: Table, results: list[RowResult]) -> dict[str, Path]:
     from alphatank.training.plots import plot_heatmap, plot_row_curves
 
@@ -400,10 +394,10 @@ def write_report(plan: Plan, table: Table, command: str = "") -> dict[str, Any]:
                                           for c in rr.columns)]
     data = _json(plan, table, results, checks, league, command, missing)
     md = _markdown(plan, table, results, checks, league, figs, command, missing)
-    _write_text(plan.out / f"{table.name}.md", md)
-    _write_text(plan.out / f"{table.name}.csv", _csv(table, results))
+    write_text_atomic(plan.out / f"{table.name}.md", md)
+    write_text_atomic(plan.out / f"{table.name}.csv", _csv(table, results))
     import json
-    _write_text(plan.out / f"{table.name}.json", json.dumps(data, indent=1) + "\n")
+    write_text_atomic(plan.out / f"{table.name}.json", json.dumps(data, indent=1) + "\n")
     return data
 
 

@@ -10,16 +10,15 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import statistics
 import time
-from pathlib import Path
 
 import numpy as np
 
 from alphatank.commands.argtypes import positive_int
 from alphatank.commands.benchfloor import find_floor, floor_us_per_tick
 from alphatank.commands.benchsoak import DEFAULT_SOAK_SCENARIOS, soak
+from alphatank.files import write_text_atomic
 from alphatank.game.scenarios import ScenarioError
 from alphatank.sim.config import game_config
 from alphatank.sim.mapspec import load_map
@@ -165,6 +164,4 @@ def _soak(args: argparse.Namespace) -> int:
 def _write_json(path: str | None, figures: dict) -> None:
     """Write ``figures`` to ``path`` (if given) atomically."""
     if path:
-        tmp = Path(f"{path}.tmp")
-        tmp.write_text(json.dumps(figures, indent=2), encoding="utf-8")
-        os.replace(tmp, path)
+        write_text_atomic(path, json.dumps(figures, indent=2))

@@ -11,6 +11,7 @@ from pathlib import Path
 from alphatank.commands.argtypes import positive_float, positive_int
 from alphatank.errors import InputError
 from alphatank.extras import require
+from alphatank.files import write_text_atomic
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -59,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
     results = evaluate_checkpoint(ckpt, [None], games=args.games, seed=12345)
     table = format_table(results)
     print(table)
-    (run_dir / "eval.md").write_text(table + "\n", encoding="utf-8")
+    write_text_atomic(run_dir / "eval.md", table + "\n")
     write_csv(results, run_dir / "eval.csv")
     write_json(results, run_dir / "eval.json")
     lo, hi = results[0].interval

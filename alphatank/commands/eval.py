@@ -13,6 +13,7 @@ from pathlib import Path
 
 from alphatank.commands.argtypes import positive_int, seed
 from alphatank.errors import InputError, as_input_error
+from alphatank.files import write_text_atomic
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -91,8 +92,8 @@ def run(args: argparse.Namespace) -> int:
         if args.json:
             write_json(results, args.json, per_game=True)
             if stats:
-                Path(args.json).with_suffix(".team.json").write_text(
-                    json.dumps(stats, indent=1) + "\n", encoding="utf-8")
+                write_text_atomic(Path(args.json).with_suffix(".team.json"),
+                                  json.dumps(stats, indent=1) + "\n")
     except OSError as exc:
         raise InputError(f"cannot write {exc.filename}: {exc.strerror}") from None
     return 0

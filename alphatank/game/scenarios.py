@@ -38,6 +38,7 @@ from pathlib import Path
 from typing import Any
 
 from alphatank.errors import InputError
+from alphatank.files import decode_text, read_text
 from alphatank.game.observe import OBS_KINDS
 from alphatank.game.seats import (
     Seat,
@@ -58,10 +59,8 @@ from alphatank.sim.config import (
 from alphatank.sim.mapspec import (
     MapError,
     MapSpec,
-    decode_text,
     load_map,
     parse_map,
-    read_text,
     shipped_maps,
 )
 from alphatank.sim.policy import NoopPolicy

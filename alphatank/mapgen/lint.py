@@ -14,9 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
+from alphatank.files import decode_text, read_text
 from alphatank.mapgen.generate import lines_clear, segment_cells
 from alphatank.sim.grid import components, open_sides
-from alphatank.sim.mapspec import MapError, MapSpec, decode_text, load_map, map_text, read_text
+from alphatank.sim.mapspec import MapError, MapSpec, load_map, map_text
 
 
 @dataclass(frozen=True)

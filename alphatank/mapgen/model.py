@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from alphatank.files import read_text, write_text_atomic
 from alphatank.mapgen.generate import MAX_SIZE, MapGenError
 from alphatank.sim.mapspec import (
     GRID_CHARS,
@@ -16,7 +17,6 @@ from alphatank.sim.mapspec import (
     MapSpec,
     map_text,
     parse_map,
-    read_text,
 )
 
 TOOLS = GRID_CHARS  # '#', '.', '1'..'8', '+', '-'
@@ -162,7 +162,6 @@ class EditorModel:
         path = Path(path)
         self.header.setdefault("name", path.stem)
         spec = parse_map(self.text(), str(path), name=path.stem)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(self.text(), encoding="utf-8")
+        write_text_atomic(path, self.text())
         self.dirty = False
         return spec

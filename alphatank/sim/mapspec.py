@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from alphatank.errors import InputError
+from alphatank.files import read_text
 from alphatank.sim.grid import floor_areas, reachable_from
 
 GRID_CHARS = "#.12345678+-"
@@ -21,28 +22,6 @@ HEADER_KEYS = ("name", "cell", "description", "zones", "author")
 DEFAULT_CELL = 70.0
 CELL_RANGE = (16.0, 400.0)  # px per cell: tanks (30 x 24 px) need room, worlds stay drawable
 MAX_GRID = 128  # cells each way
-
-
-def read_text(path: str | Path) -> str:
-    """A text file's contents as UTF-8 (a leading byte-order mark dropped); ValueError
-    naming the file, and the offset of the first bad byte, for anything else."""
-    try:
-        raw = Path(path).read_bytes()
-    except OSError as exc:
-        raise ValueError(f"{path}: cannot read: {exc.strerror or exc}") from None
-    return decode_text(raw, str(path))
-
-
-def decode_text(raw: bytes, source: str = "<bytes>") -> str:
-    """``raw`` decoded as UTF-8 without a byte-order mark; ValueError naming ``source``."""
-    try:
-        return raw.decode("utf-8").removeprefix("\ufeff")
-    except UnicodeDecodeError as exc:
-        kind = ("UTF-16" if raw[:2] in (b"\xff\xfe", b"\xfe\xff")
-                else "binary" if b"\x00" in raw[:1024] else "not UTF-8")
-        raise ValueError(f"{source}: not a UTF-8 text file ({kind}: byte "
-                         f"0x{raw[exc.start]:02x} at offset {exc.start}); save it as "
-                         "UTF-8") from None
 
 
 class MapError(InputError, ValueError):
