@@ -31,6 +31,7 @@ from alphatank.game.scenarios import Scenario, Seat, load_scenario
 from alphatank.sim.policy import Policy
 from alphatank.stats import League, wilson_interval
 from alphatank.training.checkpoint import Checkpoint, load_checkpoint
+from alphatank.training.teamstats import TeamWatch
 
 SAMPLING_STREAM = 1  # third SeedSequence word of the policy's sampling generator
 OUTCOME_SCORE = {"win": 1, "draw": 0, "loss": -1}
@@ -53,6 +54,7 @@ class EvalResult:
     agent: str = ""
     sides: tuple[str, str] = ("Agent", "Bot")
     outcomes: list[str] = field(default_factory=list)
+    team_stats: dict[str, Any] | None = None  # evaluate_learners(team_stats=True)
 
     @property
     def games(self) -> int:
@@ -118,10 +120,12 @@ class GameStreams:
 
 def play_games(core: MatchSet, team: str, games: int, seed: int,
                act: Callable[[np.ndarray, list[np.random.Generator]], np.ndarray] | None = None,
-               result: EvalResult | None = None) -> EvalResult:
+               result: EvalResult | None = None, watch: TeamWatch | None = None
+               ) -> EvalResult:
     """Play ``games`` games in ``core`` (its driven seats moved by ``act(obs, gens)`` ->
     (E, L, 3) actions, ``gens[e]`` the sampling generator of env ``e``'s current game)
-    and count them for ``team``."""
+    and count them for ``team``; ``watch`` follows every tick and keeps each counted
+    game's team statistics."""
     if games <= 0:
         raise ValueError(f"games must be > 0, got {games}")
     res = result or EvalResult(name="", opponent="")
@@ -139,6 +143,10 @@ def play_games(core: MatchSet, team: str, games: int, seed: int,
             extra += 1
     gens = [sampling_rng(seed, i) for i in index]
     obs = core.reset_all([game_seed(seed, i) for i in index])
+    if watch is not None:
+        core.tick_watch = watch.tick
+        for e in range(E):
+            watch.start(e)
     L = len(core.driven)
     idle = np.ones((E, L, 3), dtype=np.int64)
     done: dict[int, tuple[str, int]] = {}
@@ -152,6 +160,8 @@ def play_games(core: MatchSet, team: str, games: int, seed: int,
                 out = "draw" if m.winner is None else "win" if m.winner == team else "loss"
                 done[index[e]] = (out, int(m.tick))
                 played[e] += 1
+                if watch is not None:
+                    watch.end(index[e], e, out)
             if played[e] < quota[e]:
                 index[e] = int(start[e]) + played[e]
             else:
@@ -159,7 +169,10 @@ def play_games(core: MatchSet, team: str, games: int, seed: int,
                 extra += 1
             gens[e] = sampling_rng(seed, index[e])
             core.reset_env(e, game_seed(seed, index[e]))
+            if watch is not None:
+                watch.start(e)
         obs = core.obs.build()
+    core.tick_watch = None
     for i in sorted(done):
         out, length = done[i]
         res.outcomes.append(out)
@@ -230,8 +243,8 @@ def evaluate_checkpoint(checkpoint: str | Path | Checkpoint, opponents: Sequence
                         games: int = 100, seed: int = 0, scenario: str | Scenario | None = None,
                         team: str | None = None, deterministic: bool = False,
                         num_envs: int = 16, weakness: float | None = None,
-                        map_name: str | None = None, label: str | None = None
-                        ) -> list[EvalResult]:
+                        map_name: str | None = None, label: str | None = None,
+                        team_stats: bool = False) -> list[EvalResult]:
     """One :class:`EvalResult` per opponent for a saved checkpoint (see
     :func:`evaluate_learners`), each labelled ``label`` (default: the checkpoint's path);
     ``map_name`` plays the scenario on other maps."""
@@ -244,7 +257,8 @@ def evaluate_checkpoint(checkpoint: str | Path | Checkpoint, opponents: Sequence
         learners, ckpt.meta["observation"], {s.name: s.algo for s in ckpt.learner_specs},
         with_map(base, map_name), opponents, games=games, seed=seed, team=team,
         deterministic=deterministic, num_envs=num_envs, weakness=weakness,
-        game_overrides=tc.game, reward_overrides=tc.rewards, source=str(ckpt.path))
+        game_overrides=tc.game, reward_overrides=tc.rewards, source=str(ckpt.path),
+        team_stats=team_stats)
     for r in results:
         r.agent = label if label is not None else str(checkpoint if not isinstance(
             checkpoint, Checkpoint) else checkpoint.path)
@@ -256,13 +270,15 @@ def evaluate_learners(learners: dict[str, Any], observation: dict[str, Any],
                       games: int = 100, seed: int = 0, team: str | None = None,
                       deterministic: bool = False, num_envs: int = 16,
                       weakness: float | None = None, game_overrides: dict | None = None,
-                      reward_overrides: dict | None = None, source: str = "learners"
-                      ) -> list[EvalResult]:
+                      reward_overrides: dict | None = None, source: str = "learners",
+                      team_stats: bool = False) -> list[EvalResult]:
     """One :class:`EvalResult` per opponent. The evaluated ``team`` (default: the team of
     the first learner seat) is played by ``learners`` (per seat as in training). Opponent
     ``None`` keeps the scenario's own opponents (other learner seats are played by their
     learners too); a bot name puts that bot, at ``weakness`` (default 1), in every seat
-    outside the team. Results do not depend on ``num_envs`` (module docstring)."""
+    outside the team. Results do not depend on ``num_envs`` (module docstring).
+    ``team_stats``: each result's ``team_stats`` holds the team's cooperation figures of
+    the same games (:mod:`~alphatank.training.teamstats`)."""
     seat_learner = {int(k): v for k, v in observation["seat_learner"].items()}
     first = next(iter(learners))
     if not base.learner_seats:
@@ -304,7 +320,10 @@ def evaluate_learners(learners: dict[str, Any], observation: dict[str, Any],
                               f"{_label(seats, algo_of, theirs, False)}",
                          opponent=opp or core.describe_opponents(0),
                          sides=("Agent", side_kind(seats, theirs)))
-        results.append(play_games(core, team, games, seed, act, res))
+        watch = TeamWatch(team, n_env, list(sc.teams)) if team_stats else None
+        results.append(play_games(core, team, games, seed, act, res, watch))
+        if watch is not None:
+            res.team_stats = watch.summary()
     return results
 
 

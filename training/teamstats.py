@@ -1,7 +1,9 @@
 """Cooperation of a team, measured: who of the team scores, and whether kills come from
 two directions at once (``alphatank eval --team-stats``).
 
-Per game (an :class:`~alphatank.sim.episode.EpisodeHook` on the line-up's episodes):
+:class:`TeamWatch` follows the games of an evaluation (``play_games(..., watch=...)``),
+so the statistics come from the very games, and sampled actions, the win rates count.
+Per game:
 
 * ``hits`` / ``kills`` of each seat of the team (enemies only);
 * **both scored**: every seat of the team hit an enemy in the game;
@@ -14,13 +16,12 @@ teammate scored, the share of the team's kills made in crossfire, and hits per s
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from alphatank.sim.episode import Episode, EpisodeHook
-from alphatank.sim.match import TickEvents
+from alphatank.sim.match import Match, TickEvents
 from alphatank.stats import wilson_interval
 
 CROSSFIRE_PX = 100.0
@@ -37,50 +38,50 @@ class TeamGame:
     crossfire: int
 
 
-class TeamStatsHook(EpisodeHook):
-    """Counts a team's hits, kills and crossfire kills in each episode it joins."""
+class TeamWatch:
+    """Counts ``team``'s hits, kills and crossfire kills in the current game of each of
+    ``num_envs`` envs (seat teams ``teams``); a finished game is kept by its index in the
+    evaluation."""
 
-    def __init__(self, team: str, radius: float = CROSSFIRE_PX):
+    def __init__(self, team: str, num_envs: int, teams: list[str],
+                 radius: float = CROSSFIRE_PX):
         self.team, self.radius = team, float(radius)
-        self.games: list[TeamGame] = []
+        self.seats = [s for s, t in enumerate(teams) if t == team]
+        self.games: dict[int, TeamGame] = {}
+        self.hits = np.zeros((num_envs, len(teams)), dtype=np.int64)
+        self.kills = np.zeros((num_envs, len(teams)), dtype=np.int64)
+        self.crossfire = np.zeros(num_envs, dtype=np.int64)
 
-    def on_start(self, episode: Episode) -> None:
-        m = episode.match
-        self.seats = [s for s in range(m.n) if m.teams[s] == self.team]
-        self.hits = np.zeros(m.n, dtype=np.int64)
-        self.kills = np.zeros(m.n, dtype=np.int64)
-        self.crossfire = 0
+    def start(self, e: int) -> None:
+        """Env ``e`` starts a new game."""
+        self.hits[e] = self.kills[e] = self.crossfire[e] = 0
 
-    def on_tick(self, episode: Episode, events: TickEvents) -> None:
-        m = episode.match
+    def tick(self, e: int, m: Match, events: TickEvents) -> None:
+        """Env ``e`` played a tick with these events."""
         for h in events.hits:
             if not h.friendly and m.teams[h.shooter] == self.team:
-                self.hits[h.shooter] += 1
+                self.hits[e, h.shooter] += 1
         for k in events.kills:
             if m.teams[k.shooter] != self.team or m.teams[k.victim] == self.team:
                 continue
-            self.kills[k.shooter] += 1
+            self.kills[e, k.shooter] += 1
             mates = [s for s in self.seats if s != k.shooter]
-            owner = m.bullet_owner
-            live = m.bullet_active & np.isin(owner, mates)
+            live = m.bullet_active & np.isin(m.bullet_owner, mates)
             if live.any():
                 d = np.hypot(*(m.bullet_xy[live] - m.tank_xy[k.victim]).T)
-                self.crossfire += int((d <= self.radius).any())
+                self.crossfire[e] += int((d <= self.radius).any())
 
-    def on_end(self, episode: Episode) -> None:
-        seat = self.seats[0]
-        self.games.append(TeamGame(episode.outcome(seat), self.hits[self.seats].tolist(),
-                                   self.kills[self.seats].tolist(), self.crossfire))
-
-
-@dataclass
-class TeamStats:
-    """Summary of :class:`TeamGame` records."""
-
-    games: list[TeamGame] = field(default_factory=list)
+    def end(self, index: int, e: int, outcome: str) -> None:
+        """Env ``e``'s game, game ``index`` of the evaluation, ended with ``outcome``
+        (win, loss or draw for the team)."""
+        self.games[index] = TeamGame({"win": 1, "loss": -1}.get(outcome, 0),
+                                     self.hits[e, self.seats].tolist(),
+                                     self.kills[e, self.seats].tolist(),
+                                     int(self.crossfire[e]))
 
     def summary(self) -> dict[str, Any]:
-        g = self.games
+        """The statistics of the finished games (in game-index order)."""
+        g = [self.games[i] for i in sorted(self.games)]
         n = len(g)
         wins = [x for x in g if x.outcome > 0]
         both = sum(all(h > 0 for h in x.hits) for x in wins)
@@ -88,7 +89,8 @@ class TeamStats:
         cross = sum(x.crossfire for x in g)
         lo, hi = wilson_interval(both, len(wins)) if wins else (0.0, 0.0)
         seats = len(g[0].hits) if g else 0
-        return {"games": n, "wins": len(wins), "losses": sum(x.outcome < 0 for x in g),
+        return {"team": self.team, "crossfire_px": self.radius,
+                "games": n, "wins": len(wins), "losses": sum(x.outcome < 0 for x in g),
                 "draws": sum(x.outcome == 0 for x in g),
                 "wins_both_scored": both,
                 "wins_both_scored_share": round(both / len(wins), 4) if wins else 0.0,
@@ -99,36 +101,10 @@ class TeamStats:
                                           for k in range(seats)] if n else []}
 
 
-def team_stats(checkpoint: str, games: int = 100, seed: int = 0,
-               scenario: str | None = None, team: str | None = None,
-               radius: float = CROSSFIRE_PX) -> dict[str, Any]:
-    """Play ``games`` games of the checkpoint's scenario (or ``scenario``) with the
-    checkpoint in its learner seats (one Policy per seat; game ``i`` from the seed
-    ``alphatank eval --seed`` gives it) and summarise the team's cooperation (see the
-    module docstring)."""
-    from alphatank.game.lineup import build_lineup
-    from alphatank.game.scenarios import load_scenario, parse_scenario
-    from alphatank.training.checkpoint import load_checkpoint
-    from alphatank.training.evaluate import game_seed
-
-    ckpt = load_checkpoint(checkpoint)
-    sc = load_scenario(scenario) if scenario is not None else ckpt.scenario
-    game = ckpt.train_config.game
-    if game:
-        sc = parse_scenario({**sc.to_dict(), "game": {**sc.game, **game}}, sc.source)
-    lineup = build_lineup(sc, learner=f"checkpoint:{ckpt.path}")
-    team = team or sc.seats[sc.learner_seats[0]].team
-    hook = TeamStatsHook(team, radius)
-    for i in range(games):
-        lineup.play(game_seed(seed, i), hooks=[hook])
-    return {"checkpoint": str(ckpt.path), "scenario": sc.name, "team": team,
-            "crossfire_px": radius, **TeamStats(hook.games).summary()}
-
-
 def format_team_stats(s: dict[str, Any]) -> str:
     """Two lines for the terminal."""
     lo, hi = s["wins_both_scored_ci95"]
-    return (f"team {s['team']} in {s['scenario']}: {s['wins']}/{s['losses']}/{s['draws']} "
+    return (f"team {s['team']}: {s['wins']}/{s['losses']}/{s['draws']} "
             f"(W/L/D) of {s['games']} games; every teammate hit an enemy in "
             f"{100 * s['wins_both_scored_share']:.0f}% of the wins [{100 * lo:.0f}, "
             f"{100 * hi:.0f}]\n"

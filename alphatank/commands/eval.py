@@ -34,9 +34,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=seed, default=0, help="seed of the game sequence")
     p.add_argument("--num-envs", type=positive_int, default=16, help="matches played at once")
     p.add_argument("--team-stats", action="store_true",
-                   help="also measure cooperation in the checkpoint's own scenario: share of "
-                        "won games in which every teammate hit an enemy, kills in crossfire, "
-                        "hits per seat (--games games, one policy per seat)")
+                   help="also measure cooperation in the same games: share of won games in "
+                        "which every teammate hit an enemy, kills in crossfire, hits per "
+                        "seat (written to FILE.team.json with --json)")
     p.add_argument("--csv", metavar="FILE", help="also write the rows as CSV")
     p.add_argument("--json", metavar="FILE",
                    help="also write the rows as JSON (with every game's outcome)")
@@ -69,23 +69,19 @@ def run(args: argparse.Namespace) -> int:
                                            scenario=args.scenario, team=args.team,
                                            deterministic=args.greedy, num_envs=args.num_envs,
                                            weakness=args.weakness, map_name=args.map,
-                                           label=arg)
+                                           label=arg, team_stats=args.team_stats)
     except ValueError as exc:  # scenario, seat, option errors (a CheckpointError is not one)
         raise as_input_error(exc) from None
     print(format_table(results))
     if args.ratings:
         print("\nopenskill (Plackett-Luce) ratings from these games (draws are ties):")
         print(rating_table(results_league(results)))
-    stats = []
-    if args.team_stats:
-        from alphatank.training.teamstats import format_team_stats, team_stats
-        try:
-            for arg in args.checkpoints:
-                stats.append(team_stats(checkpoint_source(arg), games=args.games,
-                                        seed=args.seed, scenario=args.scenario, team=args.team))
-                print(format_team_stats(stats[-1]))
-        except ValueError as exc:
-            raise as_input_error(exc) from None
+    stats = [{"checkpoint": r.agent, "experiment": r.name, "opponent": r.opponent,
+              **r.team_stats} for r in results if r.team_stats is not None]
+    if stats:
+        from alphatank.training.teamstats import format_team_stats
+        for s in stats:
+            print(f"{s['checkpoint']} vs {s['opponent']}: {format_team_stats(s)}")
     try:
         if args.csv:
             write_csv(results, args.csv)

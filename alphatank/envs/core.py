@@ -22,7 +22,7 @@ Rules shared by all envs:
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -40,7 +40,7 @@ from alphatank.game.rewards import RewardTracker, as_index
 from alphatank.game.scenarios import Scenario, ScenarioError, Seat, load_scenario
 from alphatank.game.seats import make_controller
 from alphatank.sim.episode import episode_match, episode_seeds, reset_controllers
-from alphatank.sim.match import Match
+from alphatank.sim.match import Match, TickEvents
 from alphatank.sim.policy import NOOP, Policy
 
 ACTION_NVEC = np.array([3, 3, 2], dtype=np.int64)
@@ -137,6 +137,8 @@ class MatchSet:
         cap = self.game.bullet_capacity
         self._driven_bullets = np.isin(np.arange(n * cap) // cap, self.driven_idx)
         self.team_of = np.array([sc.seats[s].team for s in self.driven], dtype=object)
+        # called as tick_watch(e, match, events) after every tick (e.g. team statistics)
+        self.tick_watch: Callable[[int, Match, TickEvents], None] | None = None
 
     # ---- pickling -------------------------------------------------------------------
 
@@ -289,7 +291,9 @@ class MatchSet:
         for seat, ctrl in self._played[e]:
             if alive[seat]:
                 joint[seat] = ctrl.act(m, seat)
-        m.step(joint)
+        events = m.step(joint)
+        if self.tick_watch is not None:
+            self.tick_watch(e, m, events)
         self.batch.gather(e, m)
         if m.terminated or m.truncated:
             self.terminated[e], self.truncated[e] = m.terminated, m.truncated

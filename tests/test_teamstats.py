@@ -1,0 +1,48 @@
+"""``alphatank eval --team-stats``: the cooperation figures come from the very games the
+win rate counts, whatever ``--num-envs``."""
+
+from __future__ import annotations
+
+import json
+
+from alphatank.cli import main
+from alphatank.game.seats import checkpoint_source
+from alphatank.training.evaluate import evaluate_checkpoint
+from alphatank.training.teamstats import TeamWatch
+
+
+def test_team_stats_follow_the_evaluated_games_for_any_num_envs():
+    agent = checkpoint_source("agent:team_vs_def")
+    runs = [evaluate_checkpoint(agent, [None], games=6, seed=11, num_envs=k,
+                                team_stats=True)[0] for k in (2, 3)]
+    for r in runs:
+        s = r.team_stats
+        assert (s["wins"], s["losses"], s["draws"]) == (r.wins, r.losses, r.draws)
+        assert s["games"] == 6 and len(s["hits_per_game_by_seat"]) == 2
+        assert s["crossfire_kills"] <= s["kills"] <= round(6 * sum(s["hits_per_game_by_seat"]))
+    assert runs[0].team_stats == runs[1].team_stats
+    assert runs[0].outcomes == runs[1].outcomes
+
+
+def test_team_watch_counts_one_game_per_index():
+    w = TeamWatch("A", 2, ["A", "A", "B"])
+    w.start(0)
+    w.hits[0] = [2, 1, 0]
+    w.kills[0] = [1, 0, 0]
+    w.end(5, 0, "win")
+    w.start(0)  # a new game in env 0 starts from zero
+    w.end(6, 0, "draw")
+    s = w.summary()
+    assert (s["games"], s["wins"], s["draws"], s["wins_both_scored"]) == (2, 1, 1, 1)
+    assert s["hits_per_game_by_seat"] == [1.0, 0.5] and s["kills"] == 1
+
+
+def test_eval_cli_writes_team_stats_beside_json(tmp_path, capsys):
+    out = tmp_path / "e.json"
+    assert main(["eval", "agent:team_vs_def", "--games", "2", "--seed", "3",
+                 "--num-envs", "2", "--team-stats", "--json", str(out)]) == 0
+    stats = json.loads(out.with_suffix(".team.json").read_text(encoding="utf-8"))
+    rows = json.loads(out.read_text(encoding="utf-8"))
+    assert stats[0]["checkpoint"] == "agent:team_vs_def" and stats[0]["games"] == 2
+    assert stats[0]["wins"] == rows[0]["wins"]
+    assert "every teammate hit an enemy" in capsys.readouterr().out
