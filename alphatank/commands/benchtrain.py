@@ -152,11 +152,13 @@ def _raw_round(env: Any, actions: np.ndarray, steps: int) -> tuple[float, float]
 
 def train_bench(preset: str = "ppo_vs_smart", workers: int = 2, num_envs: int = 32,
                 hp: Sequence[str] = DEFAULT_HP, rounds: int = 3, iterations: int = 3,
-                seed: int = 0, verbose: bool = True) -> dict[str, Any]:
+                seed: int = 0, torch_threads: int = 1, verbose: bool = True
+                ) -> dict[str, Any]:
     """Training steps/s of ``preset`` (``hp``: ``--hp`` strings) against raw env steps/s of
     the same scenario, workers and envs, alternating ``rounds`` rounds; each training
     round runs ``iterations`` iterations (after one warm-up iteration), each raw round
-    the same number of vector steps. Medians; CPU s per step counts all processes."""
+    the same number of vector steps. Medians; CPU s per step counts all processes.
+    ``torch_threads``: the run's torch threads (PPO's updates; rollouts use numpy)."""
     from alphatank.envs.vector import make_vector_env
     from alphatank.training.presets import get_preset, parse_hp, run_scenario, with_hp
     from alphatank.training.runner import Trainer
@@ -168,7 +170,8 @@ def train_bench(preset: str = "ppo_vs_smart", workers: int = 2, num_envs: int = 
     cfg = with_hp(cfg, parse_hp([("--hp", h) for h in hp]), len(scenario.learner_seats))
     cfg = cfg.with_overrides(num_envs=num_envs, num_workers=workers, wandb="disabled",
                              checkpoint_every=0, eval_every=0, video_every=0, seed=seed,
-                             time_limit_s=0.0, total_steps=10**12, name="bench")
+                             time_limit_s=0.0, total_steps=10**12, name="bench",
+                             torch_threads=torch_threads)
     tmp = tempfile.mkdtemp(prefix="alphatank-bench-")
     env = make_vector_env(scenario, num_envs, seed=seed, num_workers=workers,
                           observation=cfg.observation)
@@ -199,6 +202,7 @@ def train_bench(preset: str = "ppo_vs_smart", workers: int = 2, num_envs: int = 
         trainer.env.close()
         shutil.rmtree(tmp, ignore_errors=True)
     out = {"preset": preset, "workers": workers, "num_envs": num_envs, "hp": list(hp),
+           "torch_threads": torch_threads,
            "raw_steps_per_s": round(statistics.median(raw)),
            "train_steps_per_s": round(statistics.median(train)),
            "raw_cpu_us_per_step": round(1e6 * statistics.median(raw_cpu), 1),
@@ -208,7 +212,8 @@ def train_bench(preset: str = "ppo_vs_smart", workers: int = 2, num_envs: int = 
     out["cpu_ratio"] = round(out["raw_cpu_us_per_step"] / out["train_cpu_us_per_step"], 3)
     if verbose:
         print(f"{preset} ({' '.join(hp) or 'preset hyperparameters'}), {workers} workers, "
-              f"{num_envs} envs; {rounds} alternating rounds of {vector_steps} vector steps "
+              f"{num_envs} envs, {torch_threads} torch threads; {rounds} alternating rounds of "
+              f"{vector_steps} vector steps "
               f"(load average {out['load_average']:.1f}):")
         print(f"  raw env, random actions {out['raw_steps_per_s']:9,} steps/s  "
               f"{out['raw_cpu_us_per_step']:6.1f} CPU us/step")
@@ -274,12 +279,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--num-envs", type=int, default=32)
     p.add_argument("--hp", action="append", default=None)
     p.add_argument("--rounds", type=int, default=3)
+    p.add_argument("--torch-threads", type=int, default=1)
 
 
 def run(args: argparse.Namespace) -> int:
     if args.train:
         train_bench(args.preset, args.workers, args.num_envs,
-                    DEFAULT_HP if args.hp is None else args.hp, args.rounds)
+                    DEFAULT_HP if args.hp is None else args.hp, args.rounds,
+                    torch_threads=args.torch_threads)
     if args.sac:
         sac_step_bench()
         sac_train_bench()
