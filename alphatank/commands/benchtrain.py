@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-DEFAULT_HP = ("ppo.update_epochs=4,ppo.num_steps=128",)
+DEFAULT_HP = ("ppo.update_epochs=4,ppo.num_steps=128",)  # for presets with PPO learners
 
 
 def _cpu_seconds(pids: Sequence[int] = ()) -> float:
@@ -151,13 +151,14 @@ def _raw_round(env: Any, actions: np.ndarray, steps: int) -> tuple[float, float]
 
 
 def train_bench(preset: str = "ppo_vs_smart", workers: int = 2, num_envs: int = 32,
-                hp: Sequence[str] = DEFAULT_HP, rounds: int = 3, iterations: int = 3,
+                hp: Sequence[str] | None = None, rounds: int = 3, iterations: int = 3,
                 seed: int = 0, torch_threads: int = 1, verbose: bool = True
                 ) -> dict[str, Any]:
     """Training steps/s of ``preset`` (``hp``: ``--hp`` strings) against raw env steps/s of
     the same scenario, workers and envs, alternating ``rounds`` rounds; each training
     round runs ``iterations`` iterations (after one warm-up iteration), each raw round
     the same number of vector steps. Medians; CPU s per step counts all processes.
+    ``hp`` None: :data:`DEFAULT_HP` when the preset trains PPO learners, else none.
     ``torch_threads``: the run's torch threads (PPO's updates; rollouts use numpy)."""
     from alphatank.envs.vector import make_vector_env
     from alphatank.training.presets import get_preset, parse_hp, run_scenario, with_hp
@@ -167,6 +168,8 @@ def train_bench(preset: str = "ppo_vs_smart", workers: int = 2, num_envs: int = 
     limit_threads(1)
     cfg = get_preset(preset)
     scenario = run_scenario(cfg)
+    if hp is None:
+        hp = DEFAULT_HP if "ppo" in {s.algo for s in cfg.learners} or not cfg.learners else ()
     cfg = with_hp(cfg, parse_hp([("--hp", h) for h in hp]), len(scenario.learner_seats))
     cfg = cfg.with_overrides(num_envs=num_envs, num_workers=workers, wandb="disabled",
                              checkpoint_every=0, eval_every=0, video_every=0, seed=seed,
@@ -285,7 +288,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.train:
         train_bench(args.preset, args.workers, args.num_envs,
-                    DEFAULT_HP if args.hp is None else args.hp, args.rounds,
+                    args.hp, args.rounds,
                     torch_threads=args.torch_threads)
     if args.sac:
         sac_step_bench()
