@@ -65,10 +65,10 @@ Fold = tuple[torch.Tensor, torch.Tensor, torch.Tensor]
 
 def fold_constant(x: torch.Tensor) -> tuple[torch.Tensor, Fold | None]:
     """Split the columns of ``x`` (N, D) that hold one value in every row (empty bullet,
-    wall and zone slots: often more than half of an observation over a rollout) from the
-    rest: returns (the varying columns (N, D'), (varying, constant, their values)), or
-    (``x``, None) when no column is constant. A first layer then folds the constant
-    columns into its bias (:func:`run_folded`): the same sums, ~2/5 of the products."""
+    wall and zone slots: 83 of ppo_vs_smart's 236 over a 128 x 32 rollout) from the rest:
+    returns (the varying columns (N, D'), (varying, constant, their values)), or (``x``,
+    None) when no column is constant. A first layer then folds the constant columns into
+    its bias (:func:`run_folded`): the same sums in another order, fewer products."""
     const = (x == x[:1]).all(dim=0)
     if not bool(const.any()):
         return x, None

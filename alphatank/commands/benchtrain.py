@@ -176,9 +176,13 @@ def train_bench(preset: str = "ppo_vs_smart", workers: int = 2, num_envs: int = 
                              time_limit_s=0.0, total_steps=10**12, name="bench",
                              torch_threads=torch_threads)
     tmp = tempfile.mkdtemp(prefix="alphatank-bench-")
-    env = make_vector_env(scenario, num_envs, seed=seed, num_workers=workers,
-                          observation=cfg.observation)
     trainer = Trainer(cfg, os.path.join(tmp, "run"), progress=False)
+    # the raw env does what the training env does: game and reward overrides, and the
+    # learners' extra inputs (MAPPO's agent-specific states)
+    env = make_vector_env(scenario, num_envs, seed=seed, num_workers=workers,
+                          observation=cfg.observation, game_overrides=cfg.game or None,
+                          reward_overrides=cfg.rewards or None,
+                          **({"inputs": trainer.inputs} if trainer.inputs else {}))
     rng = np.random.default_rng(seed)
     actions = rng.integers(0, [3, 3, 2], size=(256, num_envs, env.num_learners, 3))
     vector_steps = trainer.rollout_steps * iterations
