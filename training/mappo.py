@@ -39,7 +39,17 @@ from torch import nn
 from alphatank.training.buffers import OnPolicyPlumbing, RolloutBuffer, compute_gae_masked
 from alphatank.training.hparams import MAPPOConfig
 from alphatank.training.normalize import ObsNormalizer, ReturnNormalizer
-from alphatank.training.ppo import MASKED_LOGIT, NVEC, evaluate_actions, mlp, np_sample
+from alphatank.training.ppo import (
+    MASKED_LOGIT,
+    NVEC,
+    Fold,
+    Tanh,
+    evaluate_actions,
+    fold_constant,
+    mlp,
+    np_sample,
+    run_folded,
+)
 from alphatank.training.stopping import check_interrupt
 
 
@@ -96,14 +106,17 @@ class MAPPONet(nn.Module):
                  nvec: tuple[int, ...] = NVEC):
         super().__init__()
         self.nvec = tuple(nvec)
-        self.actor = mlp(actor_in, hidden, sum(self.nvec), 0.01, nn.Tanh)
-        self.critic = mlp(critic_in, hidden, 1, 1.0, nn.Tanh)
+        self.actor = mlp(actor_in, hidden, sum(self.nvec), 0.01, Tanh)
+        self.critic = mlp(critic_in, hidden, 1, 1.0, Tanh)
 
-    def value(self, state: torch.Tensor) -> torch.Tensor:
-        return self.critic(state).squeeze(-1)
+    def value(self, state: torch.Tensor, fold: Fold | None = None) -> torch.Tensor:
+        return run_folded(self.critic, state, fold).squeeze(-1)
 
-    def logits(self, x: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
-        logits = self.actor(x)
+    def logits(self, x: torch.Tensor, mask: torch.Tensor | None = None,
+               fold: Fold | None = None) -> torch.Tensor:
+        """``fold``: ``x`` holds only the varying columns (see
+        :func:`~alphatank.training.ppo.fold_constant`)."""
+        logits = run_folded(self.actor, x, fold)
         if mask is not None:
             logits = logits.masked_fill(~mask, MASKED_LOGIT)
         return logits
@@ -159,7 +172,7 @@ class MAPPO(OnPolicyPlumbing):
         self.optimizer = torch.optim.Adam(
             [{"params": self.net.actor.parameters(), "lr": cfg.learning_rate},
              {"params": self.net.critic.parameters(), "lr": cfg.critic_learning_rate}],
-            eps=cfg.adam_eps)
+            eps=cfg.adam_eps, fused=True)
         self.generator = torch.Generator().manual_seed(seed)
         self.np_rng = np.random.default_rng(seed)
         self.actor_np, self.critic_np = NumpyMLP(self.net.actor), NumpyMLP(self.net.critic)
@@ -172,6 +185,7 @@ class MAPPO(OnPolicyPlumbing):
         self.buffer = RolloutBuffer(cfg.num_steps, num_streams, self.actor_in, mask_dim)
         self.states = (torch.zeros((cfg.num_steps, num_streams, state_dim)) if state_dim
                        else None)
+        self.states_np = self.states.numpy() if self.states is not None else None
         self.seat_of = np.tile(np.arange(num_seats), self.num_envs)
         self.onehot = np.eye(num_seats, dtype=np.float32)
         self._alive_now = np.ones(num_streams, dtype=bool)  # alive at the last act()
@@ -235,18 +249,19 @@ class MAPPO(OnPolicyPlumbing):
         s = self._critic_input(state, x, update=True)
         logits = self.actor_np.forward(x)
         values = self.critic_np.forward(s)[:, 0]
+        row = buf.np
         if masks is not None:
             masks = np.asarray(masks, dtype=bool)
             logits[~masks] = MASKED_LOGIT
             if buf.masks is not None:
-                buf.masks[t] = torch.from_numpy(masks)
+                row["masks"][t] = masks
         actions, logprob = np_sample(logits, self.nvec, self.np_rng)
-        buf.obs[t] = torch.from_numpy(x)
-        if self.states is not None:
-            self.states[t] = torch.from_numpy(s)
-        buf.actions[t] = torch.from_numpy(actions)
-        buf.logprobs[t] = torch.from_numpy(logprob)
-        buf.values[t] = torch.from_numpy(values)  # normalised (value_norm units)
+        row["obs"][t] = x
+        if self.states_np is not None:
+            self.states_np[t] = s
+        row["actions"][t] = actions
+        row["logprobs"][t] = logprob
+        row["values"][t] = values  # normalised (value_norm units)
         live = self._alive(obs, alive)
         self._alive_now = live if live is not None else np.ones(self.num_streams, bool)
         return actions
@@ -263,12 +278,13 @@ class MAPPO(OnPolicyPlumbing):
         del next_obs, state, alive
         buf, cfg = self.buffer, self.cfg
         t = buf.step
+        row = buf.np
         ended = np.logical_or(terminated, truncated)
-        buf.rewards[t] = torch.from_numpy(self.ret_norm(rewards, ended))
-        buf.terminated[t] = torch.from_numpy(np.asarray(terminated, dtype=np.float32))
-        buf.truncated[t] = torch.from_numpy(np.asarray(truncated, dtype=np.float32))
+        row["rewards"][t] = self.ret_norm(rewards, ended)
+        row["terminated"][t] = terminated
+        row["truncated"][t] = truncated
         act = self._alive_now if active is None else np.asarray(active, dtype=bool)
-        buf.active[t] = torch.from_numpy(np.array(act, dtype=bool))
+        row["active"][t] = act
         boot = np.logical_and(truncated, np.logical_not(terminated))
         if cfg.bootstrap_timeouts and boot.any():
             if final_obs is None or (self.state_dim and final_state is None):
@@ -277,7 +293,7 @@ class MAPPO(OnPolicyPlumbing):
             live = self._alive(final_obs, final_alive)
             values = self._team_values(self._values(final_state, final_obs),
                                        act if live is None else live)
-            buf.bootstrap[t] = torch.from_numpy(np.where(boot, values, 0.0).astype(np.float32))
+            row["bootstrap"][t] = np.where(boot, values, 0.0)
         buf.step += 1
 
     @property
@@ -311,8 +327,9 @@ class MAPPO(OnPolicyPlumbing):
         if cfg.norm_adv and n_live > 1:
             live = b_adv[b_active]
             b_adv = (b_adv - live.mean()) / (live.std() + 1e-8) * b_w
-        b_x = buf.obs.reshape(n, -1)
-        b_s = self.states.reshape(n, -1) if self.states is not None else b_x
+        b_x, x_fold = fold_constant(buf.obs.reshape(n, -1))
+        b_s, s_fold = (fold_constant(self.states.reshape(n, -1)) if self.states is not None
+                       else (b_x, x_fold))
         b_actions = buf.actions.reshape(n, -1)
         b_logprobs, b_values = buf.logprobs.reshape(n), buf.values.reshape(n)
         b_masks = buf.masks.reshape(n, -1) if buf.masks is not None else None
@@ -327,19 +344,21 @@ class MAPPO(OnPolicyPlumbing):
             for start in range(0, n - mb_size + 1, mb_size):
                 idx = perm[start:start + mb_size]
                 check_interrupt(self.interrupt)  # the runner rewinds a cut update
-                w = b_w[idx]
+                w = b_w.index_select(0, idx)  # index_select: 5x cheaper than b_x[idx]
                 n_w = w.sum().clamp(min=1.0)
-                value = net.value(b_s[idx])
-                v_loss = (self._value_loss(value, b_values[idx], b_target[idx]) * w).sum() / n_w
-                mask = b_masks[idx] if b_masks is not None else None
-                logprob, entropy = evaluate_actions(net.logits(b_x[idx], mask), b_actions[idx],
-                                                    self.nvec)
-                log_ratio = logprob - b_logprobs[idx]
+                value = net.value(b_s.index_select(0, idx), s_fold)
+                v_loss = (self._value_loss(value, b_values.index_select(0, idx),
+                                           b_target.index_select(0, idx)) * w).sum() / n_w
+                mask = b_masks.index_select(0, idx) if b_masks is not None else None
+                logprob, entropy = evaluate_actions(
+                    net.logits(b_x.index_select(0, idx), mask, x_fold),
+                    b_actions.index_select(0, idx), self.nvec)
+                log_ratio = logprob - b_logprobs.index_select(0, idx)
                 ratio = log_ratio.exp()
                 with torch.no_grad():
                     approx_kl = (((ratio - 1) - log_ratio) * w).sum() / n_w
                     clipfrac = (((ratio - 1.0).abs() > cfg.clip_coef).float() * w).sum() / n_w
-                adv = b_adv[idx]
+                adv = b_adv.index_select(0, idx)
                 pg = torch.max(-adv * ratio,
                                -adv * torch.clamp(ratio, 1 - cfg.clip_coef, 1 + cfg.clip_coef))
                 pg_loss = (pg * w).sum() / n_w

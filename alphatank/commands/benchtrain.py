@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-DEFAULT_HP = ("ppo.update_epochs=4,ppo.num_steps=128",)
+DEFAULT_HP = ("ppo.update_epochs=4,ppo.num_steps=128",)  # for presets with PPO learners
 
 
 def _cpu_seconds(pids: Sequence[int] = ()) -> float:
@@ -151,12 +151,15 @@ def _raw_round(env: Any, actions: np.ndarray, steps: int) -> tuple[float, float]
 
 
 def train_bench(preset: str = "ppo_vs_smart", workers: int = 2, num_envs: int = 32,
-                hp: Sequence[str] = DEFAULT_HP, rounds: int = 3, iterations: int = 3,
-                seed: int = 0, verbose: bool = True) -> dict[str, Any]:
+                hp: Sequence[str] | None = None, rounds: int = 3, iterations: int = 3,
+                seed: int = 0, torch_threads: int = 1, verbose: bool = True
+                ) -> dict[str, Any]:
     """Training steps/s of ``preset`` (``hp``: ``--hp`` strings) against raw env steps/s of
     the same scenario, workers and envs, alternating ``rounds`` rounds; each training
     round runs ``iterations`` iterations (after one warm-up iteration), each raw round
-    the same number of vector steps. Medians; CPU s per step counts all processes."""
+    the same number of vector steps. Medians; CPU s per step counts all processes.
+    ``hp`` None: :data:`DEFAULT_HP` when the preset trains PPO learners, else none.
+    ``torch_threads``: the run's torch threads (PPO's updates; rollouts use numpy)."""
     from alphatank.envs.vector import make_vector_env
     from alphatank.training.presets import get_preset, parse_hp, run_scenario, with_hp
     from alphatank.training.runner import Trainer
@@ -165,14 +168,21 @@ def train_bench(preset: str = "ppo_vs_smart", workers: int = 2, num_envs: int = 
     limit_threads(1)
     cfg = get_preset(preset)
     scenario = run_scenario(cfg)
+    if hp is None:
+        hp = DEFAULT_HP if "ppo" in {s.algo for s in cfg.learners} or not cfg.learners else ()
     cfg = with_hp(cfg, parse_hp([("--hp", h) for h in hp]), len(scenario.learner_seats))
     cfg = cfg.with_overrides(num_envs=num_envs, num_workers=workers, wandb="disabled",
                              checkpoint_every=0, eval_every=0, video_every=0, seed=seed,
-                             time_limit_s=0.0, total_steps=10**12, name="bench")
+                             time_limit_s=0.0, total_steps=10**12, name="bench",
+                             torch_threads=torch_threads)
     tmp = tempfile.mkdtemp(prefix="alphatank-bench-")
-    env = make_vector_env(scenario, num_envs, seed=seed, num_workers=workers,
-                          observation=cfg.observation)
     trainer = Trainer(cfg, os.path.join(tmp, "run"), progress=False)
+    # the raw env does what the training env does: game and reward overrides, and the
+    # learners' extra inputs (MAPPO's agent-specific states)
+    env = make_vector_env(scenario, num_envs, seed=seed, num_workers=workers,
+                          observation=cfg.observation, game_overrides=cfg.game or None,
+                          reward_overrides=cfg.rewards or None,
+                          **({"inputs": trainer.inputs} if trainer.inputs else {}))
     rng = np.random.default_rng(seed)
     actions = rng.integers(0, [3, 3, 2], size=(256, num_envs, env.num_learners, 3))
     vector_steps = trainer.rollout_steps * iterations
@@ -199,6 +209,7 @@ def train_bench(preset: str = "ppo_vs_smart", workers: int = 2, num_envs: int = 
         trainer.env.close()
         shutil.rmtree(tmp, ignore_errors=True)
     out = {"preset": preset, "workers": workers, "num_envs": num_envs, "hp": list(hp),
+           "torch_threads": torch_threads,
            "raw_steps_per_s": round(statistics.median(raw)),
            "train_steps_per_s": round(statistics.median(train)),
            "raw_cpu_us_per_step": round(1e6 * statistics.median(raw_cpu), 1),
@@ -208,7 +219,8 @@ def train_bench(preset: str = "ppo_vs_smart", workers: int = 2, num_envs: int = 
     out["cpu_ratio"] = round(out["raw_cpu_us_per_step"] / out["train_cpu_us_per_step"], 3)
     if verbose:
         print(f"{preset} ({' '.join(hp) or 'preset hyperparameters'}), {workers} workers, "
-              f"{num_envs} envs; {rounds} alternating rounds of {vector_steps} vector steps "
+              f"{num_envs} envs, {torch_threads} torch threads; {rounds} alternating rounds of "
+              f"{vector_steps} vector steps "
               f"(load average {out['load_average']:.1f}):")
         print(f"  raw env, random actions {out['raw_steps_per_s']:9,} steps/s  "
               f"{out['raw_cpu_us_per_step']:6.1f} CPU us/step")
@@ -274,12 +286,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--num-envs", type=int, default=32)
     p.add_argument("--hp", action="append", default=None)
     p.add_argument("--rounds", type=int, default=3)
+    p.add_argument("--torch-threads", type=int, default=1)
 
 
 def run(args: argparse.Namespace) -> int:
     if args.train:
         train_bench(args.preset, args.workers, args.num_envs,
-                    DEFAULT_HP if args.hp is None else args.hp, args.rounds)
+                    args.hp, args.rounds,
+                    torch_threads=args.torch_threads)
     if args.sac:
         sac_step_bench()
         sac_train_bench()
