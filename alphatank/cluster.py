@@ -1,8 +1,8 @@
 """The one door to a Ray cluster (``--ray [ADDRESS]`` of ``alphatank train`` and
 ``alphatank experiments``).
 
-Nothing here imports Ray until :func:`connect` is called, and nothing else in AlphaTank
-imports this module unless ``--ray`` was given: without it Ray is never imported. Ray
+Nothing here imports Ray until :func:`connect` is called, and nothing in AlphaTank calls
+it unless ``--ray`` was given: without it Ray is never imported. Ray
 is the ``ray`` install extra; :func:`connect` says how to install it when it is missing.
 
 ``connect(None)`` starts a private local instance (``ray.init(address="local")``: never
@@ -61,6 +61,7 @@ class Connection:
 
 
 PROBE_TIMEOUT_S = 5.0
+ENV_RUNNER_TIMEOUT_S = 60.0  # an env runner silent this long on one call is hung: restart it
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 

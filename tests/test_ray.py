@@ -79,7 +79,8 @@ def test_train_through_a_head_node_started_with_ray_start(tmp_path):
         assert start.returncode == 0, start.stdout + start.stderr
         res = subprocess.run([sys.executable, "-m", "alphatank.cli", "train", "--runs",
                               str(tmp_path), "--name", "head", *TINY, "--total-steps", "128",
-                              "--ray", f"127.0.0.1:{port}", "--env-runners", "2"],
+                              "--ray", f"127.0.0.1:{port}", "--env-runners", "2",
+                              "--env-runner-timeout", "30"],
                              capture_output=True, text=True, timeout=180, env=env)
         out = res.stdout + res.stderr
         assert res.returncode == 0, out
@@ -99,6 +100,16 @@ def test_a_wrong_address_is_one_line(tmp_path):
     assert res.returncode == 2
     last = res.stderr.strip().splitlines()[-1]
     assert last.startswith("alphatank train: error: --ray 127.0.0.1:") and "ray start" in last
+
+
+@pytest.mark.parametrize(("extra", "message"), [
+    (["--env-runner-timeout", "5"], "--env-runner-timeout: needs --ray"),
+    (["--ray", "--env-runner-timeout", "0"], "--env-runner-timeout: must be > 0 seconds, got 0"),
+])
+def test_a_bad_env_runner_timeout_is_one_line(tmp_path, capsys, extra, message):
+    assert main(["train", "--runs", str(tmp_path), *TINY, *extra]) == 2
+    assert message in capsys.readouterr().err.strip().splitlines()[-1]
+    assert not any(tmp_path.iterdir())  # nothing written
 
 
 @pytest.fixture(scope="module")
@@ -170,6 +181,29 @@ def test_first_update_has_the_same_weights_as_with_local_workers(cluster, tmp_pa
     alone = Trainer(tiny_cfg("one"), tmp_path / "one", progress=False)  # one process
     alone.train()
     assert weights(alone) == weights(local)
+
+
+def test_a_hung_env_runner_is_killed_and_restarted(cluster):
+    env = RayVectorMatchEnv("vs_aggressive", 4, seed=3, num_runners=2, step_timeout_s=1.5)
+    try:
+        env.set_opponents(["dodge"])
+        obs = env.reset(5)
+        act = np.ones((4, 1, 3), np.int64)
+        env.step(act)
+        pid = ray.get(env.runners[0].pid.remote())
+        os.kill(pid, signal.SIGSTOP)  # a real hang: the process stops answering
+        t0 = time.monotonic()
+        with pytest.raises(RolloutLost, match=r"env runner 0 \(envs 0-1\) was lost \(hung: no "
+                                              r"answer within 1.5 s, killed\); Ray restarted "
+                                              r"it \(restart 1, max_restarts=3\)"):
+            env.step(act)
+        assert time.monotonic() - t0 < 60
+        assert env.restarts == [1, 0] and env.lost_rollouts == 1
+        assert ray.get(env.runners[0].pid.remote()) != pid
+        np.testing.assert_array_equal(env.reset(5), obs)  # settings replayed: same games
+        assert env.step(act)[0].shape == obs.shape
+    finally:
+        env.close()
 
 
 def test_a_run_goes_on_when_an_env_runner_is_killed(cluster, tmp_path, capsys):

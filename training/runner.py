@@ -42,6 +42,7 @@ from typing import Any
 
 import numpy as np
 
+from alphatank.cluster import ENV_RUNNER_TIMEOUT_S
 from alphatank.envs.core import ACTION_NVEC
 from alphatank.envs.ids import env_id
 from alphatank.envs.ray_vector import RolloutLost
@@ -117,7 +118,8 @@ class Trainer:
     (:class:`~alphatank.envs.ray_vector.RayVectorMatchEnv`, in place of ``num_workers``
     processes, same results); a runner that dies costs the iteration in flight, which is
     collected again (:attr:`lost_rollouts`, a ``warning`` on stderr and ``charts/
-    lost_rollouts`` in the log).
+    lost_rollouts`` in the log); so does one that does not answer a step within
+    ``env_runner_timeout_s`` (it is killed and restarted).
 
     ``action_mask``: optional hook ``f(obs (E, L, D)) -> bool (E, L, 8)`` over the
     concatenated choices (rotate 3, move 3, fire 2); learners that take masks (PPO) never
@@ -128,7 +130,8 @@ class Trainer:
                  resume: Checkpoint | None = None, progress: bool = True,
                  wandb_id: str | None = None,
                  action_mask: Callable[[np.ndarray], np.ndarray] | None = None,
-                 scenario: Scenario | None = None, env_runners: int = 0):
+                 scenario: Scenario | None = None, env_runners: int = 0,
+                 env_runner_timeout_s: float = ENV_RUNNER_TIMEOUT_S):
         self.cfg = cfg
         self.action_mask = action_mask
         self.run_dir = Path(run_dir)
@@ -164,8 +167,8 @@ class Trainer:
             from alphatank.envs.ray_vector import RayVectorMatchEnv
             self.env = RayVectorMatchEnv(
                 self.scenario, cfg.num_envs, seed=cfg.seed, num_runners=env_runners,
-                observation=cfg.observation, game_overrides=cfg.game or None,
-                reward_overrides=cfg.rewards or None, **extra)
+                step_timeout_s=env_runner_timeout_s, observation=cfg.observation,
+                game_overrides=cfg.game or None, reward_overrides=cfg.rewards or None, **extra)
         else:
             self.env = make_vector_env(
                 self.scenario, cfg.num_envs, seed=cfg.seed, num_workers=cfg.num_workers,
@@ -664,12 +667,13 @@ class Trainer:
 
 
 def resume_trainer(path: str | Path, progress: bool = True, env: Any = None,
-                   env_runners: int = 0, **overrides: Any) -> Trainer:
+                   env_runners: int = 0, env_runner_timeout_s: float = ENV_RUNNER_TIMEOUT_S,
+                   **overrides: Any) -> Trainer:
     """A :class:`Trainer` continuing the run saved at ``path`` (checkpoint or run dir);
-    ``overrides`` change run settings such as ``total_steps``; ``env_runners``: as for
-    :class:`Trainer`."""
+    ``overrides`` change run settings such as ``total_steps``; ``env_runners`` and
+    ``env_runner_timeout_s``: as for :class:`Trainer`."""
     ckpt = load_checkpoint(path)
     cfg = ckpt.train_config.with_overrides(**overrides)
     return Trainer(cfg, ckpt.path.parent.parent, env=env, resume=ckpt, progress=progress,
                    wandb_id=ckpt.meta.get("wandb_id"), scenario=ckpt.scenario,
-                   env_runners=env_runners)
+                   env_runners=env_runners, env_runner_timeout_s=env_runner_timeout_s)

@@ -14,6 +14,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+from alphatank.cluster import ENV_RUNNER_TIMEOUT_S
 from alphatank.commands.argtypes import seed
 from alphatank.errors import InputError, as_input_error
 from alphatank.training.fields import FieldError
@@ -119,6 +120,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                          help="with --ray: env-runner actors (one CPU each), in place of "
                               "--workers processes; the same seed and N give the same run as "
                               "--workers N (default: the run's workers, at least 2)")
+    cluster.add_argument("--env-runner-timeout", type=float, metavar="SECONDS",
+                         help="with --env-runners: a runner that does not answer a step "
+                              "within SECONDS is hung: it is killed and restarted, and the "
+                              f"iteration collected again (default: {ENV_RUNNER_TIMEOUT_S:g})")
 
 
 # TrainConfig field -> the flag that sets it (run settings, also allowed with --resume)
@@ -271,6 +276,12 @@ def run(args: argparse.Namespace) -> int:
                          "sets local worker processes)")
     if args.env_runners is not None and args.env_runners < 1:
         raise InputError(f"--env-runners: must be >= 1, got {args.env_runners}")
+    if args.env_runner_timeout is not None:
+        if args.ray is None:
+            raise InputError("--env-runner-timeout: needs --ray (it applies to env runners)")
+        if not args.env_runner_timeout > 0:
+            raise InputError(f"--env-runner-timeout: must be > 0 seconds, got "
+                             f"{args.env_runner_timeout:g}")
     if args.ray is not None and not args.print_config:
         from alphatank.cluster import connect
         connection = connect(args.ray or None, feature="alphatank train --ray")
@@ -280,6 +291,11 @@ def run(args: argparse.Namespace) -> int:
         finally:
             connection.close()
     return _run(args, progress)
+
+
+def _runner_timeout(args: argparse.Namespace) -> float:
+    return (ENV_RUNNER_TIMEOUT_S if args.env_runner_timeout is None
+            else args.env_runner_timeout)
 
 
 def _env_runners(args: argparse.Namespace, cfg: TrainConfig, cpus: float) -> int:
@@ -314,6 +330,7 @@ def _run(args: argparse.Namespace, progress: bool, cpus: float = 0.0) -> int:
             runners = _env_runners(args, cfg, cpus)
             with _one_line_warnings():
                 trainer = resume_trainer(args.resume, progress=progress, env_runners=runners,
+                                         env_runner_timeout_s=_runner_timeout(args),
                                          **_overrides(args))
         except ValueError as exc:
             raise as_input_error(exc) from None
@@ -336,7 +353,8 @@ def _run(args: argparse.Namespace, progress: bool, cpus: float = 0.0) -> int:
         from alphatank.training.runner import Trainer
         runners = _env_runners(args, cfg, cpus)
         with _one_line_warnings():
-            trainer = Trainer(cfg, run_dir, progress=progress, env_runners=runners)
+            trainer = Trainer(cfg, run_dir, progress=progress, env_runners=runners,
+                              env_runner_timeout_s=_runner_timeout(args))
         for name, counts in trainer.warm_start.items():
             print(f"warm start {name} from {cfg.init_from}: {counts['mapped']} features "
                   f"mapped, {counts['new']} new (zero weight), {counts['dropped']} dropped"

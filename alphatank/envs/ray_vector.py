@@ -6,8 +6,17 @@
 controls, extra learner inputs) and, for the same seed, its results bit for bit: env
 runner ``k`` is a Ray actor (:class:`EnvRunner`, one CPU) owning a
 :class:`~alphatank.envs.vector.VectorMatchEnv` over the same contiguous block of env ids
-as worker ``k`` of the subprocess env. Every step sends each runner its block of actions,
-all runners step at once, and their observations come back through Ray's object store.
+as worker ``k`` of the subprocess env. Every step is one actor call per runner carrying
+its block of actions; all runners step at once, and each answers with one record array
+(observations, rewards, episode ends, final observations and extra inputs of its envs,
+one structured row per env: a single buffer for Ray to serialise) plus the records of the
+episodes that ended (usually none).
+
+Ray Compiled Graphs (``experimental_compile``) are not used: in Ray 2.60 their
+shared-memory channels wait by polling (``sched_yield`` loops), so each idle runner and the
+waiting learner keep a core busy, which on a host with fewer free cores than runners + 1
+(or during the learner's update) costs more than the ~1 ms per call it saves
+(docs/distributed.md).
 
 Failures: Ray restarts a runner whose process or node dies (``max_restarts``); the
 restarted actor rebuilds its envs from the constructor arguments and this env replays the
@@ -15,8 +24,10 @@ opponent settings made since (the last call of each kind, in order). The matches
 shard are gone, so the rollout in flight is lost: :meth:`step` raises
 :class:`RolloutLost` (after the runner is back), the caller drops the partial rollout and
 resets (the Trainer does; see :mod:`alphatank.training.runner`). A runner lost during
-:meth:`reset` costs nothing: the reset is redone. A runner out of restarts ends the run
-with a RuntimeError naming it.
+:meth:`reset` costs nothing: the reset is redone. A runner that does not answer a call
+within ``step_timeout_s`` (hung: deadlocked, stopped, stuck in a system call) is killed
+and restarted the same way, and the message says so. A runner out of restarts ends the
+run with a RuntimeError naming it.
 
 Ray is imported when the env is built, never at module import.
 """
@@ -30,6 +41,7 @@ from typing import Any
 
 import numpy as np
 
+from alphatank.cluster import ENV_RUNNER_TIMEOUT_S
 from alphatank.envs.core import check_actions
 from alphatank.envs.vector import ShardedEnv, VectorMatchEnv
 from alphatank.game.scenarios import Scenario
@@ -45,12 +57,34 @@ class RolloutLost(RuntimeError):
     the partial rollout dropped. The message says which runner and what happened."""
 
 
+def step_record(num_learners: int, obs_dim: int,
+                input_shapes: Mapping[str, tuple[int, ...]]) -> np.dtype:
+    """One env's row of a step's answer: everything :meth:`VectorMatchEnv.step` returns
+    for it but the episode records, and its extra inputs."""
+    L, D = num_learners, obs_dim
+    fields: list[tuple] = [("obs", np.float32, (L, D)), ("rewards", np.float32, (L,)),
+                           ("terminated", np.bool_), ("truncated", np.bool_),
+                           ("final_obs", np.float32, (L, D))]
+    for name, shape in input_shapes.items():
+        fields += [(f"input:{name}", np.float32, (L, *shape)),
+                   (f"final:{name}", np.float32, (L, *shape))]
+    return np.dtype(fields)
+
+
 class EnvRunner:
-    """One shard: a :class:`VectorMatchEnv` over env ids ``lo..hi-1`` (a Ray actor)."""
+    """One shard: a :class:`VectorMatchEnv` over env ids ``lo..hi-1`` (a Ray actor). A
+    step writes its results into one record array made once (:func:`step_record`)."""
 
     def __init__(self, kwargs: dict[str, Any], lo: int, hi: int):
-        self.env = VectorMatchEnv(num_envs=hi - lo, env_ids=range(lo, hi), **kwargs)
+        self.env = env = VectorMatchEnv(num_envs=hi - lo, env_ids=range(lo, hi), **kwargs)
         self.started = False
+        self.rec = np.zeros(hi - lo, step_record(env.num_learners, env.obs_dim,
+                                                 env.input_shapes))
+        rec = self.rec
+        self._out = [rec[k] for k in ("obs", "rewards", "terminated", "truncated",
+                                      "final_obs")]
+        self._finals = {name: rec[f"final:{name}"] for name in env.input_shapes}
+        self._dirty = False  # final_obs / final inputs rows written by the last step
 
     def configure(self, calls: Sequence[tuple[str, tuple]]) -> None:
         """Apply opponent settings (method name, arguments) in order."""
@@ -62,11 +96,21 @@ class EnvRunner:
         self.started = True
         return obs, self.env.inputs
 
-    def step(self, actions: np.ndarray) -> tuple:
+    def step(self, actions: np.ndarray) -> tuple[np.ndarray, list[dict[str, Any]]]:
+        """One step of the validated (n, L, 3) actions: the record array and the records
+        of the episodes that ended."""
         if not self.started:  # Ray restarted this actor since the last reset
             raise RolloutLost("the env runner was restarted; its matches were not reset")
-        obs, rew, term, trunc, info = self.env.step(actions)
-        return obs, rew, term, trunc, info, self.env.inputs
+        rec = self.rec
+        if self._dirty:
+            rec["final_obs"] = 0.0
+            for arr in self._finals.values():
+                arr[...] = 0.0
+        episodes = self.env._step_into(actions, *self._out, self._finals)
+        for name, value in self.env.inputs.items():
+            rec[f"input:{name}"] = value
+        self._dirty = bool(episodes)
+        return rec, episodes
 
     def pid(self) -> int:
         import os
@@ -87,7 +131,8 @@ class RayVectorMatchEnv(ShardedEnv):
                  reward_overrides: dict | None = None, *, num_runners: int = 2,
                  seat_policies: Mapping[int, Policy] | None = None,
                  learner_seats: Sequence[int] | None = None, inputs: Sequence[str] = (),
-                 max_restarts: int = DEFAULT_MAX_RESTARTS):
+                 max_restarts: int = DEFAULT_MAX_RESTARTS,
+                 step_timeout_s: float = ENV_RUNNER_TIMEOUT_S):
         from alphatank.cluster import connect
 
         if not 1 <= num_runners <= num_envs:
@@ -95,6 +140,8 @@ class RayVectorMatchEnv(ShardedEnv):
                              f"{num_runners}")
         if max_restarts < 0:
             raise ValueError(f"max_restarts must be >= 0, got {max_restarts}")
+        if not step_timeout_s > 0:
+            raise ValueError(f"step_timeout_s must be > 0 seconds, got {step_timeout_s}")
         connect()
         import ray
 
@@ -109,6 +156,9 @@ class RayVectorMatchEnv(ShardedEnv):
         self.inputs = {name: np.zeros((num_envs, self.num_learners, *shape), np.float32)
                        for name, shape in self.input_shapes.items()}
         self.max_restarts = max_restarts
+        self.step_timeout_s = float(step_timeout_s)
+        self._rec = np.zeros(num_envs, step_record(self.num_learners, self.obs_dim,
+                                                   self.input_shapes))
         actor = ray.remote(EnvRunner).options(num_cpus=1, max_restarts=max_restarts,
                                               max_task_retries=0)
         self.runners = [actor.remote(kwargs, lo, hi) for lo, hi in self._blocks]
@@ -137,15 +187,29 @@ class RayVectorMatchEnv(ShardedEnv):
 
     def _gather(self, refs: Sequence[Any]) -> list:
         """Results of one call per runner; a runner that died is brought back (settings
-        replayed) and :class:`RolloutLost` raised once every runner answered."""
+        replayed), one silent for ``step_timeout_s`` is killed and brought back, and
+        :class:`RolloutLost` raised once every runner answered."""
         ray = self._ray
+        refs = list(refs)
+        deadline = time.monotonic() + self.step_timeout_s
         try:
-            return ray.get(list(refs))  # one call: the common case
+            return ray.get(refs, timeout=self.step_timeout_s)  # one call: the common case
         except (ray.exceptions.RayError, RolloutLost):
             pass  # find out which runner failed, and how
+        _, pending = ray.wait(refs, num_returns=len(refs),
+                              timeout=max(0.0, deadline - time.monotonic()))
+        hung = {ref.hex() for ref in pending}
+        for k, ref in enumerate(refs):
+            if ref.hex() in hung:  # restarted by Ray as if it had died
+                ray.kill(self.runners[k], no_restart=False)
         out: list[Any] = []
         lost: list[tuple[int, BaseException]] = []
         for k, ref in enumerate(refs):
+            if ref.hex() in hung:
+                out.append(None)
+                lost.append((k, TimeoutError(f"hung: no answer within "
+                                             f"{self.step_timeout_s:g} s, killed")))
+                continue
             try:
                 out.append(ray.get(ref))
             except (ray.exceptions.RayActorError, RolloutLost) as exc:
@@ -165,8 +229,9 @@ class RayVectorMatchEnv(ShardedEnv):
         ray = self._ray
         lo, hi = self._blocks[k]
         what = f"env runner {k} (envs {lo}-{hi - 1})"
-        cause = type(exc).__name__ if isinstance(exc, RolloutLost) else (
-            f"{type(exc).__name__}: {str(exc).strip().splitlines()[0]}")
+        cause = (type(exc).__name__ if isinstance(exc, RolloutLost) else str(exc)
+                 if isinstance(exc, TimeoutError) else
+                 f"{type(exc).__name__}: {str(exc).strip().splitlines()[0]}")
         calls = self._replay_order(k)
         deadline = time.monotonic() + RESTART_TIMEOUT_S
         while True:
@@ -276,17 +341,17 @@ class RayVectorMatchEnv(ShardedEnv):
         except RolloutLost:
             self.lost_rollouts += 1
             raise
-        infos = [p[4] for p in parts]
+        rec, episodes = self._rec, []
+        for (lo, hi), (part, eps) in zip(self._blocks, parts, strict=True):
+            rec[lo:hi] = part
+            episodes.extend(eps)
         if self.input_shapes:
-            self.inputs = {name: np.concatenate([p[5][name] for p in parts])
-                           for name in self.input_shapes}
-        info = {"final_obs": np.concatenate([i["final_obs"] for i in infos]),
-                "episodes": [ep for i in infos for ep in i["episodes"]],
-                "final_inputs": {name: np.concatenate([i["final_inputs"][name] for i in infos])
+            self.inputs = {name: rec[f"input:{name}"].copy() for name in self.input_shapes}
+        info = {"final_obs": rec["final_obs"].copy(), "episodes": episodes,
+                "final_inputs": {name: rec[f"final:{name}"].copy()
                                  for name in self.input_shapes}}
-        return (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]),
-                np.concatenate([p[2] for p in parts]), np.concatenate([p[3] for p in parts]),
-                info)
+        return (rec["obs"].copy(), rec["rewards"].copy(), rec["terminated"].copy(),
+                rec["truncated"].copy(), info)
 
     @property
     def num_runners(self) -> int:
