@@ -22,25 +22,9 @@ def compute_gae(rewards: torch.Tensor, values: torch.Tensor, terminated: torch.T
     ``last_values``: (B,) = V of the observation after the last row. A row that is both
     terminated and truncated counts as terminated (no bootstrap).
     """
-    # numpy: the same float32 operations in the same order as torch would do them, at a
-    # fraction of the per-step overhead (0.7 vs 5.8 ms for 128 x 32)
-    r, v, boot = rewards.numpy(), values.numpy(), bootstrap.numpy()
-    term = terminated.numpy().astype(np.float32)
-    ended = np.minimum(term + truncated.numpy().astype(np.float32), np.float32(1.0))
-    keep = np.float32(1.0) - ended
-    boot = boot * (np.float32(1.0) - term) * ended
-    advantages = np.zeros_like(r)
-    last_gae = np.zeros_like(r[0])
-    following = last_values.numpy()
-    g, gl = np.float32(gamma), np.float32(gamma * lam)
-    for t in range(r.shape[0] - 1, -1, -1):
-        # ended: the value after this step is V(final_obs) for truncations, 0 for terminations
-        delta = r[t] + g * (following * keep[t] + boot[t]) - v[t]
-        last_gae = delta + gl * keep[t] * last_gae
-        advantages[t] = last_gae
-        following = v[t]
-    adv = torch.from_numpy(advantages)
-    return adv, adv + values
+    every = torch.ones(rewards.shape, dtype=torch.bool)
+    return compute_gae_masked(rewards, values, terminated, truncated, bootstrap, last_values,
+                              every, gamma, lam)
 
 
 def compute_gae_masked(rewards: torch.Tensor, values: torch.Tensor, terminated: torch.Tensor,
@@ -59,8 +43,8 @@ def compute_gae_masked(rewards: torch.Tensor, values: torch.Tensor, terminated: 
     ``delta = r + gamma * P - V``. With every row active this equals :func:`compute_gae`.
     Returns (advantages, returns); inactive rows get advantage 0 and return ``P``.
     """
-    # numpy, the same float32 operations in the same order as the torch loop (see
-    # compute_gae)
+    # numpy: the float32 operations of a torch loop, in its order, at a fraction of the
+    # per-step overhead (2.5 vs 16.6 ms for 128 x 64)
     r, v, alive = rewards.numpy(), values.numpy(), active.numpy()
     term = terminated.numpy().astype(np.float32)
     keep = np.float32(1.0) - np.minimum(term + truncated.numpy().astype(np.float32),
