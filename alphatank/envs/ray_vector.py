@@ -106,7 +106,7 @@ class EnvRunner:
             rec["final_obs"] = 0.0
             for arr in self._finals.values():
                 arr[...] = 0.0
-        episodes = self.env._step_into(actions, *self._out, self._finals)
+        episodes = self.env.step_into(actions, *self._out, self._finals)
         for name, value in self.env.inputs.items():
             rec[f"input:{name}"] = value
         self._dirty = bool(episodes)

@@ -226,18 +226,19 @@ class VectorMatchEnv:
         rewards = np.empty((E, L), np.float32)
         terminated, truncated = np.empty(E, bool), np.empty(E, bool)
         final_inputs = {name: np.zeros_like(a) for name, a in self.inputs.items()}
-        episodes = self._step_into(acts, obs, rewards, terminated, truncated, final_obs,
+        episodes = self.step_into(acts, obs, rewards, terminated, truncated, final_obs,
                                    final_inputs)
         return obs, rewards, terminated, truncated, {"final_obs": final_obs,
                                                      "episodes": episodes,
                                                      "final_inputs": final_inputs}
 
-    def _step_into(self, acts: np.ndarray, obs: np.ndarray, rewards: np.ndarray,
-                   terminated: np.ndarray, truncated: np.ndarray, final_obs: np.ndarray,
-                   final_inputs: dict[str, np.ndarray]) -> list[dict[str, Any]]:
-        """One step written into the given arrays (``final_obs``, ``final_inputs``: only
-        the rows of ended episodes are written; the caller keeps the others zero).
-        Returns the episode records; ``self.inputs`` holds the step's inputs."""
+    def step_into(self, acts: np.ndarray, obs: np.ndarray, rewards: np.ndarray,
+                  terminated: np.ndarray, truncated: np.ndarray, final_obs: np.ndarray,
+                  final_inputs: dict[str, np.ndarray]) -> list[dict[str, Any]]:
+        """One step written into the given arrays (what local workers and Ray env runners
+        call with their shared buffers; ``final_obs``, ``final_inputs``: only the rows of
+        ended episodes are written; the caller keeps the others zero). Returns the
+        episode records; ``self.inputs`` holds the step's inputs."""
         core = self.core
         terms, built = core.step(acts)
         lt = terms[:, :, core.driven_idx]  # (E, T, L)
@@ -341,7 +342,7 @@ def _worker(conn: Any, kwargs: dict, lo: int, hi: int, specs: dict, names: dict)
                 if dirty:  # last step's final observations and inputs
                     for arr in finals:
                         arr.fill(0)
-                episodes = env._step_into(a["actions"][lo:hi], *out, final_inputs)
+                episodes = env.step_into(a["actions"][lo:hi], *out, final_inputs)
                 for name, rows in input_rows.items():
                     rows[...] = env.inputs[name]
                 dirty = bool(episodes)

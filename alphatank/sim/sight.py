@@ -20,22 +20,21 @@ segments.
 
 from __future__ import annotations
 
-import weakref
-
 import pymunk
 from pymunk._chipmunk import ffi, lib
 
 from alphatank.sim.world import WALLS_ONLY, World
 
 _EVERYWHERE = pymunk.BB(-1e300, -1e300, 1e300, 1e300)
-_cache: weakref.WeakKeyDictionary[World, WallSight] = weakref.WeakKeyDictionary()
 
 
 def wall_sight(world: World) -> WallSight:
-    """The (cached) WallSight of ``world``."""
-    sight = _cache.get(world)
+    """The WallSight of ``world``, built once and kept on the world, so it is freed with
+    it (a module-level cache keyed weakly by the world kept every world alive: the sight
+    refers to its world)."""
+    sight = world.sight_cache
     if sight is None:
-        sight = _cache[world] = WallSight(world)
+        sight = world.sight_cache = WallSight(world)
     return sight
 
 

@@ -23,7 +23,7 @@ from __future__ import annotations
 import heapq
 import math
 from collections.abc import Callable, Sequence
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 import pymunk
@@ -122,6 +122,7 @@ class World:
     def __init__(self, cfg: GameConfig, spec: MapSpec, poses: np.ndarray):
         """``poses``: (n_tanks, 3) array of x, y, angle (radians; 0 faces +x, y down)."""
         self.cfg, self.spec = cfg, spec
+        self.sight_cache: Any = None  # its WallSight (alphatank.sim.sight.wall_sight)
         n = len(poses)
         cap = cfg.bullet_capacity
         self.n_tanks, self.capacity, self.n_bullets = n, cap, n * cap
