@@ -49,7 +49,7 @@ def feat(ms: MatchSet, obs: np.ndarray, name: str, learner: int = 0) -> float:
     return float(obs[0, learner, ms.obs.layout[name]][0])
 
 
-@pytest.mark.parametrize("kind", ["paper", "egocentric"])
+@pytest.mark.parametrize("kind", ["paper", "egocentric", "egocentric_path"])
 def test_index_map_is_complete_and_contiguous(kind):
     ms = duel(kind, "arena4", ("A", "A", "B", "B"))
     lay = ms.obs.layout
@@ -162,6 +162,43 @@ def test_egocentric_frame_and_rays_against_known_walls():
     assert f(f"ray[{R // 8}].dist") == 1.0  # diagonal: beyond the ray length
 
 
+def test_path_features_follow_the_maze_to_each_tank():
+    """``tank[k].path_*`` against NavGrid.path (the per-cell route the bots use): the
+    direction to the route's cell two steps ahead (the tank itself when one step away), in
+    the own frame, and the route's length over the map's longest one; zeros once dead."""
+    from alphatank.sim.navigation import nav_grid
+
+    ms = duel("egocentric_path", "maze")
+    m = ms.matches[0]
+    nav = nav_grid(m.spec)
+    floor = m.spec.floor_cells()
+    rng = np.random.default_rng(11)
+    turned = 0
+    for _ in range(25):
+        a, b = (floor[int(k)] for k in rng.choice(len(floor), 2, replace=False))
+        (x0, y0), (x1, y1) = m.spec.cell_center(a), m.spec.cell_center(b)
+        heading = float(rng.uniform(-math.pi, math.pi))
+        obs = place(ms, [(x0, y0, heading), (x1, y1, 0.0)])
+        route = nav.path(a, b)
+        tx, ty = (x1, y1) if len(route) <= 2 else m.spec.cell_center(route[2])
+        dx, dy = tx - x0, ty - y0
+        norm = math.hypot(dx, dy)
+        c, s = math.cos(heading), math.sin(heading)
+        f = lambda name, obs=obs: feat(ms, obs, name)  # noqa: E731
+        assert f("tank[0].path_fwd") == pytest.approx((dx * c + dy * s) / norm, abs=1e-5)
+        assert f("tank[0].path_side") == pytest.approx((dy * c - dx * s) / norm, abs=1e-5)
+        assert f("tank[0].path_dist") == pytest.approx((len(route) - 1) / nav.diameter,
+                                                       abs=1e-6)
+        # The way differs from the straight line when walls are in between.
+        straight = math.atan2(y1 - y0, x1 - x0)
+        turned += abs(math.remainder(math.atan2(dy, dx) - straight, 2 * math.pi)) > 0.5
+    assert turned >= 5
+    m.alive[1] = False
+    ms.batch.gather(0, m)
+    obs = ms.obs.build()
+    assert [feat(ms, obs, f"tank[0].path_{k}") for k in ("fwd", "side", "dist")] == [0, 0, 0]
+
+
 def test_rays_match_pymunk_segment_queries():
     ms = duel("egocentric", "maze")
     m = ms.matches[0]
@@ -215,6 +252,8 @@ PINNED_OBS = {0: {
     ("team", "paper"): "0217b798cf35674f", ("team", "egocentric"): "14ffd73d900b5071",
     ("mixed_teams", "paper"): "723d6c2468611ac5",
     ("mixed_teams", "egocentric"): "7c9c52663aa4d6c2",
+    ("vs_smart", "egocentric_path"): "6b83464b77b659de",
+    ("mixed_teams", "egocentric_path"): "1c0d5f3b194fe72b",
 }}
 
 

@@ -48,8 +48,8 @@ def observations() -> str:
         elif not re.fullmatch(r"c\d[xy]", f):
             rows.append(f"| {f} | {FIELD_HELP[f]} |")
     parts.append("Fields:\n\n" + "\n".join(rows))
-    rows = ["| scenario | tanks | team flags | paper | egocentric |",
-            "| --- | --- | --- | --- | --- |"]
+    rows = ["| scenario | tanks | team flags | " + " | ".join(OBS_KINDS) + " |",
+            "| --- | --- | --- |" + " --- |" * len(OBS_KINDS)]
     for name in shipped_scenarios():
         sc = load_scenario(name)
         if not sc.learner_seats:

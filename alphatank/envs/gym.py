@@ -27,15 +27,17 @@ Episode end
     ``winner`` (team or None) and ``outcome`` ("win" / "loss" / "draw").
 
 Arguments
-    ``scenario`` (name or TOML path), ``observation`` ("paper" / "egocentric"; default: the
-    scenario's), ``learner_seat`` (default: the first learner seat), ``opponent_policy``
-    (a Policy in every seat the env plays), ``seat_policies`` ({seat: Policy}; the
-    scenario's other learner seats need one), ``game_overrides`` / ``reward_overrides``
-    (GameConfig / RewardConfig fields), ``render_mode`` (None, "rgb_array", "human").
+    ``scenario`` (name or TOML path), ``observation`` ("paper", "egocentric" or
+    "egocentric_path"; default: the scenario's), ``learner_seat`` (default: the first
+    learner seat), ``opponent_policy`` (a Policy in every seat the env plays),
+    ``seat_policies`` ({seat: Policy}; the scenario's other learner seats need one),
+    ``game_overrides`` / ``reward_overrides`` (GameConfig / RewardConfig fields),
+    ``render_mode`` (None, "rgb_array", "human").
 
 Version history (``ENV_VERSION`` in :mod:`alphatank.envs.ids`, shared by every AlphaTank
 env and written into checkpoints)
-    * v0: the initial release: paper and egocentric observations, Table 5 rewards.
+    * v0: the initial release: paper and egocentric observations, Table 5 rewards; later
+      the additive egocentric_path kind (the other kinds unchanged, their digests pinned).
 """
 
 from __future__ import annotations

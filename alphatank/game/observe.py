@@ -14,6 +14,11 @@ scenario and an index map (:class:`ObsLayout`, feature name -> slice):
 ``egocentric``  the same entities in the tank's own frame (``fwd`` along the heading,
                 ``side`` to its right on screen) plus a ring of wall-distance rays, so
                 nothing depends on absolute map coordinates.
+``egocentric_path``  the egocentric kind plus, for every other tank, the way to it through
+                the maze: the unit direction (own frame) to the floor cell two steps ahead
+                on a shortest grid path towards it, and that path's length in cells over
+                the map's longest one (BFS, :mod:`alphatank.sim.navigation`). A policy can
+                then hunt a bot that never comes to it on any map.
 
 Scales: map positions ``2 x / W - 1``; relative positions divided by ``max(W, H)``;
 distances by the map diagonal; tank velocities by ``tank_speed``; bullet velocities by
@@ -34,11 +39,12 @@ import numpy as np
 
 from alphatank.sim.config import GameConfig
 from alphatank.sim.mapspec import MapSpec
+from alphatank.sim.navigation import NavGrid, nav_grid
 
 if TYPE_CHECKING:
     from alphatank.sim.match import Match
 
-OBS_KINDS = ("paper", "egocentric")
+OBS_KINDS = ("paper", "egocentric", "egocentric_path")
 TANK_FIELDS = ("alive", "x", "y", "sin", "cos", "vx", "vy", "c0x", "c0y", "c1x", "c1y",
                "c2x", "c2y", "c3x", "c3y", "wall")  # columns of tank_table()
 BULLET_FIELDS = ("x", "y", "vx", "vy")  # columns of bullet_table()
@@ -70,6 +76,11 @@ FIELD_HELP = {
     "side": "position relative to me towards my right (on screen), / max(W, H)",
     "v_fwd": "velocity along my heading, / tank_speed or / bullet_speed",
     "v_side": "velocity towards my right, / tank_speed or / bullet_speed",
+    "path_fwd": "unit direction along my heading to the cell two steps ahead on a shortest "
+                "grid path to the tank (the tank itself once in its cell); 0 if dead",
+    "path_side": "the same direction towards my right (on screen)",
+    "path_dist": "BFS path length to the tank in cells / the map's longest path; "
+                 "1 if unreachable, 0 if dead",
 }
 BLOCK_HELP = {
     "self": "the observing tank",
@@ -217,6 +228,7 @@ class StateBatch:
         self.idiag = np.ones((E, 1, 1))  # 1 / diagonal: distances
         self.corner_u = np.zeros((E, 1, 4, 2))  # normalised corner offsets (times cos)
         self.corner_v = np.zeros((E, 1, 4, 2))  # (times sin)
+        self.specs: list[MapSpec | None] = [None] * E  # each env's map this episode
 
     def __reduce__(self) -> tuple:
         """Pickle as a fresh batch (views into ``raw`` must stay views; contents are
@@ -242,6 +254,7 @@ class StateBatch:
         """Map size, wall rectangles and zone centres of match ``e``'s episode."""
         spec = match.spec
         g = self.cfg
+        self.specs[e] = spec
         self.size[e] = (spec.width, spec.height)
         inv = 2.0 / self.size[e]
         self.inv[e, 0] = inv
@@ -334,6 +347,10 @@ class ObservationBuilder:
         self._other_xy = pick(batch.tank_xy, self.other_idx)  # (E, L, O, 2)
         self._other_act = pick(batch.bullet_active, self.other_bidx)  # (E, L, K)
         self._bullets_zero = False  # the other-bullet block is all zeros already
+        # egocentric_path: each env's NavGrid, and the envs grouped by grid (one group
+        # when every env plays the same map), set with the statics.
+        self._nav: list[NavGrid | None] = [None] * E
+        self._nav_groups: list[tuple[NavGrid, np.ndarray | slice]] = []
         if kind == "paper":
             self._paper_plan()
 
@@ -359,8 +376,9 @@ class ObservationBuilder:
             lay.add("self", None, ("alive", "sin", "cos", "v_fwd", "v_side", "wall", "reload",
                                    "bullets", "in_buff", "in_debuff"))
             lay.add("ray", self.rays, ("dist",))
+            path = ("path_fwd", "path_side", "path_dist") if self.kind == "egocentric_path" else ()
             lay.add("tank", n_oth, t + ("alive", "fwd", "side", "dist", "sin", "cos", "v_fwd",
-                                        "v_side", "wall"))
+                                        "v_side", "wall") + path)
             lay.add("own_bullet", cap, ("mask", "fwd", "side", "v_fwd", "v_side", "dist"))
             lay.add("bullet", K, ("mask",) + t + ("fwd", "side", "v_fwd", "v_side", "dist"))
             lay.add("buff", B, ("mask", "fwd", "side", "dist"))
@@ -405,6 +423,8 @@ class ObservationBuilder:
             cols("self", "alive", "sin", "cos", "v_fwd", "v_side", "wall", "in_buff",
                  "in_debuff", span=counts)
             cols("tank", "alive", "sin", "cos", "wall")
+            if self.kind == "egocentric_path":
+                cols("tank", "path_fwd", "path_side", "path_dist")
         return at
 
     def _block(self, name: str, count: int) -> np.ndarray:
@@ -432,7 +452,10 @@ class ObservationBuilder:
     # ---- statics --------------------------------------------------------------------
 
     def set_static(self, e: int) -> None:
-        """Write the per-episode blocks of env ``e`` (walls, zone positions in ``paper``)."""
+        """Write the per-episode blocks of env ``e`` (walls, zone positions in ``paper``;
+        the map's navigation grid in ``egocentric_path``)."""
+        if self.kind == "egocentric_path":
+            self._set_nav(e)
         if self.kind != "paper":
             return
         b, at = self.batch, self.at
@@ -450,6 +473,19 @@ class ObservationBuilder:
         self.v_buff[e, ..., at["buff.x:y"]] = zones[:nbf]
         self.v_debuff[e, ..., at["debuff.mask"]] = b.zone_mask[e, nbf:]
         self.v_debuff[e, ..., at["debuff.x:y"]] = zones[nbf:]
+
+    def _set_nav(self, e: int) -> None:
+        spec = self.batch.specs[e]
+        if spec is None:
+            raise ValueError(f"env {e} has no map yet: call StateBatch.set_static first")
+        self._nav[e] = nav_grid(spec)
+        groups: dict[int, tuple[NavGrid, list[int]]] = {}
+        for i, grid in enumerate(self._nav):
+            if grid is not None:
+                groups.setdefault(id(grid), (grid, []))[1].append(i)
+        E = len(self._nav)
+        self._nav_groups = [(grid, slice(None) if len(envs) == E else np.array(envs))
+                            for grid, envs in groups.values()]
 
     # ---- per step -------------------------------------------------------------------
 
@@ -707,6 +743,34 @@ class ObservationBuilder:
         self.v_own[..., at["own_bullet.mask"]] = act
         self.v_buff[..., at["buff.mask"]] = b.zone_mask[:, None, :b.max_buffs]
         self.v_debuff[..., at["debuff.mask"]] = b.zone_mask[:, None, b.max_buffs:]
+        if self._nav_groups:
+            self._build_paths(c3, s3)
+
+    def _build_paths(self, c3: np.ndarray, s3: np.ndarray) -> None:
+        """``tank.path_*`` of every observer and other tank, one group of envs per map:
+        shortest-path next cells from the all-pairs tables, rotated into the own frame."""
+        b, at, vt = self.batch, self.at, self.v_tank
+        obs, oi = self.observers, self.other_idx
+        for grid, envs in self._nav_groups:
+            xy = b.tank_xy[envs]  # (G, n, 2)
+            nodes = grid.nodes_of(xy.reshape(-1, 2)).reshape(xy.shape[:2])
+            src = np.broadcast_to(nodes[:, obs][:, :, None], (len(nodes),) + oi.shape)
+            dst = nodes[:, oi]  # (G, L, O)
+            nxt = grid.next_table
+            n1 = nxt[src, dst]
+            n1 = np.where(n1 < 0, src, n1)
+            n2 = nxt[n1, dst]
+            n2 = np.where(n2 < 0, n1, n2)
+            target = np.where((n1 == dst)[..., None], xy[:, oi], grid.centers[n2])
+            d = target - xy[:, obs][:, :, None]  # (G, L, O, 2)
+            alive = b.alive[envs][:, oi]
+            k = alive / np.maximum(np.hypot(d[..., 0], d[..., 1]), 1e-9)
+            c, s = c3[envs], s3[envs]
+            vt[envs, :, :, at["tank.path_fwd"]] = (d[..., 0] * c + d[..., 1] * s) * k
+            vt[envs, :, :, at["tank.path_side"]] = (d[..., 1] * c - d[..., 0] * s) * k
+            steps = grid.dist_table[src, dst]
+            vt[envs, :, :, at["tank.path_dist"]] = np.where(
+                steps >= 0, steps * (1.0 / grid.diameter), 1.0) * alive
 
     def ray_distances(self, xy: np.ndarray, angle: np.ndarray) -> np.ndarray:
         """(E, L, R) px to the nearest wall rectangle along ``rays`` directions from each

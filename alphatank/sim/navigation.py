@@ -14,6 +14,7 @@ as numpy arrays for bulk use:
                 (``a`` itself when ``a == b``, -1 when unreachable). Ties go to the
                 first neighbour in up, down, left, right order, so paths are deterministic.
 ``rects``       (R, 4) float64: the map's merged wall rectangles (x0, y0, x1, y1) in px.
+``diameter``    the longest BFS distance between two floor cells (at least 1).
 
 Lazily computed and cached: ``visible_row(i, radius)`` (cells seen from cell ``i``),
 ``waypoint_idx(i, j, radius)`` (string-pulled route target) and ``clearance_map(res)``
@@ -71,6 +72,7 @@ class NavGrid:
         self.node = self._nearest_floor()
         self.dist_table = bfs_layers(self.neighbors, np.eye(f, dtype=bool))  # all pairs
         self.next_table = self._next_steps()
+        self.diameter = max(int(self.dist_table.max()), 1)  # longest shortest path (cells)
         # Wall rectangles (x0, y0, x1, y1) in px, for exact line-of-sight tests.
         self.rects = np.array(spec.wall_rects, dtype=np.float64).reshape(-1, 4)
         self._visible: dict[tuple[int, float], np.ndarray] = {}
