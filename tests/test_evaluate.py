@@ -16,6 +16,7 @@ from alphatank.training.evaluate import (
     EvalResult,
     evaluate_checkpoint,
     evaluate_policies,
+    evaluate_stand_in,
     format_table,
     rate_games,
     write_csv,
@@ -63,6 +64,29 @@ def test_counts_do_not_depend_on_how_games_are_split_over_envs():
     r7 = evaluate_policies(sc, bots(1.0), team="A", games=10, num_envs=7, seed=9)
     assert (r4.wins, r4.losses, r4.draws) == (r7.wins, r7.losses, r7.draws)
     assert sorted(r4.lengths) == sorted(r7.lengths)
+
+
+def test_bot_parity_plays_the_learner_seats_in_the_same_games(tmp_path, capsys):
+    """bot:NAME puts the bot in every learner seat: the same games as evaluate_policies
+    with that bot there, whatever num_envs; idle opponents lose every game to it."""
+    sc = duel(300)
+    ref = evaluate_policies(sc, bots(1.0), team="A", games=10, num_envs=4, seed=9)
+    tmp = tmp_path / "duel_bots.toml"
+    tmp.write_text('name = "duel_bots"\nmap = "open"\n[game]\nmax_steps = 300\n'
+                   '[[seats]]\nteam = "A"\ncontroller = "learner"\n'
+                   '[[seats]]\nteam = "B"\ncontroller = "bot"\nbot = "aggressive"\n')
+    for n_env in (3, 7):
+        (par,) = evaluate_stand_in("aggressive", tmp, [None], games=10, seed=9,
+                                   num_envs=n_env)
+        assert par.outcomes == ref.outcomes and par.lengths == ref.lengths
+    assert par.name == "Aggressive Bot vs Aggressive Bot" and par.agent == "bot:aggressive"
+    (idle,) = evaluate_stand_in("smart", "vs_smart", ["dodge"], games=4, weakness=0.0)
+    assert (idle.wins, idle.games) == (4, 4) and idle.opponent == "dodge"
+    assert main(["eval", "bot:smart", "--scenario", "vs_smart", "--vs", "random",
+                 "--weakness", "0", "--games", "2"]) == 0
+    assert "| bot:smart  | Smart Bot vs Random Bot |" in capsys.readouterr().out
+    assert main(["eval", "bot:smart", "--games", "2"]) == 2
+    assert "give --scenario" in capsys.readouterr().err
 
 
 def test_table_layout_wilson_and_files(tmp_path):

@@ -281,24 +281,10 @@ def evaluate_learners(learners: dict[str, Any], observation: dict[str, Any],
     the same games (:mod:`~alphatank.training.teamstats`)."""
     seat_learner = {int(k): v for k, v in observation["seat_learner"].items()}
     first = next(iter(learners))
-    if not base.learner_seats:
-        raise ValueError(f"{base.source}: no learner seat for the learners to play")
-    team = team or base.seats[base.learner_seats[0]].team
-    if team not in base.teams:
-        raise ValueError(f"team {team!r} not in scenario {base.name!r}; teams: "
-                         f"{sorted(set(base.teams))}")
+    team = learner_team(base, team)
     results = []
     for opp in opponents:
-        seats = []
-        for s in base.seats:
-            if s.team != team and opp is not None:
-                seats.append(Seat(s.team, "bot", bot=opp,
-                                  weakness=1.0 if weakness is None else weakness))
-            elif s.team != team and s.controller == "bot" and weakness is not None:
-                seats.append(Seat(s.team, "bot", bot=s.bot, weakness=weakness,
-                                  options=s.options))
-            else:
-                seats.append(s)
+        seats = opponent_seats(base, team, opp, weakness)
         sc = dataclasses.replace(base, seats=tuple(seats))
         driven = [i for i, s in enumerate(seats) if s.controller == "learner"]
         n_env = max(1, min(num_envs, games))
@@ -324,6 +310,64 @@ def evaluate_learners(learners: dict[str, Any], observation: dict[str, Any],
         results.append(play_games(core, team, games, seed, act, res, watch))
         if watch is not None:
             res.team_stats = watch.summary()
+    return results
+
+
+def learner_team(base: Scenario, team: str | None) -> str:
+    """The evaluated team: ``team``, or that of the scenario's first learner seat."""
+    if not base.learner_seats:
+        raise ValueError(f"{base.source}: no learner seat for the learners to play")
+    team = team or base.seats[base.learner_seats[0]].team
+    if team not in base.teams:
+        raise ValueError(f"team {team!r} not in scenario {base.name!r}; teams: "
+                         f"{sorted(set(base.teams))}")
+    return team
+
+
+def opponent_seats(base: Scenario, team: str, opp: str | None,
+                   weakness: float | None) -> list[Seat]:
+    """``base``'s seats with bot ``opp`` (at ``weakness``, default 1) in every seat
+    outside ``team``; ``opp`` None keeps the scenario's opponents (their bots at
+    ``weakness`` when given)."""
+    seats = []
+    for s in base.seats:
+        if s.team != team and opp is not None:
+            seats.append(Seat(s.team, "bot", bot=opp,
+                              weakness=1.0 if weakness is None else weakness))
+        elif s.team != team and s.controller == "bot" and weakness is not None:
+            seats.append(Seat(s.team, "bot", bot=s.bot, weakness=weakness, options=s.options))
+        else:
+            seats.append(s)
+    return seats
+
+
+def evaluate_stand_in(bot: str, scenario: str | Scenario, opponents: Sequence[str | None],
+                      games: int = 100, seed: int = 0, team: str | None = None,
+                      num_envs: int = 16, weakness: float | None = None,
+                      map_name: str | None = None, label: str | None = None
+                      ) -> list[EvalResult]:
+    """Bot parity: :func:`evaluate_learners`'s games (same seeds, same opponents) with a
+    bot (a seat spec such as ``smart`` or ``smart@0.5``) in every learner seat of
+    ``team``, so an agent's win rate can be set beside a rule-based player's."""
+    from alphatank.game.lineup import spec_seat
+
+    base = with_map(load_scenario(scenario), map_name)
+    team = learner_team(base, team)
+    stand = spec_seat(bot, team, where=f"bot:{bot}")
+    results = []
+    for opp in opponents:
+        seats = opponent_seats(base, team, opp, weakness)
+        played = [stand if s.team == team and s.controller == "learner" else s for s in seats]
+        sc = dataclasses.replace(base, seats=tuple(played))
+        core = MatchSet(sc, max(1, min(num_envs, games)), driven=[])
+        ours = [i for i, s in enumerate(played) if s.team == team]
+        theirs = [i for i, s in enumerate(played) if s.team != team]
+        res = EvalResult(name=f"{_label(played, {}, ours, True)} vs "
+                              f"{_label(played, {}, theirs, False)}",
+                         opponent=opp or core.describe_opponents(0),
+                         sides=(side_kind(played, ours), side_kind(played, theirs)),
+                         agent=label or f"bot:{bot}")
+        results.append(play_games(core, team, games, seed, None, res))
     return results
 
 

@@ -19,7 +19,9 @@ from alphatank.files import write_text_atomic
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("checkpoints", nargs="+", metavar="CHECKPOINT",
                    help="checkpoint folder(s) or run folder(s) (their latest save), also as "
-                        "checkpoint:PATH, or agent:NAME for a shipped agent")
+                        "checkpoint:PATH, agent:NAME for a shipped agent, or bot:NAME "
+                        "(with --scenario) for a bot in the learner seats: its win rate in "
+                        "the same games, beside an agent's")
     p.add_argument("--vs", default="",
                    help="comma-separated bots to play (e.g. smart,aggressive,dodge,defensive); "
                         "default: the opponents of each checkpoint's scenario")
@@ -49,6 +51,7 @@ def run(args: argparse.Namespace) -> int:
     from alphatank.game.seats import checkpoint_source
     from alphatank.training.evaluate import (
         evaluate_checkpoint,
+        evaluate_stand_in,
         format_table,
         rating_table,
         results_league,
@@ -64,6 +67,18 @@ def run(args: argparse.Namespace) -> int:
     results = []
     try:
         for arg in args.checkpoints:
+            if arg.startswith("bot:"):
+                if args.scenario is None:
+                    raise InputError(f"{arg}: a bot has no scenario of its own; give "
+                                     "--scenario (its learner seats are played by the bot)")
+                if args.team_stats:
+                    raise InputError(f"{arg}: --team-stats measures checkpoints only")
+                results += evaluate_stand_in(arg[4:], args.scenario, opponents,
+                                             games=args.games, seed=args.seed,
+                                             team=args.team, num_envs=args.num_envs,
+                                             weakness=args.weakness, map_name=args.map,
+                                             label=arg)
+                continue
             results += evaluate_checkpoint(checkpoint_source(arg), opponents,
                                            games=args.games, seed=args.seed,
                                            scenario=args.scenario, team=args.team,
