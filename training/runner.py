@@ -58,6 +58,7 @@ from alphatank.training.checkpoint import (
     save_checkpoint,
     scenario_to_dict,
 )
+from alphatank.training.imitate import imitate, imitate_config
 from alphatank.training.learners import learner_class, make_learner
 from alphatank.training.logging import RunLogger
 from alphatank.training.presets import (
@@ -247,6 +248,7 @@ class Trainer:
             self.saved_step = self.global_step
         elif cfg.init_from:
             self._warm_start(cfg.init_from)
+        self.imitation = None if resume is not None else imitate_config(cfg.imitate)
         self._check_cadence()
         self.logger = RunLogger(self.run_dir, cfg.to_dict(), cfg.name, cfg.wandb, cfg.project,
                                 cfg.tensorboard, run_id=wandb_id,
@@ -550,6 +552,11 @@ class Trainer:
     def _run(self, bar: Any, start: float) -> None:
         """The iterations of :meth:`train` (``start``: the perf_counter of elapsed 0)."""
         cfg = self.cfg
+        if self.imitation is not None and self.global_step == 0:
+            metrics = imitate(self, self.imitation)
+            self.imitation = None
+            self.elapsed = time.perf_counter() - start
+            self.logger.log({**metrics, "charts/elapsed_s": self.elapsed}, 0)
         obs = self._segment_reset()
         while self.global_step < cfg.total_steps and not self.stop():
             before = self._iteration_start()

@@ -1,0 +1,108 @@
+"""Behaviour cloning warm start: a bot's games, the learner fitted to them, in a run."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from alphatank.game.scenarios import load_scenario
+from alphatank.training.fields import FieldError
+from alphatank.training.imitate import (
+    ImitateConfig,
+    clone,
+    collect,
+    discounted_returns,
+    imitate_config,
+)
+from alphatank.training.ppo import PPO, PPOConfig
+from alphatank.training.presets import LearnerSpec, TrainConfig
+from alphatank.training.runner import Trainer
+
+torch.set_num_threads(1)
+
+
+def test_discounted_returns_are_cut_at_episode_ends():
+    r = np.array([[1.0, 0.0], [2.0, 1.0], [4.0, 0.0]])
+    done = np.array([[False, False], [True, False], [False, False]])
+    ret = discounted_returns(r, done, 0.5)
+    assert ret[:, 0].tolist() == [1.0 + 0.5 * 2.0, 2.0, 4.0]
+    assert ret[:, 1].tolist() == [0.5 * 1.0, 1.0, 0.0]
+
+
+def greedy_agreement(ppo: PPO, obs: np.ndarray, actions: np.ndarray, alive: np.ndarray
+                     ) -> float:
+    """Share of live samples whose most likely action (every head) is the bot's."""
+    x = ppo.obs_norm(obs[alive], update=False)
+    logits, _ = ppo.mirror.forward(x)
+    heads = [h.argmax(-1) for h in np.split(logits, np.cumsum(ppo.nvec)[:-1], axis=-1)]
+    return float((np.stack(heads, -1) == actions[alive]).all(-1).mean())
+
+
+def test_cloning_makes_the_learner_act_like_the_bot():
+    sc = load_scenario("vs_aggressive")
+    cfg = ImitateConfig(bot="aggressive", steps=300, epochs=12, minibatch=256)
+    demo = collect(sc, cfg, 4, seed=1, observation="egocentric", game={}, rewards={},
+                   driven=[0])
+    T, E, L, D = demo.obs.shape
+    assert (T, E, L) == (300, 4, 1) and demo.alive.any() and demo.games > 0
+    assert demo.done.sum() == demo.games
+    obs, acts = demo.obs.reshape(T, E, D), demo.actions.reshape(T, E, 3)
+    alive, rew = demo.alive.reshape(T, E), demo.rewards.reshape(T, E)
+    held = slice(240, None)  # the last 60 steps are not trained on
+    ppo = PPO(D, E, PPOConfig(), seed=0)
+    before = greedy_agreement(ppo, obs[held], acts[held], alive[held])
+    stats = clone(ppo, obs[:240], acts[:240], alive[:240], rew[:240], demo.done[:240], cfg, 0)
+    after = greedy_agreement(ppo, obs[held], acts[held], alive[held])
+    assert after > 0.5 and after > before + 0.3, (before, after)
+    assert stats["action_accuracy"] > 0.5
+    np.testing.assert_allclose(ppo.obs_norm.rms.mean, obs[:240].reshape(-1, D).mean(0), atol=1e-4)
+
+
+def run_config(name: str, **kw) -> TrainConfig:
+    kw.setdefault("total_steps", 128)
+    return TrainConfig(name, "vs_aggressive", num_envs=2, wandb="disabled",
+                       observation="egocentric", checkpoint_every=0,
+                       learners=(LearnerSpec("ppo", "ppo", (0,),
+                                             config=PPOConfig(num_steps=32, update_epochs=1)),),
+                       **kw)
+
+
+def weights(tr: Trainer) -> list[np.ndarray]:
+    return [p.detach().numpy().copy() for p in tr.learners["ppo"].net.parameters()]
+
+
+def test_a_run_starts_from_the_clone_the_same_way_every_time(tmp_path):
+    table = {"bot": "aggressive", "steps": 64, "epochs": 2}
+    runs = [Trainer(run_config("bc", imitate=table), tmp_path / f"bc{k}", progress=False)
+            for k in range(2)]
+    plain = Trainer(run_config("plain"), tmp_path / "plain", progress=False)
+    for tr in (*runs, plain):
+        tr.train()
+    first = (tmp_path / "bc0" / "metrics.jsonl").read_text().splitlines()[0]
+    assert '"step": 0, "imitate/bot_win_rate"' in first and "imitate/ppo/action_accuracy" in first
+    for a, b in zip(weights(runs[0]), weights(runs[1]), strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert any(not np.array_equal(a, b)
+               for a, b in zip(weights(runs[0]), weights(plain), strict=True))
+
+
+def test_the_time_limit_cuts_the_demonstrations(tmp_path):
+    cfg = run_config("cut", imitate={"steps": 10**6}, time_limit_s=1.0, total_steps=10**6)
+    tr = Trainer(cfg, tmp_path / "cut", progress=False)
+    out = tr.train()
+    assert out["stopped"]["reason"] == "time limit" and out["elapsed_s"] < 10
+    assert (tmp_path / "cut" / "latest").exists()
+
+
+@pytest.mark.parametrize("table, fragment", [
+    ({"bot": "smrt"}, "unknown bot 'smrt'"),
+    ({"stepz": 5}, "imitate.stepz"),
+    ({"steps": 0}, "imitate.steps"),
+])
+def test_bad_imitate_tables_name_the_field(tmp_path, table, fragment):
+    with pytest.raises((FieldError, ValueError), match=fragment):
+        imitate_config(table)
+    with pytest.raises((FieldError, ValueError), match=fragment):
+        Trainer(run_config("bad", imitate=table), tmp_path / "bad", progress=False)
+    assert not (tmp_path / "bad" / "latest").exists()
