@@ -106,3 +106,15 @@ def test_bad_imitate_tables_name_the_field(tmp_path, table, fragment):
     with pytest.raises((FieldError, ValueError), match=fragment):
         Trainer(run_config("bad", imitate=table), tmp_path / "bad", progress=False)
     assert not (tmp_path / "bad" / "latest").exists()
+
+
+def test_a_mixed_run_clones_each_scenario_in_its_own_envs(tmp_path):
+    cfg = run_config("mix", imitate={"bot": "smart", "steps": 48, "epochs": 1})
+    from alphatank.training.mixed import MixedVectorEnv
+
+    env = MixedVectorEnv(["vs_aggressive", "vs_random"], 4, observation="egocentric")
+    tr = Trainer(cfg.with_overrides(num_envs=4), tmp_path / "mix", env=env, progress=False)
+    tr.train()
+    first = (tmp_path / "mix" / "metrics.jsonl").read_text().splitlines()[0]
+    assert '"imitate/samples": ' in first
+    assert float(first.split('"imitate/samples": ')[1].split(",")[0]) > 48 * 2

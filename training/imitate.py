@@ -6,9 +6,10 @@ hard line-up (two learners against three bots that shoot exactly) it never wins 
 learn from. Cloning the bot first starts RL from a policy about as good as the bot
 (``alphatank eval bot:NAME --scenario S`` measures that level in the same games).
 
-:func:`imitate` plays ``steps`` vector steps of the run's scenario, its opponents at full
-strength, the bot (a seat spec such as ``smart``) in every learner seat, recording each
-live seat's observation (the run's kind) and the bot's action. Each PPO learner then fits
+:func:`imitate` plays ``steps`` vector steps of the run's scenario (each scenario of a
+mixed run in its own envs), its opponents at full strength, the bot (a seat spec such as
+``smart``) in every learner seat, recording each live seat's observation (the run's kind)
+and the bot's action. Each PPO learner then fits
 its actor to its seats' actions (cross-entropy on every action head) and its critic to
 the discounted returns of the same games under the run's rewards, normalised as PPO
 normalises them; its observation and return statistics start from the demonstrations.
@@ -190,15 +191,23 @@ def clone(learner: PPO, obs: np.ndarray, actions: np.ndarray, alive: np.ndarray,
 def imitate(trainer: Any, cfg: ImitateConfig) -> dict[str, float]:
     """Warm start every learner of ``trainer`` (a fresh run) by cloning ``cfg.bot``,
     heeding ``trainer.stop``; returns metrics (``imitate/...``)."""
-    tc = trainer.cfg
+    tc, env = trainer.cfg, trainer.env
     driven = sorted(s for spec in trainer.specs for s in spec.seats)
-    demo = collect(trainer.scenario, cfg, trainer.E, tc.seed + 7919, tc.observation,
-                   tc.game, tc.rewards, driven, trainer.stop)
-    if not len(demo.done):
+    # a mixed env (training.mixed) plays its scenarios in contiguous blocks of env ids:
+    # demonstrations come the same way, so stream order matches the learners'
+    blocks = (list(zip(env.scenarios, (b.stop - b.start for b in env.slices), strict=True))
+              if hasattr(env, "slices") else [(trainer.scenario, trainer.E)])
+    parts = [collect(sc, cfg, n, tc.seed + 7919 + k, tc.observation, tc.game, tc.rewards,
+                     driven, trainer.stop) for k, (sc, n) in enumerate(blocks)]
+    T = min(len(p.done) for p in parts)
+    if not T:
         return {}
+    demo = Demonstrations(*(np.concatenate([getattr(p, f)[:T] for p in parts], axis=1)
+                            for f in ("obs", "actions", "alive", "rewards", "done")),
+                          sum(p.wins for p in parts), sum(p.games for p in parts))
     metrics = {"imitate/bot_win_rate": demo.wins / max(demo.games, 1),
                "imitate/games": float(demo.games), "imitate/samples": float(demo.alive.sum())}
-    T, E = demo.done.shape
+    E = demo.done.shape[1]
     for k, spec in enumerate(trainer.specs):
         cols = trainer.cols[spec.name]  # its streams: env-major, then its seats
         B = E * len(cols)
