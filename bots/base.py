@@ -76,12 +76,6 @@ class Bot:
     def __repr__(self) -> str:
         return f"{type(self).__name__}(seed={self.seed!r})"
 
-    def __getstate__(self) -> dict:
-        """Everything but the wall queries of the live world (chipmunk pointers)."""
-        state = self.__dict__.copy()
-        state["_sight"] = None
-        return state
-
     # ---- Policy protocol ------------------------------------------------------------
 
     def reset(self, match: Match, seat: int, seed: int | None = None) -> None:
@@ -97,7 +91,6 @@ class Bot:
         self.tables = map_tables(nav)
         self._node_rows: list[list[int]] = self.tables["node_rows"]
         self._centers: list[list[float]] = self.tables["centers"]
-        self._sight: WallSight | None = wall_sight(match.world)
         self.turn_step = math.radians(cfg.rotation_speed) / cfg.tick_hz
         self.hit_radius = cfg.tank_height / 2 + cfg.bullet_radius
         self.muzzle_offset = cfg.tank_width / 2 + cfg.bullet_radius + 0.5
@@ -111,11 +104,9 @@ class Bot:
         self.on_reset(match, seat)
 
     def sight(self, match: Match) -> WallSight:
-        """Fast exact wall queries on ``match``'s current world."""
-        s = self._sight
-        if s is None or s.world is not match.world:
-            s = self._sight = wall_sight(match.world)
-        return s
+        """Fast exact wall queries on ``match``'s current world (kept on the world, so a
+        bot holds no world and pickles without one)."""
+        return wall_sight(match.world)
 
     def node_of(self, x: float, y: float) -> int:
         """``nav.node_of(x, y)`` from plain-Python tables: the floor node of a pixel."""
