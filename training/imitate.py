@@ -117,13 +117,14 @@ def collect(scenario: Scenario, cfg: ImitateConfig, num_envs: int, seed: int,
         out.actions[t] = acts
         terms, obs = core.step(acts)
         out.rewards[t] = core.rewards(terms)
-        for e, m in enumerate(core.matches):
-            if m.done:
-                out.done[t, e] = True
-                out.games += 1
-                out.wins += m.winner == team
-                start(e)
-        obs = core.obs.build()
+        ended = [e for e, m in enumerate(core.matches) if m.done]
+        for e in ended:
+            out.done[t, e] = True
+            out.games += 1
+            out.wins += core.matches[e].winner == team
+            start(e)
+        if ended:  # the new episodes' first observations
+            obs = core.obs.build()
     return out
 
 
