@@ -27,7 +27,7 @@ import torch
 
 from alphatank.envs.core import MatchSet
 from alphatank.game.scenarios import Scenario
-from alphatank.sim.episode import episode_seeds
+from alphatank.sim.episode import episode_seeds, reset_controllers
 from alphatank.sim.policy import NOOP
 from alphatank.training.fields import build, hp, validate
 from alphatank.training.ppo import PPO, evaluate_actions
@@ -96,9 +96,10 @@ def collect(scenario: Scenario, cfg: ImitateConfig, num_envs: int, seed: int,
     def start(e: int) -> None:
         s = int(seeds.integers(2**31))
         core.reset_env(e, s)
-        seat_seeds = episode_seeds(s, len(scenario.seats)).seat_seeds  # the env's rule for bots
+        played: list[Any] = [None] * len(scenario.seats)
         for bot, seat in zip(bots[e], seats, strict=True):
-            bot.reset(core.matches[e], seat, seed=seat_seeds[seat])
+            played[seat] = bot
+        reset_controllers(core.matches[e], played, episode_seeds(s, len(scenario.seats)))
 
     for e in range(E):
         start(e)
@@ -150,13 +151,10 @@ def clone(learner: PPO, obs: np.ndarray, actions: np.ndarray, alive: np.ndarray,
     if not isinstance(learner, PPO) or learner.algo != "ppo":
         raise ValueError(f"imitate: warm starts PPO learners only, not {learner.algo!r}")
     T, B, D = obs.shape
-    norm, ret_norm = learner.obs_norm, learner.ret_norm
-    for t in range(T):  # the statistics PPO keeps, started from the demonstrations
-        norm(obs[t], update=True)
-    scaled = np.stack([ret_norm(rewards[t], done[t]) for t in range(T)])
+    # the statistics PPO keeps, started from the demonstrations
+    x = torch.from_numpy(learner.obs_norm(obs.reshape(T * B, D), update=True))
+    scaled = np.stack([learner.ret_norm(rewards[t], done[t]) for t in range(T)])
     returns = discounted_returns(scaled, done, learner.cfg.gamma)
-    x = torch.from_numpy(np.stack([norm(obs[t], update=False) for t in range(T)])
-                         .reshape(T * B, D).astype(np.float32))
     a = torch.from_numpy(actions.reshape(T * B, 3))
     live = torch.from_numpy(alive.reshape(T * B))
     y = torch.from_numpy(returns.reshape(T * B).astype(np.float32))

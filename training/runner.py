@@ -552,7 +552,7 @@ class Trainer:
     def _run(self, bar: Any, start: float) -> None:
         """The iterations of :meth:`train` (``start``: the perf_counter of elapsed 0)."""
         cfg = self.cfg
-        if self.imitation is not None and self.global_step == 0:
+        if self.imitation is not None:  # a fresh run's first call (None on resume)
             metrics = imitate(self, self.imitation)
             self.imitation = None
             self.elapsed = time.perf_counter() - start

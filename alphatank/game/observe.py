@@ -744,9 +744,9 @@ class ObservationBuilder:
         self.v_buff[..., at["buff.mask"]] = b.zone_mask[:, None, :b.max_buffs]
         self.v_debuff[..., at["debuff.mask"]] = b.zone_mask[:, None, b.max_buffs:]
         if self._nav_groups:
-            self._build_paths(c3, s3)
+            self._build_paths(c3, s3, self_xy)
 
-    def _build_paths(self, c3: np.ndarray, s3: np.ndarray) -> None:
+    def _build_paths(self, c3: np.ndarray, s3: np.ndarray, self_xy: np.ndarray) -> None:
         """``tank.path_*`` of every observer and other tank, one group of envs per map:
         shortest-path next cells from the all-pairs tables, rotated into the own frame."""
         b, at, vt = self.batch, self.at, self.v_tank
@@ -762,7 +762,7 @@ class ObservationBuilder:
             n2 = nxt[n1, dst]
             n2 = np.where(n2 < 0, n1, n2)
             target = np.where((n1 == dst)[..., None], xy[:, oi], grid.centers[n2])
-            d = target - xy[:, obs][:, :, None]  # (G, L, O, 2)
+            d = target - self_xy[envs]  # (G, L, O, 2)
             alive = b.alive[envs][:, oi]
             k = alive / np.maximum(np.hypot(d[..., 0], d[..., 1]), 1e-9)
             c, s = c3[envs], s3[envs]
