@@ -217,6 +217,21 @@ def test_spawns_fill_missing_slots_on_reachable_floor():
     assert all(not spec.walls[c] for c in m.spawn_cells)
 
 
+def test_random_spawns_ignore_the_map_slots_and_follow_the_seed():
+    bf = load_map("battlefield")
+    draws = [_match(teams=("A", "A", "B", "B", "B"), spec=bf, seed=s, random_spawns=True)
+             for s in range(6)]
+    again = _match(teams=("A", "A", "B", "B", "B"), spec=bf, seed=3, random_spawns=True)
+    assert again.spawn_cells == draws[3].spawn_cells
+    for m in draws:
+        assert len(set(m.spawn_cells)) == 5
+        assert all(not bf.walls[c] for c in m.spawn_cells)
+    firsts = {m.spawn_cells[0] for m in draws}
+    assert len(firsts) > 1 and firsts != {bf.spawns[1]}
+    fixed = _match(teams=("A", "A", "B", "B", "B"), spec=bf, seed=3)
+    assert fixed.spawn_cells[:2] == [bf.spawns[1], bf.spawns[2]]
+
+
 def test_random_zones_come_from_the_seed():
     maze = load_map("maze")
     a, b, c = _match(spec=maze, seed=1), _match(spec=maze, seed=1), _match(spec=maze, seed=2)

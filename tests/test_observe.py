@@ -49,7 +49,7 @@ def feat(ms: MatchSet, obs: np.ndarray, name: str, learner: int = 0) -> float:
     return float(obs[0, learner, ms.obs.layout[name]][0])
 
 
-@pytest.mark.parametrize("kind", ["paper", "egocentric", "egocentric_path"])
+@pytest.mark.parametrize("kind", ["paper", "egocentric", "egocentric_path", "egocentric_nearest"])
 def test_index_map_is_complete_and_contiguous(kind):
     ms = duel(kind, "arena4", ("A", "A", "B", "B"))
     lay = ms.obs.layout
@@ -139,6 +139,39 @@ def test_team_flags_and_order_teammates_first():
     assert feat(ms, obs, "tank[0].x") == pytest.approx(2 * xs[2] / ms.matches[0].spec.width - 1,
                                                        abs=1e-6)
     assert [feat(ms, obs, f"tank[{k}].team", learner=1) for k in range(3)] == [1.0, 0.0, 0.0]
+
+
+def test_nearest_kind_is_the_egocentric_one_with_tanks_nearest_first():
+    teams = ("A", "B", "A", "B", "B")
+    poses = [(385.0, 385.0, 0.3), (600.0, 385.0, 1.0), (100.0, 100.0, 2.0),
+             (385.0, 300.0, -1.0), (150.0, 600.0, 0.5)]
+    ego, near = duel("egocentric", "arena8", teams), duel("egocentric_nearest", "arena8", teams)
+    for ms in (ego, near):
+        ms.matches[0].alive[3] = False  # the nearest enemy of seat 0 is dead
+    a, b = place(ego, poses), place(near, poses)
+    lay = ego.obs.layout
+    assert near.obs.layout.fields == lay.fields
+    w = lay.widths["tank"]
+    tanks = lambda obs, o: obs[0, o, lay["tank"]].reshape(-1, w)  # noqa: E731
+    # Seat 0 (learner 0): others by seat are [mate 2, enemies 1, 3, 4]; nearest first among
+    # the living enemies: 1 (215 px), 4 (~302 px), then the dead 3.
+    assert np.array_equal(tanks(b, 0), tanks(a, 0)[[0, 1, 3, 2]])
+    assert feat(near, b, "tank[1].dist") < feat(near, b, "tank[2].dist")
+    assert feat(near, b, "tank[3].alive") == 0.0
+    # Every observer's slots are a permutation of its egocentric slots, teammates first.
+    for o in range(len(teams)):
+        ta, tb = tanks(a, o), tanks(b, o)
+        assert sorted(map(tuple, ta)) == sorted(map(tuple, tb))
+        assert np.array_equal(ta[:, lay.column("tank", "team")],
+                              tb[:, lay.column("tank", "team")])
+    # Outside the tank block the two kinds agree.
+    rest = np.ones(lay.size, dtype=bool)
+    rest[lay["tank"]] = False
+    assert np.array_equal(a[..., rest], b[..., rest])
+    # A 1v1 has one other tank: the kinds are the same observation.
+    poses2 = poses[:2]
+    assert np.array_equal(place(duel("egocentric"), poses2),
+                          place(duel("egocentric_nearest"), poses2))
 
 
 def test_egocentric_frame_and_rays_against_known_walls():
@@ -254,6 +287,7 @@ PINNED_OBS = {0: {
     ("mixed_teams", "egocentric"): "7c9c52663aa4d6c2",
     ("vs_smart", "egocentric_path"): "6b83464b77b659de",
     ("mixed_teams", "egocentric_path"): "1c0d5f3b194fe72b",
+    ("mixed_teams", "egocentric_nearest"): "55afeaaba481a0a9",
 }}
 
 

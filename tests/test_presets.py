@@ -59,9 +59,13 @@ def test_presets_keep_the_papers_settings():
         row = get_preset(name)  # shipped: Table 7 but 128 steps x 4 epochs, 15 min at most
         assert row.learners[0].config == PPOConfig(num_steps=128, update_epochs=4)
         assert row.time_limit_s == 900 and row.rewards == {} and "Table 7" in row.description
-    for name in ("team_vs_2smart", "team_vs_def", "team_vs_def_2smart", "team_vs_four_bots",
-                 "ppo_vs_defensive"):  # rows with other rewards say so
-        assert "not the paper's rewards" in get_preset(name).description
+    for name in ("team_vs_2smart", "team_vs_def", "ppo_vs_defensive"):  # rows with other
+        assert "not the paper's rewards" in get_preset(name).description  # rewards say so
+    for name in ("team_vs_def_2smart", "team_vs_four_bots"):  # the paper's team env
+        row = get_preset(name)
+        assert row.rewards == {} and "paper rewards" in row.description
+        assert load_scenario(row.scenario).game == {"random_spawns": True}
+        assert row.imitate["bot"] == "smart" and row.observation == "egocentric_nearest"
     demo = get_preset("demo")
     assert demo.learners[0].config == PPOConfig(num_steps=128, update_epochs=4,
                                                 num_minibatches=4, anneal_lr=True)

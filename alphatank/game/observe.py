@@ -1,6 +1,6 @@
 """Per-agent observation vectors, built for many matches and agents at once.
 
-Two kinds (``OBS_KINDS``), both float32, clipped to [-1, 1], with a fixed size per
+Four kinds (``OBS_KINDS``), all float32, clipped to [-1, 1], with a fixed size per
 scenario and an index map (:class:`ObsLayout`, feature name -> slice):
 
 ``paper``       every component of the paper's Table 1 in map coordinates: own tank
@@ -19,6 +19,11 @@ scenario and an index map (:class:`ObsLayout`, feature name -> slice):
                 on a shortest grid path towards it, and that path's length in cells over
                 the map's longest one (BFS, :mod:`alphatank.sim.navigation`). A policy can
                 then hunt a bot that never comes to it on any map.
+``egocentric_nearest``  the egocentric kind with the other tanks ordered nearest first
+                (teammates, then enemies; dead ones last in their group) instead of by
+                seat: ``tank[m]`` (m teammates) is always the nearest living enemy, whatever
+                the line-up. A 1v1 policy warm-starts a team seat with its enemy features
+                on the nearest enemy (in a 1v1 the kind equals ``egocentric``).
 
 Scales: map positions ``2 x / W - 1``; relative positions divided by ``max(W, H)``;
 distances by the map diagonal; tank velocities by ``tank_speed``; bullet velocities by
@@ -44,7 +49,7 @@ from alphatank.sim.navigation import NavGrid, nav_grid
 if TYPE_CHECKING:
     from alphatank.sim.match import Match
 
-OBS_KINDS = ("paper", "egocentric", "egocentric_path")
+OBS_KINDS = ("paper", "egocentric", "egocentric_path", "egocentric_nearest")
 TANK_FIELDS = ("alive", "x", "y", "sin", "cos", "vx", "vy", "c0x", "c0y", "c1x", "c1y",
                "c2x", "c2y", "c3x", "c3y", "wall")  # columns of tank_table()
 BULLET_FIELDS = ("x", "y", "vx", "vy")  # columns of bullet_table()
@@ -85,7 +90,8 @@ FIELD_HELP = {
 BLOCK_HELP = {
     "self": "the observing tank",
     "own_bullet": "my bullet slots, in slot order",
-    "tank": "every other tank: teammates first, then enemies, each in seat order",
+    "tank": "every other tank: teammates first, then enemies, each in seat order "
+            "(`egocentric_nearest`: nearest first, dead ones last)",
     "bullet": "other tanks' bullets, nearest first",
     "wall": "the map's merged wall rectangles",
     "buff": "buff zones", "debuff": "debuff zones",
@@ -328,6 +334,10 @@ class ObservationBuilder:
         self.other_idx = np.array(others, dtype=np.int64).reshape(L, n_oth)
         self.other_team = (team[self.other_idx] == team[self.observers][:, None]).astype(
             np.float64)
+        # egocentric_nearest sort keys: enemies after teammates, dead after the living
+        # (distances are below 1e9 px: maps are at most a few thousand)
+        self._group_key = np.where(self.other_team > 0, 0.0, 2e9)
+        self._dead_key = 1e9
         self.own_bidx = self.observers[:, None] * cap + np.arange(cap)  # (L, cap)
         self.other_bidx = (self.other_idx[:, :, None] * cap + np.arange(cap)).reshape(L, K)
         self.other_bteam = np.repeat(self.other_team, cap, axis=1)  # (L, K)
@@ -495,6 +505,8 @@ class ObservationBuilder:
             self._build_paper()
         else:
             self._build_ego()
+            if self.kind == "egocentric_nearest" and self.n_others > 1:
+                self._order_nearest()
         out = self.out
         np.minimum(out, 1.0, out=out)
         np.maximum(out, -1.0, out=out)
@@ -745,6 +757,17 @@ class ObservationBuilder:
         self.v_debuff[..., at["debuff.mask"]] = b.zone_mask[:, None, b.max_buffs:]
         if self._nav_groups:
             self._build_paths(c3, s3, self_xy)
+
+    def _order_nearest(self) -> None:
+        """Reorder each observer's other-tank slots nearest first within teammates and
+        within enemies, dead tanks last in their group (``egocentric_nearest``)."""
+        b, oi = self.batch, self.other_idx
+        rel = self._relv[:, :, :self.n_others]
+        key = np.hypot(rel[..., 0], rel[..., 1])
+        np.copyto(key, self._dead_key, where=~b.alive[:, oi])
+        key += self._group_key
+        order = key.argsort(axis=-1, kind="stable")
+        self.v_tank[...] = self.v_tank[self._ge, self._gl, order]
 
     def _build_paths(self, c3: np.ndarray, s3: np.ndarray, self_xy: np.ndarray) -> None:
         """``tank.path_*`` of every observer and other tank, one group of envs per map:

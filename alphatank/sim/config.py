@@ -130,6 +130,8 @@ class GameConfig:
     self_hit: bool = False
     self_hit_grace_ms: float = bounded(150.0, 0.0, 60000.0)
     immortal: bool = False  # the paper's TERMINATE_TIME training mode: hits score, nobody dies
+    # every tank starts on a random free cell, the map's spawn slots unused (the paper's team env)
+    random_spawns: bool = False
     max_steps: int = bounded(1200, 1, 10_000_000)
 
     def __post_init__(self) -> None:

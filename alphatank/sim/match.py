@@ -173,9 +173,12 @@ class Match:
         self._update_zones(report=False)
 
     def _spawn_cells(self) -> list[tuple[int, int]]:
-        """Map spawns for slots 1..n; missing slots drawn from free, reachable floor."""
+        """Map spawns for slots 1..n; missing slots (all with ``random_spawns``) drawn from
+        free, reachable floor."""
         spec = self.spec
-        cells: list[tuple[int, int] | None] = [spec.spawns.get(i + 1) for i in range(self.n)]
+        cells: list[tuple[int, int] | None] = (
+            [None] * self.n if self.cfg.random_spawns
+            else [spec.spawns.get(i + 1) for i in range(self.n)])
         used = {c for c in cells if c is not None}
         anchor = next((c for c in cells if c is not None), None)
         floor = spec.floor_cells()
