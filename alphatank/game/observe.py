@@ -351,6 +351,8 @@ class ObservationBuilder:
         self._bt = np.zeros((E, batch.n_bullets, len(BULLET_FIELDS)))
         self._count_scale = np.array([1.0 / self.cfg.cooldown_ticks, 1.0 / cap])
         self._ray_angles = np.arange(rays) * (2 * math.pi / rays)
+        self._ray_work: np.ndarray | None = None  # ray_distances' work arrays
+        self._ray_far: np.ndarray | None = None
         # Reads of other tanks and bullets: views when the seat pattern allows (a 1v1 is
         # all views), else fancy indexing each step.
         self._self_xy = pick(batch.tank_xy, self.observers[:, None])  # (E, L, 1, 2)
@@ -798,7 +800,8 @@ class ObservationBuilder:
     def ray_distances(self, xy: np.ndarray, angle: np.ndarray) -> np.ndarray:
         """(E, L, R) px to the nearest wall rectangle along ``rays`` directions from each
         observer (heading first, then clockwise on screen), by exact slab intersection;
-        capped at ``ray_length``. ``xy``: (E, L, 2), ``angle``: (E, L)."""
+        capped at ``ray_length``. ``xy``: (E, L, 2), ``angle``: (E, L). The (E, L, R, W)
+        work arrays are kept between calls of the same shape."""
         b = self.batch
         a = angle[..., None] + self._ray_angles  # (E, L, R)
         dx, dy = np.cos(a), np.sin(a)
@@ -808,12 +811,26 @@ class ObservationBuilder:
         rr = b.ray_rects[:, None, None, :, :]  # (E, 1, 1, W, 4)
         ox = xy[..., 0][..., None, None]
         oy = xy[..., 1][..., None, None]
-        tx0, tx1 = (rr[..., 0] - ox) * ix, (rr[..., 2] - ox) * ix
-        ty0, ty1 = (rr[..., 1] - oy) * iy, (rr[..., 3] - oy) * iy
-        tmin = np.maximum(np.minimum(tx0, tx1), np.minimum(ty0, ty1))
-        tmax = np.minimum(np.maximum(tx0, tx1), np.maximum(ty0, ty1))
-        near = np.maximum(tmin, 0.0)
-        d = np.where(tmax >= near, near, np.inf).min(axis=-1)
+        shape = a.shape + rr.shape[-2:-1]
+        if self._ray_work is None or self._ray_work.shape[1:] != shape:
+            self._ray_work = np.empty((5,) + shape)
+            self._ray_far = np.empty(shape, dtype=bool)
+        tx0, tx1, ty0, ty1, tmp = self._ray_work
+        np.multiply(rr[..., 0] - ox, ix, out=tx0)
+        np.multiply(rr[..., 2] - ox, ix, out=tx1)
+        np.multiply(rr[..., 1] - oy, iy, out=ty0)
+        np.multiply(rr[..., 3] - oy, iy, out=ty1)
+        # tmin = max(min(tx0, tx1), min(ty0, ty1)) -> tmp; tmax = min(max.., max..) -> tx1
+        np.minimum(tx0, tx1, out=tmp)
+        np.maximum(tx0, tx1, out=tx1)
+        np.minimum(ty0, ty1, out=tx0)
+        np.maximum(tmp, tx0, out=tmp)
+        np.maximum(ty0, ty1, out=ty0)
+        np.minimum(tx1, ty0, out=tx1)
+        near = np.maximum(tmp, 0.0, out=tmp)
+        np.less(tx1, near, out=self._ray_far)
+        np.copyto(near, np.inf, where=self._ray_far)  # the ray misses this rectangle
+        d = near.min(axis=-1)
         return np.minimum(d, self.ray_length, out=d)
 
 
