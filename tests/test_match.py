@@ -232,6 +232,25 @@ def test_random_spawns_ignore_the_map_slots_and_follow_the_seed():
     assert fixed.spawn_cells[:2] == [bf.spawns[1], bf.spawns[2]]
 
 
+def test_benched_tanks_are_out_from_the_start_and_the_rest_play_to_the_end():
+    m = _match(teams=("A", "B", "B"), seed=2)
+    m.bench([1])
+    assert m.alive.tolist() == [True, False, True] and not m.events.kills
+    assert not m.world.tank_present[1]
+    with pytest.raises(ValueError, match="leave a team with no tank"):
+        m.bench([2])
+    m.place_tank(0, 200.0, 385.0, 0.0)
+    m.place_tank(2, 420.0, 385.0, math.pi)
+    for _ in range(120):
+        m.step(_act(m, FIRE))
+        if m.done:
+            break
+    assert m.terminated and m.winner == "A"  # the one tank B fielded is down
+    assert [k.victim for k in m.events.kills] == [2]
+    with pytest.raises(RuntimeError, match="before the first tick"):
+        m.bench([1])
+
+
 def test_random_zones_come_from_the_seed():
     maze = load_map("maze")
     a, b, c = _match(spec=maze, seed=1), _match(spec=maze, seed=1), _match(spec=maze, seed=2)

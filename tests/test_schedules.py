@@ -11,6 +11,7 @@ from alphatank.training.runner import Trainer, opponent_key
 from alphatank.training.schedules import (
     CurriculumSchedule,
     CycleSchedule,
+    LineupCurriculum,
     WinRateCurriculum,
     make_schedule,
 )
@@ -173,6 +174,50 @@ def test_winrate_curriculum_reaches_the_bots_of_the_next_episode():
     # the finished episodes began before the curriculum: labelled with what they met
     assert [ep["opponent"] for ep in info["episodes"]] == ["B:defensive(w=1)"] * 2
     assert env.core.episode_label == ["B:defensive(w=0.2)"] * 2  # the episodes begun now
+
+
+def test_lineup_curriculum_adds_the_bots_as_the_team_wins():
+    # team_vs_def_smart: learners 0, 1; defensive 2, smart 3 and 4
+    env = VectorMatchEnv("team_vs_def_smart", 2, seed=0, game_overrides={"max_steps": 4})
+    env.reset()
+    c = make_schedule({"kind": "lineup", "levels": [[2, 3], [2], []], "threshold": 0.5,
+                       "window": 4, "min_episodes": 2}, 1000)
+    assert isinstance(c, LineupCurriculum) and c.benched == (2, 3)
+    assert c.apply(env, 0)["schedule/absent"] == 2.0
+    for _ in range(4):
+        _, _, _, _, info = env.step(np.ones((2, 2, 3), dtype=np.int64))
+    m = env.core.matches[0]
+    assert m.alive.tolist() == [True, True, False, False, True]  # one smart bot left
+    labels = env.core.episode_label
+    assert labels == ["B:absent, B:absent, B:smart(w=1)"] * 2
+    # the finished episodes had the full line-up: not counted at this level
+    for ep in info["episodes"]:
+        c.record(ep["opponent"], "win")
+    assert not c.results
+    c.record(labels[0], "win")
+    c.record(labels[0], "loss")  # 1/2 = 0.5: one bot more
+    assert c.level == 1 and c.benched == (2,)
+    c.apply(env, 10)
+    for _ in range(4):
+        env.step(np.ones((2, 2, 3), dtype=np.int64))
+    assert env.core.matches[1].alive.tolist() == [True, True, False, True, True]
+    d = LineupCurriculum(levels=[[2, 3], [2], []])
+    d.load_state_dict(c.state_dict())
+    assert d.benched == (2,)
+
+
+def test_benching_checks_the_seats():
+    env = VectorMatchEnv("team_vs_def_smart", 1, seed=0)
+    with pytest.raises(ValueError, match=r"cannot bench seats \[0\]; bot seats: \[2, 3, 4\]"):
+        env.set_benched([0])
+    with pytest.raises(ValueError, match="leaves a team with no tank"):
+        env.set_benched([2, 3, 4])
+    with pytest.raises(ValueError, match="fewer seats at each level"):
+        LineupCurriculum(levels=[[2], [2, 3], []])
+    with pytest.raises(ValueError, match="end with the full line-up"):
+        LineupCurriculum(levels=[[2, 3], [2]])
+    with pytest.raises(ValueError, match="lists of seat numbers"):
+        LineupCurriculum(levels=[2, 3])
 
 
 def test_bad_schedule_settings_are_rejected():

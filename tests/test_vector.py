@@ -129,6 +129,23 @@ def test_subprocess_variant_is_bit_identical(observation):
         assert p["env"] == q["env"] and np.array_equal(p["return"], q["return"])
 
 
+def test_benched_seats_reach_the_worker_processes():
+    sub = SubprocVectorMatchEnv("team_vs_def_smart", 2, seed=0, num_workers=2,
+                                observation="egocentric_nearest")
+    try:
+        with pytest.raises(ValueError, match="cannot bench seats"):
+            sub.set_benched([1])
+        sub.set_benched([2, 4])
+        obs = sub.reset()
+        alive = [sub.layout[f"tank[{k}].alive"].start for k in range(4)]
+        # each learner: its mate, then the one enemy in play, then the two absent ones
+        assert obs[..., alive].tolist() == [[[1.0, 1.0, 0.0, 0.0]] * 2] * 2
+        sub.set_benched([])
+        assert sub.reset()[..., alive].tolist() == [[[1.0] * 4] * 2] * 2
+    finally:
+        sub.close()
+
+
 def test_worker_errors_reach_the_parent():
     sub = SubprocVectorMatchEnv("vs_random", 2, seed=0, num_workers=2,
                                 seat_policies={1: ExplodingPolicy()})

@@ -100,6 +100,10 @@ class MixedVectorEnv:
         for b in self.blocks:
             b.set_opponent_policy(policy)
 
+    def set_benched(self, seats: Sequence[int]) -> None:
+        for b in self.blocks:
+            b.set_benched(seats)
+
     def add_opponent(self, name: str, opponent: str | Policy) -> None:
         for b in self.blocks:
             b.add_opponent(name, opponent)

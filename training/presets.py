@@ -131,7 +131,7 @@ class TrainConfig:
     game: dict[str, Any] = hp({}, "GameConfig overrides on top of the scenario's")
     rewards: dict[str, Any] = hp({}, "RewardConfig overrides on top of the scenario's")
     schedule: dict[str, Any] = hp({}, "opponent schedule: kind = none | curriculum | cycle | "
-                                  "winrate, and its parameters")
+                                  "winrate | lineup | league, and its parameters")
     selfplay: dict[str, Any] = hp({}, "self-play pool: the learner seats no learner drives "
                                   "are played by past snapshots of a learner (keys: learner, "
                                   "window, latest_share, every)")

@@ -1,5 +1,6 @@
 """Opponent schedules (paper 3.4.5-3.4.6): curriculum by bot weakness (over steps, or
-level by level as the win rate rises), cycle over a bot pool.
+level by level as the win rate rises) or by line-up (bots left out, then added as the win
+rate rises), cycle over a bot pool.
 
 A schedule decides, between episodes, which bots fill the non-learner seats and how
 strong they are. The runner calls :meth:`OpponentSchedule.record` for every finished
@@ -25,6 +26,8 @@ class ScheduledEnv(Protocol):
     def set_bot_weakness(self, weakness: float) -> None: ...
 
     def set_opponents(self, bot_names: list[str], weakness: float | None = None) -> None: ...
+
+    def set_benched(self, seats: tuple[int, ...]) -> None: ...
 
 
 class OpponentSchedule:
@@ -191,65 +194,62 @@ class CycleSchedule(OpponentSchedule):
         self._pushed = None  # a fresh env needs the current opponent again
 
 
-class WinRateCurriculum(OpponentSchedule):
-    """Bot weakness in steps (``levels``), one level up each time the win rate over the
-    last ``window`` episodes played at the current level reaches ``threshold`` (with at
-    least ``min_episodes`` of them). Only wins count; draws and losses do not. With
-    ``demote`` > 0 it also steps one level down when that win rate falls below
-    ``demote`` (a team that stopped winning practises where it still wins).
-
-    Episodes whose opponent label names another weakness (``smart(w=0.1)``: finished
-    before the new level reached the env) are not counted. Evaluation is not affected:
-    the runner's evaluation plays the scenario's own bots, at full strength.
+class _LevelCurriculum(OpponentSchedule):
+    """Levels of difficulty, one up each time the win rate over the last ``window``
+    episodes played at the current level reaches ``threshold`` (with at least
+    ``min_episodes`` of them). Only wins count; draws and losses do not. With ``demote``
+    > 0 it also steps one level down when that win rate falls below ``demote`` (a team
+    that stopped winning practises where it still wins). Subclasses say what a level
+    pushes to the env and which episodes were played at the current one (an episode that
+    started before the new level reached its env is not counted). Evaluation is not
+    affected: the runner's evaluation plays the scenario's own line-up at full strength.
     """
 
-    kind = "winrate"
+    name = "curriculum"
 
-    def __init__(self, levels: tuple[float, ...] | list[float] = (0.1, 0.25, 0.5, 0.75, 1.0),
-                 threshold: float = 0.6, window: int = 100, min_episodes: int = 50,
-                 demote: float = 0.0):
-        levels = tuple(float(w) for w in levels)
-        if not levels or any(not 0.0 <= w <= 1.0 for w in levels):
-            raise ValueError(f"winrate curriculum levels must be weaknesses in [0, 1], "
-                             f"got {list(levels)}")
-        if list(levels) != sorted(levels):
-            raise ValueError(f"winrate curriculum levels must rise, got {list(levels)}")
+    def __init__(self, count: int, threshold: float, window: int, min_episodes: int,
+                 demote: float):
         if not 0.0 < threshold <= 1.0:
-            raise ValueError(f"winrate curriculum threshold must be in (0, 1], got {threshold}")
+            raise ValueError(f"{self.name} threshold must be in (0, 1], got {threshold}")
         if window <= 0 or not 0 < min_episodes <= window:
-            raise ValueError(f"winrate curriculum needs window > 0 and 0 < min_episodes <= "
+            raise ValueError(f"{self.name} needs window > 0 and 0 < min_episodes <= "
                              f"window, got {window}, {min_episodes}")
         if not 0.0 <= demote < threshold:
-            raise ValueError(f"winrate curriculum demote must be in [0, threshold), got "
-                             f"{demote}")
-        self.levels, self.threshold, self.demote = levels, float(threshold), float(demote)
+            raise ValueError(f"{self.name} demote must be in [0, threshold), got {demote}")
+        self.count, self.threshold, self.demote = count, float(threshold), float(demote)
         self.window, self.min_episodes = int(window), int(min_episodes)
         self.level = 0
         self.results: deque[float] = deque(maxlen=self.window)
-        self._applied: float | None = None
-
-    @property
-    def weakness(self) -> float:
-        return self.levels[self.level]
+        self._applied: int | None = None
 
     def win_rate(self) -> float:
         return float(np.mean(self.results)) if self.results else 0.0
 
+    def _push(self, env: ScheduledEnv) -> None:
+        """Send the current level's setting to ``env``."""
+        raise NotImplementedError
+
+    def _at_level(self, opponent: str) -> bool:
+        """Whether an episode against ``opponent`` (its label) was played at this level."""
+        raise NotImplementedError
+
+    def _metrics(self) -> dict[str, float]:
+        return {}
+
     def apply(self, env: ScheduledEnv, step: int) -> dict[str, float]:
-        if self._applied != self.weakness:
-            env.set_bot_weakness(self.weakness)
-            self._applied = self.weakness
-        return {"schedule/weakness": self.weakness, "schedule/level": float(self.level),
+        if self._applied != self.level:
+            self._push(env)
+            self._applied = self.level
+        return {**self._metrics(), "schedule/level": float(self.level),
                 "schedule/level_win_rate": self.win_rate()}
 
     def record(self, opponent: str, outcome: str) -> None:
-        seen = {round(float(w), 4) for w in re.findall(r"\(w=([0-9.eE+-]+)", opponent)}
-        if seen and round(self.weakness, 4) not in seen:
+        if not self._at_level(opponent):
             return
         self.results.append(1.0 if outcome == "win" else 0.0)
         if len(self.results) < self.min_episodes:
             return
-        if self.level < len(self.levels) - 1 and self.win_rate() >= self.threshold:
+        if self.level < self.count - 1 and self.win_rate() >= self.threshold:
             self.level += 1
             self.results.clear()
         elif self.level > 0 and self.win_rate() < self.demote:
@@ -261,10 +261,85 @@ class WinRateCurriculum(OpponentSchedule):
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         if state:
-            self.level = min(int(state["level"]), len(self.levels) - 1)
+            self.level = min(int(state["level"]), self.count - 1)
             self.results.clear()
             self.results.extend(state["results"])
-        self._applied = None  # a fresh env needs the current weakness again
+        self._applied = None  # a fresh env needs the current level again
+
+
+class WinRateCurriculum(_LevelCurriculum):
+    """Bot weakness in steps (``levels``), one level up as the win rate rises (see
+    :class:`_LevelCurriculum`). Episodes whose opponent label names another weakness
+    (``smart(w=0.1)``: finished before the new level reached the env) are not counted."""
+
+    kind = "winrate"
+    name = "winrate curriculum"
+
+    def __init__(self, levels: tuple[float, ...] | list[float] = (0.1, 0.25, 0.5, 0.75, 1.0),
+                 threshold: float = 0.6, window: int = 100, min_episodes: int = 50,
+                 demote: float = 0.0):
+        levels = tuple(float(w) for w in levels)
+        if not levels or any(not 0.0 <= w <= 1.0 for w in levels):
+            raise ValueError(f"winrate curriculum levels must be weaknesses in [0, 1], "
+                             f"got {list(levels)}")
+        if list(levels) != sorted(levels):
+            raise ValueError(f"winrate curriculum levels must rise, got {list(levels)}")
+        super().__init__(len(levels), threshold, window, min_episodes, demote)
+        self.levels = levels
+
+    @property
+    def weakness(self) -> float:
+        return self.levels[self.level]
+
+    def _push(self, env: ScheduledEnv) -> None:
+        env.set_bot_weakness(self.weakness)
+
+    def _at_level(self, opponent: str) -> bool:
+        seen = {round(float(w), 4) for w in re.findall(r"\(w=([0-9.eE+-]+)", opponent)}
+        return not seen or round(self.weakness, 4) in seen
+
+    def _metrics(self) -> dict[str, float]:
+        return {"schedule/weakness": self.weakness}
+
+
+class LineupCurriculum(_LevelCurriculum):
+    """The opponents' line-up in steps: ``levels`` lists, per level, the bot seats left
+    out of the episodes (dead from the start), ending with the full line-up (``[]``); one
+    level up as the win rate rises (see :class:`_LevelCurriculum`). E.g. two learners
+    against a defensive and two smart bots (seats 2, 3, 4): ``[[2, 3], [2], []]`` plays
+    one smart bot, then both, then all three. An episode counts at the level whose number
+    of absent seats its label shows."""
+
+    kind = "lineup"
+    name = "lineup curriculum"
+
+    def __init__(self, levels: list[list[int]] | tuple = ([],), threshold: float = 0.6,
+                 window: int = 100, min_episodes: int = 50, demote: float = 0.0):
+        ok = bool(levels) and all(isinstance(lv, list | tuple) and all(
+            isinstance(k, int) and not isinstance(k, bool) for k in lv) for lv in levels)
+        if not ok:
+            raise ValueError(f"lineup curriculum levels must be lists of seat numbers, got "
+                             f"{levels!r}")
+        benched = tuple(tuple(sorted(set(lv))) for lv in levels)
+        sizes = [len(b) for b in benched]
+        if sizes[-1] or sizes != sorted(sizes, reverse=True) or len(set(sizes)) != len(sizes):
+            raise ValueError(f"lineup curriculum levels must leave out fewer seats at each "
+                             f"level and end with the full line-up ([]), got {list(levels)}")
+        super().__init__(len(benched), threshold, window, min_episodes, demote)
+        self.levels = benched
+
+    @property
+    def benched(self) -> tuple[int, ...]:
+        return self.levels[self.level]
+
+    def _push(self, env: ScheduledEnv) -> None:
+        env.set_benched(self.benched)
+
+    def _at_level(self, opponent: str) -> bool:
+        return opponent.count(":absent") == len(self.benched)
+
+    def _metrics(self) -> dict[str, float]:
+        return {"schedule/absent": float(len(self.benched))}
 
 
 def make_schedule(spec: dict[str, Any], total_steps: int, seed: int = 0) -> OpponentSchedule:
@@ -284,6 +359,8 @@ def make_schedule(spec: dict[str, Any], total_steps: int, seed: int = 0) -> Oppo
             return CycleSchedule(**spec)
         if kind == "winrate":
             return WinRateCurriculum(**spec)
+        if kind == "lineup":
+            return LineupCurriculum(**spec)
         if kind == "league":  # resolved late: the league copies learners (checkpoint layer)
             from alphatank.game.seats import resolve
             spec.setdefault("seed", seed)
@@ -291,4 +368,4 @@ def make_schedule(spec: dict[str, Any], total_steps: int, seed: int = 0) -> Oppo
     except TypeError as exc:
         raise ValueError(f"schedule {kind!r}: {exc}") from None
     raise ValueError(f"unknown schedule kind {kind!r}; valid: none, curriculum, cycle, winrate, "
-                     f"league")
+                     f"lineup, league")

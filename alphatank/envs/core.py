@@ -74,6 +74,23 @@ def check_actions(actions: Any, shape: tuple[int, ...], name_of: Any) -> np.ndar
     return arr.astype(np.int64, copy=False)
 
 
+def check_benched(scenario: Scenario, driven: Sequence[int], seats: Sequence[int]
+                  ) -> tuple[int, ...]:
+    """``seats`` as a sorted tuple after checking that each is a bot seat of ``scenario``
+    (not a learner seat in ``driven``) and that every team keeps a seat; ValueError
+    names what is allowed."""
+    bots = [i for i, s in enumerate(scenario.seats) if s.controller == "bot" and i not in driven]
+    out = tuple(sorted({int(s) for s in seats}))
+    bad = [s for s in out if s not in bots]
+    if bad:
+        raise ValueError(f"{scenario.name}: cannot bench seats {bad}; bot seats: {bots}")
+    left = {scenario.seats[i].team for i in range(len(scenario.seats)) if i not in out}
+    if len(left) < len({s.team for s in scenario.seats}):
+        raise ValueError(f"{scenario.name}: benching seats {list(out)} leaves a team with no "
+                         f"tank")
+    return out
+
+
 class MatchSet:
     """``num_envs`` matches of a scenario; the caller drives ``driven`` seats (default:
     the scenario's learner seats) and the set plays every other seat."""
@@ -115,6 +132,7 @@ class MatchSet:
         self.episode_label: list[str] = ["none"] * E  # who the current episode is against
         self.bot_override: list[str] | None = None
         self.weakness: float | None = None
+        self.benched: tuple[int, ...] = ()  # seats out of every next episode (set_benched)
         walls, buffs, debuffs = slot_counts(self.game, self.specs)
         self.batch = StateBatch(self.game, n, E, walls, buffs, debuffs)
         self.obs = ObservationBuilder(self.kind, self.batch, self.teams, self.driven,
@@ -218,6 +236,11 @@ class MatchSet:
             raise ValueError(f"unknown opponent(s) {bad}; registered: {sorted(self.opponents)}")
         self.env_opponent = list(names)
 
+    def set_benched(self, seats: Sequence[int]) -> None:
+        """Bot seats left out of every env's next episodes (a line-up curriculum; see
+        :func:`check_benched`); ``()`` restores the full line-up."""
+        self.benched = check_benched(self.scenario, self.driven, seats)
+
     def describe_opponents(self, e: int) -> str:
         """Label of the seats this set plays in env ``e`` from its next episode, e.g.
         ``B:smart(w=1)``; a named opponent (:meth:`set_env_opponents`) is labelled by its
@@ -233,7 +256,8 @@ class MatchSet:
             c = self.seat_controller_spec(e, seat)
             if c is None:
                 continue
-            label = c.describe() if isinstance(c, Seat) else f"policy:{type(c).__name__}"
+            label = ("absent" if seat in self.benched else c.describe() if isinstance(c, Seat)
+                     else f"policy:{type(c).__name__}")
             parts.append(f"{self.teams[seat]}:{label}")
         return ", ".join(parts) or "none"
 
@@ -257,6 +281,8 @@ class MatchSet:
         seeds = episode_seeds(seed, self.n, len(self.specs))
         old = self.matches[e] if e < len(self.matches) else None
         m = episode_match(self.game, self.specs, self.teams, seeds, old)
+        if self.benched:
+            m.bench(self.benched)
         if old is None:
             self.matches.append(m)
         else:

@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 
 from alphatank.cluster import ENV_RUNNER_TIMEOUT_S
-from alphatank.envs.core import check_actions
+from alphatank.envs.core import check_actions, check_benched
 from alphatank.envs.vector import ShardedEnv, VectorMatchEnv
 from alphatank.game.scenarios import Scenario
 from alphatank.sim.policy import Policy
@@ -293,6 +293,10 @@ class RayVectorMatchEnv(ShardedEnv):
 
     def set_opponent_policy(self, policy: Policy | None) -> None:
         self._setting("opponent_policy", "set_opponent_policy", (policy,))
+
+    def set_benched(self, seats: Sequence[int]) -> None:
+        seats = check_benched(self.scenario, self.learner_seats, seats)
+        self._setting("benched", "set_benched", (seats,))
 
     def add_opponent(self, name: str, opponent: str | Policy) -> None:
         self._setting(("add_opponent", name), "add_opponent", (name, opponent))

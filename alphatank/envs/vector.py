@@ -64,7 +64,7 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from alphatank.envs.core import MatchSet, action_space, check_actions
+from alphatank.envs.core import MatchSet, action_space, check_actions, check_benched
 from alphatank.envs.gym import single_learner_seat
 from alphatank.game.observe import ObsLayout
 from alphatank.game.rewards import TERMS
@@ -177,6 +177,11 @@ class VectorMatchEnv:
         """A frozen Policy in every non-learner seat from the next episode on (self-play
         against a snapshot); ``None`` restores the scenario's controllers."""
         self.core.opponent_policy = policy
+
+    def set_benched(self, seats: Sequence[int]) -> None:
+        """Bot seats left out of the next episodes (dead from the start: a line-up
+        curriculum); ``()`` restores the full line-up."""
+        self.core.set_benched(seats)
 
     def add_opponent(self, name: str, opponent: str | Policy) -> None:
         """Register a named opponent (a seat spec such as ``smart@0.5`` or
@@ -491,6 +496,10 @@ class SubprocVectorMatchEnv(ShardedEnv):
     def set_opponent_policy(self, policy: Policy | None) -> None:
         self._broadcast("call", ("set_opponent_policy", (policy,)))
 
+    def set_benched(self, seats: Sequence[int]) -> None:
+        seats = check_benched(self.scenario, self.learner_seats, seats)
+        self._broadcast("call", ("set_benched", (seats,)))
+
     def add_opponent(self, name: str, opponent: str | Policy) -> None:
         self._broadcast("call", ("add_opponent", (name, opponent)))
 
@@ -637,6 +646,9 @@ class TankBattleVectorEnv(VectorEnv):
 
     def set_opponent_policy(self, policy: Policy | None) -> None:
         self.engine.set_opponent_policy(policy)
+
+    def set_benched(self, seats: Sequence[int]) -> None:
+        self.engine.set_benched(seats)
 
     # ---- episodes ---------------------------------------------------------------------
 

@@ -202,6 +202,23 @@ class Match:
             cells[i] = free[int(p)]
         return [c for c in cells if c is not None]
 
+    def bench(self, tanks: Sequence[int]) -> None:
+        """Take ``tanks`` out of this episode before its first tick (the absent seats of a
+        line-up curriculum): dead from the start, out of the physics, no events. Every
+        team keeps at least one tank."""
+        if self.tick:
+            raise RuntimeError("Match.bench: only before the first tick")
+        out = ~self.alive
+        out[list(tanks)] = True
+        kept = np.unique(self.team_index[~out])
+        if kept.size < len(self.team_names):
+            raise ValueError(f"Match.bench: tanks {sorted(set(tanks))} would leave a team "
+                             f"with no tank")
+        for i in np.flatnonzero(out & self.alive).tolist():
+            self.alive[i] = False
+            self.world.remove_tank(i)
+        self._update_zones(report=False)
+
     # ---- rules ----------------------------------------------------------------------
 
     def place_tank(self, tank: int, x: float, y: float, angle: float) -> None:
