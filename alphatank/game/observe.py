@@ -693,6 +693,7 @@ class ObservationBuilder:
         self._vscale = np.r_[np.full(no, 1.0 / g.tank_speed),
                              np.full(cap + K, 1.0 / g.bullet_speed)]
         self._seg = (no, no + cap, no + cap + K)  # ends of the tank / own / other-bullet groups
+        self._near_key = np.zeros((E, L, no))  # egocentric_nearest sort keys
 
     def _build_ego(self) -> None:
         b, g, at = self.batch, self.cfg, self.at
@@ -765,7 +766,7 @@ class ObservationBuilder:
         within enemies, dead tanks last in their group (``egocentric_nearest``)."""
         b, oi = self.batch, self.other_idx
         rel = self._relv[:, :, :self.n_others]
-        key = np.hypot(rel[..., 0], rel[..., 1])
+        key = np.hypot(rel[..., 0], rel[..., 1], out=self._near_key)
         np.copyto(key, self._dead_key, where=~b.alive[:, oi])
         key += self._group_key
         order = key.argsort(axis=-1, kind="stable")
