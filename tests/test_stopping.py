@@ -7,6 +7,9 @@ import dataclasses
 import json
 import shutil
 import signal
+import subprocess
+import sys
+import time
 
 import numpy as np
 import pytest
@@ -19,7 +22,12 @@ from alphatank.training.ppo import PPOConfig
 from alphatank.training.presets import LearnerSpec, TrainConfig
 from alphatank.training.runner import RunWarning, Trainer, resume_trainer
 from alphatank.training.sac import SAC, SACConfig
-from alphatank.training.stopping import StopFlag, StopRequested, stop_on_signals
+from alphatank.training.stopping import (
+    StopFlag,
+    StopRequested,
+    exit_with_parent,
+    stop_on_signals,
+)
 
 torch.set_num_threads(1)
 pytestmark = pytest.mark.filterwarnings("ignore::alphatank.training.runner.RunWarning")
@@ -227,6 +235,60 @@ def test_stop_flag_signals_and_interruptible_blocks():
         signal.pause()  # blocked: only the alarm of the deadline ends it
     assert timed.reason == "time limit" and timed.exit_code == 0
     assert signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)
+
+
+# a worker: watches its parent, then runs until a stop (like a run) and says why it ended;
+# with "ignore" it ignores SIGTERM, so only the grace period can end it
+WORKER = """
+import pathlib, signal, sys, time
+from alphatank.training.stopping import StopFlag, exit_with_parent, stop_on_signals
+out = pathlib.Path(sys.argv[1])
+exit_with_parent(poll_s=0.05, grace_s=0.5)
+if sys.argv[2] == "ignore":
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    out.with_suffix(".ready").write_text("ready")
+    time.sleep(60)
+flag = StopFlag()
+with stop_on_signals(flag):
+    out.with_suffix(".ready").write_text("ready")
+    while not flag():
+        time.sleep(0.01)
+out.write_text(flag.reason)
+"""
+# the driver: starts a worker, waits until it watches, then dies without waiting for it
+DRIVER = """
+import pathlib, subprocess, sys, time
+ready = pathlib.Path(sys.argv[2]).with_suffix(".ready")
+p = subprocess.Popen([sys.executable, "-c", sys.argv[1], sys.argv[2], sys.argv[3]])
+while not ready.exists():
+    time.sleep(0.01)
+print(p.pid)
+"""
+
+
+def _alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"  # a zombie has ended
+    except FileNotFoundError:
+        return False
+
+
+def test_a_worker_whose_parent_dies_stops_like_on_sigterm_or_ends_after_the_grace(tmp_path):
+    with pytest.raises(ValueError, match="poll_s"):
+        exit_with_parent(poll_s=0)
+    pids = {}
+    for mode in ("stop", "ignore"):
+        out = tmp_path / f"{mode}.txt"
+        done = subprocess.run([sys.executable, "-c", DRIVER, WORKER, str(out), mode],
+                              capture_output=True, text=True, timeout=60, check=True)
+        pids[mode] = int(done.stdout)
+    deadline = time.monotonic() + 20
+    while any(_alive(p) for p in pids.values()) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not any(_alive(p) for p in pids.values())
+    assert (tmp_path / "stop.txt").read_text() == "SIGTERM"  # its run stopped, not killed
+    assert not (tmp_path / "ignore.txt").exists()
 
 
 def test_saves_more_often_than_an_episode_lasts_are_warned(tmp_path):

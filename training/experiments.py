@@ -48,6 +48,7 @@ from alphatank.training.presets import (
     run_learners,
     with_hp,
 )
+from alphatank.training.stopping import exit_with_parent
 
 TABLES = ("table3", "table4", "sac", "league", "heldout")
 EVAL_SEED_BASE = 1_000_000
@@ -654,8 +655,10 @@ def execute(jobs: Sequence[Job], workers: int = 1, progress: bool = True,
             import multiprocessing as mp
             from concurrent.futures import ProcessPoolExecutor, as_completed
 
-            with ProcessPoolExecutor(max_workers=workers,
-                                     mp_context=mp.get_context("spawn")) as pool:
+            # a worker whose driver was killed stops its run (saving it) instead of
+            # training on as an orphan
+            with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"),
+                                     initializer=exit_with_parent) as pool:
                 futures = {pool.submit(run_job, job): job for job in jobs}
                 for fut in as_completed(futures):
                     job = futures[fut]

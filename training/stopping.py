@@ -6,12 +6,14 @@ the duration of a run (main thread only; previous handlers are restored afterwar
 when the flag has a deadline, a ``SIGALRM`` timer so that the budget also ends long
 stretches that do not poll (evaluation, videos) inside :meth:`StopFlag.interruptible`.
 A SIGINT while a signal's stop is under way (or a second SIGINT) aborts at once
-(``KeyboardInterrupt``; the previous checkpoint stays intact).
+(``KeyboardInterrupt``; the previous checkpoint stays intact). :func:`exit_with_parent`
+makes a worker process stop the same way when the process that started it dies.
 """
 
 from __future__ import annotations
 
 import math
+import os
 import signal
 import threading
 import time
@@ -114,3 +116,23 @@ def stop_on_signals(flag: StopFlag) -> Iterator[StopFlag]:
         if timed and timer[0] > 0:  # someone else's timer was running: re-arm what is left
             left = timer[0] - (time.monotonic() - began)
             signal.setitimer(signal.ITIMER_REAL, max(1e-3, left), timer[1])
+
+
+def exit_with_parent(poll_s: float = 1.0, grace_s: float = 60.0) -> None:
+    """In a worker process (e.g. a process pool's initializer): once its parent dies, send
+    this process SIGTERM, so a run in it stops and saves as on any SIGTERM, and end it
+    outright ``grace_s`` seconds later if it is still alive. A daemon thread polls the
+    parent's pid every ``poll_s`` seconds."""
+    if not poll_s > 0 or not grace_s >= 0:
+        raise ValueError(f"exit_with_parent: need poll_s > 0 and grace_s >= 0, got "
+                           f"poll_s={poll_s}, grace_s={grace_s}")
+    parent = os.getppid()
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(poll_s)
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(grace_s)
+        os._exit(128 + signal.SIGTERM)
+
+    threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
