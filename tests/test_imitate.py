@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 import torch
@@ -59,6 +61,22 @@ def test_cloning_makes_the_learner_act_like_the_bot():
     np.testing.assert_allclose(ppo.obs_norm.rms.mean, obs[:240].reshape(-1, D).mean(0), atol=1e-4)
 
 
+def test_dagger_games_are_played_by_the_learner_and_labelled_by_the_bot():
+    sc = load_scenario("vs_aggressive")
+    cfg = ImitateConfig(bot="aggressive")
+    seen = []
+
+    def idle(obs: np.ndarray) -> np.ndarray:  # a learner that never moves or fires
+        seen.append(obs.copy())
+        return np.zeros((*obs.shape[:2], 3), dtype=np.int64)
+
+    demo = collect(sc, cfg, 4, seed=1, observation="egocentric", game={}, rewards={},
+                   driven=[0], steps=400, drive=idle)
+    assert demo.games > 0 and demo.wins == 0  # the idle tank never wins a game
+    assert (demo.actions[demo.alive][:, 2] == 1).any()  # though the bot would have fired
+    np.testing.assert_array_equal(np.stack(seen), demo.obs)  # it saw what was recorded
+
+
 def run_config(name: str, **kw) -> TrainConfig:
     kw.setdefault("total_steps", 128)
     return TrainConfig(name, "vs_aggressive", num_envs=2, wandb="disabled",
@@ -85,6 +103,26 @@ def test_a_run_starts_from_the_clone_the_same_way_every_time(tmp_path):
         np.testing.assert_array_equal(a, b)
     assert any(not np.array_equal(a, b)
                for a, b in zip(weights(runs[0]), weights(plain), strict=True))
+
+
+def test_dagger_rounds_refit_the_clone_on_its_own_states_the_same_way_every_time(tmp_path):
+    table = {"bot": "aggressive", "steps": 64, "epochs": 2, "dagger": 2, "dagger_steps": 48}
+    runs = [Trainer(run_config("dagger", imitate=table), tmp_path / f"d{k}", progress=False)
+            for k in range(2)]
+    plain = Trainer(run_config("bc", imitate={**table, "dagger": 0}), tmp_path / "bc",
+                    progress=False)
+    for tr in (*runs, plain):
+        tr.train()
+    first = json.loads((tmp_path / "d0" / "metrics.jsonl").read_text().splitlines()[0])
+    for r in (1, 2):
+        assert 0 <= first[f"imitate/dagger{r}/win_rate"] <= 1
+        assert 0 <= first[f"imitate/dagger{r}/ppo/agreement"] <= 1
+    for a, b in zip(weights(runs[0]), weights(runs[1]), strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert any(not np.array_equal(a, b)
+               for a, b in zip(weights(runs[0]), weights(plain), strict=True))
+    # the rounds' states are in the observation statistics: 64 + 2 x 48 steps of 2 envs
+    assert runs[0].learners["ppo"].obs_norm.rms.count > plain.learners["ppo"].obs_norm.rms.count
 
 
 def test_the_time_limit_cuts_the_demonstrations(tmp_path):

@@ -171,6 +171,27 @@ def test_env_runners_match_worker_processes_and_a_killed_one_comes_back(cluster)
         sv.close()
 
 
+def test_benched_seats_reach_the_env_runners_and_come_back_after_a_restart(cluster):
+    rv = RayVectorMatchEnv("team_vs_def_smart", 2, seed=0, num_runners=2,
+                           observation="egocentric_nearest")
+    try:
+        with pytest.raises(ValueError, match="cannot bench seats"):
+            rv.set_benched([1])
+        rv.set_benched([2, 4])
+        alive = [rv.layout[f"tank[{k}].alive"].start for k in range(4)]
+        # each learner: its mate, then the one enemy in play, then the two absent ones
+        benched = [[[1.0, 1.0, 0.0, 0.0]] * 2] * 2
+        assert rv.reset()[..., alive].tolist() == benched
+        os.kill(ray.get(rv.runners[0].pid.remote()), signal.SIGKILL)
+        with pytest.raises(RolloutLost):
+            rv.step(np.zeros((2, 2, 3), np.int64))
+        assert rv.reset()[..., alive].tolist() == benched  # the setting was replayed
+        rv.set_benched([])
+        assert rv.reset()[..., alive].tolist() == [[[1.0] * 4] * 2] * 2
+    finally:
+        rv.close()
+
+
 def test_first_update_has_the_same_weights_as_with_local_workers(cluster, tmp_path):
     local = Trainer(tiny_cfg("local", num_workers=2), tmp_path / "local", progress=False)
     local.train()

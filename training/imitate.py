@@ -14,6 +14,12 @@ its actor to its seats' actions (cross-entropy on every action head) and its cri
 the discounted returns of the same games under the run's rewards, normalised as PPO
 normalises them; its observation and return statistics start from the demonstrations.
 The time it takes counts in the run's wall time (``time_limit_s``).
+
+A clone drifts off the bot's states: one wrong turn and it stands where the bot never
+stood, with no example to follow. ``dagger`` rounds (DAgger, Ross et al. 2011) fix that:
+the learners play ``dagger_steps`` vector steps themselves (sampling, as PPO will), the
+bot labels every live seat's state with what it would do there, and each learner is
+refit (``dagger_epochs`` passes, from where it stands) on everything gathered so far.
 """
 
 from __future__ import annotations
@@ -42,6 +48,10 @@ class ImitateConfig:
     epochs: int = hp(8, "passes over the demonstrations", gt=0)
     minibatch: int = hp(2048, "samples per gradient step", gt=0)
     learning_rate: float = hp(1e-3, "Adam learning rate of the cloning", gt=0)
+    dagger: int = hp(0, "DAgger rounds after the first fit: the learners play, the bot "
+                        "labels their states, the fit is redone on all the data", ge=0)
+    dagger_steps: int = hp(2048, "vector steps of each DAgger round", gt=0)
+    dagger_epochs: int = hp(4, "passes over all the data in each DAgger round's refit", gt=0)
 
     def __post_init__(self) -> None:
         validate(self)
@@ -73,11 +83,17 @@ class Demonstrations:
     games: int
 
 
+Drive = Callable[[np.ndarray], np.ndarray]
+
+
 def collect(scenario: Scenario, cfg: ImitateConfig, num_envs: int, seed: int,
             observation: str | None, game: dict[str, Any], rewards: dict[str, Any],
-            driven: list[int], stop: Callable[[], bool] = bool) -> Demonstrations:
-    """Play ``cfg.steps`` vector steps with ``cfg.bot`` in the learner seats ``driven``
-    (indices into the scenario's learner seats); fewer when ``stop()`` turns true."""
+            driven: list[int], stop: Callable[[], bool] = bool, steps: int | None = None,
+            drive: Drive | None = None) -> Demonstrations:
+    """Play ``steps`` (default ``cfg.steps``) vector steps with ``cfg.bot`` in the
+    learner seats ``driven`` (indices into the scenario's learner seats); fewer when
+    ``stop()`` turns true. With ``drive`` (observations (E, L, D) -> actions (E, L, 3))
+    the learners play instead and the bot's actions are only recorded, as labels."""
     from alphatank.game.lineup import spec_seat
     from alphatank.game.seats import make_controller
 
@@ -88,7 +104,7 @@ def collect(scenario: Scenario, cfg: ImitateConfig, num_envs: int, seed: int,
     stand = spec_seat(cfg.bot, team, where=f"imitate.bot {cfg.bot!r}")
     bots = [[make_controller(stand) for _ in seats] for _ in range(num_envs)]
     seeds = np.random.default_rng(seed)
-    T, E, L = cfg.steps, num_envs, len(seats)
+    T, E, L = steps or cfg.steps, num_envs, len(seats)
     out = Demonstrations(np.zeros((T, E, L, core.obs_dim), dtype=np.float32),
                          np.zeros((T, E, L, 3), dtype=np.int64), np.zeros((T, E, L), bool),
                          np.zeros((T, E, L)), np.zeros((T, E), bool), 0, 0)
@@ -116,7 +132,7 @@ def collect(scenario: Scenario, cfg: ImitateConfig, num_envs: int, seed: int,
                 out.alive[t, e, k] = live
                 acts[e, k] = bot.act(m, seat) if live else NOOP
         out.actions[t] = acts
-        terms, obs = core.step(acts)
+        terms, obs = core.step(acts if drive is None else drive(obs))
         out.rewards[t] = core.rewards(terms)
         ended = [e for e, m in enumerate(core.matches) if m.done]
         for e in ended:
@@ -140,30 +156,56 @@ def discounted_returns(rewards: np.ndarray, done: np.ndarray, gamma: float) -> n
     return ret
 
 
-def clone(learner: PPO, obs: np.ndarray, actions: np.ndarray, alive: np.ndarray,
-          rewards: np.ndarray, done: np.ndarray, cfg: ImitateConfig, seed: int,
-          stop: Callable[[], bool] = bool) -> dict[str, float]:
-    """Fit ``learner`` to its streams' demonstrations: ``obs`` (T, B, D), ``actions``
-    (T, B, 3), ``alive`` / ``rewards`` / ``done`` (T, B), B = its num_streams (the
-    order of its rollout streams); stops early when ``stop()`` turns true. Returns the
-    last minibatch's losses and the share of live samples whose most likely action
-    (every head) is the bot's."""
+@dataclass
+class Samples:
+    """One learner's cloning data, flat: raw observations (N, D), the bot's actions
+    (N, 3), which samples are of live seats (N,) and the critic's targets (N,)."""
+
+    obs: np.ndarray
+    actions: np.ndarray
+    alive: np.ndarray
+    returns: np.ndarray
+
+    def __add__(self, other: Samples) -> Samples:
+        return Samples(*(np.concatenate([a, b]) for a, b in zip(
+            (self.obs, self.actions, self.alive, self.returns),
+            (other.obs, other.actions, other.alive, other.returns), strict=True)))
+
+
+def samples(learner: PPO, obs: np.ndarray, actions: np.ndarray, alive: np.ndarray,
+            rewards: np.ndarray, done: np.ndarray) -> Samples:
+    """Flatten one batch of a learner's streams, ``obs`` (T, B, D), ``actions`` (T, B, 3),
+    ``alive`` / ``rewards`` / ``done`` (T, B), B = its num_streams (the order of its
+    rollout streams), folding the observations and rewards into the statistics PPO keeps;
+    the targets are the discounted returns of the scaled rewards, cut at the batch's end."""
     if not isinstance(learner, PPO) or learner.algo != "ppo":
         raise ValueError(f"imitate: warm starts PPO learners only, not {learner.algo!r}")
     T, B, D = obs.shape
-    # the statistics PPO keeps, started from the demonstrations
-    x = torch.from_numpy(learner.obs_norm(obs.reshape(T * B, D), update=True))
+    flat = obs.reshape(T * B, D)
+    learner.obs_norm(flat, update=True)
     scaled = np.stack([learner.ret_norm(rewards[t], done[t]) for t in range(T)])
     returns = discounted_returns(scaled, done, learner.cfg.gamma)
-    a = torch.from_numpy(actions.reshape(T * B, 3))
-    live = torch.from_numpy(alive.reshape(T * B))
-    y = torch.from_numpy(returns.reshape(T * B).astype(np.float32))
+    return Samples(flat, actions.reshape(T * B, 3), alive.reshape(T * B),
+                   returns.reshape(T * B).astype(np.float32))
+
+
+def fit(learner: PPO, data: Samples, cfg: ImitateConfig, seed: int,
+        stop: Callable[[], bool] = bool, epochs: int | None = None) -> dict[str, float]:
+    """Fit ``learner``'s actor to ``data``'s actions (cross-entropy on every head, live
+    samples only) and its critic to the targets for ``epochs`` (default ``cfg.epochs``)
+    passes; stops early when ``stop()`` turns true.
+    Returns the last minibatch's losses and the share of live samples whose most likely
+    action (every head) is the bot's."""
+    x = torch.from_numpy(learner.obs_norm(data.obs))
+    a = torch.from_numpy(data.actions)
+    live = torch.from_numpy(data.alive)
+    y = torch.from_numpy(data.returns)
     net = learner.net
     opt = torch.optim.Adam(net.parameters(), lr=cfg.learning_rate)
     gen = torch.Generator().manual_seed(seed)
-    n = T * B
+    n = len(x)
     stats: dict[str, float] = {}
-    for _ in range(cfg.epochs):
+    for _ in range(epochs or cfg.epochs):
         order = torch.randperm(n, generator=gen)
         for lo in range(0, n, cfg.minibatch):
             if stop():
@@ -180,41 +222,98 @@ def clone(learner: PPO, obs: np.ndarray, actions: np.ndarray, alive: np.ndarray,
             opt.step()
             stats = {"policy_loss": policy_loss.item(), "value_loss": value_loss.item()}
     learner.mirror.sync(net)
-    with torch.no_grad():
-        heads = torch.stack([h.argmax(-1) for h in torch.split(net.logits(x[live]),
-                                                                list(net.nvec), dim=-1)], -1)
-        stats["action_accuracy"] = float((heads == a[live]).all(-1).float().mean())
+    stats["action_accuracy"] = agreement(learner, data)
     return stats
 
 
-def imitate(trainer: Any, cfg: ImitateConfig) -> dict[str, float]:
-    """Warm start every learner of ``trainer`` (a fresh run) by cloning ``cfg.bot``,
-    heeding ``trainer.stop``; returns metrics (``imitate/...``)."""
+def agreement(learner: PPO, data: Samples) -> float:
+    """Share of ``data``'s live samples whose most likely action (every head) is the
+    bot's."""
+    with torch.no_grad():
+        x = torch.from_numpy(learner.obs_norm(data.obs[data.alive]))
+        heads = torch.stack([h.argmax(-1) for h in torch.split(
+            learner.net.logits(x), list(learner.net.nvec), dim=-1)], -1)
+    return float((heads == torch.from_numpy(data.actions[data.alive])).all(-1)
+                 .float().mean()) if len(x) else 0.0
+
+
+def clone(learner: PPO, obs: np.ndarray, actions: np.ndarray, alive: np.ndarray,
+          rewards: np.ndarray, done: np.ndarray, cfg: ImitateConfig, seed: int,
+          stop: Callable[[], bool] = bool) -> dict[str, float]:
+    """:func:`samples` of one batch, then :func:`fit` to them."""
+    return fit(learner, samples(learner, obs, actions, alive, rewards, done), cfg, seed, stop)
+
+
+def gather(trainer: Any, cfg: ImitateConfig, steps: int, seed: int,
+           drive: Callable[[int], Drive] | None = None) -> Demonstrations:
+    """One batch of games in the run's envs: a mixed env (training.mixed) plays its
+    scenarios in contiguous blocks of env ids, and its demonstrations come the same way,
+    so stream order matches the learners'. ``drive(n)``: the learners' player for a block
+    of ``n`` envs (None: the bot plays)."""
     tc, env = trainer.cfg, trainer.env
     driven = sorted(s for spec in trainer.specs for s in spec.seats)
-    # a mixed env (training.mixed) plays its scenarios in contiguous blocks of env ids:
-    # demonstrations come the same way, so stream order matches the learners'
     blocks = (list(zip(env.scenarios, (b.stop - b.start for b in env.slices), strict=True))
               if hasattr(env, "slices") else [(trainer.scenario, trainer.E)])
-    parts = [collect(sc, cfg, n, tc.seed + 7919 + k, tc.observation, tc.game, tc.rewards,
-                     driven, trainer.stop) for k, (sc, n) in enumerate(blocks)]
+    parts = [collect(sc, cfg, n, seed + k, tc.observation, tc.game, tc.rewards, driven,
+                     trainer.stop, steps, None if drive is None else drive(n))
+             for k, (sc, n) in enumerate(blocks)]
     T = min(len(p.done) for p in parts)
-    if not T:
-        return {}
-    demo = Demonstrations(*(np.concatenate([getattr(p, f)[:T] for p in parts], axis=1)
+    return Demonstrations(*(np.concatenate([getattr(p, f)[:T] for p in parts], axis=1)
                             for f in ("obs", "actions", "alive", "rewards", "done")),
                           sum(p.wins for p in parts), sum(p.games for p in parts))
+
+
+def imitate(trainer: Any, cfg: ImitateConfig) -> dict[str, float]:
+    """Warm start every learner of ``trainer`` (a fresh run) by cloning ``cfg.bot``, then
+    ``cfg.dagger`` DAgger rounds, heeding ``trainer.stop``; returns metrics
+    (``imitate/...``; ``imitate/dagger<r>/...`` per round: the learners' win rate and,
+    per learner, how often it agreed with the bot on its own states before the refit)."""
+    tc, specs = trainer.cfg, trainer.specs
+    learners = [trainer.learners[spec.name] for spec in specs]
+    rng = np.random.default_rng(tc.seed + 104729)  # the learners' samples in DAgger rounds
+
+    def split(demo: Demonstrations) -> list[Samples]:
+        """Each learner's share of ``demo`` (its streams: env-major, then its seats)."""
+        T, E = demo.done.shape
+        out = []
+        for spec, learner in zip(specs, learners, strict=True):
+            cols = trainer.cols[spec.name]
+            B = E * len(cols)
+            out.append(samples(learner, demo.obs[:, :, cols].reshape(T, B, -1),
+                               demo.actions[:, :, cols].reshape(T, B, 3),
+                               demo.alive[:, :, cols].reshape(T, B),
+                               demo.rewards[:, :, cols].reshape(T, B),
+                               np.repeat(demo.done, len(cols), axis=1)))
+        return out
+
+    def drive(n: int) -> Drive:
+        def play(obs: np.ndarray) -> np.ndarray:
+            acts = np.empty((n, obs.shape[1], 3), dtype=np.int64)
+            for spec, learner in zip(specs, learners, strict=True):
+                cols = trainer.cols[spec.name]
+                acts[:, cols] = learner.policy_actions(
+                    obs[:, cols].reshape(n * len(cols), -1), rng=rng).reshape(n, len(cols), 3)
+            return acts
+        return play
+
+    demo = gather(trainer, cfg, cfg.steps, tc.seed + 7919)
+    if not len(demo.done):
+        return {}
     metrics = {"imitate/bot_win_rate": demo.wins / max(demo.games, 1),
                "imitate/games": float(demo.games), "imitate/samples": float(demo.alive.sum())}
-    E = demo.done.shape[1]
-    for k, spec in enumerate(trainer.specs):
-        cols = trainer.cols[spec.name]  # its streams: env-major, then its seats
-        B = E * len(cols)
-        done = np.repeat(demo.done, len(cols), axis=1)
-        stats = clone(trainer.learners[spec.name], demo.obs[:, :, cols].reshape(T, B, -1),
-                      demo.actions[:, :, cols].reshape(T, B, 3),
-                      demo.alive[:, :, cols].reshape(T, B),
-                      demo.rewards[:, :, cols].reshape(T, B), done, cfg, tc.seed + k,
-                      trainer.stop)
-        metrics.update({f"imitate/{spec.name}/{key}": v for key, v in stats.items()})
+    data = split(demo)
+    for r in range(cfg.dagger + 1):
+        if r:
+            demo = gather(trainer, cfg, cfg.dagger_steps, tc.seed + 7919 + 1000 * r, drive)
+            if not len(demo.done):
+                break
+            metrics[f"imitate/dagger{r}/win_rate"] = demo.wins / max(demo.games, 1)
+            fresh = split(demo)
+            for spec, learner, more in zip(specs, learners, fresh, strict=True):
+                metrics[f"imitate/dagger{r}/{spec.name}/agreement"] = agreement(learner, more)
+            data = [a + b for a, b in zip(data, fresh, strict=True)]
+        for k, (spec, learner) in enumerate(zip(specs, learners, strict=True)):
+            stats = fit(learner, data[k], cfg, tc.seed + k + 31 * r, trainer.stop,
+                        cfg.dagger_epochs if r else cfg.epochs)
+            metrics.update({f"imitate/{spec.name}/{key}": v for key, v in stats.items()})
     return metrics
