@@ -57,6 +57,33 @@ def test_feature_map_matches_tanks_by_role():
     assert len(set(di.tolist())) == len(di)
 
 
+def test_a_1v1_egocentric_policy_seeds_a_nearest_first_team_policy():
+    src = MatchSet("vs_defensive", 1, observation="egocentric").obs.layout
+    env = VectorMatchEnv("team_vs_def_smart", 2, seed=3, observation="egocentric_nearest")
+    dst = env.layout
+    si, di, _ = feature_map(src, dst, src_mates=0, dst_mates=1)
+    pairs = {src.fields[s]: dst.fields[d] for s, d in zip(si, di, strict=True)}
+    assert pairs["tank[0].fwd"] == "tank[1].fwd"  # the enemy: the nearest enemy
+    assert pairs["ray[0].dist"] == "ray[0].dist" and pairs["self.v_fwd"] == "self.v_fwd"
+    ppo = trained_ppo(src.size)
+    team = PPO(dst.size, 4, PPOConfig(), seed=1)
+    warm_start(team, ppo.state_dict(), src, dst, dst_mates=1)
+    env.reset()
+    obs, *_ = env.step(np.zeros((2, 2, 3), np.int64))
+    obs = obs.reshape(-1, dst.size)
+    one = np.zeros((len(obs), src.size), dtype=np.float32)
+    one[:, si] = obs[:, di]
+    np.testing.assert_allclose(team.mirror.forward(team.obs_norm(obs))[0],
+                               ppo.mirror.forward(ppo.obs_norm(one))[0], rtol=1e-4, atol=1e-4)
+    # enemies in seat order do not map onto nearest-first slots, nor other kinds
+    seat_order = MatchSet("team_vs_def_smart", 1, observation="egocentric").obs.layout
+    with pytest.raises(ValueError, match="at most one teammate and one enemy"):
+        feature_map(seat_order, dst, src_mates=1, dst_mates=1)
+    paper = MatchSet("vs_defensive", 1, observation="paper").obs.layout
+    with pytest.raises(ValueError, match="cannot map a 'paper' observation"):
+        feature_map(paper, dst, src_mates=0, dst_mates=1)
+
+
 @pytest.mark.parametrize("kind", ["paper", "egocentric"])
 def test_warm_started_mappo_acts_as_the_1v1_network(kind):
     src, dst, team_obs = layouts(kind)

@@ -4,7 +4,9 @@ Observation features are matched by name through both index maps
 (:class:`~alphatank.game.observe.ObsLayout`). Other tanks are matched by role: the
 source's teammates to the target's first teammate slots, its enemies to the target's
 enemy slots (in a 1v1 ``tank[0]`` is the enemy; in a 2v1 it is ``tank[1]``, after the
-teammate). Everything else keeps its name (``self.x``, ``own_bullet[3].vx``,
+teammate). A 1v1 ``egocentric`` source also seeds an ``egocentric_nearest`` target
+(and back): with one other tank the two kinds agree, and the enemy lands on the nearest
+enemy's slot. Everything else keeps its name (``self.x``, ``own_bullet[3].vx``,
 ``bullet[0].dist`` - the nearest other bullet, ``wall[5].x0``, ...).
 
 * First layer: matched input columns are copied; new inputs (teammate slots, team flags,
@@ -34,6 +36,16 @@ import torch
 from alphatank.game.observe import ObservationBuilder, ObsLayout, StateBatch
 
 _TANK = re.compile(r"^tank\[(\d+)\]\.(.+)$")
+NEAREST_PAIR = {"egocentric", "egocentric_nearest"}  # the same fields, other tanks ordered
+
+
+def _same_order(src: ObsLayout, src_mates: int, dst: ObsLayout) -> bool:
+    """``egocentric`` and ``egocentric_nearest`` differ only in the order of the other
+    tanks within teammates and within enemies: with at most one of each in the source,
+    its slots mean the same in either kind (a 1v1 enemy is the nearest enemy)."""
+    slots = {int(m.group(1)) for m in map(_TANK.match, src.fields) if m}
+    return ({src.kind, dst.kind} == NEAREST_PAIR and src_mates <= 1
+            and len(slots) - src_mates <= 1)
 
 
 def feature_map(src: ObsLayout, dst: ObsLayout, src_mates: int = 0, dst_mates: int = 0
@@ -41,8 +53,11 @@ def feature_map(src: ObsLayout, dst: ObsLayout, src_mates: int = 0, dst_mates: i
     """(src_idx, dst_idx, dropped): source feature ``src_idx[i]`` feeds target feature
     ``dst_idx[i]``; ``dropped`` source features have no target. ``*_mates``: how many of
     each layout's ``tank[k]`` slots are teammates (they come first)."""
-    if src.kind != dst.kind:
-        raise ValueError(f"cannot map a {src.kind!r} observation onto a {dst.kind!r} one")
+    if src.kind != dst.kind and not _same_order(src, src_mates, dst):
+        raise ValueError(f"cannot map a {src.kind!r} observation onto a {dst.kind!r} one"
+                         + (" (other tanks in seat order against nearest first: only a "
+                            "source with at most one teammate and one enemy maps)"
+                            if {src.kind, dst.kind} == NEAREST_PAIR else ""))
     si, di, dropped = [], [], []
     for k, name in enumerate(src.fields):
         target = name
