@@ -12,10 +12,11 @@ from alphatank.game.scenarios import load_scenario
 from alphatank.training.fields import FieldError
 from alphatank.training.imitate import (
     ImitateConfig,
-    clone,
     collect,
     discounted_returns,
+    fit,
     imitate_config,
+    samples,
 )
 from alphatank.training.ppo import PPO, PPOConfig
 from alphatank.training.presets import LearnerSpec, TrainConfig
@@ -54,7 +55,8 @@ def test_cloning_makes_the_learner_act_like_the_bot():
     held = slice(240, None)  # the last 60 steps are not trained on
     ppo = PPO(D, E, PPOConfig(), seed=0)
     before = greedy_agreement(ppo, obs[held], acts[held], alive[held])
-    stats = clone(ppo, obs[:240], acts[:240], alive[:240], rew[:240], demo.done[:240], cfg, 0)
+    stats = fit(ppo, samples(ppo, obs[:240], acts[:240], alive[:240], rew[:240],
+                             demo.done[:240]), cfg, 0)
     after = greedy_agreement(ppo, obs[held], acts[held], alive[held])
     assert after > 0.5 and after > before + 0.3, (before, after)
     assert stats["action_accuracy"] > 0.5

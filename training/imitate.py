@@ -237,13 +237,6 @@ def agreement(learner: PPO, data: Samples) -> float:
                  .float().mean()) if len(x) else 0.0
 
 
-def clone(learner: PPO, obs: np.ndarray, actions: np.ndarray, alive: np.ndarray,
-          rewards: np.ndarray, done: np.ndarray, cfg: ImitateConfig, seed: int,
-          stop: Callable[[], bool] = bool) -> dict[str, float]:
-    """:func:`samples` of one batch, then :func:`fit` to them."""
-    return fit(learner, samples(learner, obs, actions, alive, rewards, done), cfg, seed, stop)
-
-
 def gather(trainer: Any, cfg: ImitateConfig, steps: int, seed: int,
            drive: Callable[[int], Drive] | None = None) -> Demonstrations:
     """One batch of games in the run's envs: a mixed env (training.mixed) plays its
