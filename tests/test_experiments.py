@@ -4,7 +4,10 @@ a failing row is reported while the other finishes; the shipped tables all load.
 
 import csv
 import json
+import os
 import shutil
+import signal
+import threading
 from pathlib import Path
 
 import pytest
@@ -15,6 +18,7 @@ from alphatank.training.experiments import (
     load_tables,
     make_plan,
     row_config,
+    run_job,
     table_names,
 )
 
@@ -144,6 +148,35 @@ def test_a_failing_row_is_reported_and_the_other_finishes(tmp_path, capsys):
     data = json.loads((out / "tiny.json").read_text())
     assert data["rows"][0]["columns"]["random"]["per_seed"]
     assert data["missing"] and "b_cycle" in data["missing"][0]
+
+
+def test_a_row_stopped_by_a_signal_is_not_finished_nor_evaluated(tmp_path):
+    """SIGTERM (a killed driver's workers get one) or Ctrl-C cut a row short: it must not
+    be marked done (``--resume`` trains it again) nor evaluated as if finished."""
+    plan = make_plan(load_tables(["tiny"], write_rows(tmp_path / "exp")), tmp_path / "out",
+                     steps=10**7, games=2, budget_min=2, rows=["a_random"])
+    job = plan.jobs[0]
+    metrics = Path(job.run_dir) / "metrics.jsonl"
+    over = threading.Event()
+
+    def stop_once_training() -> None:  # after the first logged iteration: handlers are set
+        while not over.wait(0.05):
+            if metrics.is_file() and metrics.read_text().strip():
+                os.kill(os.getpid(), signal.SIGTERM)
+                return
+
+    watcher = threading.Thread(target=stop_once_training, daemon=True)
+    watcher.start()
+    try:
+        _, error, seconds = run_job(job)
+    finally:
+        over.set()
+        watcher.join()
+    assert error is not None and "stopped by SIGTERM" in error and "--resume" in error
+    assert seconds < 60
+    run = Path(job.run_dir)
+    assert (run / "latest").exists()  # it saved where it stopped
+    assert not job.done_file.exists() and not (run / "eval").exists()
 
 
 def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys):

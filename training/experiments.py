@@ -513,6 +513,10 @@ def read_json(path: Path) -> Any:
     return json.loads(Path(path).read_text(encoding="utf-8"))
 
 
+class RunInterrupted(RuntimeError):
+    """A row's training was stopped by a signal: it has no done.json and no evaluation."""
+
+
 def _train(job: Job) -> dict[str, Any]:
     from alphatank.training.learners import learner_class
     from alphatank.training.runner import Trainer
@@ -535,6 +539,9 @@ def _train(job: Job) -> dict[str, Any]:
     t0 = time.time()
     trainer = Trainer(cfg, run_dir, env=env, progress=False)
     summary = trainer.train()
+    if summary["exit_code"]:  # SIGINT / SIGTERM: cut short, not finished
+        raise RunInterrupted(f"stopped by {summary['stopped']['reason']} at step "
+                             f"{summary['global_step']:,}; --resume trains it again")
     league = trainer.schedule.table() if hasattr(trainer.schedule, "table") else None
     done = {"summary": summary, "wall_s": time.time() - t0, "total_steps": cfg.total_steps,
             "stopped_by": "steps" if summary["global_step"] >= cfg.total_steps else "time",
