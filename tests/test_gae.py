@@ -155,6 +155,18 @@ def test_obs_normalizer_round_trip_and_clip():
         ObsNormalizer(4).load_state_dict(norm.state_dict())
 
 
+def test_obs_normalizer_update_folds_in_without_normalising():
+    x = np.random.default_rng(1).normal(-4.0, 2.0, size=(200, 3)).astype(np.float32)
+    called, updated = ObsNormalizer(3), ObsNormalizer(3)
+    called(x, update=True)
+    updated.update(x)
+    np.testing.assert_array_equal(updated(x[:7]), called(x[:7]))
+    assert updated.rms.count == called.rms.count > 200
+    off = ObsNormalizer(3, enabled=False)
+    off.update(x)  # disabled: the statistics stay as they are, like __call__(update=True)
+    assert off.rms.count < 1 and off.rms.mean.tolist() == [0.0, 0.0, 0.0]
+
+
 def test_return_normalizer_resets_at_episode_end():
     rn = ReturnNormalizer(2, gamma=0.5)
     rn(np.array([1.0, 1.0]), np.array([True, False]))

@@ -182,7 +182,7 @@ def samples(learner: PPO, obs: np.ndarray, actions: np.ndarray, alive: np.ndarra
         raise ValueError(f"imitate: warm starts PPO learners only, not {learner.algo!r}")
     T, B, D = obs.shape
     flat = obs.reshape(T * B, D)
-    learner.obs_norm(flat, update=True)
+    learner.obs_norm.update(flat)
     scaled = np.stack([learner.ret_norm(rewards[t], done[t]) for t in range(T)])
     returns = discounted_returns(scaled, done, learner.cfg.gamma)
     return Samples(flat, actions.reshape(T * B, 3), alive.reshape(T * B),

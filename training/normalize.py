@@ -74,11 +74,17 @@ class ObsNormalizer:
         if not self.enabled:
             return obs.copy()
         if update:
-            self.rms.update(obs.reshape(-1, obs.shape[-1]))
-            self._refresh()
+            self.update(obs)
         out = (obs - self._mean) * self._inv_std
         np.clip(out, -self.clip, self.clip, out=out)
         return out
+
+    def update(self, obs: np.ndarray) -> None:
+        """Fold ``obs`` (..., obs_dim) into the statistics (not when disabled)."""
+        if not self.enabled:
+            return
+        self.rms.update(np.asarray(obs, dtype=np.float32).reshape(-1, self.rms.mean.shape[0]))
+        self._refresh()
 
     def state_dict(self) -> dict[str, torch.Tensor]:
         return {**self.rms.state_dict(), "enabled": torch.tensor(self.enabled),
