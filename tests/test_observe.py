@@ -11,7 +11,13 @@ import pytest
 
 from alphatank.envs.core import MatchSet
 from alphatank.envs.ids import ENV_VERSION
-from alphatank.game.observe import DEFAULT_RAY_LENGTH, ObservationBuilder, StateBatch, slot_counts
+from alphatank.game.observe import (
+    DEFAULT_RAY_LENGTH,
+    OBS_KINDS,
+    ObservationBuilder,
+    StateBatch,
+    slot_counts,
+)
 from alphatank.game.scenarios import load_scenario, parse_scenario
 from alphatank.sim.match import Match
 
@@ -49,7 +55,7 @@ def feat(ms: MatchSet, obs: np.ndarray, name: str, learner: int = 0) -> float:
     return float(obs[0, learner, ms.obs.layout[name]][0])
 
 
-@pytest.mark.parametrize("kind", ["paper", "egocentric", "egocentric_path", "egocentric_nearest"])
+@pytest.mark.parametrize("kind", OBS_KINDS)
 def test_index_map_is_complete_and_contiguous(kind):
     ms = duel(kind, "arena4", ("A", "A", "B", "B"))
     lay = ms.obs.layout
@@ -174,6 +180,67 @@ def test_nearest_kind_is_the_egocentric_one_with_tanks_nearest_first():
                           place(duel("egocentric_nearest"), poses2))
 
 
+def test_aim_kind_adds_the_shot_of_a_bullet_fired_now():
+    teams = ("A", "A", "B", "B")
+    near, aim = duel("egocentric_nearest", "open", teams), duel("egocentric_aim", "open", teams)
+    # Seat 0 at the centre facing +x; enemy 2 straight ahead, enemy 3 and mate 1 far off.
+    poses = [(385.0, 385.0, 0.0), (150.0, 150.0, 0.0), (560.0, 385.0, 0.0),
+             (150.0, 620.0, 0.0)]
+    a, b = place(near, poses), place(aim, poses)
+    lay = aim.obs.layout
+    assert lay.fields[:near.obs.layout.size] == near.obs.layout.fields  # the shot comes last
+    assert np.array_equal(a, b[..., :near.obs.layout.size])
+    f = lambda obs, name, o=0: feat(aim, obs, name, learner=o)  # noqa: E731
+    assert (f(b, "shot.enemy"), f(b, "shot.friend"), f(b, "shot.miss")) == (1.0, 0.0, 0.0)
+    # The mate steps into the line of fire: the bullet would reach it first.
+    poses[1] = (470.0, 385.0, 0.0)
+    b = place(aim, poses)
+    assert (f(b, "shot.enemy"), f(b, "shot.friend")) == (0.0, 1.0)
+    # Turned a quarter away (down the screen): the bullet hits the wall 315 px below, after
+    # 300 px of travel at most; the closest it gets to enemy 2 is from its start.
+    poses[0] = (385.0, 385.0, math.pi / 2)
+    poses[1] = (150.0, 150.0, 0.0)
+    b = place(aim, poses)
+    g = aim.matches[0].cfg
+    start = 385.0 + g.tank_width / 2 + g.bullet_radius + 0.5
+    assert (f(b, "shot.enemy"), f(b, "shot.friend")) == (0.0, 0.0)
+    assert f(b, "shot.miss") == pytest.approx(
+        min(math.hypot(175.0, start - 385.0), 175.0 * math.sqrt(2)) / g.bullet_max_distance,
+        abs=1e-4)
+    # A dead observer sees no shot.
+    aim.matches[0].alive[0] = False
+    b = place(aim, poses)
+    assert b[0, 0, lay["shot"]].tolist() == [0.0, 0.0, 0.0]
+
+
+def test_aim_kind_agrees_with_the_bots_shot_prediction():
+    """In played positions (ricochets included) ``shot.enemy`` is the bots' own test of a
+    shot fired now (``Bot.shot_hits``, search grade) for every live learner."""
+    from bots.registry import make_bot
+
+    teams = ("A", "A", "B", "B", "B")
+    ms = duel("egocentric_aim", "arena8", teams)
+    m = ms.matches[0]
+    bot = make_bot("smart", seed=0)
+    players = [make_bot("smart", seed=k) for k in range(5)]  # they aim: shots that hit
+    for k, p in enumerate(players):
+        p.reset(m, k)
+    seen = {0.0: 0, 1.0: 0}
+    for t in range(400):
+        m.step(np.stack([p.act(m, k) for k, p in enumerate(players)]))
+        if m.done:
+            break
+        ms.batch.gather(0, m)
+        obs = ms.obs.build()
+        for o in range(5):
+            if m.alive[o]:
+                bot.reset(m, o)
+                want = float(bot.shot_hits(m, o, exact=False)[0])
+                assert feat(ms, obs, "shot.enemy", learner=o) == want, (t, o)
+                seen[want] += 1
+    assert seen[1.0] > 0 and seen[0.0] > 0
+
+
 def test_egocentric_frame_and_rays_against_known_walls():
     ms = duel("egocentric")
     # Facing +y (down the screen); the enemy 100 px to the tank's left on screen (+x).
@@ -288,6 +355,7 @@ PINNED_OBS = {0: {
     ("vs_smart", "egocentric_path"): "6b83464b77b659de",
     ("mixed_teams", "egocentric_path"): "1c0d5f3b194fe72b",
     ("mixed_teams", "egocentric_nearest"): "55afeaaba481a0a9",
+    ("mixed_teams", "egocentric_aim"): "78fe9702e9789cde",
 }}
 
 

@@ -84,6 +84,28 @@ def test_a_1v1_egocentric_policy_seeds_a_nearest_first_team_policy():
         feature_map(paper, dst, src_mates=0, dst_mates=1)
 
 
+def test_a_nearest_first_team_policy_seeds_the_aim_kind_with_its_shot_inputs_at_zero():
+    src = MatchSet("team_vs_def_smart", 1, observation="egocentric_nearest").obs.layout
+    env = VectorMatchEnv("team_vs_def_smart", 2, seed=5, observation="egocentric_aim")
+    dst = env.layout
+    si, di, dropped = feature_map(src, dst, src_mates=1, dst_mates=1)
+    assert len(dropped) == 0 and len(si) == src.size == dst.size - 3  # all but the shot
+    assert [dst.fields[d] for d in di] == src.fields
+    ppo = trained_ppo(src.size)
+    aim = PPO(dst.size, 4, PPOConfig(), seed=2)
+    warm_start(aim, ppo.state_dict(), src, dst, src_mates=1, dst_mates=1)
+    env.reset()
+    obs, *_ = env.step(np.zeros((2, 2, 3), np.int64))
+    obs = obs.reshape(-1, dst.size)
+    np.testing.assert_allclose(aim.mirror.forward(aim.obs_norm(obs))[0],
+                               ppo.mirror.forward(ppo.obs_norm(obs[:, di]))[0],
+                               rtol=1e-4, atol=1e-4)
+    # and back: the shot block is dropped, every other feature keeps its place
+    back, _, gone = feature_map(dst, src, src_mates=1, dst_mates=1)
+    assert [dst.fields[k] for k in gone] == ["shot.enemy", "shot.friend", "shot.miss"]
+    assert len(back) == src.size
+
+
 @pytest.mark.parametrize("kind", ["paper", "egocentric"])
 def test_warm_started_mappo_acts_as_the_1v1_network(kind):
     src, dst, team_obs = layouts(kind)

@@ -4,10 +4,12 @@ Observation features are matched by name through both index maps
 (:class:`~alphatank.game.observe.ObsLayout`). Other tanks are matched by role: the
 source's teammates to the target's first teammate slots, its enemies to the target's
 enemy slots (in a 1v1 ``tank[0]`` is the enemy; in a 2v1 it is ``tank[1]``, after the
-teammate). A 1v1 ``egocentric`` source also seeds an ``egocentric_nearest`` target
-(and back): with one other tank the two kinds agree, and the enemy lands on the nearest
-enemy's slot. Everything else keeps its name (``self.x``, ``own_bullet[3].vx``,
-``bullet[0].dist`` - the nearest other bullet, ``wall[5].x0``, ...).
+teammate). A 1v1 ``egocentric`` source also seeds an ``egocentric_nearest`` or
+``egocentric_aim`` target (and back): with one other tank the kinds agree, and the enemy
+lands on the nearest enemy's slot; ``egocentric_nearest`` and ``egocentric_aim`` map onto
+each other whatever the line-up (the shot block is new, or dropped). Everything else
+keeps its name (``self.x``, ``own_bullet[3].vx``, ``bullet[0].dist`` - the nearest other
+bullet, ``wall[5].x0``, ...).
 
 * First layer: matched input columns are copied; new inputs (teammate slots, team flags,
   the seat one-hot of MAPPO) start at zero; a source feature the target lacks (e.g. a
@@ -36,16 +38,20 @@ import torch
 from alphatank.game.observe import ObservationBuilder, ObsLayout, StateBatch
 
 _TANK = re.compile(r"^tank\[(\d+)\]\.(.+)$")
-NEAREST_PAIR = {"egocentric", "egocentric_nearest"}  # the same fields, other tanks ordered
+# Other-tank order of the kinds that map onto each other (egocentric_aim is egocentric_nearest
+# plus the shot block).
+ORDER = {"egocentric": "seat", "egocentric_nearest": "nearest", "egocentric_aim": "nearest"}
 
 
 def _same_order(src: ObsLayout, src_mates: int, dst: ObsLayout) -> bool:
-    """``egocentric`` and ``egocentric_nearest`` differ only in the order of the other
-    tanks within teammates and within enemies: with at most one of each in the source,
-    its slots mean the same in either kind (a 1v1 enemy is the nearest enemy)."""
+    """Whether two kinds' other-tank slots mean the same: the same order, or seat order
+    against nearest first (``egocentric`` and ``egocentric_nearest``) with at most one
+    teammate and one enemy in the source (a 1v1 enemy is the nearest enemy)."""
+    a, b = ORDER.get(src.kind), ORDER.get(dst.kind)
+    if a is None or b is None:
+        return False
     slots = {int(m.group(1)) for m in map(_TANK.match, src.fields) if m}
-    return ({src.kind, dst.kind} == NEAREST_PAIR and src_mates <= 1
-            and len(slots) - src_mates <= 1)
+    return a == b or (src_mates <= 1 and len(slots) - src_mates <= 1)
 
 
 def feature_map(src: ObsLayout, dst: ObsLayout, src_mates: int = 0, dst_mates: int = 0
@@ -57,7 +63,7 @@ def feature_map(src: ObsLayout, dst: ObsLayout, src_mates: int = 0, dst_mates: i
         raise ValueError(f"cannot map a {src.kind!r} observation onto a {dst.kind!r} one"
                          + (" (other tanks in seat order against nearest first: only a "
                             "source with at most one teammate and one enemy maps)"
-                            if {src.kind, dst.kind} == NEAREST_PAIR else ""))
+                            if src.kind in ORDER and dst.kind in ORDER else ""))
     si, di, dropped = [], [], []
     for k, name in enumerate(src.fields):
         target = name

@@ -1,6 +1,6 @@
 """Per-agent observation vectors, built for many matches and agents at once.
 
-Four kinds (``OBS_KINDS``), all float32, clipped to [-1, 1], with a fixed size per
+Five kinds (``OBS_KINDS``), all float32, clipped to [-1, 1], with a fixed size per
 scenario and an index map (:class:`ObsLayout`, feature name -> slice):
 
 ``paper``       every component of the paper's Table 1 in map coordinates: own tank
@@ -24,6 +24,11 @@ scenario and an index map (:class:`ObsLayout`, feature name -> slice):
                 seat: ``tank[m]`` (m teammates) is always the nearest living enemy, whatever
                 the line-up. A 1v1 policy warm-starts a team seat with its enemy features
                 on the nearest enemy (in a 1v1 the kind equals ``egocentric``).
+``egocentric_aim``  the ``egocentric_nearest`` kind plus a ``shot`` block: where a bullet
+                fired now along the heading would go (the ricochet prediction the bots aim
+                with): whether the first tank it reaches is an enemy or a teammate, and its
+                closest approach to a live enemy. Firing is then a function of what the
+                policy sees, not of wall geometry it must infer from rays.
 
 Scales: map positions ``2 x / W - 1``; relative positions divided by ``max(W, H)``;
 distances by the map diagonal; tank velocities by ``tank_speed``; bullet velocities by
@@ -42,6 +47,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from alphatank.game.rewards import hit_radius
+from alphatank.sim.ballistics import path_reach, predict_path
 from alphatank.sim.config import GameConfig
 from alphatank.sim.mapspec import MapSpec
 from alphatank.sim.navigation import NavGrid, nav_grid
@@ -49,7 +56,9 @@ from alphatank.sim.navigation import NavGrid, nav_grid
 if TYPE_CHECKING:
     from alphatank.sim.match import Match
 
-OBS_KINDS = ("paper", "egocentric", "egocentric_path", "egocentric_nearest")
+OBS_KINDS = ("paper", "egocentric", "egocentric_path", "egocentric_nearest", "egocentric_aim")
+NEAREST_KINDS = ("egocentric_nearest", "egocentric_aim")  # other tanks nearest first
+SHOT_FIELDS = ("enemy", "friend", "miss")  # the shot block (StateBatch.shots' columns)
 TANK_FIELDS = ("alive", "x", "y", "sin", "cos", "vx", "vy", "c0x", "c0y", "c1x", "c1y",
                "c2x", "c2y", "c3x", "c3y", "wall")  # columns of tank_table()
 BULLET_FIELDS = ("x", "y", "vx", "vy")  # columns of bullet_table()
@@ -86,17 +95,22 @@ FIELD_HELP = {
     "path_side": "the same direction towards my right (on screen)",
     "path_dist": "BFS path length to the tank in cells / the map's longest path; "
                  "1 if unreachable, 0 if dead",
+    "enemy": "1 if a bullet fired now (ricochets predicted) first reaches an enemy tank",
+    "friend": "1 if a bullet fired now first reaches a teammate",
+    "miss": "closest approach of a bullet fired now to a live enemy (centres) / "
+            "bullet_max_distance, at most 1 (1 with no enemy alive)",
 }
 BLOCK_HELP = {
     "self": "the observing tank",
     "own_bullet": "my bullet slots, in slot order",
     "tank": "every other tank: teammates first, then enemies, each in seat order "
-            "(`egocentric_nearest`: nearest first, dead ones last)",
+            "(`egocentric_nearest`, `egocentric_aim`: nearest first, dead ones last)",
     "bullet": "other tanks' bullets, nearest first",
     "wall": "the map's merged wall rectangles",
     "buff": "buff zones", "debuff": "debuff zones",
     "zone": "where I stand",
     "ray": "wall distance along evenly spaced directions: ray 0 straight ahead, then clockwise",
+    "shot": "a bullet fired now along my heading (0 while I am dead)",
 }
 DEFAULT_RAYS = 16
 DEFAULT_RAY_LENGTH = 350.0  # px: five cells of the default map
@@ -220,6 +234,10 @@ class StateBatch:
         self.counts = np.zeros((E, 2, n), dtype=np.int64)
         self.cooldown, self.bullets_alive = self.counts[:, 0], self.counts[:, 1]
         self.tick = np.zeros(E, dtype=np.int64)
+        # Per tank, SHOT_FIELDS of a bullet fired now; only the seats of want_shots().
+        self.shots = np.zeros((E, n, len(SHOT_FIELDS)))
+        self.shot_seats: tuple[int, ...] = ()
+        self._shot_radius = hit_radius(cfg)
         # Per-episode statics.
         self.size = np.ones((E, 2))  # map width, height (px)
         self.walls = np.zeros((E, max_walls, 4))  # x0, y0, x1, y1 (px)
@@ -255,6 +273,33 @@ class StateBatch:
         c[0] = match.cooldown
         c[1] = match.bullets_alive
         self.tick[e] = match.tick
+        if self.shot_seats:
+            self._gather_shots(e, match)
+
+    def want_shots(self, seats: Sequence[int]) -> None:
+        """Predict a shot of these seats in every :meth:`gather` (``shots``)."""
+        self.shot_seats = tuple(sorted(set(self.shot_seats) | {int(s) for s in seats}))
+
+    def _gather_shots(self, e: int, match: Match) -> None:
+        """``shots[e]`` of the wanted seats: a bullet fired now along the heading, traced
+        like the bots' search (``predict_path(exact=False)``), against the live tanks."""
+        w, alive, xy, team = match.world, match.alive, match.tank_xy, match.team_index
+        out = self.shots[e]
+        far = self.cfg.bullet_max_distance
+        for s in self.shot_seats:
+            if not alive[s]:
+                out[s] = 0.0
+                continue
+            mx, my = w.muzzle(s)
+            path = predict_path(w, mx, my, float(match.tank_angle[s]), exact=False)
+            others = np.flatnonzero(alive)
+            others = others[others != s]
+            k, closest = path_reach(path, xy[others], self._shot_radius)
+            mate = team[others] == team[s]
+            out[s, 0] = k >= 0 and not mate[k]
+            out[s, 1] = k >= 0 and mate[k]
+            foes = closest[~mate]
+            out[s, 2] = min(foes.min() / far, 1.0) if len(foes) else 1.0
 
     def set_static(self, e: int, match: Match) -> None:
         """Map size, wall rectangles and zone centres of match ``e``'s episode."""
@@ -395,6 +440,8 @@ class ObservationBuilder:
             lay.add("bullet", K, ("mask",) + t + ("fwd", "side", "v_fwd", "v_side", "dist"))
             lay.add("buff", B, ("mask", "fwd", "side", "dist"))
             lay.add("debuff", Dz, ("mask", "fwd", "side", "dist"))
+            if self.kind == "egocentric_aim":
+                lay.add("shot", None, SHOT_FIELDS)
         return lay
 
     def _columns(self) -> dict[str, int | slice]:
@@ -460,6 +507,10 @@ class ObservationBuilder:
         else:
             self.v_ray = self.out[:, :, lay["ray"]]
             self._ego_tables()
+        if self.kind == "egocentric_aim":
+            self.v_shot = self.out[:, :, lay["shot"]]
+            self.batch.want_shots(self.observers.tolist())
+            self._shot_src = pick(self.batch.shots, self.observers[:, None])  # (E, L, 1, 3)
 
     # ---- statics --------------------------------------------------------------------
 
@@ -507,8 +558,12 @@ class ObservationBuilder:
             self._build_paper()
         else:
             self._build_ego()
-            if self.kind == "egocentric_nearest" and self.n_others > 1:
+            if self.kind in NEAREST_KINDS and self.n_others > 1:
                 self._order_nearest()
+            if self.kind == "egocentric_aim":
+                src = self._shot_src
+                np.copyto(self.v_shot, self.batch.shots[:, self.observers] if src is None
+                          else src[:, :, 0])
         out = self.out
         np.minimum(out, 1.0, out=out)
         np.maximum(out, -1.0, out=out)
@@ -763,7 +818,7 @@ class ObservationBuilder:
 
     def _order_nearest(self) -> None:
         """Reorder each observer's other-tank slots nearest first within teammates and
-        within enemies, dead tanks last in their group (``egocentric_nearest``)."""
+        within enemies, dead tanks last in their group (``NEAREST_KINDS``)."""
         b, oi = self.batch, self.other_idx
         rel = self._relv[:, :, :self.n_others]
         key = np.hypot(rel[..., 0], rel[..., 1], out=self._near_key)
