@@ -125,6 +125,9 @@ def quick_wall_hit(space: pymunk.Space, x0: float, y0: float, x1: float, y1: flo
                    ) -> pymunk.SegmentQueryInfo | None:
     """:func:`alphatank.sim.world.first_wall_hit` through pymunk's space-level query:
     cheaper, but it can miss a wall corner grazed only by the circle's rim."""
+    if not skip:  # the nearest hit, found without a Python callback per shape
+        q = space.segment_query_first((x0, y0), (x1, y1), radius, WALLS_ONLY)
+        return q if q is not None and q.shape is not None else None
     best = None
     for q in space.segment_query((x0, y0), (x1, y1), radius, WALLS_ONLY):
         if q.shape not in skip and (best is None or q.alpha < best.alpha):
