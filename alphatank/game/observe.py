@@ -47,9 +47,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from alphatank.game.rewards import hit_radius
 from alphatank.sim.ballistics import path_reach, predict_path
-from alphatank.sim.config import GameConfig
+from alphatank.sim.config import GameConfig, hit_radius
 from alphatank.sim.mapspec import MapSpec
 from alphatank.sim.navigation import NavGrid, nav_grid
 

@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from alphatank.sim.config import ConfigError, GameConfig, RewardConfig
+from alphatank.sim.config import ConfigError, GameConfig, RewardConfig, hit_radius
 
 if TYPE_CHECKING:
     from alphatank.game.observe import StateBatch
@@ -86,11 +86,6 @@ def hits(events: Iterable[Hit], n: int, cfg: RewardConfig
         elif h.shooter != h.victim:
             team[h.shooter] += cfg.team_hit_penalty
     return hit, hurt, team
-
-
-def hit_radius(game: GameConfig) -> float:
-    """Closest approach at which a predicted path surely hits a tank."""
-    return game.bullet_radius + 0.5 * min(game.tank_width, game.tank_height)
 
 
 def trajectory(d: float, radius: float, cfg: RewardConfig) -> tuple[float, float]:

@@ -219,6 +219,11 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 
 
+def hit_radius(game: GameConfig) -> float:
+    """Closest approach at which a predicted path surely hits a tank."""
+    return game.bullet_radius + 0.5 * min(game.tank_width, game.tank_height)
+
+
 def from_dict(cls: type[T], data: dict[str, Any], where: str = "") -> T:
     """Build a config dataclass from a mapping, rejecting unknown keys by name. Errors
     read ``<where>.<field>: <reason>`` (``where`` defaults to the class name)."""
