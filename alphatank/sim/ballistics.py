@@ -78,7 +78,10 @@ def path_hits(path: np.ndarray, targets_xy: np.ndarray, hit_radius: float) -> in
     """Index of the first target (in order along the path) the path passes within
     ``hit_radius`` of, or -1. A bullet stops at the first tank it hits, so the result
     tells whether a shot reaches an enemy before a friend."""
-    return path_reach(path, targets_xy, hit_radius)[0]
+    targets = np.asarray(targets_xy, dtype=np.float64).reshape(-1, 2)
+    if len(targets) == 0 or len(path) < 2:
+        return -1
+    return _first_reached(path, *_seg_dist(path, targets), hit_radius)
 
 
 def path_reach(path: np.ndarray, targets_xy: np.ndarray, hit_radius: float
@@ -88,23 +91,28 @@ def path_reach(path: np.ndarray, targets_xy: np.ndarray, hit_radius: float
     targets = np.asarray(targets_xy, dtype=np.float64).reshape(-1, 2)
     if len(targets) == 0 or len(path) < 2:
         return -1, np.full(len(targets), math.inf)
-    dist, t = _seg_dist(path, targets)  # (S, T) distances and closest-point params
-    closest = dist.min(axis=0)
+    dist, t = _seg_dist(path, targets)
+    return _first_reached(path, dist, t, hit_radius), dist.min(axis=0)
+
+
+def _first_reached(path: np.ndarray, dist: np.ndarray, t: np.ndarray, hit_radius: float
+                   ) -> int:
+    """:func:`path_hits` from the (S, T) segment distances and closest-point params."""
     close = dist <= hit_radius
     near = close.any(axis=1)
     seg = int(near.argmax())  # first segment that comes close to anyone
     if not near[seg]:
-        return -1, closest
+        return -1
     cand = np.flatnonzero(close[seg])
     if cand.size == 1:
-        return int(cand[0]), closest
+        return int(cand[0])
     # Several targets near the same leg: the one whose entry point comes first.
     d = path[seg + 1] - path[seg]
     seg_len = math.hypot(d[0], d[1])
     along = t[seg, cand] * seg_len
     half_chord = np.sqrt(np.maximum(hit_radius ** 2 - dist[seg, cand] ** 2, 0.0))
     entry = along - half_chord
-    return int(cand[int(np.argmin(entry))]), closest
+    return int(cand[int(np.argmin(entry))])
 
 
 def _seg_dist(path: np.ndarray, targets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
