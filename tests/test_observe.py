@@ -241,6 +241,32 @@ def test_aim_kind_agrees_with_the_bots_shot_prediction():
     assert seen[1.0] > 0 and seen[0.0] > 0
 
 
+def test_aim_path_kind_is_the_aim_kind_with_the_way_to_each_tank():
+    """``egocentric_aim_path``: every feature of ``egocentric_aim`` (slots nearest first,
+    the shot block) plus ``egocentric_path``'s way to each tank, moved with its slot."""
+    teams = ("A", "B", "A", "B", "B")
+    poses = [(105.0, 105.0, 0.3), (665.0, 385.0, 1.0), (385.0, 665.0, 2.0),
+             (245.0, 105.0, -1.0), (525.0, 525.0, 0.5)]
+    kinds = ("egocentric_aim", "egocentric_path", "egocentric_aim_path")
+    aim, path, both = (place(duel(k, "maze", teams), poses) for k in kinds)
+    lay_aim, lay_path, lay = (duel(k, "maze", teams).obs.layout for k in kinds)
+    assert set(lay.fields) == set(lay_aim.fields) | set(lay_path.fields)
+    for name in lay_aim.fields:
+        assert np.array_equal(both[..., lay[name]], aim[..., lay_aim[name]]), name
+    # Path fields follow their tank: match egocentric_path's seat-order slots by position.
+    where = lambda obs, lay, k: tuple(obs[0, o, lay[f"tank[{k}].{f}"]][0]  # noqa: E731
+                                      for f in ("fwd", "side"))
+    for o in range(len(teams)):
+        for k in range(len(teams) - 1):
+            j = [i for i in range(len(teams) - 1)
+                 if where(path, lay_path, i) == where(both, lay, k)]
+            assert len(j) == 1
+            for f in ("path_fwd", "path_side", "path_dist"):
+                assert (both[0, o, lay[f"tank[{k}].{f}"]][0]
+                        == path[0, o, lay_path[f"tank[{j[0]}].{f}"]][0])
+    assert np.abs(both[..., lay["tank[0].path_fwd"]]).max() > 0
+
+
 def test_egocentric_frame_and_rays_against_known_walls():
     ms = duel("egocentric")
     # Facing +y (down the screen); the enemy 100 px to the tank's left on screen (+x).
@@ -356,6 +382,7 @@ PINNED_OBS = {0: {
     ("mixed_teams", "egocentric_path"): "1c0d5f3b194fe72b",
     ("mixed_teams", "egocentric_nearest"): "55afeaaba481a0a9",
     ("mixed_teams", "egocentric_aim"): "78fe9702e9789cde",
+    ("mixed_teams", "egocentric_aim_path"): "1402310e5a2f05cc",
 }}
 
 

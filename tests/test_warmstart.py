@@ -104,6 +104,16 @@ def test_a_nearest_first_team_policy_seeds_the_aim_kind_with_its_shot_inputs_at_
     back, _, gone = feature_map(dst, src, src_mates=1, dst_mates=1)
     assert [dst.fields[k] for k in gone] == ["shot.enemy", "shot.friend", "shot.miss"]
     assert len(back) == src.size
+    # on to the aim kind with paths: every feature maps by name, the path fields are new
+    both = MatchSet("team_vs_def_smart", 1, observation="egocentric_aim_path").obs.layout
+    si, di, dropped = feature_map(dst, both, src_mates=1, dst_mates=1)
+    assert len(dropped) == 0 and [both.fields[d] for d in di] == dst.fields
+    assert sorted(set(both.fields) - set(dst.fields)) == sorted(
+        f"tank[{k}].path_{f}" for k in range(4) for f in ("dist", "fwd", "side"))
+    # egocentric_path lists the other tanks in seat order: it cannot seed nearest first
+    seat_paths = MatchSet("team_vs_def_smart", 1, observation="egocentric_path").obs.layout
+    with pytest.raises(ValueError, match="at most one teammate and one enemy"):
+        feature_map(seat_paths, both, src_mates=1, dst_mates=1)
 
 
 @pytest.mark.parametrize("kind", ["paper", "egocentric"])

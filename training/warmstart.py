@@ -4,10 +4,11 @@ Observation features are matched by name through both index maps
 (:class:`~alphatank.game.observe.ObsLayout`). Other tanks are matched by role: the
 source's teammates to the target's first teammate slots, its enemies to the target's
 enemy slots (in a 1v1 ``tank[0]`` is the enemy; in a 2v1 it is ``tank[1]``, after the
-teammate). A 1v1 ``egocentric`` source also seeds an ``egocentric_nearest`` or
-``egocentric_aim`` target (and back): with one other tank the kinds agree, and the enemy
-lands on the nearest enemy's slot; ``egocentric_nearest`` and ``egocentric_aim`` map onto
-each other whatever the line-up (the shot block is new, or dropped). Everything else
+teammate). The egocentric kinds map onto each other (``ORDER``); a feature one has and
+the other lacks (the ``path_*`` fields, the shot block) is new, or dropped. Kinds that
+order other tanks differently (seat order against nearest first) map only from a source
+with at most one teammate and one enemy: with one other tank the orders agree, and a 1v1
+enemy lands on the nearest enemy's slot. Everything else
 keeps its name (``self.x``, ``own_bullet[3].vx``, ``bullet[0].dist`` - the nearest other
 bullet, ``wall[5].x0``, ...).
 
@@ -38,20 +39,23 @@ import torch
 from alphatank.game.observe import ObservationBuilder, ObsLayout, StateBatch
 
 _TANK = re.compile(r"^tank\[(\d+)\]\.(.+)$")
-# Other-tank order of the kinds that map onto each other (egocentric_aim is egocentric_nearest
-# plus the shot block).
-ORDER = {"egocentric": "seat", "egocentric_nearest": "nearest", "egocentric_aim": "nearest"}
+# Other-tank order of the kinds that map onto each other (they differ in the path fields
+# and the shot block, which map by name).
+ORDER = {"egocentric": "seat", "egocentric_path": "seat", "egocentric_nearest": "nearest",
+         "egocentric_aim": "nearest", "egocentric_aim_path": "nearest"}
 
 
 def _same_order(src: ObsLayout, src_mates: int, dst: ObsLayout) -> bool:
     """Whether two kinds' other-tank slots mean the same: the same order, or seat order
-    against nearest first (``egocentric`` and ``egocentric_nearest``) with at most one
+    against nearest first (e.g. ``egocentric`` and ``egocentric_nearest``) with at most one
     teammate and one enemy in the source (a 1v1 enemy is the nearest enemy)."""
     a, b = ORDER.get(src.kind), ORDER.get(dst.kind)
     if a is None or b is None:
         return False
+    if a == b:
+        return True
     slots = {int(m.group(1)) for m in map(_TANK.match, src.fields) if m}
-    return a == b or (src_mates <= 1 and len(slots) - src_mates <= 1)
+    return src_mates <= 1 and len(slots) - src_mates <= 1
 
 
 def feature_map(src: ObsLayout, dst: ObsLayout, src_mates: int = 0, dst_mates: int = 0

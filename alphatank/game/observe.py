@@ -1,6 +1,6 @@
 """Per-agent observation vectors, built for many matches and agents at once.
 
-Five kinds (``OBS_KINDS``), all float32, clipped to [-1, 1], with a fixed size per
+Six kinds (``OBS_KINDS``), all float32, clipped to [-1, 1], with a fixed size per
 scenario and an index map (:class:`ObsLayout`, feature name -> slice):
 
 ``paper``       every component of the paper's Table 1 in map coordinates: own tank
@@ -29,6 +29,8 @@ scenario and an index map (:class:`ObsLayout`, feature name -> slice):
                 with): whether the first tank it reaches is an enemy or a teammate, and its
                 closest approach to a live enemy. Firing is then a function of what the
                 policy sees, not of wall geometry it must infer from rays.
+``egocentric_aim_path``  ``egocentric_aim`` with ``egocentric_path``'s way to every other
+                tank: where to shoot and which way round the walls leads to a target.
 
 Scales: map positions ``2 x / W - 1``; relative positions divided by ``max(W, H)``;
 distances by the map diagonal; tank velocities by ``tank_speed``; bullet velocities by
@@ -55,8 +57,12 @@ from alphatank.sim.navigation import NavGrid, nav_grid
 if TYPE_CHECKING:
     from alphatank.sim.match import Match
 
-OBS_KINDS = ("paper", "egocentric", "egocentric_path", "egocentric_nearest", "egocentric_aim")
-NEAREST_KINDS = ("egocentric_nearest", "egocentric_aim")  # other tanks nearest first
+OBS_KINDS = ("paper", "egocentric", "egocentric_path", "egocentric_nearest", "egocentric_aim",
+             "egocentric_aim_path")
+# What the egocentric kinds add: other tanks nearest first, the way to each, the shot block.
+NEAREST_KINDS = ("egocentric_nearest", "egocentric_aim", "egocentric_aim_path")
+PATH_KINDS = ("egocentric_path", "egocentric_aim_path")
+SHOT_KINDS = ("egocentric_aim", "egocentric_aim_path")
 SHOT_FIELDS = ("enemy", "friend", "miss")  # the shot block (StateBatch.shots' columns)
 TANK_FIELDS = ("alive", "x", "y", "sin", "cos", "vx", "vy", "c0x", "c0y", "c1x", "c1y",
                "c2x", "c2y", "c3x", "c3y", "wall")  # columns of tank_table()
@@ -103,7 +109,8 @@ BLOCK_HELP = {
     "self": "the observing tank",
     "own_bullet": "my bullet slots, in slot order",
     "tank": "every other tank: teammates first, then enemies, each in seat order "
-            "(`egocentric_nearest`, `egocentric_aim`: nearest first, dead ones last)",
+            "(`egocentric_nearest`, `egocentric_aim`, `egocentric_aim_path`: nearest first, "
+            "dead ones last)",
     "bullet": "other tanks' bullets, nearest first",
     "wall": "the map's merged wall rectangles",
     "buff": "buff zones", "debuff": "debuff zones",
@@ -432,14 +439,14 @@ class ObservationBuilder:
             lay.add("self", None, ("alive", "sin", "cos", "v_fwd", "v_side", "wall", "reload",
                                    "bullets", "in_buff", "in_debuff"))
             lay.add("ray", self.rays, ("dist",))
-            path = ("path_fwd", "path_side", "path_dist") if self.kind == "egocentric_path" else ()
+            path = ("path_fwd", "path_side", "path_dist") if self.kind in PATH_KINDS else ()
             lay.add("tank", n_oth, t + ("alive", "fwd", "side", "dist", "sin", "cos", "v_fwd",
                                         "v_side", "wall") + path)
             lay.add("own_bullet", cap, ("mask", "fwd", "side", "v_fwd", "v_side", "dist"))
             lay.add("bullet", K, ("mask",) + t + ("fwd", "side", "v_fwd", "v_side", "dist"))
             lay.add("buff", B, ("mask", "fwd", "side", "dist"))
             lay.add("debuff", Dz, ("mask", "fwd", "side", "dist"))
-            if self.kind == "egocentric_aim":
+            if self.kind in SHOT_KINDS:
                 lay.add("shot", None, SHOT_FIELDS)
         return lay
 
@@ -481,7 +488,7 @@ class ObservationBuilder:
             cols("self", "alive", "sin", "cos", "v_fwd", "v_side", "wall", "in_buff",
                  "in_debuff", span=counts)
             cols("tank", "alive", "sin", "cos", "wall")
-            if self.kind == "egocentric_path":
+            if self.kind in PATH_KINDS:
                 cols("tank", "path_fwd", "path_side", "path_dist")
         return at
 
@@ -506,7 +513,7 @@ class ObservationBuilder:
         else:
             self.v_ray = self.out[:, :, lay["ray"]]
             self._ego_tables()
-        if self.kind == "egocentric_aim":
+        if self.kind in SHOT_KINDS:
             self.v_shot = self.out[:, :, lay["shot"]]
             self.batch.want_shots(self.observers.tolist())
             self._shot_src = pick(self.batch.shots, self.observers[:, None])  # (E, L, 1, 3)
@@ -515,8 +522,8 @@ class ObservationBuilder:
 
     def set_static(self, e: int) -> None:
         """Write the per-episode blocks of env ``e`` (walls, zone positions in ``paper``;
-        the map's navigation grid in ``egocentric_path``)."""
-        if self.kind == "egocentric_path":
+        the map's navigation grid in ``PATH_KINDS``)."""
+        if self.kind in PATH_KINDS:
             self._set_nav(e)
         if self.kind != "paper":
             return
@@ -559,7 +566,7 @@ class ObservationBuilder:
             self._build_ego()
             if self.kind in NEAREST_KINDS and self.n_others > 1:
                 self._order_nearest()
-            if self.kind == "egocentric_aim":
+            if self.kind in SHOT_KINDS:
                 src = self._shot_src
                 np.copyto(self.v_shot, self.batch.shots[:, self.observers] if src is None
                           else src[:, :, 0])

@@ -7,7 +7,7 @@ Format (see docs/environments.md)::
     description = "1v1: one learner against the smart bot"
     map = "battlefield"          # shipped map, a .txt path, or a folder of maps
     preset = "paper"             # or "long_range"
-    observation = "paper"        # or "egocentric", "egocentric_path"
+    observation = "paper"        # or any of OBS_KINDS (alphatank.game.observe)
     [game]                       # optional GameConfig overrides
     max_steps = 1500
     [rewards]                    # optional RewardConfig overrides
