@@ -19,6 +19,7 @@ from alphatank.game.observe import (
     slot_counts,
 )
 from alphatank.game.scenarios import load_scenario, parse_scenario
+from alphatank.sim.config import hit_radius
 from alphatank.sim.match import Match
 
 W = H = 770.0
@@ -267,6 +268,34 @@ def test_aim_path_kind_is_the_aim_kind_with_the_way_to_each_tank():
     assert np.abs(both[..., lay["tank[0].path_fwd"]]).max() > 0
 
 
+def test_full_kind_adds_the_closest_incoming_bullet():
+    """``threat``: the other tanks' bullet that will pass closest within the horizon,
+    straight lines (hand-computed), nothing for bullets flying away or too far off."""
+    full, path = duel("egocentric_full"), duel("egocentric_aim_path")
+    me, foe = (385.0, 385.0, 0.0), (600.0, 600.0, 0.0)
+    # Coming from ahead, passing 10 px to my right (+y on screen) in 200 / 300 s; a second
+    # one passes farther (30 px) and sooner: the closer pass is the threat.
+    bullets = [(1, 0, 585.0, 395.0, -300.0, 0.0), (1, 1, 415.0, 355.0, 0.0, 300.0)]
+    obs = place(full, [me, foe], bullets)
+    lay, r = full.obs.layout, hit_radius(full.matches[0].cfg)
+    got = [feat(full, obs, f"threat.{f}") for f in ("near", "eta", "dir_fwd", "dir_side")]
+    assert got == pytest.approx([1 - 10 / (4 * r), 1 - 200 / 300, 0.0, 1.0], abs=1e-6)
+    # Everything else is the aim_path observation.
+    base = place(path, [me, foe], bullets)
+    rest = [k for k, name in enumerate(lay.fields) if not name.startswith("threat.")]
+    assert np.array_equal(obs[..., rest], base)
+    # Turned a quarter to the right, the pass point lies straight ahead.
+    obs = place(full, [(385.0, 385.0, math.pi / 2), foe], bullets)
+    assert feat(full, obs, "threat.dir_fwd") == pytest.approx(1.0, abs=1e-6)
+    # Flying away, or closing in after the horizon: no threat.
+    for b in [(1, 0, 585.0, 395.0, 300.0, 0.0), (1, 0, 700.0, 395.0, -300.0, 0.0)]:
+        obs = place(full, [me, foe], [b])
+        assert obs[0, 0, lay["threat"]].tolist() == [0.0, 0.0, 0.0, 0.0]
+    full.matches[0].alive[0] = False
+    obs = place(full, [me, foe], bullets)
+    assert obs[0, 0, lay["threat"]].tolist() == [0.0, 0.0, 0.0, 0.0]
+
+
 def test_egocentric_frame_and_rays_against_known_walls():
     ms = duel("egocentric")
     # Facing +y (down the screen); the enemy 100 px to the tank's left on screen (+x).
@@ -383,6 +412,7 @@ PINNED_OBS = {0: {
     ("mixed_teams", "egocentric_nearest"): "55afeaaba481a0a9",
     ("mixed_teams", "egocentric_aim"): "78fe9702e9789cde",
     ("mixed_teams", "egocentric_aim_path"): "1402310e5a2f05cc",
+    ("mixed_teams", "egocentric_full"): "9ae7c293eeff04f5",
 }}
 
 

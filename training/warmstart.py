@@ -5,7 +5,7 @@ Observation features are matched by name through both index maps
 source's teammates to the target's first teammate slots, its enemies to the target's
 enemy slots (in a 1v1 ``tank[0]`` is the enemy; in a 2v1 it is ``tank[1]``, after the
 teammate). The egocentric kinds map onto each other (``ORDER``); a feature one has and
-the other lacks (the ``path_*`` fields, the shot block) is new, or dropped. Kinds that
+the other lacks (the ``path_*`` fields, the shot and threat blocks) is new, or dropped. Kinds that
 order other tanks differently (seat order against nearest first) map only from a source
 with at most one teammate and one enemy: with one other tank the orders agree, and a 1v1
 enemy lands on the nearest enemy's slot. Everything else
@@ -42,7 +42,8 @@ _TANK = re.compile(r"^tank\[(\d+)\]\.(.+)$")
 # Other-tank order of the kinds that map onto each other (they differ in the path fields
 # and the shot block, which map by name).
 ORDER = {"egocentric": "seat", "egocentric_path": "seat", "egocentric_nearest": "nearest",
-         "egocentric_aim": "nearest", "egocentric_aim_path": "nearest"}
+         "egocentric_aim": "nearest", "egocentric_aim_path": "nearest",
+         "egocentric_full": "nearest"}
 
 
 def _same_order(src: ObsLayout, src_mates: int, dst: ObsLayout) -> bool:

@@ -29,8 +29,9 @@ Episode end
 Arguments
     ``scenario`` (name or TOML path), ``observation`` (one of ``OBS_KINDS``: "paper",
     "egocentric", "egocentric_path", "egocentric_nearest", "egocentric_aim",
-    "egocentric_aim_path"; default: the scenario's), ``learner_seat`` (default: the first
-    learner seat), ``opponent_policy`` (a Policy in every seat the env plays),
+    "egocentric_aim_path", "egocentric_full"; default: the scenario's),
+    ``learner_seat`` (default: the first learner seat), ``opponent_policy`` (a Policy in
+    every seat the env plays),
     ``seat_policies`` ({seat: Policy}; the scenario's other learner seats need one),
     ``game_overrides`` / ``reward_overrides`` (GameConfig / RewardConfig fields),
     ``render_mode`` (None, "rgb_array", "human").
@@ -38,8 +39,9 @@ Arguments
 Version history (``ENV_VERSION`` in :mod:`alphatank.envs.ids`, shared by every AlphaTank
 env and written into checkpoints)
     * v0: the initial release: paper and egocentric observations, Table 5 rewards; later
-      the additive egocentric_path, egocentric_nearest, egocentric_aim and
-      egocentric_aim_path kinds (the other kinds unchanged, their digests pinned).
+      the additive egocentric_path, egocentric_nearest, egocentric_aim,
+      egocentric_aim_path and egocentric_full kinds (the other kinds unchanged, their
+      digests pinned).
 """
 
 from __future__ import annotations

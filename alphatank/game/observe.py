@@ -1,6 +1,6 @@
 """Per-agent observation vectors, built for many matches and agents at once.
 
-Six kinds (``OBS_KINDS``), all float32, clipped to [-1, 1], with a fixed size per
+Seven kinds (``OBS_KINDS``), all float32, clipped to [-1, 1], with a fixed size per
 scenario and an index map (:class:`ObsLayout`, feature name -> slice):
 
 ``paper``       every component of the paper's Table 1 in map coordinates: own tank
@@ -31,6 +31,9 @@ scenario and an index map (:class:`ObsLayout`, feature name -> slice):
                 policy sees, not of wall geometry it must infer from rays.
 ``egocentric_aim_path``  ``egocentric_aim`` with ``egocentric_path``'s way to every other
                 tank: where to shoot and which way round the walls leads to a target.
+``egocentric_full``  ``egocentric_aim_path`` plus a ``threat`` block: of the other tanks'
+                bullets, the one that will pass closest to me within a second (straight
+                lines, like the bots' dodging): how close, how soon, and on which side.
 
 Scales: map positions ``2 x / W - 1``; relative positions divided by ``max(W, H)``;
 distances by the map diagonal; tank velocities by ``tank_speed``; bullet velocities by
@@ -58,11 +61,14 @@ if TYPE_CHECKING:
     from alphatank.sim.match import Match
 
 OBS_KINDS = ("paper", "egocentric", "egocentric_path", "egocentric_nearest", "egocentric_aim",
-             "egocentric_aim_path")
+             "egocentric_aim_path", "egocentric_full")
 # What the egocentric kinds add: other tanks nearest first, the way to each, the shot block.
-NEAREST_KINDS = ("egocentric_nearest", "egocentric_aim", "egocentric_aim_path")
-PATH_KINDS = ("egocentric_path", "egocentric_aim_path")
-SHOT_KINDS = ("egocentric_aim", "egocentric_aim_path")
+NEAREST_KINDS = ("egocentric_nearest", "egocentric_aim", "egocentric_aim_path", "egocentric_full")
+PATH_KINDS = ("egocentric_path", "egocentric_aim_path", "egocentric_full")
+SHOT_KINDS = ("egocentric_aim", "egocentric_aim_path", "egocentric_full")
+THREAT_KINDS = ("egocentric_full",)
+THREAT_FIELDS = ("near", "eta", "dir_fwd", "dir_side")
+THREAT_HORIZON_S = 1.0  # bullets closing in later than this are no threat yet
 SHOT_FIELDS = ("enemy", "friend", "miss")  # the shot block (StateBatch.shots' columns)
 TANK_FIELDS = ("alive", "x", "y", "sin", "cos", "vx", "vy", "c0x", "c0y", "c1x", "c1y",
                "c2x", "c2y", "c3x", "c3y", "wall")  # columns of tank_table()
@@ -100,6 +106,10 @@ FIELD_HELP = {
     "path_side": "the same direction towards my right (on screen)",
     "path_dist": "BFS path length to the tank in cells / the map's longest path; "
                  "1 if unreachable, 0 if dead",
+    "near": "1 - its closest approach / (4 x hit radius), at least 0",
+    "eta": "1 - seconds to its closest approach / 1 s",
+    "dir_fwd": "unit direction from me to its closest point, along my heading",
+    "dir_side": "the same direction towards my right (on screen)",
     "enemy": "1 if a bullet fired now (ricochets predicted) first reaches an enemy tank",
     "friend": "1 if a bullet fired now first reaches a teammate",
     "miss": "closest approach of a bullet fired now to a live enemy (centres) / "
@@ -109,14 +119,15 @@ BLOCK_HELP = {
     "self": "the observing tank",
     "own_bullet": "my bullet slots, in slot order",
     "tank": "every other tank: teammates first, then enemies, each in seat order "
-            "(`egocentric_nearest`, `egocentric_aim`, `egocentric_aim_path`: nearest first, "
-            "dead ones last)",
+            "(`egocentric_nearest` and the kinds built on it: nearest first, dead ones last)",
     "bullet": "other tanks' bullets, nearest first",
     "wall": "the map's merged wall rectangles",
     "buff": "buff zones", "debuff": "debuff zones",
     "zone": "where I stand",
     "ray": "wall distance along evenly spaced directions: ray 0 straight ahead, then clockwise",
     "shot": "a bullet fired now along my heading (0 while I am dead)",
+    "threat": "the other tanks' bullet that will pass closest to me within 1 s (straight "
+              "lines; all 0 if none)",
 }
 DEFAULT_RAYS = 16
 DEFAULT_RAY_LENGTH = 350.0  # px: five cells of the default map
@@ -448,6 +459,8 @@ class ObservationBuilder:
             lay.add("debuff", Dz, ("mask", "fwd", "side", "dist"))
             if self.kind in SHOT_KINDS:
                 lay.add("shot", None, SHOT_FIELDS)
+            if self.kind in THREAT_KINDS:
+                lay.add("threat", None, THREAT_FIELDS)
         return lay
 
     def _columns(self) -> dict[str, int | slice]:
@@ -513,6 +526,8 @@ class ObservationBuilder:
         else:
             self.v_ray = self.out[:, :, lay["ray"]]
             self._ego_tables()
+        if self.kind in THREAT_KINDS:
+            self.v_threat = self.out[:, :, lay["threat"]]
         if self.kind in SHOT_KINDS:
             self.v_shot = self.out[:, :, lay["shot"]]
             self.batch.want_shots(self.observers.tolist())
@@ -755,6 +770,7 @@ class ObservationBuilder:
                              np.full(cap + K, 1.0 / g.bullet_speed)]
         self._seg = (no, no + cap, no + cap + K)  # ends of the tank / own / other-bullet groups
         self._near_key = np.zeros((E, L, no))  # egocentric_nearest sort keys
+        self._hit_radius = hit_radius(g)
 
     def _build_ego(self) -> None:
         b, g, at = self.batch, self.cfg, self.at
@@ -806,6 +822,10 @@ class ObservationBuilder:
             velv[:, :, oc:ock] = b.bullet_vel[self._ge, sel]
             rm[:, :, oc:ock] = mask
             vm[:, :, oc:ock] = mask
+        if self.kind in THREAT_KINDS:
+            self._build_threat(None if others is None else (relv[:, :, oc:ock],
+                                                            velv[:, :, oc:ock], others[3]),
+                               c3, s3)
         out = self.out
         fc, sc_, dc = self._rel_cols
         k = rm * b.scale
@@ -821,6 +841,38 @@ class ObservationBuilder:
         self.v_debuff[..., at["debuff.mask"]] = b.zone_mask[:, None, b.max_buffs:]
         if self._nav_groups:
             self._build_paths(c3, s3, self_xy)
+
+    def _build_threat(self, bullets: tuple[np.ndarray, ...] | None, c3: np.ndarray,
+                      s3: np.ndarray) -> None:
+        """The ``threat`` block: of the other tanks' bullets flying at me in a straight
+        line (walls ignored, like the bots' dodging), the one that will pass closest
+        within ``THREAT_HORIZON_S``: how close (``near``), how soon (``eta``) and where
+        its closest point lies (unit direction, own frame: dodge the other way); zeros
+        while I am dead."""
+        vt = self.v_threat
+        if bullets is None:
+            vt[...] = 0.0
+            return
+        rel, vel, mask = bullets  # (E, L, K, 2), (E, L, K, 2), (E, L, K)
+        v2 = np.maximum((vel * vel).sum(axis=-1), 1e-9)
+        t = -(rel * vel).sum(axis=-1) / v2
+        m = rel + vel * t[..., None]
+        miss = np.hypot(m[..., 0], m[..., 1])
+        ok = (mask > 0) & (t > 0) & (t < THREAT_HORIZON_S)
+        k = np.where(ok, miss, np.inf).argmin(axis=-1)[..., None]
+        hit = np.take_along_axis(ok, k, axis=-1)[..., 0]
+        miss = np.take_along_axis(miss, k, axis=-1)[..., 0]
+        scale = 4.0 * self._hit_radius
+        vt[..., 0] = np.where(hit, np.maximum(1.0 - miss / scale, 0.0), 0.0)
+        vt[..., 1] = np.where(hit, 1.0 - np.take_along_axis(t, k, axis=-1)[..., 0]
+                              / THREAT_HORIZON_S, 0.0)
+        mx = np.take_along_axis(m[..., 0], k, axis=-1)[..., 0]
+        my = np.take_along_axis(m[..., 1], k, axis=-1)[..., 0]
+        inv = np.where(hit, 1.0 / np.maximum(miss, 1e-6), 0.0)
+        c, s = c3[..., 0], s3[..., 0]
+        vt[..., 2] = (mx * c + my * s) * inv
+        vt[..., 3] = (my * c - mx * s) * inv
+        vt *= self.batch.alive[:, self.observers][..., None]
 
     def _order_nearest(self) -> None:
         """Reorder each observer's other-tank slots nearest first within teammates and
