@@ -65,7 +65,7 @@ def test_presets_keep_the_papers_settings():
         row = get_preset(name)
         assert row.rewards == {} and "paper rewards" in row.description
         assert load_scenario(row.scenario).game == {"random_spawns": True}
-        assert row.imitate["bot"] == "smart" and row.observation == "egocentric_aim"
+        assert row.imitate["bot"] == "smart" and row.observation == "egocentric_full"
         assert [(s.algo, s.seats) for s in row.learners] == [("ppo", (0, 1))]  # shared
     demo = get_preset("demo")
     assert demo.learners[0].config == PPOConfig(num_steps=128, update_epochs=4,
