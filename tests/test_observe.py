@@ -197,13 +197,25 @@ def test_aim_kind_adds_the_shot_of_a_bullet_fired_now():
     poses[1] = (470.0, 385.0, 0.0)
     b = place(aim, poses)
     assert (f(b, "shot.enemy"), f(b, "shot.friend")) == (0.0, 1.0)
+    # Both near the same leg: the enemy's centre comes first along it, but 15 px off the
+    # line, and the bullet enters the centred mate's reach first.
+    g = aim.matches[0].cfg
+    r, start = hit_radius(g), 385.0 + g.tank_width / 2 + g.bullet_radius + 0.5
+    enemy_x = start + 100.0
+    mate_x = enemy_x + 6.0  # enters at 106 - r, the enemy at 100 - sqrt(r^2 - 15^2)
+    assert mate_x - r < enemy_x - math.sqrt(r * r - 15.0 ** 2)
+    poses[1], poses[2] = (mate_x, 385.0, 0.0), (enemy_x, 400.0, 0.0)
+    b = place(aim, poses)
+    assert (f(b, "shot.enemy"), f(b, "shot.friend")) == (0.0, 1.0)
+    poses[1] = (mate_x + 20.0, 385.0, 0.0)  # the mate further on: the enemy is reached
+    b = place(aim, poses)
+    assert (f(b, "shot.enemy"), f(b, "shot.friend")) == (1.0, 0.0)
+    poses[2] = (560.0, 385.0, 0.0)
     # Turned a quarter away (down the screen): the bullet hits the wall 315 px below, after
     # 300 px of travel at most; the closest it gets to enemy 2 is from its start.
     poses[0] = (385.0, 385.0, math.pi / 2)
     poses[1] = (150.0, 150.0, 0.0)
     b = place(aim, poses)
-    g = aim.matches[0].cfg
-    start = 385.0 + g.tank_width / 2 + g.bullet_radius + 0.5
     assert (f(b, "shot.enemy"), f(b, "shot.friend")) == (0.0, 0.0)
     assert f(b, "shot.miss") == pytest.approx(
         min(math.hypot(175.0, start - 385.0), 175.0 * math.sqrt(2)) / g.bullet_max_distance,
@@ -240,6 +252,48 @@ def test_aim_kind_agrees_with_the_bots_shot_prediction():
                 assert feat(ms, obs, "shot.enemy", learner=o) == want, (t, o)
                 seen[want] += 1
     assert seen[1.0] > 0 and seen[0.0] > 0
+
+
+def test_shots_of_many_envs_are_each_paths_own_reach():
+    """The shot block of a batch of envs, reached for every env and seat at once, is
+    what :func:`path_hits` and :func:`path_distances` give on each seat's own predicted
+    path in its own match (dead seats and teammates in the way included)."""
+    from alphatank.sim.ballistics import path_distances, path_hits, predict_path
+
+    sc = load_scenario("team_vs_four_bots")
+    ms = MatchSet(sc, 3, observation="egocentric_aim")
+    obs = ms.reset_all([5, 6, 7])
+    lay, rng = ms.obs.layout, np.random.default_rng(3)
+    cols = [lay[f"shot.{k}"].start for k in ("enemy", "friend", "miss")]
+    seen = np.zeros(3)  # enemy, friend, dead observers
+    for _ in range(300):
+        for e, m in enumerate(ms.matches):
+            g, r = m.cfg, hit_radius(m.cfg)
+            for o, seat in enumerate(sc.learner_seats):
+                got = obs[e, o, cols].tolist()
+                if not m.alive[seat]:
+                    assert got == [0.0, 0.0, 0.0]
+                    seen[2] += 1
+                    continue
+                path = predict_path(m.world, *m.world.muzzle(seat),
+                                    float(m.tank_angle[seat]), exact=False)
+                others = np.flatnonzero(m.alive)
+                others = others[others != seat]
+                k = path_hits(path, m.tank_xy[others], r)
+                mate = m.team_index[others] == m.team_index[seat]
+                foes = others[~mate]
+                miss = (min(path_distances(path, m.tank_xy[foes]).min()
+                            / g.bullet_max_distance, 1.0) if len(foes) else 1.0)
+                want = [float(k >= 0 and not mate[k]), float(k >= 0 and mate[k])]
+                assert got[:2] == want and got[2] == pytest.approx(miss, rel=1e-6)
+                seen[:2] += want
+        acts = rng.integers((3, 3, 2), size=(3, len(sc.learner_seats), 3))
+        _, obs = ms.step(acts)
+        for e in range(3):
+            if ms.terminated[e] or ms.truncated[e]:
+                ms.reset_env(e, 100 + e)
+        obs = ms.obs.build()
+    assert seen.min() > 0
 
 
 def test_aim_path_kind_is_the_aim_kind_with_the_way_to_each_tank():

@@ -52,7 +52,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from alphatank.sim.ballistics import path_reach, predict_path
+from alphatank.sim.ballistics import predict_path
 from alphatank.sim.config import GameConfig, hit_radius
 from alphatank.sim.mapspec import MapSpec
 from alphatank.sim.navigation import NavGrid, nav_grid
@@ -251,10 +251,17 @@ class StateBatch:
         self.counts = np.zeros((E, 2, n), dtype=np.int64)
         self.cooldown, self.bullets_alive = self.counts[:, 0], self.counts[:, 1]
         self.tick = np.zeros(E, dtype=np.int64)
-        # Per tank, SHOT_FIELDS of a bullet fired now; only the seats of want_shots().
+        # Per tank, SHOT_FIELDS of a bullet fired now; only the seats of want_shots(),
+        # from their predicted paths (complex points, padded with the end point) and
+        # lengths (0: dead), traced in gather() and reached for all envs in reach_shots().
         self.shots = np.zeros((E, n, len(SHOT_FIELDS)))
         self.shot_seats: tuple[int, ...] = ()
         self._shot_radius = hit_radius(cfg)
+        self._paths = np.zeros((E, n, cfg.bullet_max_bounces + 2), dtype=np.complex128)
+        self._path_len = np.zeros((E, n), dtype=np.int64)
+        self._shots_due = False
+        self._tank_z = np.zeros((E, n), dtype=np.complex128)
+        self.team = np.zeros((E, n), dtype=np.int64)  # team index of every seat
         # Per-episode statics.
         self.size = np.ones((E, 2))  # map width, height (px)
         self.walls = np.zeros((E, max_walls, 4))  # x0, y0, x1, y1 (px)
@@ -298,31 +305,77 @@ class StateBatch:
         self.shot_seats = tuple(sorted(set(self.shot_seats) | {int(s) for s in seats}))
 
     def _gather_shots(self, e: int, match: Match) -> None:
-        """``shots[e]`` of the wanted seats: a bullet fired now along the heading, traced
-        like the bots' search (``predict_path(exact=False)``), against the live tanks."""
-        w, alive, xy, team = match.world, match.alive, match.tank_xy, match.team_index
-        out = self.shots[e]
-        far = self.cfg.bullet_max_distance
+        """Trace a bullet fired now along the heading of each wanted live seat of match
+        ``e``, like the bots' search (``predict_path(exact=False)``)."""
+        w, alive = match.world, match.alive
         for s in self.shot_seats:
             if not alive[s]:
-                out[s] = 0.0
+                self._path_len[e, s] = 0
                 continue
             mx, my = w.muzzle(s)
             path = predict_path(w, mx, my, float(match.tank_angle[s]), exact=False)
-            others = np.flatnonzero(alive)
-            others = others[others != s]
-            k, closest = path_reach(path, xy[others], self._shot_radius)
-            mate = team[others] == team[s]
-            out[s, 0] = k >= 0 and not mate[k]
-            out[s, 1] = k >= 0 and mate[k]
-            foes = closest[~mate]
-            out[s, 2] = min(foes.min() / far, 1.0) if len(foes) else 1.0
+            z = path.view(np.complex128).ravel()
+            row = self._paths[e, s]
+            row[:len(z)] = z
+            row[len(z):] = z[-1]
+            self._path_len[e, s] = len(z)
+        self._shots_due = True
+
+    def reach_shots(self) -> None:
+        """Fill ``shots`` of every env from the paths traced since the last call, against
+        the live tanks in one set of array operations: the first tank each path reaches
+        (:func:`alphatank.sim.ballistics.path_hits`) and its closest approach to an enemy
+        (:func:`alphatank.sim.ballistics.path_distances`)."""
+        if not self._shots_due:
+            return
+        self._shots_due = False
+        seats = np.asarray(self.shot_seats)
+        length = self._path_len[:, seats]  # (E, S)
+        out = self.shots[:, seats]
+        P = int(length.max())
+        if P == 0:
+            self.shots[:, seats] = 0.0
+            return
+        w = self._tank_z
+        w.real, w.imag = self.tank_xy[..., 0], self.tank_xy[..., 1]
+        z = self._paths[:, seats, :P]
+        a = z[..., :-1, None]
+        d = z[..., 1:, None] - a  # (E, S, P-1, 1)
+        rel = w[:, None, None, :] - a  # (E, S, P-1, n)
+        len2 = np.maximum(d.real * d.real + d.imag * d.imag, 1e-300)
+        t = np.minimum(np.maximum((rel * d.conj()).real / len2, 0.0), 1.0)
+        dist = np.abs(rel - t * d)
+        n = self.n
+        target = self.alive[:, None, :] & (np.arange(n) != seats[:, None])  # (E, S, n)
+        dist[~np.broadcast_to(target[:, :, None], dist.shape)] = np.inf
+        r = self._shot_radius
+        close = dist <= r
+        near = close.any(axis=-1)  # (E, S, P-1)
+        seg = near.argmax(axis=-1)[..., None, None]  # the first leg near anyone
+        hit = np.take_along_axis(near, seg[..., 0], axis=-1)[..., 0]
+        d_seg = np.take_along_axis(dist, seg, axis=2)[:, :, 0]  # (E, S, n)
+        along = np.take_along_axis(t, seg, axis=2)[:, :, 0] * np.abs(
+            np.take_along_axis(d, seg, axis=2)[:, :, 0])
+        chord = np.sqrt(np.maximum(r * r - np.minimum(d_seg, r) ** 2, 0.0))
+        entry = np.where(d_seg <= r, along - chord, np.inf)  # where each enters the leg
+        first = entry.argmin(axis=-1)[..., None]  # (E, S, 1)
+        team = self.team
+        mine = team[:, seats][..., None]  # (E, S, 1)
+        mate = np.take_along_axis(team, first[..., 0], axis=1)[..., None] == mine
+        out[..., 0] = hit & ~mate[..., 0]
+        out[..., 1] = hit & mate[..., 0]
+        foe = target & (team[:, None, :] != mine)
+        closest = np.where(foe, dist.min(axis=2), np.inf).min(axis=-1)
+        out[..., 2] = np.minimum(closest / self.cfg.bullet_max_distance, 1.0)
+        out[length == 0] = 0.0
+        self.shots[:, seats] = out
 
     def set_static(self, e: int, match: Match) -> None:
         """Map size, wall rectangles and zone centres of match ``e``'s episode."""
         spec = match.spec
         g = self.cfg
         self.specs[e] = spec
+        self.team[e] = match.team_index
         self.size[e] = (spec.width, spec.height)
         inv = 2.0 / self.size[e]
         self.inv[e, 0] = inv
@@ -582,6 +635,7 @@ class ObservationBuilder:
             if self.kind in NEAREST_KINDS and self.n_others > 1:
                 self._order_nearest()
             if self.kind in SHOT_KINDS:
+                self.batch.reach_shots()
                 src = self._shot_src
                 np.copyto(self.v_shot, self.batch.shots[:, self.observers] if src is None
                           else src[:, :, 0])

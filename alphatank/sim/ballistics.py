@@ -84,17 +84,6 @@ def path_hits(path: np.ndarray, targets_xy: np.ndarray, hit_radius: float) -> in
     return _first_reached(path, *_seg_dist(path, targets), hit_radius)
 
 
-def path_reach(path: np.ndarray, targets_xy: np.ndarray, hit_radius: float
-               ) -> tuple[int, np.ndarray]:
-    """:func:`path_hits` and :func:`path_distances` of one path from one distance table:
-    (first target reached or -1, (T,) closest distance of each target)."""
-    targets = np.asarray(targets_xy, dtype=np.float64).reshape(-1, 2)
-    if len(targets) == 0 or len(path) < 2:
-        return -1, np.full(len(targets), math.inf)
-    dist, t = _seg_dist(path, targets)
-    return _first_reached(path, dist, t, hit_radius), dist.min(axis=0)
-
-
 def _first_reached(path: np.ndarray, dist: np.ndarray, t: np.ndarray, hit_radius: float
                    ) -> int:
     """:func:`path_hits` from the (S, T) segment distances and closest-point params."""
