@@ -331,7 +331,6 @@ class StateBatch:
         self._shots_due = False
         seats = np.asarray(self.shot_seats)
         length = self._path_len[:, seats]  # (E, S)
-        out = self.shots[:, seats]
         P = int(length.max())
         if P == 0:
             self.shots[:, seats] = 0.0
@@ -358,13 +357,14 @@ class StateBatch:
             np.take_along_axis(d, seg, axis=2)[:, :, 0])
         chord = np.sqrt(np.maximum(r * r - np.minimum(d_seg, r) ** 2, 0.0))
         entry = np.where(d_seg <= r, along - chord, np.inf)  # where each enters the leg
-        first = entry.argmin(axis=-1)[..., None]  # (E, S, 1)
+        first = entry.argmin(axis=-1)  # (E, S)
         team = self.team
-        mine = team[:, seats][..., None]  # (E, S, 1)
-        mate = np.take_along_axis(team, first[..., 0], axis=1)[..., None] == mine
-        out[..., 0] = hit & ~mate[..., 0]
-        out[..., 1] = hit & mate[..., 0]
-        foe = target & (team[:, None, :] != mine)
+        mine = team[:, seats]
+        mate = np.take_along_axis(team, first, axis=1) == mine
+        out = np.empty(mine.shape + (len(SHOT_FIELDS),))
+        out[..., 0] = hit & ~mate
+        out[..., 1] = hit & mate
+        foe = target & (team[:, None, :] != mine[..., None])
         closest = np.where(foe, dist.min(axis=2), np.inf).min(axis=-1)
         out[..., 2] = np.minimum(closest / self.cfg.bullet_max_distance, 1.0)
         out[length == 0] = 0.0
