@@ -605,11 +605,13 @@ class Trainer:
                 bar.set_postfix(sps=f"{metrics['charts/sps']:.0f}", win=f"{win:.2f}",
                                 it=self.iteration, refresh=False)
             if last or (cfg.checkpoint_every and self.iteration % cfg.checkpoint_every == 0):
+                self.elapsed = time.perf_counter() - start  # up to the save, stop check included
                 self.save()
                 if last:
                     return
                 obs = self._segment_reset()
         if self.global_step != self.saved_step:  # stopped between iterations
+            self.elapsed = time.perf_counter() - start
             self.save()
 
     def _rollback_point(self) -> dict[str, Any] | None:
