@@ -52,7 +52,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from alphatank.sim.ballistics import predict_path
+from alphatank.sim.ballistics import predict_path, segment_distances
 from alphatank.sim.config import GameConfig, hit_radius
 from alphatank.sim.mapspec import MapSpec
 from alphatank.sim.navigation import NavGrid, nav_grid
@@ -337,13 +337,7 @@ class StateBatch:
             return
         w = self._tank_z
         w.real, w.imag = self.tank_xy[..., 0], self.tank_xy[..., 1]
-        z = self._paths[:, seats, :P]
-        a = z[..., :-1, None]
-        d = z[..., 1:, None] - a  # (E, S, P-1, 1)
-        rel = w[:, None, None, :] - a  # (E, S, P-1, n)
-        len2 = np.maximum(d.real * d.real + d.imag * d.imag, 1e-300)
-        t = np.minimum(np.maximum((rel * d.conj()).real / len2, 0.0), 1.0)
-        dist = np.abs(rel - t * d)
+        dist, t, d = segment_distances(self._paths[:, seats, :P], w[:, None, :])  # (E, S, P-1, n)
         n = self.n
         target = self.alive[:, None, :] & (np.arange(n) != seats[:, None])  # (E, S, n)
         dist[~np.broadcast_to(target[:, :, None], dist.shape)] = np.inf

@@ -106,15 +106,25 @@ def _first_reached(path: np.ndarray, dist: np.ndarray, t: np.ndarray, hit_radius
 
 def _seg_dist(path: np.ndarray, targets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Distances (S, T) from each path segment to each target, and the closest-point
-    parameter t in [0, 1] along each segment (complex arithmetic: fewest numpy calls)."""
+    parameter t in [0, 1] along each segment (:func:`segment_distances`)."""
     z = np.asarray(path, dtype=np.float64).view(np.complex128).ravel()
     w = np.ascontiguousarray(targets, dtype=np.float64).view(np.complex128).ravel()
-    a = z[:-1, None]
-    d = z[1:, None] - a  # (S, 1)
-    rel = w[None, :] - a  # (S, T)
+    dist, t, _ = segment_distances(z, w)
+    return dist, t
+
+
+def segment_distances(z: np.ndarray, w: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Distances (..., S, T) from each leg of the polylines ``z`` (..., P) to the points
+    ``w`` (..., T), both complex x + iy with broadcasting leading axes; the closest-point
+    parameter t in [0, 1] along each leg; the legs (..., S, 1). Complex arithmetic: the
+    fewest numpy calls."""
+    a = z[..., :-1, None]
+    d = z[..., 1:, None] - a
+    rel = w[..., None, :] - a
     len2 = np.maximum(d.real * d.real + d.imag * d.imag, 1e-300)  # zero legs: t = 0
     t = np.minimum(np.maximum((rel * d.conj()).real / len2, 0.0), 1.0)
-    return np.abs(rel - t * d), t
+    return np.abs(rel - t * d), t, d
 
 
 def quick_wall_hit(space: pymunk.Space, x0: float, y0: float, x1: float, y1: float,
