@@ -59,6 +59,15 @@ def test_row_curves_and_heatmap(tmp_path):
     fig = plot_row_curves([("row A", runs), ("row B", runs[:1])])
     visible = [ax for ax in fig.axes if ax.get_visible()]
     assert [len(ax.lines) for ax in visible] == [3, 1]
+    long = "2 PPO Agents (shared, full) vs Defensive + Aggressive + 2 Smart Bots"
+    fig = plot_row_curves([(long, runs)], title="Table 3: " + "a long table title " * 8)
+    ax = fig.axes[0]
+    assert ax.get_title().replace("\n", " ") == long
+    assert max(map(len, ax.get_title().split("\n"))) <= 44  # wrapped to the panel
+    assert fig._suptitle.get_text().count("\n") >= 1
+    fig.canvas.draw()
+    ticks = [t.get_text() for t in ax.get_xticklabels() if t.get_text()]
+    assert "2k" in ticks and "2000" not in ticks  # steps in k / M
     values = np.array([[61.0, np.nan], [20.0, 90.0]])
     paper = np.array([[72.0, 47.0], [np.nan, np.nan]])
     fig = plot_heatmap(values, ["Random Bot", "Cycle"], ["Random", "Aggressive"], paper=paper)

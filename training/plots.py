@@ -9,6 +9,7 @@ tests inspect its axes and lines) and uses the Agg backend: no display needed.
 from __future__ import annotations
 
 import math
+import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -23,6 +24,19 @@ def _pyplot() -> Any:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     return plt
+
+
+def _steps_axis(ax: Any) -> None:
+    """Env steps in k / M (``800k``, ``1.2M``) so that the tick labels of a narrow panel
+    do not run into each other."""
+    from matplotlib.ticker import EngFormatter
+    ax.xaxis.set_major_formatter(EngFormatter(sep=""))
+
+
+def _wrapped(text: str, width: int) -> str:
+    """``text`` broken into lines of at most ``width`` characters (a long row title
+    would otherwise overlap its neighbour's)."""
+    return "\n".join(textwrap.wrap(text, width)) if text else text
 
 
 def learner_series(run_dir: str | Path) -> dict[str, dict[str, np.ndarray]]:
@@ -70,6 +84,8 @@ def plot_runs(runs: Sequence[str | Path], out: str | Path | None = None,
             ax.set(xlabel=xlabel, ylabel=metric, title=f"{metric} (last 100 episodes)")
             if row == 0:
                 ax.set_ylim(-0.02, 1.02)
+            if col == 0:
+                _steps_axis(ax)
             ax.grid(alpha=0.3)
     axes[0][0].legend(fontsize=7)
     fig.tight_layout()
@@ -95,14 +111,16 @@ def plot_row_curves(groups: Sequence[tuple[str, Sequence[str | Path]]],
             for name, s in per_learner.items():
                 ax.plot(s["step"], s["win_rate"], lw=1.1,
                         label=f"{Path(run).name.rsplit('-', 1)[0]} {name}".strip())
-        ax.set(title=label, xlabel="env steps", ylabel="win rate", ylim=(-0.02, 1.02))
+        ax.set(xlabel="env steps", ylabel="win rate", ylim=(-0.02, 1.02))
+        ax.set_title(_wrapped(label, 44), fontsize=10)
+        _steps_axis(ax)
         ax.grid(alpha=0.3)
         if ax.lines:
             ax.legend(fontsize=6)
     for k in range(len(groups), rows * cols):
         axes[k // cols][k % cols].set_visible(False)
     if title:
-        fig.suptitle(title)
+        fig.suptitle(_wrapped(title, int(10 * 4.6 * cols)))
     fig.tight_layout()
     return _save(fig, out)
 
