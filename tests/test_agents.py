@@ -10,9 +10,9 @@ import pytest
 import torch
 
 from alphatank.cli import main
-from alphatank.game.lineup import build_lineup
+from alphatank.game.lineup import build_lineup, lineup_scenario
 from alphatank.game.seats import SeatError, agent_path, shipped_agents
-from alphatank.training.checkpoint import load_checkpoint, load_policy
+from alphatank.training.checkpoint import CheckpointError, load_checkpoint, load_policy
 from alphatank.training.hparams import PPOConfig
 from alphatank.training.presets import LearnerSpec, TrainConfig
 from alphatank.training.runner import Trainer
@@ -44,6 +44,21 @@ def test_shipped_agent_loads_weights_only_and_plays_its_scenario(name):
                if s.controller == "learner")
 
 
+def test_an_egocentric_agent_plays_a_map_with_more_walls_than_it_trained_on():
+    # ppo_cycle_full trained on battlefield and open (11 and 4 wall rectangles); maze has
+    # 15. Its observation has no wall block, so it plays there; a paper agent says why not.
+    for name, want in (("ppo_cycle_full", None), ("ppo_vs_smart", "room for 11 wall")):
+        sc = lineup_scenario(seats=f"smart,agent:{name}", map_name="maze")
+        assert len(sc.map_specs()[0].wall_rects) == 15
+        lineup = build_lineup(sc)
+        if want is None:
+            ep = lineup.start(seed=2, tick_limit=60).run()
+            assert ep.ticks == 60 or ep.over
+        else:
+            with pytest.raises(CheckpointError, match=want):
+                lineup.start(seed=2, tick_limit=60)
+
+
 def test_unknown_agent_lists_the_shipped_ones():
     with pytest.raises(SeatError, match="unknown agent 'nobody'; shipped agents: "):
         agent_path("nobody")
@@ -67,3 +82,5 @@ def test_export_strips_training_state_and_lists(tmp_path, capsys):
     assert main(["agents"]) == 0
     out = capsys.readouterr().out
     assert all(name in out for name in shipped_agents()) or "no shipped agents" in out
+    cycle = next(line for line in out.splitlines() if line.startswith("ppo_cycle_full"))
+    assert all(f"vs {bot} " in cycle for bot in ("random", "aggressive", "defensive", "dodge"))

@@ -429,22 +429,29 @@ class NetworkPolicy:
                 f"sizes as {self.trained_as}" if self.trained_as else "")
 
     def reset(self, match: Any, seat: int, seed: int | None = None) -> None:
-        from alphatank.game.observe import ObservationBuilder, StateBatch
+        from alphatank.game.observe import ObservationBuilder, StateBatch, slot_counts
 
         name = self.name_for_seat(seat)
         learner = self.get_learner(name)
         per_match = self._seats.setdefault(match, {})
         old = per_match.get(seat)
-        builder = old[1] if old is not None and old[4] == (match.cfg, tuple(match.teams)) \
-            else None
+        need = len(match.spec.wall_rects)
+        builder = old[1] if (old is not None and old[4] == (match.cfg, tuple(match.teams))
+                             and old[1].batch.walls.shape[1] >= need) else None
         if builder is None:
             walls, buffs, debuffs = self.slots
-            need = len(match.spec.wall_rects)
             if self.kind == "paper" and need > walls:
                 raise CheckpointError(
                     f"{self.source}: trained with room for {walls} wall rectangles in its "
                     f"'paper' observation; map {match.spec.name!r} has {need}")
-            batch = StateBatch(match.cfg, match.n, 1, walls, buffs, debuffs)
+            _, nb, nd = slot_counts(match.cfg, [match.spec])
+            if nb > buffs or nd > debuffs:
+                raise CheckpointError(
+                    f"{self.source}: trained with room for {buffs} buff and {debuffs} "
+                    f"debuff zones; map {match.spec.name!r} has {nb} and {nd}")
+            # Only the paper kind has a wall block; the others read the walls through
+            # rays and routes, so any map's walls fit.
+            batch = StateBatch(match.cfg, match.n, 1, max(walls, need), buffs, debuffs)
             builder = ObservationBuilder(self.kind, batch, match.teams, [seat],
                                          team_flags=self.team_flags)
             if builder.layout.size != self.obs_dim:
