@@ -209,6 +209,9 @@ def test_shipped_tables_load_and_plan(tmp_path):
     assert cyc.schedule["interval"] == cyc.total_steps // 16 and cyc.observation == "egocentric"
     assert cyc.schedule["mode"] == "fixed" and cyc.schedule["scale_victory"] is False
     assert cyc.time_limit_s == 900.0 and cyc.seed == 0
+    full = row_config(t4.row("cycle_fixed_full"), 0, 15)
+    assert full.observation == "egocentric_full" and full.imitate["bot"] == "smart"
+    assert full.learners[0].config.learning_rate == 1e-4
     sac = row_config(next(t for t in tables if t.name == "sac").row("sac_vs_ppo"), 1, 15)
     assert {s.name: s.config.utd_ratio for s in sac.learners if s.algo == "sac"} == \
         {"sac": 0.125} and sac.seed == 1
@@ -217,4 +220,4 @@ def test_shipped_tables_load_and_plan(tmp_path):
     # Table 4's specialists and adaptive cycle are shared with the league table
     shared = [j for j in plan.jobs if len(j.rows) > 1]
     assert len(shared) == 2 * 5 and all(len(j.rows) == 2 for j in shared)
-    assert len(plan.jobs) == 2 * (8 + 12 + 3 + 7 + 3) - len(shared)
+    assert len(plan.jobs) == 2 * (8 + 14 + 3 + 7 + 3) - len(shared)

@@ -48,8 +48,14 @@ def run(args: argparse.Namespace) -> int:
     for name in names:
         s = agent_summary(agent_path(name))
         rows = s["eval"] if isinstance(s["eval"], list) else [s["eval"]]
-        win = ", ".join(f"{100 * r['win_rate']:.0f}% [{100 * r['ci95_low']:.0f}, "
-                        f"{100 * r['ci95_high']:.0f}] of {r['games']}"
-                        for r in rows if r and "win_rate" in r)
+        rows = [r for r in rows if r and "win_rate" in r]
+        win = ", ".join((f"vs {_against(r)} " if len(rows) > 1 else "")
+                        + f"{100 * r['win_rate']:.0f}% [{100 * r['ci95_low']:.0f}, "
+                        f"{100 * r['ci95_high']:.0f}] of {r['games']}" for r in rows)
         print(f"{name:20s} {s['scenario']:18s} {s['steps']:>10,d} {s['elapsed_s']:>8.0f}  {win}")
     return 0
+
+
+def _against(row: dict) -> str:
+    """What an evaluation row played: its experiment column, else its opponent label."""
+    return str(row.get("spec", {}).get("column") or row.get("opponent", "?"))
