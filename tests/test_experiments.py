@@ -220,4 +220,4 @@ def test_shipped_tables_load_and_plan(tmp_path):
     # Table 4's specialists and adaptive cycle are shared with the league table
     shared = [j for j in plan.jobs if len(j.rows) > 1]
     assert len(shared) == 2 * 5 and all(len(j.rows) == 2 for j in shared)
-    assert len(plan.jobs) == 2 * (8 + 14 + 3 + 7 + 3) - len(shared)
+    assert len(plan.jobs) == 2 * (8 + 14 + 3 + 8 + 3) - len(shared)
