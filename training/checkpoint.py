@@ -435,20 +435,19 @@ class NetworkPolicy:
         learner = self.get_learner(name)
         per_match = self._seats.setdefault(match, {})
         old = per_match.get(seat)
-        need = len(match.spec.wall_rects)
+        walls, buffs, debuffs = self.slots
+        need, nb, nd = slot_counts(match.cfg, [match.spec])
+        if self.kind == "paper" and need > walls:
+            raise CheckpointError(
+                f"{self.source}: trained with room for {walls} wall rectangles in its "
+                f"'paper' observation; map {match.spec.name!r} has {need}")
+        if nb > buffs or nd > debuffs:
+            raise CheckpointError(
+                f"{self.source}: trained with room for {buffs} buff and {debuffs} "
+                f"debuff zones; map {match.spec.name!r} has {nb} and {nd}")
         builder = old[1] if (old is not None and old[4] == (match.cfg, tuple(match.teams))
                              and old[1].batch.walls.shape[1] >= need) else None
         if builder is None:
-            walls, buffs, debuffs = self.slots
-            if self.kind == "paper" and need > walls:
-                raise CheckpointError(
-                    f"{self.source}: trained with room for {walls} wall rectangles in its "
-                    f"'paper' observation; map {match.spec.name!r} has {need}")
-            _, nb, nd = slot_counts(match.cfg, [match.spec])
-            if nb > buffs or nd > debuffs:
-                raise CheckpointError(
-                    f"{self.source}: trained with room for {buffs} buff and {debuffs} "
-                    f"debuff zones; map {match.spec.name!r} has {nb} and {nd}")
             # Only the paper kind has a wall block; the others read the walls through
             # rays and routes, so any map's walls fit.
             batch = StateBatch(match.cfg, match.n, 1, max(walls, need), buffs, debuffs)
