@@ -212,6 +212,11 @@ def test_shipped_tables_load_and_plan(tmp_path):
     full = row_config(t4.row("cycle_fixed_full"), 0, 15)
     assert full.observation == "egocentric_full" and full.imitate["bot"] == "smart"
     assert full.learners[0].config.learning_rate == 1e-4
+    for bot in ("random", "aggressive", "defensive", "dodge"):  # like with like
+        spec = row_config(t4.row(f"{bot}_full"), 0, 15)
+        assert spec.scenario == f"vs_{bot}" and not spec.schedule and not spec.rewards
+        assert (spec.learners[0].config, spec.imitate, spec.observation, spec.num_envs) == \
+            (full.learners[0].config, full.imitate, full.observation, full.num_envs)
     sac = row_config(next(t for t in tables if t.name == "sac").row("sac_vs_ppo"), 1, 15)
     assert {s.name: s.config.utd_ratio for s in sac.learners if s.algo == "sac"} == \
         {"sac": 0.125} and sac.seed == 1
@@ -220,4 +225,4 @@ def test_shipped_tables_load_and_plan(tmp_path):
     # Table 4's specialists and adaptive cycle are shared with the league table
     shared = [j for j in plan.jobs if len(j.rows) > 1]
     assert len(shared) == 2 * 5 and all(len(j.rows) == 2 for j in shared)
-    assert len(plan.jobs) == 2 * (8 + 14 + 3 + 8 + 3) - len(shared)
+    assert len(plan.jobs) == 2 * (8 + 18 + 3 + 8 + 3) - len(shared)
