@@ -81,11 +81,10 @@ def test_dagger_games_are_played_by_the_learner_and_labelled_by_the_bot():
 
 def run_config(name: str, **kw) -> TrainConfig:
     kw.setdefault("total_steps", 128)
+    kw.setdefault("learners", (LearnerSpec("ppo", "ppo", (0,),
+                                           config=PPOConfig(num_steps=32, update_epochs=1)),))
     return TrainConfig(name, "vs_aggressive", num_envs=2, wandb="disabled",
-                       observation="egocentric", checkpoint_every=0,
-                       learners=(LearnerSpec("ppo", "ppo", (0,),
-                                             config=PPOConfig(num_steps=32, update_epochs=1)),),
-                       **kw)
+                       observation="egocentric", checkpoint_every=0, **kw)
 
 
 def weights(tr: Trainer) -> list[np.ndarray]:
@@ -158,3 +157,51 @@ def test_a_mixed_run_clones_each_scenario_in_its_own_envs(tmp_path):
     first = (tmp_path / "mix" / "metrics.jsonl").read_text().splitlines()[0]
     assert '"imitate/samples": ' in first
     assert float(first.split('"imitate/samples": ')[1].split(",")[0]) > 48 * 2
+
+
+def anchor_divergence(tr: Trainer, anchor: PPO) -> float:
+    """Mean KL(anchor || policy) over the heads, on the observations of one rollout of
+    ``tr``'s env (each policy with its own statistics)."""
+    from alphatank.training.ppo import head_log_probs
+
+    obs = tr.env.reset(seed=5)[:, 0]
+    lr = tr.learners["ppo"]
+    with torch.no_grad():
+        ref = head_log_probs(torch.from_numpy(
+            anchor.anchor_np.forward(anchor.anchor_norm(obs))), lr.nvec)
+        now = head_log_probs(torch.from_numpy(lr.mirror.forward(lr.obs_norm(obs))[0]), lr.nvec)
+    return float((ref.exp() * (ref - now)).sum((-2, -1)).mean())
+
+
+def test_anchor_kl_keeps_the_policy_near_the_clone_and_resumes_with_it(tmp_path):
+    table = {"bot": "aggressive", "steps": 64, "epochs": 4}
+    ppo = {"num_steps": 32, "update_epochs": 8, "learning_rate": 3e-3}
+
+    def cfg(name: str, kl: float) -> TrainConfig:
+        spec = LearnerSpec("ppo", "ppo", (0,), config=PPOConfig(**ppo, anchor_kl=kl))
+        return run_config(name, imitate=table, total_steps=256, learners=(spec,))
+
+    free = Trainer(cfg("free", 0.0), tmp_path / "free", progress=False)
+    held = Trainer(cfg("held", 5.0), tmp_path / "held", progress=False)
+    for tr in (free, held):
+        tr.train()
+    learner = held.learners["ppo"]
+    assert free.learners["ppo"].anchor_np is None and learner.anchor_np is not None
+    assert anchor_divergence(held, learner) < 0.5 * anchor_divergence(free, learner)
+    logged = [json.loads(line) for line in (tmp_path / "held" / "metrics.jsonl").open()]
+    assert any("losses/anchor_kl" in row for row in logged)
+    # the anchor is saved with the learner and comes back on resume
+    state = learner.state_dict()
+    again = PPO(learner.obs_dim, learner.num_streams, learner.cfg)
+    again.load_state_dict(state)
+    for a, b in zip(again.anchor_actor.parameters(), learner.anchor_actor.parameters(),
+                    strict=True):
+        assert torch.equal(a, b) and not a.requires_grad
+    np.testing.assert_array_equal(again.anchor_norm.rms.mean, learner.anchor_norm.rms.mean)
+
+
+def test_anchor_kl_without_a_warm_start_is_refused():
+    spec = LearnerSpec("ppo", "ppo", (0,), config=PPOConfig(num_steps=32, anchor_kl=1.0))
+    with pytest.raises(FieldError, match="'ppo': anchor_kl = 1.0 needs a warm start"):
+        run_config("cold", learners=(spec,))
+    run_config("warm", learners=(spec,), init_from="runs/x")  # a warm start: allowed

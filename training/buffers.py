@@ -73,7 +73,9 @@ def compute_gae_masked(rewards: torch.Tensor, values: torch.Tensor, terminated: 
 class RolloutBuffer:
     """Preallocated PPO rollout of ``num_steps`` rows for ``num_streams`` (env, seat) streams."""
 
-    def __init__(self, num_steps: int, num_streams: int, obs_dim: int, mask_dim: int = 0):
+    def __init__(self, num_steps: int, num_streams: int, obs_dim: int, mask_dim: int = 0,
+                 logit_dim: int = 0):
+        """``logit_dim`` > 0: also ``anchor_logits`` (the anchor policy's logits per row)."""
         t, b = num_steps, num_streams
         self.num_steps, self.num_streams = t, b
         self.obs = torch.zeros((t, b, obs_dim), dtype=torch.float32)
@@ -86,6 +88,8 @@ class RolloutBuffer:
         self.bootstrap = torch.zeros((t, b), dtype=torch.float32)
         self.active = torch.ones((t, b), dtype=torch.bool)
         self.masks = torch.ones((t, b, mask_dim), dtype=torch.bool) if mask_dim else None
+        self.anchor_logits = (torch.zeros((t, b, logit_dim), dtype=torch.float32)
+                              if logit_dim else None)
         self.step = 0
         # numpy views of the same memory: per-step writes through numpy cost a third
         self.np = {k: v.numpy() for k, v in vars(self).items() if isinstance(v, torch.Tensor)}
@@ -116,6 +120,9 @@ class OnPolicyPlumbing:
     def new_segment(self) -> None:
         """Fresh episodes everywhere: restart the discounted returns of reward scaling."""
         self.ret_norm.returns[:] = 0.0
+
+    def anchor(self) -> None:
+        """No anchor (MAPPO; PPO overrides this)."""
 
     def drop_rollout(self) -> None:
         """Forget the unfinished rollout (its matches were lost)."""

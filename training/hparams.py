@@ -31,6 +31,9 @@ class PPOConfig:
     target_kl: float | None = hp(None, "stop an update's epochs once the approximate KL "
                                  "exceeds this (none: never)", gt=0)
     hidden: int = hp(128, "units per hidden layer (two tanh layers, actor and critic)", gt=0)
+    anchor_kl: float = hp(0.0, "weight of KL(start || policy) in the loss, start being the "
+                          "policy RL began from (the imitate clone or the init_from "
+                          "checkpoint): keeps what the warm start knew; 0: off", ge=0)
     norm_obs: bool = hp(True, "normalise observations by running mean/std (saved)")
     norm_reward: bool = hp(True, "scale rewards by the running std of the discounted return")
     obs_clip: float = hp(10.0, "clip of normalised observations", gt=0)

@@ -74,6 +74,10 @@ class Learner(Protocol):
         """Every stream restarts from a fresh episode (after a checkpoint): forget
         per-episode running statistics such as discounted returns."""
 
+    def anchor(self) -> None:
+        """RL starts now from a warm start (after ``imitate``, or from ``init_from``): keep
+        what it needs of the policy as it stands (PPO's ``anchor_kl``); may do nothing."""
+
     def drop_rollout(self) -> None:
         """Forget the unfinished rollout (a fixed-rollout learner; the runner then loads
         the state from the rollout's start): its matches were lost (an env runner died)."""

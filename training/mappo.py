@@ -43,6 +43,7 @@ from alphatank.training.ppo import (
     MASKED_LOGIT,
     NVEC,
     Fold,
+    NumpyMLP,
     Tanh,
     evaluate_actions,
     fold_constant,
@@ -120,21 +121,6 @@ class MAPPONet(nn.Module):
         if mask is not None:
             logits = logits.masked_fill(~mask, MASKED_LOGIT)
         return logits
-
-
-class NumpyMLP:
-    """Float32 numpy copy of a two-hidden-layer tanh :func:`~alphatank.training.ppo.mlp`."""
-
-    def __init__(self, seq: nn.Sequential):
-        self.sync(seq)
-
-    def sync(self, seq: nn.Sequential) -> None:
-        self.layers = [(np.ascontiguousarray(seq[k].weight.detach().numpy().T, dtype=np.float32),
-                        seq[k].bias.detach().numpy().astype(np.float32)) for k in (0, 2, 4)]
-
-    def forward(self, x: np.ndarray) -> np.ndarray:
-        (w1, b1), (w2, b2), (w3, b3) = self.layers
-        return np.tanh(np.tanh(x @ w1 + b1) @ w2 + b2) @ w3 + b3
 
 
 class MAPPO(OnPolicyPlumbing):

@@ -8,6 +8,7 @@ the learner's own generator, so a run is reproducible and resumable bit for bit.
 
 from __future__ import annotations
 
+import copy
 import functools
 import math
 from typing import Any
@@ -135,11 +136,16 @@ def _heads(logits: torch.Tensor, nvec: tuple[int, ...]) -> torch.Tensor:
     return logits.reshape(logits.shape[0], len(nvec), m)
 
 
+def head_log_probs(logits: torch.Tensor, nvec: tuple[int, ...]) -> torch.Tensor:
+    """(B, heads, m) log-probabilities of every choice of every head: one log-softmax
+    over the logits padded to the widest head (padding has probability 0)."""
+    return torch.log_softmax(_heads(logits, nvec), dim=-1)
+
+
 def evaluate_actions(logits: torch.Tensor, actions: torch.Tensor, nvec: tuple[int, ...]
                      ) -> tuple[torch.Tensor, torch.Tensor]:
-    """Summed log-probability and entropy (both (B,)) of given actions. All heads go
-    through one log-softmax (padded to the widest head; padding has probability 0)."""
-    logp = torch.log_softmax(_heads(logits, nvec), dim=-1)
+    """Summed log-probability and entropy (both (B,)) of given actions."""
+    logp = head_log_probs(logits, nvec)
     logprob = logp.gather(-1, actions.unsqueeze(-1)).squeeze(-1).sum(-1)
     entropy = -(logp.exp() * logp).sum((-2, -1))
     return logprob, entropy
@@ -173,6 +179,21 @@ class NumpyActorCritic:
         ha = np.tanh(h[:, :self.hidden] @ self.wa2 + self.ba2)
         hc = np.tanh(h[:, self.hidden:] @ self.wc2 + self.bc2)
         return ha @ self.wa3 + self.ba3, (hc @ self.wc3 + self.bc3)[:, 0]
+
+
+class NumpyMLP:
+    """Float32 numpy copy of a two-hidden-layer tanh :func:`~alphatank.training.ppo.mlp`."""
+
+    def __init__(self, seq: nn.Sequential):
+        self.sync(seq)
+
+    def sync(self, seq: nn.Sequential) -> None:
+        self.layers = [(np.ascontiguousarray(seq[k].weight.detach().numpy().T, dtype=np.float32),
+                        seq[k].bias.detach().numpy().astype(np.float32)) for k in (0, 2, 4)]
+
+    def forward(self, x: np.ndarray) -> np.ndarray:
+        (w1, b1), (w2, b2), (w3, b3) = self.layers
+        return np.tanh(np.tanh(x @ w1 + b1) @ w2 + b2) @ w3 + b3
 
 
 def np_sample(logits: np.ndarray, nvec: tuple[int, ...], rng: np.random.Generator,
@@ -226,17 +247,39 @@ class PPO(OnPolicyPlumbing):
         self.mirror = NumpyActorCritic(self.net)
         self.obs_norm = ObsNormalizer(obs_dim, cfg.norm_obs, cfg.obs_clip)
         self.ret_norm = ReturnNormalizer(num_streams, cfg.gamma, cfg.norm_reward, cfg.reward_clip)
-        self.buffer = RolloutBuffer(cfg.num_steps, num_streams, obs_dim, mask_dim)
+        self.buffer = RolloutBuffer(cfg.num_steps, num_streams, obs_dim, mask_dim,
+                                    sum(self.nvec) if cfg.anchor_kl else 0)
+        # the policy RL started from (see anchor()): its actor and observation statistics
+        self.anchor_actor: nn.Sequential | None = None
+        self.anchor_np: NumpyMLP | None = None
+        self.anchor_norm: ObsNormalizer | None = None
         self.updates = 0
         self.total_updates = 0  # set by plan() for learning-rate annealing
         self.interrupt: Any = None  # set by the runner; polled between minibatches
 
     # ---- acting -----------------------------------------------------------------------
 
+    def anchor(self) -> None:
+        """Keep the current policy (a warm start: the imitate clone, an init_from
+        checkpoint) as the one ``anchor_kl`` pulls towards; nothing when it is 0."""
+        if not self.cfg.anchor_kl:
+            return
+        self.anchor_actor = copy.deepcopy(self.net.actor).requires_grad_(False)
+        self.anchor_np = NumpyMLP(self.anchor_actor)
+        self.anchor_norm = copy.deepcopy(self.obs_norm)
+
     def act(self, obs: np.ndarray, masks: np.ndarray | None = None) -> np.ndarray:
         """Sample actions (num_streams, 3) for raw observations and record the step."""
         buf = self.buffer
         t = buf.step
+        if buf.anchor_logits is not None:
+            if self.anchor_np is None:
+                raise RuntimeError("anchor_kl > 0 needs an anchor: call anchor() after the "
+                                   "warm start (imitate or init_from)")
+            ref = self.anchor_np.forward(self.anchor_norm(obs))
+            if masks is not None:
+                ref[~np.asarray(masks, dtype=bool)] = MASKED_LOGIT
+            buf.np["anchor_logits"][t] = ref
         x = self.obs_norm(obs, update=True)
         logits, values = self.mirror.forward(x)
         row = buf.np
@@ -301,10 +344,13 @@ class PPO(OnPolicyPlumbing):
         b_adv, b_ret = advantages.reshape(n), returns.reshape(n)
         b_active = buf.active.reshape(n).float()
         b_masks = buf.masks.reshape(n, -1) if buf.masks is not None else None
+        b_anchor = (buf.anchor_logits.reshape(n, -1) if buf.anchor_logits is not None
+                    else None)
         mb_size = max(1, n // cfg.num_minibatches)
         stats: dict[str, list[float]] = {k: [] for k in
                                          ("policy_loss", "value_loss", "entropy", "approx_kl",
-                                          "clipfrac")}
+                                          "clipfrac", *(("anchor_kl",) if b_anchor is not None
+                                                        else ()))}
         epochs_run = 0
         for _ in range(cfg.update_epochs):
             perm = torch.randperm(n, generator=self.generator)
@@ -314,8 +360,9 @@ class PPO(OnPolicyPlumbing):
                 check_interrupt(self.interrupt)  # the runner rewinds a cut update
                 mask = b_masks.index_select(0, idx) if b_masks is not None else None
                 obs = b_obs.index_select(0, idx)  # index_select: 5x cheaper than b_obs[idx]
-                logprob, entropy = evaluate_actions(net.logits(obs, mask, fold),
-                                                    b_actions.index_select(0, idx), self.nvec)
+                logits = net.logits(obs, mask, fold)
+                logprob, entropy = evaluate_actions(logits, b_actions.index_select(0, idx),
+                                                    self.nvec)
                 value = net.value(obs, fold)
                 act_w = b_active.index_select(0, idx)
                 n_act = act_w.sum().clamp(min=1.0)
@@ -341,6 +388,12 @@ class PPO(OnPolicyPlumbing):
                     v_loss = 0.5 * ((value - ret) ** 2).mean()
                 ent = (entropy * act_w).sum() / n_act
                 loss = pg_loss - cfg.ent_coef * ent + cfg.vf_coef * v_loss
+                if b_anchor is not None:  # KL(anchor || policy) over every head
+                    ref = head_log_probs(b_anchor.index_select(0, idx), self.nvec)
+                    kl = (ref.exp() * (ref - head_log_probs(logits, self.nvec))).sum((-2, -1))
+                    anchor_kl = (kl * act_w).sum() / n_act
+                    loss = loss + cfg.anchor_kl * anchor_kl
+                    stats["anchor_kl"].append(float(anchor_kl.detach()))
                 self.optimizer.zero_grad(set_to_none=True)
                 loss.backward()
                 nn.utils.clip_grad_norm_(net.parameters(), cfg.max_grad_norm)
@@ -372,11 +425,15 @@ class PPO(OnPolicyPlumbing):
         return np_sample(logits, self.nvec, rng or self.np_rng, deterministic)[0]
 
     def state_dict(self) -> dict[str, Any]:
-        return {"net": self.net.state_dict(), "optimizer": self.optimizer.state_dict(),
-                "obs_norm": self.obs_norm.state_dict(), "ret_norm": self.ret_norm.state_dict(),
-                "generator": self.generator.get_state(),
-                "np_rng": self.np_rng.bit_generator.state,
-                "updates": torch.tensor(self.updates)}
+        state = {"net": self.net.state_dict(), "optimizer": self.optimizer.state_dict(),
+                 "obs_norm": self.obs_norm.state_dict(), "ret_norm": self.ret_norm.state_dict(),
+                 "generator": self.generator.get_state(),
+                 "np_rng": self.np_rng.bit_generator.state,
+                 "updates": torch.tensor(self.updates)}
+        if self.anchor_actor is not None:
+            state["anchor"] = {"actor": self.anchor_actor.state_dict(),
+                               "obs_norm": self.anchor_norm.state_dict()}
+        return state
 
     def load_state_dict(self, state: dict[str, Any], weights_only: bool = False) -> None:
         """Restore a learner; ``weights_only`` restores just what inference needs."""
@@ -390,3 +447,9 @@ class PPO(OnPolicyPlumbing):
         self.generator.set_state(state["generator"])
         self.np_rng.bit_generator.state = state["np_rng"]
         self.updates = int(state["updates"])
+        if "anchor" in state:
+            self.anchor_actor = copy.deepcopy(self.net.actor).requires_grad_(False)
+            self.anchor_actor.load_state_dict(state["anchor"]["actor"])
+            self.anchor_np = NumpyMLP(self.anchor_actor)
+            self.anchor_norm = copy.deepcopy(self.obs_norm)
+            self.anchor_norm.load_state_dict(state["anchor"]["obs_norm"])

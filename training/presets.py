@@ -167,6 +167,12 @@ class TrainConfig:
         names = [spec.name for spec in self.learners]
         if len(set(names)) != len(names):
             raise FieldError("TrainConfig", "learners", f"names must be unique, got {names}")
+        for spec in self.learners:  # anchor_kl pulls towards a warm start: one must exist
+            kl = getattr(spec.config, "anchor_kl", 0.0)
+            if kl and not (self.imitate or self.init_from):
+                raise FieldError("TrainConfig", "learners", f"{spec.name!r}: anchor_kl = {kl} "
+                                 f"needs a warm start to pull towards (an imitate table or "
+                                 f"init_from); set anchor_kl = 0 or add one")
 
     def with_overrides(self, **changes: Any) -> TrainConfig:
         """A copy with run settings changed (None values are ignored)."""

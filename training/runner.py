@@ -249,6 +249,9 @@ class Trainer:
         elif cfg.init_from:
             self._warm_start(cfg.init_from)
         self.imitation = None if resume is not None else imitate_config(cfg.imitate)
+        if resume is None and self.imitation is None:  # with imitate: after the cloning
+            for lr in self.learners.values():
+                lr.anchor()
         self._check_cadence()
         self.logger = RunLogger(self.run_dir, cfg.to_dict(), cfg.name, cfg.wandb, cfg.project,
                                 cfg.tensorboard, run_id=wandb_id,
@@ -555,6 +558,8 @@ class Trainer:
         if self.imitation is not None:  # a fresh run's first call (None on resume)
             metrics = imitate(self, self.imitation)
             self.imitation = None
+            for lr in self.learners.values():
+                lr.anchor()
             self.elapsed = time.perf_counter() - start
             self.logger.log({**metrics, "charts/elapsed_s": self.elapsed}, 0)
         obs = self._segment_reset()

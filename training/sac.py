@@ -210,6 +210,9 @@ class SAC:
     def new_segment(self) -> None:
         """Nothing per episode to forget (transitions are stored whole)."""
 
+    def anchor(self) -> None:
+        """No anchor: SAC learns off-policy from its replay buffer."""
+
     def drop_rollout(self) -> None:
         """No rollout to drop: every observed transition is whole and kept."""
 
