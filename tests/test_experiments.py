@@ -18,6 +18,7 @@ from alphatank.training.experiments import (
     load_tables,
     make_plan,
     row_config,
+    run_digest,
     run_job,
     table_names,
 )
@@ -226,3 +227,20 @@ def test_shipped_tables_load_and_plan(tmp_path):
     shared = [j for j in plan.jobs if len(j.rows) > 1]
     assert len(shared) == 2 * 5 and all(len(j.rows) == 2 for j in shared)
     assert len(plan.jobs) == 2 * (8 + 18 + 3 + 8 + 3) - len(shared)
+
+
+def test_a_setting_added_later_keeps_the_digests_of_runs_made_before_it(tmp_path):
+    # docs/results/table4_full.* was made before PPO had anchor_kl: its runs still match
+    plan = make_plan(load_tables(["table4"]), tmp_path, seeds=3, budget_min=15,
+                     steps=5_000_000)
+    planned = {Path(j.run_dir).name for j in plan.jobs}
+    shipped = json.loads((Path(__file__).parents[1] / "docs/results/table4_full.json")
+                         .read_text(encoding="utf-8"))
+    made = {Path(r["run_dir"]).name for row in shipped["rows"] for r in row["runs"]}
+    assert "cycle_fixed_full-s0-d532ca16a5" in made and made <= planned
+    # turned on, the setting is part of what the run does
+    cfg = row_config(load_tables(["table4"])[0].row("cycle_fixed_full"), 0, 15, 5_000_000)
+    spec = cfg.learners[0]
+    on = cfg.with_overrides(learners=(type(spec)(spec.name, spec.algo, spec.seats, config=
+                                                 type(spec.config)(anchor_kl=0.1)),))
+    assert run_digest(on, ()) != run_digest(cfg, ())

@@ -382,10 +382,19 @@ def digest(obj: Any) -> str:
     return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:10]
 
 
+# learner settings added after runs were made: at these values (off) they leave a run's
+# digest as it was, so result folders made before them still resume and report
+LATER_SETTINGS = {"anchor_kl": 0.0}
+
+
 def run_digest(cfg: TrainConfig, scenarios: Sequence[str]) -> str:
     """Hash of what a run does (its settings without the name, and its scenario mix)."""
     data = cfg.to_dict()
     data.pop("name")
+    for spec in data["learners"]:
+        for key, off in LATER_SETTINGS.items():
+            if spec["config"].get(key, off) == off:
+                spec["config"].pop(key, None)
     return digest({"cfg": data, "scenarios": list(scenarios)})
 
 
