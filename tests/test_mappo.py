@@ -11,7 +11,8 @@ from alphatank.envs.vector import VectorMatchEnv
 from alphatank.game.scenarios import parse_scenario
 from alphatank.game.state import AgentState
 from alphatank.training.hparams import MAPPOConfig
-from alphatank.training.mappo import MAPPO, NumpyMLP, ValueNorm
+from alphatank.training.mappo import MAPPO, ValueNorm
+from alphatank.training.ppo import NumpyMLP
 
 torch.set_num_threads(1)
 
