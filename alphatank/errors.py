@@ -25,5 +25,9 @@ def one_line(exc: BaseException) -> str:
     return text or type(exc).__name__
 
 
+class BusyError(InputError, RuntimeError):
+    """A file or folder that another process holds (a run another process is training)."""
+
+
 class MissingPackageError(InputError, RuntimeError):
     """An optional package that a requested feature needs is not installed."""

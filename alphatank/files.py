@@ -1,10 +1,16 @@
 """Text files in and out: UTF-8 reading with errors that name the file, and atomic writes
-(a temporary sibling, then ``os.replace``), so a reader never sees half a file."""
+(a temporary sibling, then ``os.replace``), so a reader never sees half a file; and an
+exclusive lock on a folder, so two processes never write one run at once."""
 
 from __future__ import annotations
 
+import fcntl
 import os
+import socket
 from pathlib import Path
+from typing import IO, Any
+
+from alphatank.errors import BusyError
 
 
 def read_text(path: str | Path) -> str:
@@ -44,3 +50,76 @@ def write_text_atomic(path: str | Path, text: str, newline: str | None = None) -
         tmp.unlink(missing_ok=True)
         raise
     return path
+
+
+_HELD: dict[str, list[Any]] = {}  # lock file -> [open file, holds] of the locks held here
+
+
+class FolderLock:
+    """An exclusive lock on ``folder`` (``flock`` on the hidden sibling file
+    ``.<name>.lock``, which says who holds it and is removed on release), for as long as
+    this object holds it. Another process holding it: :class:`BusyError` naming the folder
+    and the holder. Holds within one process nest (the lock goes when the last one is
+    released); the operating system drops it when the process ends, however it ends."""
+
+    def __init__(self, folder: str | Path):
+        self.folder = Path(folder)
+        self.path = str((self.folder.parent / f".{self.folder.name}.lock").absolute())
+        self.held = False
+
+    def acquire(self) -> FolderLock:
+        if self.held:
+            return self
+        entry = _HELD.get(self.path)
+        if entry is None:
+            entry = _HELD[self.path] = [self._lock_file(), 0]
+        entry[1] += 1
+        self.held = True
+        return self
+
+    def _lock_file(self) -> IO[str]:
+        """The lock file, open and locked by this process (a file that was removed
+        between opening and locking it is opened again)."""
+        Path(self.path).parent.mkdir(parents=True, exist_ok=True)
+        while True:
+            f: IO[str] = open(self.path, "a+", encoding="utf-8")  # noqa: SIM115 (kept open)
+            try:
+                fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                f.seek(0)
+                holder = f.read().strip() or "a process"
+                f.close()
+                raise BusyError(f"{self.folder}: {holder} is using it (lock "
+                                f"{self.path}); wait for it to end or stop it, "
+                                "then try again") from None
+            try:
+                if os.stat(self.path).st_ino == os.fstat(f.fileno()).st_ino:
+                    break
+            except FileNotFoundError:
+                pass
+            f.close()  # its holder released and removed it meanwhile: take the new one
+        f.seek(0)
+        f.truncate()
+        f.write(f"pid {os.getpid()} on {socket.gethostname()}\n")
+        f.flush()
+        return f
+
+    def release(self) -> None:
+        if not self.held:
+            return
+        self.held = False
+        entry = _HELD[self.path]
+        entry[1] -= 1
+        if not entry[1]:
+            del _HELD[self.path]
+            Path(self.path).unlink(missing_ok=True)  # while still locked
+            entry[0].close()  # closing the file drops the flock
+
+    def __enter__(self) -> FolderLock:
+        return self.acquire()
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+    def __del__(self) -> None:
+        self.release()

@@ -1,13 +1,17 @@
 """Text files: atomic writes keep the old file whole when a write fails, and the writers
-of results (eval --json/--csv) leave no temporary files behind."""
+of results (eval --json/--csv) leave no temporary files behind. Folder locks keep a second
+process out of a folder this one holds, and let it in once released."""
 
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
 
 import pytest
 
-from alphatank.files import read_text, write_text_atomic
+from alphatank.files import FolderLock, read_text, write_text_atomic
 from alphatank.training.evaluate import EvalResult, write_csv, write_json
 
 
@@ -38,3 +42,50 @@ def test_eval_writers_are_atomic_and_readable(tmp_path):
     assert lines[0].split(",")[0] == next(iter(results[0].as_dict()))
     assert len(lines) == 2 and ",vs smart,smart," in lines[1]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.csv", "r.json"]
+
+
+def lock_in_another_process(folder) -> str:
+    """What a second Python process gets when it tries ``FolderLock(folder)``."""
+    code = ("import sys\nfrom alphatank.files import FolderLock\n"
+            "from alphatank.errors import BusyError\n"
+            "try:\n    FolderLock(sys.argv[1]).acquire()\nexcept BusyError as e:\n"
+            "    print('busy:', e)\nelse:\n    print('got it')\n")
+    return subprocess.run([sys.executable, "-c", code, str(folder)], capture_output=True,
+                          text=True, check=True, timeout=60).stdout.strip()
+
+
+def test_a_held_folder_lock_keeps_other_processes_out_until_released(tmp_path):
+    run = tmp_path / "runs" / "mine"
+    outer = FolderLock(run).acquire()
+    inner = FolderLock(run).acquire()  # holds in one process nest
+    said = lock_in_another_process(run)
+    assert said.startswith(f"busy: {run}: pid {os.getpid()} on ") and "wait for it" in said
+    inner.release()
+    assert lock_in_another_process(run).startswith("busy:")  # the outer hold remains
+    outer.release()
+    assert lock_in_another_process(run) == "got it"
+    with FolderLock(run) as lock:
+        assert lock.held and lock_in_another_process(run).startswith("busy:")
+    assert not lock.held
+    assert not run.exists()  # the lock is a sibling file, gone once released
+    assert list(run.parent.iterdir()) == []
+
+
+def test_a_run_that_another_process_trains_is_refused_in_one_line(tmp_path, capsys,
+                                                                  held_elsewhere):
+    """``alphatank train`` on a run folder another process holds: exit 2, one line naming the
+    folder and the holder, nothing written; once the holder is gone it trains."""
+    from alphatank.cli import main
+
+    run = tmp_path / "tiny.toml"
+    run.write_text('scenario = "vs_random"\ntotal_steps = 32\nnum_envs = 2\n'
+                   'wandb = "disabled"\n[[learners]]\nname = "p"\n[learners.config]\n'
+                   'num_steps = 16\nupdate_epochs = 1\n')
+    argv = ["train", "--config", str(run), "--runs", str(tmp_path / "runs"), "--no-progress"]
+    with held_elsewhere(tmp_path / "runs" / "tiny") as pid:
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.count("\n") == 0 and f"{tmp_path / 'runs' / 'tiny'}: pid {pid} on " in err
+        assert not (tmp_path / "runs" / "tiny").exists()
+    assert main(argv) == 0
+    assert (tmp_path / "runs" / "tiny" / "latest").is_file()

@@ -39,7 +39,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from alphatank.files import write_text_atomic
+from alphatank.files import FolderLock, write_text_atomic
 from alphatank.training.presets import (
     TrainConfig,
     get_preset,
@@ -527,11 +527,18 @@ class RunInterrupted(RuntimeError):
 
 
 def _train(job: Job) -> dict[str, Any]:
+    cfg = TrainConfig.from_dict(job.cfg)
+    run_dir = Path(job.run_dir)
+    with FolderLock(run_dir):  # another command training this run: BusyError, nothing lost
+        return _train_locked(job, cfg, run_dir)
+
+
+def _train_locked(job: Job, cfg: TrainConfig, run_dir: Path) -> dict[str, Any]:
     from alphatank.training.learners import learner_class
     from alphatank.training.runner import Trainer
 
-    cfg = TrainConfig.from_dict(job.cfg)
-    run_dir = Path(job.run_dir)
+    if job.done_file.is_file():  # finished by another command while this one waited
+        return read_json(job.done_file)
     if run_dir.exists():  # an unfinished run: start it again from scratch
         shutil.rmtree(run_dir)
     run_dir.mkdir(parents=True)

@@ -48,6 +48,7 @@ from alphatank.envs.ids import env_id
 from alphatank.envs.ray_vector import RolloutLost
 from alphatank.envs.vector import make_vector_env
 from alphatank.extras import require
+from alphatank.files import FolderLock
 from alphatank.game.observe import slot_counts
 from alphatank.game.scenarios import Scenario
 from alphatank.training.checkpoint import (
@@ -136,6 +137,8 @@ class Trainer:
         self.cfg = cfg
         self.action_mask = action_mask
         self.run_dir = Path(run_dir)
+        # one process at a time writes a run (BusyError otherwise), until train() ends
+        self.lock = FolderLock(self.run_dir).acquire()
         self.progress = progress
         limit_threads(cfg.torch_threads)
         # an injected env brings its own scenario (tests use custom maps); a resumed run
@@ -180,6 +183,7 @@ class Trainer:
         except BaseException:
             if env is None:  # do not leave worker processes behind
                 self.env.close()
+            self.lock.release()
             raise
 
     def _setup(self, specs: list, resume: Checkpoint | None, wandb_id: str | None) -> None:
@@ -523,6 +527,7 @@ class Trainer:
         summary; ``stopped`` says why it ended early (None: it reached ``total_steps``)
         and ``exit_code`` is 130 / 143 after SIGINT / SIGTERM, else 0."""
         cfg = self.cfg
+        self.lock.acquire()
         start = time.perf_counter() - self.elapsed  # elapsed counts the whole run
         self.stop = StopFlag(cfg.time_limit_s)  # the budget counts this call only
         self.stopped = {}
@@ -543,6 +548,7 @@ class Trainer:
                     bar.close()
                 self.logger.close()
                 self.env.close()
+                self.lock.release()
         if self.stop.reason is not None:
             self.stopped = {"reason": self.stop.reason, "checkpoint_step": self.saved_step,
                             **self.stopped}

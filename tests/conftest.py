@@ -1,0 +1,35 @@
+"""Fixtures shared by several test files."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import pytest
+
+HOLD = ("import sys\nfrom alphatank.files import FolderLock\n"
+        "lock = FolderLock(sys.argv[1]).acquire()\nprint('held', flush=True)\nsys.stdin.read()\n")
+
+
+@contextmanager
+def _held_elsewhere(folder: Path) -> Iterator[int]:
+    """``FolderLock(folder)`` held by a second Python process while the block runs (it
+    lets go when its standard input closes); yields that process's pid."""
+    proc = subprocess.Popen([sys.executable, "-c", HOLD, str(folder)], stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None and proc.stdout.readline().strip() == "held"
+        yield proc.pid
+    finally:
+        assert proc.stdin is not None
+        proc.stdin.close()
+        proc.wait(timeout=60)
+
+
+@pytest.fixture
+def held_elsewhere():
+    """A context manager factory: ``with held_elsewhere(folder) as pid: ...``."""
+    return _held_elsewhere
