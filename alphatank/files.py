@@ -7,6 +7,7 @@ from __future__ import annotations
 import fcntl
 import os
 import socket
+import warnings
 from pathlib import Path
 from typing import IO, Any
 
@@ -92,6 +93,11 @@ class FolderLock:
                 raise BusyError(f"{self.folder}: {holder} is using it (lock "
                                 f"{self.path}); wait for it to end or stop it, "
                                 "then try again") from None
+            except OSError as exc:  # a file system without locks (some network mounts)
+                warnings.warn(f"{self.path}: cannot lock ({exc.strerror or exc}); going on "
+                              "without: keep other processes out of this folder yourself",
+                              stacklevel=3)
+                break
             try:
                 if os.stat(self.path).st_ino == os.fstat(f.fileno()).st_ino:
                     break

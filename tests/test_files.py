@@ -89,3 +89,20 @@ def test_a_run_that_another_process_trains_is_refused_in_one_line(tmp_path, caps
         assert not (tmp_path / "runs" / "tiny").exists()
     assert main(argv) == 0
     assert (tmp_path / "runs" / "tiny" / "latest").is_file()
+
+
+def test_a_file_system_without_locks_warns_and_goes_on(tmp_path, monkeypatch):
+    """Some network mounts refuse flock (ENOLCK): training must still run there. The
+    refusal cannot be made on this machine's disk, so the system call is replaced."""
+    import errno
+    import fcntl
+
+    def refuse(*args: object) -> None:
+        raise OSError(errno.ENOLCK, "No locks available")
+
+    monkeypatch.setattr(fcntl, "flock", refuse)
+    with pytest.warns(UserWarning, match="cannot lock .No locks available"):
+        lock = FolderLock(tmp_path / "run").acquire()
+    assert lock.held
+    lock.release()
+    assert list(tmp_path.iterdir()) == []
