@@ -238,6 +238,13 @@ def test_shipped_tables_load_and_plan(tmp_path):
         assert spec.scenario == f"vs_{bot}" and not spec.schedule and not spec.rewards
         assert (spec.learners[0].config, spec.imitate, spec.observation, spec.num_envs) == \
             (full.learners[0].config, full.imitate, full.observation, full.num_envs)
+        # the same specialist on the cycle's four settings: only its one bot, every setting
+        mix = t4.row(f"{bot}_mix")
+        assert mix.scenarios == t4.row("cycle_fixed_full").scenarios
+        mixed = row_config(mix, 0, 15)
+        assert mixed.schedule["pool"] == [bot] and mixed.schedule["kind"] == "cycle"
+        assert (mixed.learners[0].config, mixed.imitate, mixed.observation) == \
+            (full.learners[0].config, full.imitate, full.observation)
     sac = row_config(next(t for t in tables if t.name == "sac").row("sac_vs_ppo"), 1, 15)
     assert {s.name: s.config.utd_ratio for s in sac.learners if s.algo == "sac"} == \
         {"sac": 0.125} and sac.seed == 1
@@ -246,7 +253,7 @@ def test_shipped_tables_load_and_plan(tmp_path):
     # Table 4's specialists and adaptive cycle are shared with the league table
     shared = [j for j in plan.jobs if len(j.rows) > 1]
     assert len(shared) == 2 * 5 and all(len(j.rows) == 2 for j in shared)
-    assert len(plan.jobs) == 2 * (8 + 18 + 3 + 8 + 3) - len(shared)
+    assert len(plan.jobs) == 2 * (8 + 22 + 3 + 8 + 3) - len(shared)
 
 
 def test_a_setting_added_later_keeps_the_digests_of_runs_made_before_it(tmp_path):

@@ -36,7 +36,7 @@ from alphatank.errors import InputError
 from alphatank.files import write_text_atomic
 from alphatank.game.scenarios import Scenario, ScenarioError, parse_scenario
 from alphatank.game.seats import agent_path
-from alphatank.sim.config import check_value
+from alphatank.sim.config import ACTION_REPEAT_MAX, check_value
 from alphatank.sim.policy import NOOP
 from alphatank.training.learners import make_learner
 from alphatank.training.presets import LearnerSpec, TrainConfig
@@ -305,7 +305,9 @@ _OBSERVATION_FIELDS: dict[str, tuple[tuple[type, ...], tuple[Any, Any] | None]] 
     "kind": ((str,), None), "obs_dim": ((int,), (1, 10**7)),
     "max_walls": ((int,), (0, 10**6)), "max_buffs": ((int,), (0, 10**6)),
     "max_debuffs": ((int,), (0, 10**6)), "team_flags": ((bool,), None),
-    "tanks": ((int,), (2, 10**4)), "seat_learner": ((dict,), None)}
+    "tanks": ((int,), (2, 10**4)), "seat_learner": ((dict,), None),
+    "action_repeat": ((int,), (1, ACTION_REPEAT_MAX))}
+_OPTIONAL_OBSERVATION_FIELDS = {"action_repeat": 1}  # added later: older checkpoints lack it
 _PROGRESS_FIELDS = {"global_step": ((int,), (0, None)), "iteration": ((int,), (0, None)),
                     "episodes": ((int,), (0, None)), "elapsed": ((float,), (0, None))}
 
@@ -321,7 +323,7 @@ def _check_meta(meta: dict[str, Any], meta_file: Path) -> None:
             raise fail(key, f"must be an object, got {data!r}")
         for name, (kinds, rng) in table.items():
             if name not in data:
-                if key == "observation":
+                if key == "observation" and name not in _OPTIONAL_OBSERVATION_FIELDS:
                     raise fail(f"{key}.{name}", "missing")
                 continue
             _, why = check_value(kinds, data[name], rng)
@@ -396,6 +398,7 @@ class NetworkPolicy:
         self.team_flags = bool(observation["team_flags"])
         self.seat_learner = {int(k): v for k, v in observation["seat_learner"].items()}
         self.n_tanks = int(observation["tanks"])
+        self.repeat = int(observation.get("action_repeat", 1))  # ticks an action is held
         self.trained_as = trained_as  # the training scenario, for error messages
         self._seats: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
@@ -462,7 +465,7 @@ class NetworkPolicy:
         num_seats = getattr(learner, "num_seats", None)  # learners with seat ids (MAPPO)
         sid = None if num_seats is None else self.seat_id(match, seat, name, num_seats)
         per_match[seat] = (learner, builder, np.random.default_rng(seed), sid,
-                           (match.cfg, tuple(match.teams)))
+                           (match.cfg, tuple(match.teams)), NOOP.copy())
         builder.batch.set_static(0, match)
         builder.batch.gather(0, match)
         builder.set_static(0)
@@ -470,12 +473,17 @@ class NetworkPolicy:
     def act(self, match: Any, seat: int) -> np.ndarray:
         if not match.alive[seat]:
             return NOOP.copy()
-        learner, builder, rng, sid, _ = self._seats[match][seat]
+        learner, builder, rng, sid, _, held = self._seats[match][seat]
+        if match.tick % self.repeat:  # between decisions: the action trained as held
+            return held.copy()
         builder.batch.gather(0, match)
         obs = builder.build()[0]
         if sid is None:
-            return learner.policy_actions(obs, self.deterministic, rng)[0]
-        return learner.policy_actions(obs, self.deterministic, rng, seat=sid)[0]
+            act = learner.policy_actions(obs, self.deterministic, rng)[0]
+        else:
+            act = learner.policy_actions(obs, self.deterministic, rng, seat=sid)[0]
+        held[:] = act
+        return act
 
 
 class LivePolicy(NetworkPolicy):

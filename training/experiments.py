@@ -382,15 +382,19 @@ def digest(obj: Any) -> str:
     return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:10]
 
 
-# learner settings added after runs were made: at these values (off) they leave a run's
-# digest as it was, so result folders made before them still resume and report
+# settings added after runs were made: at these values (off) they leave a run's digest as
+# it was, so result folders made before them still resume and report (learner, run)
 LATER_SETTINGS = {"anchor_kl": 0.0}
+LATER_RUN_SETTINGS = {"action_repeat": 1}
 
 
 def run_digest(cfg: TrainConfig, scenarios: Sequence[str]) -> str:
     """Hash of what a run does (its settings without the name, and its scenario mix)."""
     data = cfg.to_dict()
     data.pop("name")
+    for key, off in LATER_RUN_SETTINGS.items():
+        if data.get(key, off) == off:
+            data.pop(key, None)
     for spec in data["learners"]:
         for key, off in LATER_SETTINGS.items():
             if spec["config"].get(key, off) == off:
@@ -551,7 +555,8 @@ def _train_locked(job: Job, cfg: TrainConfig, run_dir: Path) -> dict[str, Any]:
         inputs = sorted({x for spec in run_learners(cfg, 1)
                          for x in learner_class(spec.algo).inputs})
         env = MixedVectorEnv(job.scenarios, cfg.num_envs, cfg.seed, cfg.observation,
-                             cfg.game or None, cfg.rewards or None, inputs=inputs)
+                             cfg.game or None, cfg.rewards or None, inputs=inputs,
+                             action_repeat=cfg.action_repeat)
     t0 = time.time()
     trainer = Trainer(cfg, run_dir, env=env, progress=False)
     summary = trainer.train()

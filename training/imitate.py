@@ -89,16 +89,19 @@ Drive = Callable[[np.ndarray], np.ndarray]
 def collect(scenario: Scenario, cfg: ImitateConfig, num_envs: int, seed: int,
             observation: str | None, game: dict[str, Any], rewards: dict[str, Any],
             driven: list[int], stop: Callable[[], bool] = bool, steps: int | None = None,
-            drive: Drive | None = None) -> Demonstrations:
+            drive: Drive | None = None, action_repeat: int = 1) -> Demonstrations:
     """Play ``steps`` (default ``cfg.steps``) vector steps with ``cfg.bot`` in the
     learner seats ``driven`` (indices into the scenario's learner seats); fewer when
     ``stop()`` turns true. With ``drive`` (observations (E, L, D) -> actions (E, L, 3))
-    the learners play instead and the bot's actions are only recorded, as labels."""
+    the learners play instead and the bot's actions are only recorded, as labels. With
+    ``action_repeat`` k a step's action (the bot's decision) is held for k ticks, as the
+    learners will hold theirs."""
     from alphatank.game.lineup import spec_seat
     from alphatank.game.seats import make_controller
 
     core = MatchSet(scenario, num_envs, observation=observation, game_overrides=game or None,
-                    reward_overrides=rewards or None, driven=driven)
+                    reward_overrides=rewards or None, driven=driven,
+                    action_repeat=action_repeat)
     seats = [scenario.learner_seats[d] for d in driven]
     team = scenario.seats[seats[0]].team
     stand = spec_seat(cfg.bot, team, where=f"imitate.bot {cfg.bot!r}")
@@ -248,7 +251,8 @@ def gather(trainer: Any, cfg: ImitateConfig, steps: int, seed: int,
     blocks = (list(zip(env.scenarios, (b.stop - b.start for b in env.slices), strict=True))
               if hasattr(env, "slices") else [(trainer.scenario, trainer.E)])
     parts = [collect(sc, cfg, n, seed + k, tc.observation, tc.game, tc.rewards, driven,
-                     trainer.stop, steps, None if drive is None else drive(n))
+                     trainer.stop, steps, None if drive is None else drive(n),
+                     tc.action_repeat)
              for k, (sc, n) in enumerate(blocks)]
     T = min(len(p.done) for p in parts)
     return Demonstrations(*(np.concatenate([getattr(p, f)[:T] for p in parts], axis=1)

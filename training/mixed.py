@@ -34,7 +34,8 @@ class MixedVectorEnv:
 
     def __init__(self, scenarios: Sequence[str | Scenario], num_envs: int, seed: int = 0,
                  observation: str | None = None, game_overrides: dict | None = None,
-                 reward_overrides: dict | None = None, inputs: Sequence[str] = ()):
+                 reward_overrides: dict | None = None, inputs: Sequence[str] = (),
+                 action_repeat: int = 1):
         scs = [load_scenario(s) for s in scenarios]
         if not scs:
             raise ValueError("a mixed env needs at least one scenario")
@@ -49,7 +50,7 @@ class MixedVectorEnv:
         for sc, n in zip(scs, sizes, strict=True):
             self.blocks.append(VectorMatchEnv(
                 sc, n, seed, observation, game_overrides, reward_overrides,
-                env_ids=range(off, off + n), inputs=inputs))
+                env_ids=range(off, off + n), inputs=inputs, action_repeat=action_repeat))
             self.slices.append(slice(off, off + n))
             off += n
         first = self.blocks[0]
@@ -67,6 +68,7 @@ class MixedVectorEnv:
         self.scenario = scs[0]  # what checkpoints record (their observation fits them all)
         self.core = first.core  # reward settings (victory) for the trainer
         self.num_envs = num_envs
+        self.action_repeat = first.action_repeat
         self.num_learners = first.num_learners
         self.learner_seats = first.learner_seats
         self.learner_teams = first.learner_teams

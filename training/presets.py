@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from alphatank.files import read_text
+from alphatank.sim.config import ACTION_REPEAT_MAX
 from alphatank.training.algorithms import ALGORITHMS, get_algorithm
 from alphatank.training.fields import (
     FieldError,
@@ -128,6 +129,9 @@ class TrainConfig:
     num_workers: int = hp(1, "env worker processes", gt=0)
     seed: int = hp(0, "run seed (every random stream derives from it)", ge=0)
     observation: str | None = hp(None, "observation kind (none: the scenario's)")
+    action_repeat: int = hp(1, "ticks each learner action is held for (the other seats act "
+                            "every tick); an env step is that many ticks", ge=1,
+                            le=ACTION_REPEAT_MAX)
     game: dict[str, Any] = hp({}, "GameConfig overrides on top of the scenario's")
     rewards: dict[str, Any] = hp({}, "RewardConfig overrides on top of the scenario's")
     schedule: dict[str, Any] = hp({}, "opponent schedule: kind = none | curriculum | cycle | "

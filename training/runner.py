@@ -134,6 +134,9 @@ class Trainer:
                  action_mask: Callable[[np.ndarray], np.ndarray] | None = None,
                  scenario: Scenario | None = None, env_runners: int = 0,
                  env_runner_timeout_s: float = ENV_RUNNER_TIMEOUT_S):
+        if env is not None and getattr(env, "action_repeat", 1) != cfg.action_repeat:
+            raise ValueError(f"the env holds actions for {getattr(env, 'action_repeat', 1)} "
+                             f"tick(s); the run's action_repeat is {cfg.action_repeat}")
         self.cfg = cfg
         self.action_mask = action_mask
         self.run_dir = Path(run_dir)
@@ -163,6 +166,8 @@ class Trainer:
         # extra per-stream inputs the learners need from the env (Learner.inputs)
         self.inputs = sorted({x for spec in specs for x in learner_class(spec.algo).inputs})
         extra: dict[str, Any] = {"inputs": self.inputs} if self.inputs else {}
+        if cfg.action_repeat != 1:
+            extra["action_repeat"] = cfg.action_repeat
         if cfg.selfplay:
             extra["learner_seats"] = [self.scenario.learner_seats[s] for s in driven]
         if env is not None:
@@ -230,7 +235,7 @@ class Trainer:
             "kind": cfg.observation or self.scenario.observation, "obs_dim": self.D,
             "max_walls": walls, "max_buffs": buffs, "max_debuffs": debuffs,
             "team_flags": self.scenario.team_mode, "seat_learner": seat_learner,
-            "tanks": len(self.scenario.seats)}
+            "tanks": len(self.scenario.seats), "action_repeat": cfg.action_repeat}
         self.global_step = 0
         self.iteration = 0
         self.episodes = 0

@@ -182,6 +182,7 @@ def train_bench(preset: str = "ppo_vs_smart", workers: int = 2, num_envs: int = 
     env = make_vector_env(scenario, num_envs, seed=seed, num_workers=workers,
                           observation=cfg.observation, game_overrides=cfg.game or None,
                           reward_overrides=cfg.rewards or None,
+                          action_repeat=cfg.action_repeat,
                           **({"inputs": trainer.inputs} if trainer.inputs else {}))
     rng = np.random.default_rng(seed)
     actions = rng.integers(0, [3, 3, 2], size=(256, num_envs, env.num_learners, 3))

@@ -40,7 +40,7 @@ DEFAULT_PRESET = "ppo_vs_aggressive"
 SCHEDULES = ("none", "cycle:fixed", "cycle:random", "cycle:adaptive")
 SHAPES = ("linear", "sigmoid")
 NEW_RUN_ONLY = ("preset", "config", "scenario", "map", "schedule", "curriculum", "hp", "ppo",
-                "sac", "init_from")
+                "sac", "init_from", "action_repeat")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -70,6 +70,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                       help="warm start: every learner starts from the PPO learner of this "
                            "checkpoint (a run or checkpoint folder, or agent:NAME, e.g. a 1v1 "
                            "agent for a team run; new inputs start at zero weight)")
+    what.add_argument("--action-repeat", type=int, metavar="K",
+                      help="hold each learner action for K ticks (the bots still act every "
+                           "tick): an env step is K ticks; default 1")
     what.add_argument("--hp", action="append", default=[], metavar="ALGO.FIELD=VALUE,...",
                       help="set a hyperparameter of every learner of that algorithm, e.g. "
                            "ppo.update_epochs=4 (repeatable; see the list below)")
@@ -217,6 +220,11 @@ def build_run(args: argparse.Namespace) -> TrainConfig:
         cfg = dataclasses.replace(cfg, scenario=args.scenario)
     if args.map is not None:
         cfg = dataclasses.replace(cfg, map=args.map)
+    if args.action_repeat is not None:
+        try:
+            cfg = cfg.with_overrides(action_repeat=args.action_repeat)
+        except FieldError as exc:
+            raise ValueError(f"--action-repeat: {exc.problem}") from None
     if args.init_from is not None:
         from alphatank.game.seats import checkpoint_source
         from alphatank.training.checkpoint import CheckpointError, resolve_checkpoint_dir

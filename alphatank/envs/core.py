@@ -39,6 +39,7 @@ from alphatank.game.observe import (
 from alphatank.game.rewards import RewardTracker, as_index
 from alphatank.game.scenarios import Scenario, ScenarioError, Seat, load_scenario
 from alphatank.game.seats import make_controller
+from alphatank.sim.config import ACTION_REPEAT_MAX
 from alphatank.sim.episode import episode_match, episode_seeds, reset_controllers
 from alphatank.sim.match import Match, TickEvents
 from alphatank.sim.policy import NOOP, Policy
@@ -91,19 +92,31 @@ def check_benched(scenario: Scenario, driven: Sequence[int], seats: Sequence[int
     return out
 
 
+def check_action_repeat(k: Any) -> None:
+    """ValueError unless ``k`` is a whole number of ticks in 1..ACTION_REPEAT_MAX."""
+    if isinstance(k, bool) or not isinstance(k, int | np.integer) \
+            or not 1 <= k <= ACTION_REPEAT_MAX:
+        raise ValueError(f"action_repeat must be a whole number of ticks in "
+                         f"1..{ACTION_REPEAT_MAX}, got {k!r}")
+
+
 class MatchSet:
     """``num_envs`` matches of a scenario; the caller drives ``driven`` seats (default:
-    the scenario's learner seats) and the set plays every other seat."""
+    the scenario's learner seats) and the set plays every other seat. With
+    ``action_repeat`` k each :meth:`step` holds the driven seats' actions for k ticks
+    (fewer when the match ends first) while the other seats act every tick."""
 
     def __init__(self, scenario: str | Scenario, num_envs: int = 1, *,
                  observation: str | None = None, game_overrides: Mapping | None = None,
                  reward_overrides: Mapping | None = None,
                  driven: Sequence[int] | None = None,
                  seat_policies: Mapping[int, Policy] | None = None,
-                 env_ids: Sequence[int] | None = None):
+                 env_ids: Sequence[int] | None = None, action_repeat: int = 1):
         sc = self.scenario = load_scenario(scenario)
         if num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
+        check_action_repeat(action_repeat)
+        self.action_repeat = int(action_repeat)
         self.num_envs = E = num_envs
         self.env_ids = list(range(E)) if env_ids is None else list(env_ids)
         self.game = sc.game_config(**dict(game_overrides or {}))
@@ -140,6 +153,7 @@ class MatchSet:
         self.global_state = GlobalState(self.batch, self.teams)
         self.tracker = RewardTracker(self.reward_cfg, self.game, self.teams, E,
                                      rewarded=self.driven)
+        self._acc = np.zeros_like(self.tracker.terms)  # a step's terms over its ticks
         self.matches: list[Match] = []
         self.map_index = np.zeros(E, dtype=np.int64)
         self.controllers: list[list[Policy | None]] = [[None] * n for _ in range(E)]
@@ -325,16 +339,32 @@ class MatchSet:
             self.terminated[e], self.truncated[e] = m.terminated, m.truncated
 
     def step(self, actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """One tick in every env. ``actions``: validated int (E, L, 3). Returns the
-        (E, len(TERMS), n) reward terms of this step and the (E, L, D) observations
+        """One tick in every env (``action_repeat`` ticks, the driven seats' actions
+        held). ``actions``: validated int (E, L, 3). Returns the (E, len(TERMS), n) reward
+        terms of this step, summed over its ticks, and the (E, L, D) observations
         (internal buffers: copy what you keep). ``terminated`` / ``truncated`` hold the
         episode ends."""
         if len(self.matches) < self.num_envs:
             raise RuntimeError("step() before reset() (an unpickled env must be reset)")
+        terms = self._step_all(actions, None)
+        if self.action_repeat > 1:
+            acc = self._acc
+            np.copyto(acc, terms)
+            for _ in range(self.action_repeat - 1):
+                live = ~(self.terminated | self.truncated)
+                if not live.any():
+                    break
+                acc += self._step_all(actions, live) * live[:, None, None]
+            terms = acc
+        return terms, self.obs.build()
+
+    def _step_all(self, actions: np.ndarray, live: np.ndarray | None) -> np.ndarray:
+        """One tick of every env (of the ``live`` ones only, when given); its terms."""
         if len(self.driven):
             self.joint[:, self._driven_sel] = actions
         for e in range(self.num_envs):
-            self._tick(e)
+            if live is None or live[e]:
+                self._tick(e)
         terms = self.tracker.step(slice(None), self.batch, self.matches, self.joint)
         if len(self.driven):  # no driven seat alive: play the match out now
             gone = np.flatnonzero(~np.logical_or.reduce(
@@ -342,7 +372,7 @@ class MatchSet:
             for e in gone.tolist():
                 if not (self.terminated[e] or self.truncated[e]):
                     self._play_out(e)
-        return terms, self.obs.build()
+        return terms
 
     def _play_out(self, e: int) -> None:
         """Finish env ``e``'s match without its (dead) driven seats; adds the rewards of

@@ -132,7 +132,7 @@ class RayVectorMatchEnv(ShardedEnv):
                  seat_policies: Mapping[int, Policy] | None = None,
                  learner_seats: Sequence[int] | None = None, inputs: Sequence[str] = (),
                  max_restarts: int = DEFAULT_MAX_RESTARTS,
-                 step_timeout_s: float = ENV_RUNNER_TIMEOUT_S):
+                 step_timeout_s: float = ENV_RUNNER_TIMEOUT_S, action_repeat: int = 1):
         from alphatank.cluster import connect
 
         if not 1 <= num_runners <= num_envs:
@@ -152,7 +152,7 @@ class RayVectorMatchEnv(ShardedEnv):
         self._ray = ray
         kwargs = self._plan_shards(scenario, num_envs, num_runners, seed, observation,
                                    game_overrides, reward_overrides, seat_policies,
-                                   learner_seats, inputs)
+                                   learner_seats, inputs, action_repeat)
         self.inputs = {name: np.zeros((num_envs, self.num_learners, *shape), np.float32)
                        for name, shape in self.input_shapes.items()}
         self.max_restarts = max_restarts

@@ -94,13 +94,15 @@ class VectorMatchEnv:
                  reward_overrides: dict | None = None, *,
                  seat_policies: Mapping[int, Policy] | None = None,
                  learner_seats: Sequence[int] | None = None,
-                 env_ids: Sequence[int] | None = None, inputs: Sequence[str] = ()):
+                 env_ids: Sequence[int] | None = None, inputs: Sequence[str] = (),
+                 action_repeat: int = 1):
         self.scenario = load_scenario(scenario)
         self.core = MatchSet(self.scenario, num_envs, observation=observation,
                              game_overrides=game_overrides, reward_overrides=reward_overrides,
                              driven=learner_seats, seat_policies=seat_policies,
-                             env_ids=env_ids)
+                             env_ids=env_ids, action_repeat=action_repeat)
         core = self.core
+        self.action_repeat = core.action_repeat
         self.num_envs = num_envs
         self.num_learners = L = len(core.driven)
         self.learner_seats = list(core.driven)
@@ -386,12 +388,15 @@ class ShardedEnv:
     def _plan_shards(self, scenario: str | Scenario, num_envs: int, num_shards: int,
                      seed: int, observation: str | None, game_overrides: dict | None,
                      reward_overrides: dict | None, seat_policies: Mapping[int, Policy] | None,
-                     learner_seats: Sequence[int] | None, inputs: Sequence[str]) -> dict:
+                     learner_seats: Sequence[int] | None, inputs: Sequence[str],
+                     action_repeat: int = 1) -> dict:
         """Describe the batch, set ``_blocks`` ((lo, hi) env ids per shard) and return the
         shards' VectorMatchEnv keyword arguments."""
         probe = VectorMatchEnv(scenario, 1, seed, observation, game_overrides,
                                reward_overrides, seat_policies=seat_policies,
-                               learner_seats=learner_seats, inputs=inputs)
+                               learner_seats=learner_seats, inputs=inputs,
+                               action_repeat=action_repeat)
+        self.action_repeat = probe.action_repeat
         self.scenario = probe.scenario
         self.num_envs, self.num_learners = num_envs, probe.num_learners
         self.learner_seats, self.learner_teams = probe.learner_seats, probe.learner_teams
@@ -403,7 +408,7 @@ class ShardedEnv:
         return {"scenario": self.scenario, "seed": seed, "observation": observation,
                 "game_overrides": game_overrides, "reward_overrides": reward_overrides,
                 "seat_policies": seat_policies, "learner_seats": learner_seats,
-                "inputs": tuple(inputs)}
+                "inputs": tuple(inputs), "action_repeat": self.action_repeat}
 
     def _name(self, idx: tuple[int, ...]) -> str:
         e, slot = idx
@@ -425,13 +430,14 @@ class SubprocVectorMatchEnv(ShardedEnv):
                  reward_overrides: dict | None = None, *, num_workers: int = 2,
                  seat_policies: Mapping[int, Policy] | None = None,
                  learner_seats: Sequence[int] | None = None,
-                 start_method: str = "spawn", inputs: Sequence[str] = ()):
+                 start_method: str = "spawn", inputs: Sequence[str] = (),
+                 action_repeat: int = 1):
         if not 1 <= num_workers <= num_envs:
             raise ValueError(f"num_workers must be in 1..num_envs={num_envs}, "
                              f"got {num_workers}")
         kwargs = self._plan_shards(scenario, num_envs, num_workers, seed, observation,
                                    game_overrides, reward_overrides, seat_policies,
-                                   learner_seats, inputs)
+                                   learner_seats, inputs, action_repeat)
         E, L, D = num_envs, self.num_learners, self.obs_dim
         specs = {"obs": ((E, L, D), "float32"), "final_obs": ((E, L, D), "float32"),
                  "rewards": ((E, L), "float32"), "terminated": ((E,), "bool"),

@@ -104,6 +104,10 @@ def check_fields(obj: Any) -> None:
         object.__setattr__(obj, f.name, value)
 
 
+# Most ticks an agent may hold one action for (action_repeat): one second at 30 Hz.
+ACTION_REPEAT_MAX = 30
+
+
 @dataclass(frozen=True)
 class GameConfig:
     """Rules and physics settings of a match. Ranges (inclusive) keep every setting
