@@ -10,14 +10,17 @@ import torch
 
 from alphatank.game.scenarios import load_scenario
 from alphatank.training.fields import FieldError
+from alphatank.training.hparams import MAPPOConfig
 from alphatank.training.imitate import (
     ImitateConfig,
+    agreement,
     collect,
     discounted_returns,
     fit,
     imitate_config,
     samples,
 )
+from alphatank.training.mappo import MAPPO
 from alphatank.training.ppo import PPO, PPOConfig
 from alphatank.training.presets import LearnerSpec, TrainConfig
 from alphatank.training.runner import Trainer
@@ -61,6 +64,34 @@ def test_cloning_makes_the_learner_act_like_the_bot():
     assert after > 0.5 and after > before + 0.3, (before, after)
     assert stats["action_accuracy"] > 0.5
     np.testing.assert_allclose(ppo.obs_norm.rms.mean, obs[:240].reshape(-1, D).mean(0), atol=1e-4)
+
+
+def test_a_mappo_team_actor_is_cloned_per_seat_and_its_critic_left_to_warm_up():
+    sc = load_scenario("team_vs_def_bot")
+    cfg = ImitateConfig(bot="aggressive", steps=300, epochs=12, minibatch=256)
+    demo = collect(sc, cfg, 4, seed=2, observation="egocentric", game={}, rewards={},
+                   driven=[0, 1])
+    T, E, L, D = demo.obs.shape
+    assert (E, L) == (4, 2) and demo.alive[:, :, 1].any()
+    B = E * L  # streams: (env, seat) pairs, env-major
+    obs, acts = demo.obs.reshape(T, B, D), demo.actions.reshape(T, B, 3)
+    alive, rew = demo.alive.reshape(T, B), demo.rewards.reshape(T, B)
+    done = np.repeat(demo.done, L, axis=1)
+    team = MAPPO(D, B, MAPPOConfig(), seed=0, num_seats=L)
+    critic = [p.detach().clone() for p in team.net.critic.parameters()]
+    held = samples(team, obs[240:], acts[240:], alive[240:], rew[240:], done[240:])
+    before = agreement(team, held)
+    stats = fit(team, samples(team, obs[:240], acts[:240], alive[:240], rew[:240],
+                              done[:240]), cfg, 0)
+    assert stats["action_accuracy"] > 0.5 and "value_loss" not in stats
+    assert agreement(team, held) > before + 0.3, (before, agreement(team, held))
+    assert all(torch.equal(a, b) for a, b in zip(critic, team.net.critic.parameters(),
+                                                 strict=True))
+    # the numpy rollout mirror acts as the fitted network: greedy actions agree
+    x = held.obs[held.alive]
+    seats = (np.arange(len(held.obs)) % L)[held.alive]
+    greedy = team.policy_actions(x, deterministic=True, seat=seats)
+    assert (greedy == held.actions[held.alive]).all(-1).mean() > before + 0.3
 
 
 def test_dagger_games_are_played_by_the_learner_and_labelled_by_the_bot():

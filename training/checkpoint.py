@@ -313,7 +313,8 @@ _PROGRESS_FIELDS = {"global_step": ((int,), (0, None)), "iteration": ((int,), (0
 
 
 def _check_meta(meta: dict[str, Any], meta_file: Path) -> None:
-    """Type-check the meta fields that loading reads; CheckpointError names the field."""
+    """Type-check the meta fields that loading reads (CheckpointError names the field)
+    and fill in the optional ones an older checkpoint lacks with their defaults."""
     def fail(where: str, why: str) -> CheckpointError:
         return CheckpointError(f"{meta_file}: {where}: {why}")
 
@@ -323,8 +324,11 @@ def _check_meta(meta: dict[str, Any], meta_file: Path) -> None:
             raise fail(key, f"must be an object, got {data!r}")
         for name, (kinds, rng) in table.items():
             if name not in data:
-                if key == "observation" and name not in _OPTIONAL_OBSERVATION_FIELDS:
+                if key == "progress":
+                    continue
+                if name not in _OPTIONAL_OBSERVATION_FIELDS:
                     raise fail(f"{key}.{name}", "missing")
+                data[name] = _OPTIONAL_OBSERVATION_FIELDS[name]
                 continue
             _, why = check_value(kinds, data[name], rng)
             if why is not None:
@@ -398,7 +402,7 @@ class NetworkPolicy:
         self.team_flags = bool(observation["team_flags"])
         self.seat_learner = {int(k): v for k, v in observation["seat_learner"].items()}
         self.n_tanks = int(observation["tanks"])
-        self.repeat = int(observation.get("action_repeat", 1))  # ticks an action is held
+        self.repeat = int(observation["action_repeat"])  # ticks an action is held
         self.trained_as = trained_as  # the training scenario, for error messages
         self._seats: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 

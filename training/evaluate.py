@@ -290,7 +290,7 @@ def evaluate_learners(learners: dict[str, Any], observation: dict[str, Any],
         n_env = max(1, min(num_envs, games))
         core = MatchSet(sc, n_env, observation=observation["kind"],
                         game_overrides=game_overrides, reward_overrides=reward_overrides,
-                        driven=driven, action_repeat=observation.get("action_repeat", 1))
+                        driven=driven, action_repeat=observation["action_repeat"])
         if core.obs_dim != int(observation["obs_dim"]):
             raise ValueError(f"{source}: expects {observation['obs_dim']} observation "
                              f"features; scenario {sc.name!r} gives {core.obs_dim} "

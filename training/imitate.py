@@ -13,6 +13,9 @@ and the bot's action. Each PPO learner then fits
 its actor to its seats' actions (cross-entropy on every action head) and its critic to
 the discounted returns of the same games under the run's rewards, normalised as PPO
 normalises them; its observation and return statistics start from the demonstrations.
+A MAPPO learner fits its actor the same way (each seat with its one-hot); its critic reads
+a global state the demonstrations do not record, so ``critic_warmup_updates`` train it
+first.
 The time it takes counts in the run's wall time (``time_limit_s``).
 
 A clone drifts off the bot's states: one wrong turn and it stands where the bot never
@@ -36,7 +39,10 @@ from alphatank.game.scenarios import Scenario
 from alphatank.sim.episode import episode_seeds, reset_controllers
 from alphatank.sim.policy import NOOP
 from alphatank.training.fields import build, hp, validate
+from alphatank.training.mappo import MAPPO
 from alphatank.training.ppo import PPO, evaluate_actions
+
+Clonable = PPO | MAPPO
 
 
 @dataclass(frozen=True)
@@ -175,14 +181,16 @@ class Samples:
             (other.obs, other.actions, other.alive, other.returns), strict=True)))
 
 
-def samples(learner: PPO, obs: np.ndarray, actions: np.ndarray, alive: np.ndarray,
+def samples(learner: Clonable, obs: np.ndarray, actions: np.ndarray, alive: np.ndarray,
             rewards: np.ndarray, done: np.ndarray) -> Samples:
     """Flatten one batch of a learner's streams, ``obs`` (T, B, D), ``actions`` (T, B, 3),
     ``alive`` / ``rewards`` / ``done`` (T, B), B = its num_streams (the order of its
-    rollout streams), folding the observations and rewards into the statistics PPO keeps;
-    the targets are the discounted returns of the scaled rewards, cut at the batch's end."""
-    if not isinstance(learner, PPO) or learner.algo != "ppo":
-        raise ValueError(f"imitate: warm starts PPO learners only, not {learner.algo!r}")
+    rollout streams), folding the observations and rewards into the statistics the
+    learner keeps; the targets are the discounted returns of the scaled rewards, cut at
+    the batch's end."""
+    if not (isinstance(learner, MAPPO) or isinstance(learner, PPO) and learner.algo == "ppo"):
+        raise ValueError(f"imitate: warm starts PPO and MAPPO learners only, not "
+                         f"{learner.algo!r}")
     T, B, D = obs.shape
     flat = obs.reshape(T * B, D)
     learner.obs_norm.update(flat)
@@ -192,14 +200,17 @@ def samples(learner: PPO, obs: np.ndarray, actions: np.ndarray, alive: np.ndarra
                    returns.reshape(T * B).astype(np.float32))
 
 
-def fit(learner: PPO, data: Samples, cfg: ImitateConfig, seed: int,
+def fit(learner: Clonable, data: Samples, cfg: ImitateConfig, seed: int,
         stop: Callable[[], bool] = bool, epochs: int | None = None) -> dict[str, float]:
     """Fit ``learner``'s actor to ``data``'s actions (cross-entropy on every head, live
     samples only) and its critic to the targets for ``epochs`` (default ``cfg.epochs``)
-    passes; stops early when ``stop()`` turns true.
+    passes; stops early when ``stop()`` turns true. A MAPPO critic reads a global state
+    the demonstrations do not hold: only its actor is fitted (its
+    ``critic_warmup_updates`` then train the critic first).
     Returns the last minibatch's losses and the share of live samples whose most likely
     action (every head) is the bot's."""
-    x = torch.from_numpy(learner.obs_norm(data.obs))
+    x = torch.from_numpy(learner.actor_input(data.obs))
+    fit_critic = not isinstance(learner, MAPPO)
     a = torch.from_numpy(data.actions)
     live = torch.from_numpy(data.alive)
     y = torch.from_numpy(data.returns)
@@ -218,22 +229,27 @@ def fit(learner: PPO, data: Samples, cfg: ImitateConfig, seed: int,
             logprob, _ = evaluate_actions(logits, a[idx], net.nvec)
             m = live[idx].float()
             policy_loss = -(logprob * m).sum() / m.sum().clamp(min=1.0)
-            value_loss = 0.5 * ((net.value(x[idx]) - y[idx]) ** 2).mean()
+            loss = policy_loss
+            if fit_critic:
+                value_loss = 0.5 * ((net.value(x[idx]) - y[idx]) ** 2).mean()
+                loss = loss + value_loss
             opt.zero_grad()
-            (policy_loss + value_loss).backward()
+            loss.backward()
             torch.nn.utils.clip_grad_norm_(net.parameters(), learner.cfg.max_grad_norm * 10)
             opt.step()
-            stats = {"policy_loss": policy_loss.item(), "value_loss": value_loss.item()}
-    learner.mirror.sync(net)
+            stats = {"policy_loss": policy_loss.item()}
+            if fit_critic:
+                stats["value_loss"] = value_loss.item()
+    learner.sync_mirror()
     stats["action_accuracy"] = agreement(learner, data)
     return stats
 
 
-def agreement(learner: PPO, data: Samples) -> float:
+def agreement(learner: Clonable, data: Samples) -> float:
     """Share of ``data``'s live samples whose most likely action (every head) is the
     bot's."""
     with torch.no_grad():
-        x = torch.from_numpy(learner.obs_norm(data.obs[data.alive]))
+        x = torch.from_numpy(learner.actor_input(data.obs)[data.alive])
         heads = torch.stack([h.argmax(-1) for h in torch.split(
             learner.net.logits(x), list(learner.net.nvec), dim=-1)], -1)
     return float((heads == torch.from_numpy(data.actions[data.alive])).all(-1)

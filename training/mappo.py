@@ -370,8 +370,7 @@ class MAPPO(OnPolicyPlumbing):
                      else 1.0 - float((live_ret - live_val).var()) / var_y)
         self.updates += 1
         buf.clear()
-        self.actor_np.sync(net.actor)
-        self.critic_np.sync(net.critic)
+        self.sync_mirror()
         mean, std = self.value_norm.stats()
         out = {f"losses/{k}": float(np.mean(v)) for k, v in stats.items() if v}
         out.update({"losses/explained_variance": explained, "losses/epochs": float(epochs_run),
@@ -418,6 +417,16 @@ class MAPPO(OnPolicyPlumbing):
 
     # ---- inference and persistence --------------------------------------------------------
 
+    def actor_input(self, obs: np.ndarray) -> np.ndarray:
+        """The actor's input (normalised obs + seat one-hot, frozen statistics) for raw
+        observations whose rows are (env, seat) pairs, env-major, as the streams are."""
+        return self._actor_input(obs, np.arange(len(obs)) % self.num_seats)
+
+    def sync_mirror(self) -> None:
+        """Copy the torch weights to the numpy rollout mirrors (after editing ``net``)."""
+        self.actor_np.sync(self.net.actor)
+        self.critic_np.sync(self.net.critic)
+
     def policy_actions(self, obs: np.ndarray, deterministic: bool = False,
                        rng: np.random.Generator | None = None, *,
                        seat: int | np.ndarray | None = None) -> np.ndarray:
@@ -458,8 +467,7 @@ class MAPPO(OnPolicyPlumbing):
                 raise ValueError(f"saved MAPPO learner has {key} {int(state[key])}, this one "
                                  f"{getattr(self, key)}")
         self.net.load_state_dict(state["net"])
-        self.actor_np.sync(self.net.actor)
-        self.critic_np.sync(self.net.critic)
+        self.sync_mirror()
         self.obs_norm.load_state_dict(state["obs_norm"])
         self.state_norm.load_state_dict(state["state_norm"])
         self.value_norm.load_state_dict(state["value_norm"])

@@ -409,13 +409,21 @@ class PPO(OnPolicyPlumbing):
         explained = float("nan") if var_y == 0 else 1.0 - float((b_ret - b_values).var()) / var_y
         self.updates += 1
         buf.clear()
-        self.mirror.sync(net)
+        self.sync_mirror()
         out = {f"losses/{k}": float(np.mean(v)) for k, v in stats.items() if v}
         out.update({"losses/explained_variance": explained, "losses/epochs": float(epochs_run),
                     "charts/learning_rate": float(self.optimizer.param_groups[0]["lr"])})
         return out
 
     # ---- inference and persistence ------------------------------------------------------
+
+    def actor_input(self, obs: np.ndarray) -> np.ndarray:
+        """The network's input for raw observations (B, obs_dim), frozen statistics."""
+        return self.obs_norm(obs)
+
+    def sync_mirror(self) -> None:
+        """Copy the torch weights to the numpy rollout mirror (after editing ``net``)."""
+        self.mirror.sync(self.net)
 
     def policy_actions(self, obs: np.ndarray, deterministic: bool = False,
                        rng: np.random.Generator | None = None) -> np.ndarray:
@@ -438,7 +446,7 @@ class PPO(OnPolicyPlumbing):
     def load_state_dict(self, state: dict[str, Any], weights_only: bool = False) -> None:
         """Restore a learner; ``weights_only`` restores just what inference needs."""
         self.net.load_state_dict(state["net"])
-        self.mirror.sync(self.net)
+        self.sync_mirror()
         self.obs_norm.load_state_dict(state["obs_norm"])
         if weights_only:
             return

@@ -147,11 +147,7 @@ def warm_start(learner: Any, src_state: dict[str, Any], src_layout: ObsLayout,
         "mean": torch.from_numpy(d_mean), "var": torch.from_numpy(d_var),
         "count": norm["count"].clone(), "enabled": torch.tensor(enabled),
         "clip": torch.tensor(clip, dtype=torch.float64)})
-    if is_mappo:
-        learner.actor_np.sync(learner.net.actor)
-        learner.critic_np.sync(learner.net.critic)
-    else:
-        learner.mirror.sync(learner.net)
+    learner.sync_mirror()
     return {"mapped": int(si.size), "new": int(dst_layout.size - si.size),
             "dropped": int(dropped.size), "critic": int(not is_mappo)}
 

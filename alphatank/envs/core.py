@@ -39,7 +39,7 @@ from alphatank.game.observe import (
 from alphatank.game.rewards import RewardTracker, as_index
 from alphatank.game.scenarios import Scenario, ScenarioError, Seat, load_scenario
 from alphatank.game.seats import make_controller
-from alphatank.sim.config import ACTION_REPEAT_MAX
+from alphatank.sim.config import ACTION_REPEAT_MAX, check_value
 from alphatank.sim.episode import episode_match, episode_seeds, reset_controllers
 from alphatank.sim.match import Match, TickEvents
 from alphatank.sim.policy import NOOP, Policy
@@ -94,8 +94,7 @@ def check_benched(scenario: Scenario, driven: Sequence[int], seats: Sequence[int
 
 def check_action_repeat(k: Any) -> None:
     """ValueError unless ``k`` is a whole number of ticks in 1..ACTION_REPEAT_MAX."""
-    if isinstance(k, bool) or not isinstance(k, int | np.integer) \
-            or not 1 <= k <= ACTION_REPEAT_MAX:
+    if check_value((int,), k, (1, ACTION_REPEAT_MAX))[1]:
         raise ValueError(f"action_repeat must be a whole number of ticks in "
                          f"1..{ACTION_REPEAT_MAX}, got {k!r}")
 
