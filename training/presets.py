@@ -142,8 +142,9 @@ class TrainConfig:
     init_from: str = hp("", "warm start: every learner starts from the PPO learner of this "
                         "checkpoint (a run or checkpoint folder, or agent:NAME); empty: none")
     imitate: dict[str, Any] = hp({}, "behaviour-cloning warm start before RL: a bot plays "
-                                 "the learner seats and the PPO learners copy it (keys: bot, "
-                                 "steps, epochs, minibatch, learning_rate); empty: none")
+                                 "the learner seats and the PPO and MAPPO learners copy it "
+                                 "(keys: bot, steps, epochs, minibatch, learning_rate, "
+                                 "dagger, dagger_steps, dagger_epochs); empty: none")
     rollout_steps: int = hp(0, "vector steps per iteration (0: the longest rollout any "
                             "learner wants, 512 if none)", ge=0)
     checkpoint_every: int = hp(10, "iterations per checkpoint (0: only at the end)", ge=0)
