@@ -218,7 +218,7 @@ class MAPPO(OnPolicyPlumbing):
 
     def _values(self, state: np.ndarray | None, obs: np.ndarray) -> np.ndarray:
         """Denormalised critic values for raw obs / states with frozen statistics."""
-        x = self._actor_input(obs, self.seat_of[:len(obs)])
+        x = self.actor_input(obs)
         s = self._critic_input(state, x)
         return self.value_norm.denormalize(self.critic_np.forward(s)[:, 0].astype(np.float64))
 
