@@ -69,7 +69,7 @@ def test_presets_keep_the_papers_settings():
         assert [(s.algo, s.seats) for s in row.learners] == [("ppo", (0, 1))]  # shared
     for name in ("team_vs_def_2smart", "team_vs_four_bots"):  # actions held 2 ticks
         assert get_preset(name).action_repeat == 2
-    assert get_preset("team_vs_def_2smart").learners[0].config.hidden == 256  # 43.0 > 39.5%
+    assert get_preset("team_vs_def_2smart").learners[0].config.hidden == 256  # as shipped
     assert get_preset("ppo_vs_smart").action_repeat == 1
     demo = get_preset("demo")
     assert demo.learners[0].config == PPOConfig(num_steps=128, update_epochs=4,
