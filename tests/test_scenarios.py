@@ -189,3 +189,20 @@ def test_human_seats_idle_without_keyboard():
         ms.step(np.ones((1, 2, 3), dtype=np.int64))
     assert np.allclose(ms.matches[0].tank_xy[[0, 3]], start)
     assert (ms.joint[0, [0, 3]] == NOOP).all()
+
+
+@pytest.mark.parametrize("name", ["team_vs_def_smart", "team_vs_four_bots"])
+def test_nododge_scenarios_are_the_paper_rows_with_bots_that_do_not_dodge(name):
+    from alphatank.game.lineup import build_lineup
+
+    full, calm = load_scenario(name), load_scenario(f"{name}_nododge")
+    assert (calm.map, calm.preset, calm.game) == (full.map, full.preset, full.game)
+    assert [(s.controller, s.team, s.bot) for s in calm.seats] == [
+        (s.controller, s.team, s.bot) for s in full.seats]
+    for scenario, dodging in ((full, True), (calm, False)):
+        lineup = build_lineup(scenario, learner="bot:random")
+        lineup.start(3)
+        for seat, ctrl in zip(scenario.seats, lineup.controllers, strict=True):
+            if seat.bot in ("smart", "defensive"):
+                bot = getattr(ctrl, "bot", ctrl)  # weakness wrapper or the bot itself
+                assert (bot.evader is not None) is dodging, (scenario.name, seat.bot)
