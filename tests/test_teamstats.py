@@ -46,3 +46,18 @@ def test_eval_cli_writes_team_stats_beside_json(tmp_path, capsys):
     assert stats[0]["checkpoint"] == "agent:team_vs_def" and stats[0]["games"] == 2
     assert stats[0]["wins"] == rows[0]["wins"]
     assert "every teammate hit an enemy" in capsys.readouterr().out
+
+
+def test_eval_cli_team_stats_of_a_stand_in_bot(tmp_path, capsys):
+    """The smart bot in the learner seats gets the same cooperation figures as an agent
+    (a yardstick), counted from the same games as its win rate."""
+    out = tmp_path / "bot.json"
+    assert main(["eval", "bot:smart", "--scenario", "team_vs_def_bot", "--games", "4",
+                 "--seed", "5", "--num-envs", "2", "--team-stats", "--json", str(out)]) == 0
+    stats = json.loads(out.with_suffix(".team.json").read_text(encoding="utf-8"))
+    rows = json.loads(out.read_text(encoding="utf-8"))
+    assert stats[0]["checkpoint"] == "bot:smart" and stats[0]["games"] == 4
+    assert stats[0]["opponent"] == "B:defensive(w=1)"  # the other side only
+    assert (stats[0]["wins"], stats[0]["losses"]) == (rows[0]["wins"], rows[0]["losses"])
+    assert stats[0]["kills"] >= stats[0]["wins"]  # a win against one bot takes a kill
+    assert "every teammate hit an enemy" in capsys.readouterr().out

@@ -344,11 +344,12 @@ def opponent_seats(base: Scenario, team: str, opp: str | None,
 def evaluate_stand_in(bot: str, scenario: str | Scenario, opponents: Sequence[str | None],
                       games: int = 100, seed: int = 0, team: str | None = None,
                       num_envs: int = 16, weakness: float | None = None,
-                      map_name: str | None = None, label: str | None = None
-                      ) -> list[EvalResult]:
+                      map_name: str | None = None, label: str | None = None,
+                      team_stats: bool = False) -> list[EvalResult]:
     """Bot parity: :func:`evaluate_learners`'s games (same seeds, same opponents) with a
     bot (a seat spec such as ``smart`` or ``smart@0.5``) in every learner seat of
-    ``team``, so an agent's win rate can be set beside a rule-based player's."""
+    ``team``, so an agent's win rate (and, with ``team_stats``, its cooperation figures)
+    can be set beside a rule-based player's."""
     from alphatank.game.lineup import spec_seat
 
     base = with_map(load_scenario(scenario), map_name)
@@ -359,15 +360,20 @@ def evaluate_stand_in(bot: str, scenario: str | Scenario, opponents: Sequence[st
         seats = opponent_seats(base, team, opp, weakness)
         played = [stand if s.team == team and s.controller == "learner" else s for s in seats]
         sc = dataclasses.replace(base, seats=tuple(played))
-        core = MatchSet(sc, max(1, min(num_envs, games)), driven=[])
+        n_env = max(1, min(num_envs, games))
+        core = MatchSet(sc, n_env, driven=[])
         ours = [i for i, s in enumerate(played) if s.team == team]
         theirs = [i for i, s in enumerate(played) if s.team != team]
         res = EvalResult(name=f"{_label(played, {}, ours, True)} vs "
                               f"{_label(played, {}, theirs, False)}",
-                         opponent=opp or core.describe_opponents(0),
+                         opponent=opp or ", ".join(f"{played[i].team}:{played[i].describe()}"
+                                                   for i in theirs),
                          sides=(side_kind(played, ours), side_kind(played, theirs)),
                          agent=label or f"bot:{bot}")
-        results.append(play_games(core, team, games, seed, None, res))
+        watch = TeamWatch(team, n_env, list(sc.teams)) if team_stats else None
+        results.append(play_games(core, team, games, seed, None, res, watch))
+        if watch is not None:
+            res.team_stats = watch.summary()
     return results
 
 

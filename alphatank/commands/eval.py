@@ -71,13 +71,11 @@ def run(args: argparse.Namespace) -> int:
                 if args.scenario is None:
                     raise InputError(f"{arg}: a bot has no scenario of its own; give "
                                      "--scenario (its learner seats are played by the bot)")
-                if args.team_stats:
-                    raise InputError(f"{arg}: --team-stats measures checkpoints only")
                 results += evaluate_stand_in(arg[4:], args.scenario, opponents,
                                              games=args.games, seed=args.seed,
                                              team=args.team, num_envs=args.num_envs,
                                              weakness=args.weakness, map_name=args.map,
-                                             label=arg)
+                                             label=arg, team_stats=args.team_stats)
                 continue
             results += evaluate_checkpoint(checkpoint_source(arg), opponents,
                                            games=args.games, seed=args.seed,
