@@ -348,7 +348,6 @@ class Evader:
         can_hit = match.world.can_hit[:, seat].copy()
         can_hit[seat] = False
         self.shooters = [int(k) for k in np.flatnonzero(can_hit)]
-        self.shooter_mask = can_hit
         # Runs (lo, hi) of the bullet slots of those tanks (slot owners are fixed for a
         # world's lifetime).
         slots = np.flatnonzero(can_hit[match.bullet_owner])

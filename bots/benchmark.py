@@ -10,7 +10,6 @@ from alphatank.bots.registry import BOT_NAMES, make_bot
 from alphatank.sim.config import GameConfig
 from alphatank.sim.episode import start_episode
 from alphatank.sim.mapspec import load_map
-from alphatank.sim.match import Match
 
 
 def bot_costs(map_name: str = "maze", ticks: int = 2000, seed: int = 0,
@@ -43,18 +42,3 @@ def bot_costs(map_name: str = "maze", ticks: int = 2000, seed: int = 0,
         out[name] = float(np.median(samples)) / 1000.0
     return out
 
-
-def physics_tick_us(map_name: str = "maze", ticks: int = 2000, seed: int = 0) -> float:
-    """Median µs of one bare 1v1 match tick (driving and firing, no bots) for comparison."""
-    spec = load_map(map_name)
-    match = Match(GameConfig(), spec, ["A", "B"], seed=seed)
-    rng = np.random.default_rng(seed)
-    samples = np.empty(ticks, dtype=np.int64)
-    for k in range(ticks):
-        if match.done:
-            match.reset(seed + k)
-        actions = rng.integers((0, 0, 0), (3, 3, 2), size=(2, 3))
-        t0 = time.perf_counter_ns()
-        match.step(actions)
-        samples[k] = time.perf_counter_ns() - t0
-    return float(np.median(samples)) / 1000.0

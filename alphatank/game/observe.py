@@ -569,7 +569,6 @@ class ObservationBuilder:
             self.v_tank[..., self.at["tank.team"]] = self.other_team
         if self.kind == "paper":
             self.v_wall = self._block("wall", self.batch.walls.shape[1])
-            self.v_zone = self.out[:, :, lay["zone"]]
         else:
             self.v_ray = self.out[:, :, lay["ray"]]
             self._ego_tables()
@@ -653,7 +652,7 @@ class ObservationBuilder:
         for k, size in parts.items():
             start[k] = S
             S += size
-        self._src = src = np.zeros((E, S))
+        src = np.zeros((E, S))
         # x, y, vx, vy of tanks then bullets (tank_table / bullet_table fields)
         body = src[:, start["P"]:start["T"]].reshape(E, n + nb, 4)
         self._body_xy, self._body_v = body[..., 0:2], body[..., 2:4]

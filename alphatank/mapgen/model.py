@@ -15,7 +15,6 @@ from alphatank.sim.mapspec import (
     HEADER_KEYS,
     MapError,
     MapSpec,
-    map_text,
     parse_map,
 )
 
@@ -42,10 +41,6 @@ class EditorModel:
         grid = np.full((rows, cols), ".", dtype="<U1")
         grid[[0, -1], :] = grid[:, [0, -1]] = "#"
         return cls(grid, {"name": name} if name else {})
-
-    @classmethod
-    def from_spec(cls, spec: MapSpec) -> EditorModel:
-        return cls.from_text(map_text(spec), spec.source)
 
     @classmethod
     def from_text(cls, text: str, source: str = "<string>") -> EditorModel:

@@ -227,13 +227,6 @@ class Match:
         self.world.read_state()
         self._update_zones(report=False)
 
-    def place_bullet(self, owner: int, x: float, y: float, angle: float) -> int:
-        """Put a bullet of ``owner`` anywhere (for set-ups and tests); returns its slot."""
-        b = self.world.spawn_bullet(owner, x, y, angle)
-        if b >= 0:
-            self.bullets_alive[owner] += 1
-        return b
-
     def bullet_limit(self, tank: int) -> int:
         if self.in_debuff[tank]:
             return self.cfg.debuff_max_bullets
