@@ -11,6 +11,7 @@ import pytest
 from alphatank.bots import BOT_NAMES
 from alphatank.envs.core import MatchSet
 from alphatank.envs.vector import VectorMatchEnv
+from alphatank.game.lineup import build_lineup
 from alphatank.game.scenarios import (
     NoopPolicy,
     ScenarioError,
@@ -193,8 +194,6 @@ def test_human_seats_idle_without_keyboard():
 
 @pytest.mark.parametrize("name", ["team_vs_def_smart", "team_vs_four_bots"])
 def test_nododge_scenarios_are_the_paper_rows_with_bots_that_do_not_dodge(name):
-    from alphatank.game.lineup import build_lineup
-
     full, calm = load_scenario(name), load_scenario(f"{name}_nododge")
     assert (calm.map, calm.preset, calm.game) == (full.map, full.preset, full.game)
     assert [(s.controller, s.team, s.bot) for s in calm.seats] == [
