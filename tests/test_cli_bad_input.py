@@ -296,6 +296,9 @@ CASES = [
     ("eval-seed", ["eval", "{run}", "--seed", "x"], ["--seed", "'x'"]),
     ("eval-scenario", ["eval", "{run}", "--scenario", "{binary_toml}"], ["UTF-8"]),
     ("eval-agent", ["eval", "agent:nosuch"], ["unknown agent 'nosuch'"]),
+    ("eval-agent-scenario", ["eval", "agent:ppo_vs_smart", "--scenario", "team_vs_bot"],
+     ["expects 236 observation features", "its training scenario 'vs_smart'",
+      "paper observation"]),
     ("eval-checkpoint-empty", ["eval", "checkpoint:"], ["needs the checkpoint folder"]),
     # train
     ("train-resume-missing", ["train", "--resume", "{dir}/runs/nosuch"],

@@ -195,6 +195,16 @@ class Checkpoint:
     def obs_dim(self) -> int:
         return int(self.meta["observation"]["obs_dim"])
 
+    @property
+    def trained_as(self) -> str:
+        """Its training scenario for error messages: name, teams and observation kind."""
+        sc = self.meta.get("scenario", {})
+        teams = [str(t.get("team", "?")) for t in sc.get("seats", [])]
+        if not teams:
+            return ""
+        return (f"its training scenario {sc.get('name', '?')!r} (teams {teams}, "
+                f"{self.meta['observation']['kind']} observation)")
+
     def learner_names(self) -> list[str]:
         return [d["name"] for d in self.meta["learners"]]
 
@@ -507,12 +517,8 @@ class CheckpointPolicy(NetworkPolicy):
 
     def __init__(self, ckpt: Checkpoint, learner: str | None = None,
                  deterministic: bool = False):
-        sc = ckpt.meta.get("scenario", {})
-        teams = [str(t.get("team", "?")) for t in sc.get("seats", [])]
-        trained = (f"its training scenario {sc.get('name', '?')!r} (teams {teams})"
-                   if teams else "")
         super().__init__(ckpt.meta["observation"], ckpt.learner_names(), learner,
-                         deterministic, str(ckpt.path), trained)
+                         deterministic, str(ckpt.path), ckpt.trained_as)
         self.ckpt = ckpt
         wanted = [learner] if learner is not None else ckpt.learner_names()
         self.learners = {name: ckpt.load_learner(name, weights_only=True) for name in wanted}

@@ -258,7 +258,7 @@ def evaluate_checkpoint(checkpoint: str | Path | Checkpoint, opponents: Sequence
         with_map(base, map_name), opponents, games=games, seed=seed, team=team,
         deterministic=deterministic, num_envs=num_envs, weakness=weakness,
         game_overrides=tc.game, reward_overrides=tc.rewards, source=str(ckpt.path),
-        team_stats=team_stats)
+        team_stats=team_stats, trained_as=ckpt.trained_as)
     for r in results:
         r.agent = label if label is not None else str(checkpoint if not isinstance(
             checkpoint, Checkpoint) else checkpoint.path)
@@ -271,14 +271,15 @@ def evaluate_learners(learners: dict[str, Any], observation: dict[str, Any],
                       deterministic: bool = False, num_envs: int = 16,
                       weakness: float | None = None, game_overrides: dict | None = None,
                       reward_overrides: dict | None = None, source: str = "learners",
-                      team_stats: bool = False) -> list[EvalResult]:
+                      team_stats: bool = False, trained_as: str = "") -> list[EvalResult]:
     """One :class:`EvalResult` per opponent. The evaluated ``team`` (default: the team of
     the first learner seat) is played by ``learners`` (per seat as in training). Opponent
     ``None`` keeps the scenario's own opponents (other learner seats are played by their
     learners too); a bot name puts that bot, at ``weakness`` (default 1), in every seat
     outside the team. Results do not depend on ``num_envs`` (module docstring).
     ``team_stats``: each result's ``team_stats`` holds the team's cooperation figures of
-    the same games (:mod:`~alphatank.training.teamstats`)."""
+    the same games (:mod:`~alphatank.training.teamstats`). ``trained_as`` names what the
+    learners were trained on, for the error when the scenario does not fit them."""
     seat_learner = {int(k): v for k, v in observation["seat_learner"].items()}
     first = next(iter(learners))
     team = learner_team(base, team)
@@ -294,7 +295,8 @@ def evaluate_learners(learners: dict[str, Any], observation: dict[str, Any],
         if core.obs_dim != int(observation["obs_dim"]):
             raise ValueError(f"{source}: expects {observation['obs_dim']} observation "
                              f"features; scenario {sc.name!r} gives {core.obs_dim} "
-                             f"(different map walls, tank count or observation kind)")
+                             f"(different map walls, tank count or observation kind)"
+                             + (f"; it fits {trained_as}" if trained_as else ""))
         groups: dict[str, list[int]] = {}
         for col, seat in enumerate(driven):
             groups.setdefault(seat_learner.get(seat, first), []).append(col)
