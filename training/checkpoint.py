@@ -457,7 +457,9 @@ class NetworkPolicy:
         if self.kind == "paper" and need > walls:
             raise CheckpointError(
                 f"{self.source}: trained with room for {walls} wall rectangles in its "
-                f"'paper' observation; map {match.spec.name!r} has {need}")
+                f"'paper' observation; map {match.spec.name!r} has {need}"
+                + (f" (it fits maps like those of {self.trained_as})" if self.trained_as
+                   else ""))
         if nb > buffs or nd > debuffs:
             raise CheckpointError(
                 f"{self.source}: trained with room for {buffs} buff and {debuffs} "
