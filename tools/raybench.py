@@ -1,15 +1,16 @@
 """Env-runner throughput on Ray against local worker processes, Ray's start-up, and what
 one PPO learner absorbs (docs/distributed.md).
 
-    python tools/raybench.py [--envs 16] [--steps 400] [--repeats 3] [--json FILE]
+    python tools/raybench.py [--envs 16] [--steps 400] [--repeats 3] [--counts 1,2]
+                             [--json FILE]
 
 Env steps/s (random actions drawn in advance, seeded; no learner) for: one process,
-``--workers 1/2`` (SubprocVectorMatchEnv) and ``--env-runners 1/2`` (RayVectorMatchEnv
-on a local instance), measured round-robin ``--repeats`` times (medians); Ray's start-up
-(``ray.init`` of a local instance) and the first runners' start; PPO updates/s of the
-shipped ``ppo_vs_aggressive`` learner (128 steps x 16 envs x 4 epochs) and of Table 7 as
-is (512 steps x 60 epochs) on one thread; training env steps/s of that run with N
-worker processes and N env runners.
+``--workers N`` (SubprocVectorMatchEnv) and ``--env-runners N`` (RayVectorMatchEnv on a
+local instance) for each N of ``--counts``, measured round-robin ``--repeats`` times
+(medians); Ray's start-up (``ray.init`` of a local instance) and the first runners'
+start; PPO updates/s of the shipped ``ppo_vs_aggressive`` learner (128 steps x 16 envs x
+4 epochs) and of Table 7 as is (512 steps x 60 epochs) on one thread; training env
+steps/s of that run with N worker processes and N env runners.
 """
 
 from __future__ import annotations
@@ -78,10 +79,10 @@ def learner_rate(num_envs: int, repeats: int, **ppo: int) -> dict[str, float]:
             "env_steps_per_update": steps, "absorbs_env_steps_per_s": steps / (upd + act_s)}
 
 
-def training_rate(iterations: int, tmp: str) -> dict[str, float]:
+def training_rate(iterations: int, tmp: str, counts: list[int]) -> dict[str, float]:
     """Training env steps/s (median over the iterations after the first) of the shipped
     ``ppo_vs_aggressive`` run (16 envs, PPO 128 x 4) with N worker processes and with N
-    env runners, N = 1, 2."""
+    env runners, N in ``counts``."""
     import dataclasses
 
     from alphatank.training.presets import get_preset
@@ -89,7 +90,7 @@ def training_rate(iterations: int, tmp: str) -> dict[str, float]:
 
     base = get_preset("ppo_vs_aggressive")
     out = {}
-    for n in (1, 2):
+    for n in counts:
         for ray in (False, True):
             cfg = dataclasses.replace(base, name=f"bench-{n}-{ray}", num_workers=n,
                                       total_steps=iterations * 128 * base.num_envs,
@@ -140,25 +141,29 @@ def main() -> None:
     p.add_argument("--no-learner", action="store_true", help="skip the learner rates")
     p.add_argument("--head", action="store_true",
                    help="also time `ray start --head` and a driver joining it")
+    p.add_argument("--counts", default="1,2",
+                   help="comma-separated numbers of worker processes and of env runners")
     p.add_argument("--json", metavar="FILE")
     args = p.parse_args()
+    counts = [int(n) for n in args.counts.split(",")]
 
     from alphatank.cluster import connect
     from alphatank.envs.ray_vector import RayVectorMatchEnv
     from alphatank.envs.vector import SubprocVectorMatchEnv, VectorMatchEnv
 
     acts = actions(args.envs, args.steps)
-    conn = connect(num_cpus=3)  # logical CPUs: 1 + 2 runners live at once, one steps
+    # logical CPUs: every runner lives at once (only one set steps at a time)
+    conn = connect(num_cpus=sum(counts) + 1)
     out: dict[str, float | dict] = {"ray_start_s": conn.seconds}
-    t0 = time.perf_counter()
-    envs = {"process": VectorMatchEnv(SCENARIO, args.envs, seed=0),
-            "workers=1": SubprocVectorMatchEnv(SCENARIO, args.envs, num_workers=1),
-            "workers=2": SubprocVectorMatchEnv(SCENARIO, args.envs, num_workers=2)}
-    t1 = time.perf_counter()
-    envs["ray runners=1"] = RayVectorMatchEnv(SCENARIO, args.envs, num_runners=1)
-    out["first_runner_start_s"] = time.perf_counter() - t1
-    envs["ray runners=2"] = RayVectorMatchEnv(SCENARIO, args.envs, num_runners=2)
-    out["workers_start_s"] = t1 - t0
+    envs = {"process": VectorMatchEnv(SCENARIO, args.envs, seed=0)}
+    for n in counts:
+        t0 = time.perf_counter()
+        envs[f"workers={n}"] = SubprocVectorMatchEnv(SCENARIO, args.envs, num_workers=n)
+        out.setdefault("workers_start_s", time.perf_counter() - t0)
+    for n in counts:
+        t0 = time.perf_counter()
+        envs[f"ray runners={n}"] = RayVectorMatchEnv(SCENARIO, args.envs, num_runners=n)
+        out.setdefault("first_runner_start_s", time.perf_counter() - t0)
     rates: dict[str, list[float]] = {k: [] for k in envs}
     try:
         for _ in range(args.repeats):
@@ -171,20 +176,20 @@ def main() -> None:
     med = {k: statistics.median(v) for k, v in rates.items()}
     out["steps_per_s"] = med
     out["ray_overhead"] = {n: 1.0 - med[f"ray runners={n}"] / med[f"workers={n}"]
-                           for n in (1, 2)}
+                           for n in counts}
     if not args.no_learner:
         out["learner"] = learner_rate(args.envs, args.repeats)
         out["learner_table7"] = learner_rate(args.envs, 1, num_steps=512, update_epochs=60)
     if args.train_iterations:
         import tempfile
 
-        conn = connect(num_cpus=2)
+        conn = connect(num_cpus=max(counts))
         with tempfile.TemporaryDirectory() as tmp:
-            out["train_steps_per_s"] = train = training_rate(args.train_iterations, tmp)
+            out["train_steps_per_s"] = train = training_rate(args.train_iterations, tmp, counts)
         conn.close()
         for name, val in train.items():
             print(f"training, {name:14s} {val:6.0f} env steps/s")
-        for n in (1, 2):
+        for n in counts:
             print(f"training: ray overhead with {n} runner(s) vs {n} worker(s): "
                   f"{100 * (1 - train[f'ray runners={n}'] / train[f'workers={n}']):+.1f}%")
     for name, val in med.items():
@@ -193,7 +198,7 @@ def main() -> None:
     for n, o in out["ray_overhead"].items():
         print(f"ray overhead with {n} runner(s) vs {n} worker(s): {100 * o:+.1f}%")
     print(f"ray start (local instance): {out['ray_start_s']:.1f} s; first runner up in "
-          f"{out['first_runner_start_s']:.1f} s (2 worker processes: "
+          f"{out['first_runner_start_s']:.1f} s ({counts[0]} worker process(es): "
           f"{out['workers_start_s']:.1f} s)")
     for lr in (out[k] for k in ("learner", "learner_table7") if k in out):
         print(f"PPO learner {lr['num_steps']} steps x {lr['update_epochs']} epochs: "
