@@ -48,6 +48,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="env worker processes of --train (default: 2)")
     p.add_argument("--train-envs", type=positive_int, default=32, metavar="N",
                    help="matches stepped together in --train (default: 32)")
+    p.add_argument("--train-threads", type=positive_int, default=1, metavar="N",
+                   help="torch threads of the --train run's learner (default: 1; more help "
+                        "only with idle cores: the env workers wait during each update)")
     p.add_argument("--sac", action="store_true",
                    help="also measure one SAC gradient step against its bare-torch floor, and "
                         "SAC training steps/s per update-to-data ratio")
@@ -134,7 +137,8 @@ def run(args: argparse.Namespace) -> int:
     if args.train:
         from alphatank.commands.benchtrain import train_bench
 
-        results["train"] = train_bench(args.train_preset, args.train_workers, args.train_envs)
+        results["train"] = train_bench(args.train_preset, args.train_workers, args.train_envs,
+                                       torch_threads=args.train_threads)
     if args.sac:
         from alphatank.commands.benchtrain import sac_step_bench, sac_train_bench
 
