@@ -204,6 +204,46 @@ def test_first_update_has_the_same_weights_as_with_local_workers(cluster, tmp_pa
     assert weights(alone) == weights(local)
 
 
+def test_fragments_on_env_runners_match_worker_processes_and_a_lost_one(cluster):
+    from test_fragments import frozen
+
+    kw = {"game_overrides": {"max_steps": 20}}
+    rv = RayVectorMatchEnv("team_vs_bot", 5, seed=3, num_runners=2, **kw)
+    sv = SubprocVectorMatchEnv("team_vs_bot", 5, seed=3, num_workers=2, **kw)
+    policy = frozen(sv)
+
+    def same_fragments(seed: int) -> None:
+        a = rv.rollout(policy, rv.reset(seed), 30)
+        b = sv.rollout(policy, sv.reset(seed), 30)
+        for name in ("obs", "actions", "logprobs", "values", "rewards", "terminated",
+                     "truncated", "bootstrap", "next_obs"):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+        assert [(e["step"], e["env"]) for e in a.episodes] == \
+            [(e["step"], e["env"]) for e in b.episodes] and len(a.episodes) >= 5
+
+    try:
+        same_fragments(7)
+        os.kill(ray.get(rv.runners[0].pid.remote()), signal.SIGKILL)
+        with pytest.raises(RolloutLost, match=r"env runner 0 \(envs 0-1\) was lost"):
+            rv.rollout(policy, np.zeros((5, 2, rv.obs_dim), np.float32), 30)
+        assert rv.lost_rollouts == 1
+        same_fragments(8)  # after a reset the restarted runner plays the same games
+    finally:
+        rv.close()
+        sv.close()
+
+
+def test_a_run_in_fragments_on_env_runners_is_the_one_on_worker_processes(cluster, tmp_path):
+    local = Trainer(tiny_cfg("local", iterations=2, num_workers=2), tmp_path / "local",
+                    progress=False, fragments=True)
+    local.train()
+    remote = Trainer(tiny_cfg("ray", iterations=2), tmp_path / "ray", progress=False,
+                     env_runners=2, fragments=True)
+    remote.train()
+    assert remote.learners["ppo"].updates == 2
+    assert weights(local) == weights(remote)
+
+
 def test_a_hung_env_runner_is_killed_and_restarted(cluster):
     env = RayVectorMatchEnv("vs_aggressive", 4, seed=3, num_runners=2, step_timeout_s=1.5)
     try:

@@ -82,7 +82,8 @@ def learner_rate(num_envs: int, repeats: int, **ppo: int) -> dict[str, float]:
 def training_rate(iterations: int, tmp: str, counts: list[int]) -> dict[str, float]:
     """Training env steps/s (median over the iterations after the first) of the shipped
     ``ppo_vs_aggressive`` run (16 envs, PPO 128 x 4) with N worker processes and with N
-    env runners, N in ``counts``."""
+    env runners, N in ``counts``, each acting step by step on the learner and in rollout
+    fragments (``--fragments``)."""
     import dataclasses
 
     from alphatank.training.presets import get_preset
@@ -91,14 +92,17 @@ def training_rate(iterations: int, tmp: str, counts: list[int]) -> dict[str, flo
     base = get_preset("ppo_vs_aggressive")
     out = {}
     for n in counts:
-        for ray in (False, True):
-            cfg = dataclasses.replace(base, name=f"bench-{n}-{ray}", num_workers=n,
-                                      total_steps=iterations * 128 * base.num_envs,
-                                      wandb="disabled", checkpoint_every=0, time_limit_s=0.0)
-            tr = Trainer(cfg, f"{tmp}/{cfg.name}", progress=False, env_runners=n if ray else 0)
-            tr.train()
-            key = f"{'ray runners' if ray else 'workers'}={n}"
-            out[key] = statistics.median(h["charts/sps"] for h in tr.history[1:])
+        for fragments in (False, True):
+            for ray in (False, True):
+                cfg = dataclasses.replace(base, name=f"bench-{n}-{ray}-{fragments}",
+                                          num_workers=n, wandb="disabled", checkpoint_every=0,
+                                          total_steps=iterations * 128 * base.num_envs,
+                                          time_limit_s=0.0)
+                tr = Trainer(cfg, f"{tmp}/{cfg.name}", progress=False,
+                             env_runners=n if ray else 0, fragments=fragments)
+                tr.train()
+                key = f"{'ray runners' if ray else 'workers'}={n}{' fragments' * fragments}"
+                out[key] = statistics.median(h["charts/sps"] for h in tr.history[1:])
     return out
 
 
@@ -190,8 +194,10 @@ def main() -> None:
         for name, val in train.items():
             print(f"training, {name:14s} {val:6.0f} env steps/s")
         for n in counts:
-            print(f"training: ray overhead with {n} runner(s) vs {n} worker(s): "
-                  f"{100 * (1 - train[f'ray runners={n}'] / train[f'workers={n}']):+.1f}%")
+            for mode in ("", " fragments"):
+                share = 1 - train[f"ray runners={n}{mode}"] / train[f"workers={n}"]
+                print(f"training: ray overhead with {n} runner(s){mode} vs {n} worker(s): "
+                      f"{100 * share:+.1f}%")
     for name, val in med.items():
         print(f"{name:14s} {val:8.0f} env steps/s  (runs: "
               f"{', '.join(f'{x:.0f}' for x in rates[name])})")

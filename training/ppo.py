@@ -322,6 +322,40 @@ class PPO(OnPolicyPlumbing):
     def ready(self) -> bool:
         return self.buffer.full
 
+    # ---- rollouts acted elsewhere (fragments) ------------------------------------------
+
+    def frozen(self) -> tuple[NumpyActorCritic, ObsNormalizer]:
+        """Copies of the acting network and observation statistics, for a rollout acted
+        away from the learner (:mod:`alphatank.training.fragments`)."""
+        return copy.deepcopy(self.mirror), copy.deepcopy(self.obs_norm)
+
+    def ingest(self, obs: np.ndarray, actions: np.ndarray, logprobs: np.ndarray,
+               values: np.ndarray, rewards: np.ndarray, terminated: np.ndarray,
+               truncated: np.ndarray, bootstrap: np.ndarray, active: np.ndarray | None) -> None:
+        """Record rows acted by copies of :meth:`frozen` taken at the rollout's start:
+        (T, B, ...) arrays of raw observations and what followed (``bootstrap``: V of
+        the final observation of a time-limit cut). The observation statistics take the
+        rows in after them (the copies acted with the statistics of the start)."""
+        buf = self.buffer
+        row = buf.np
+        if buf.anchor_logits is not None or buf.masks is not None:
+            raise RuntimeError("rollouts acted elsewhere carry no anchor logits or action "
+                               "masks")
+        for t in range(obs.shape[0]):
+            s = buf.step
+            row["obs"][s] = self.obs_norm(obs[t])
+            row["actions"][s] = actions[t]
+            row["logprobs"][s] = logprobs[t]
+            row["values"][s] = values[t]
+            row["rewards"][s] = self.ret_norm(rewards[t], terminated[t] | truncated[t])
+            row["terminated"][s] = terminated[t]
+            row["truncated"][s] = truncated[t]
+            row["bootstrap"][s] = bootstrap[t]
+            row["active"][s] = True if active is None else active[t]
+            buf.step += 1
+        for t in range(obs.shape[0]):
+            self.obs_norm.update(obs[t])
+
     # ---- learning ---------------------------------------------------------------------
 
     def update(self, next_obs: np.ndarray) -> dict[str, float]:

@@ -59,6 +59,7 @@ from alphatank.training.checkpoint import (
     save_checkpoint,
     scenario_to_dict,
 )
+from alphatank.training.fragments import FrozenLearners, fragment_problems, ingest_fragment
 from alphatank.training.imitate import imitate, imitate_config
 from alphatank.training.learners import learner_class, make_learner
 from alphatank.training.logging import RunLogger
@@ -123,6 +124,11 @@ class Trainer:
     lost_rollouts`` in the log); so does one that does not answer a step within
     ``env_runner_timeout_s`` (it is killed and restarted).
 
+    ``fragments``: each iteration is acted by the env's shards with frozen copies of the
+    learners, one call per shard (:mod:`alphatank.training.fragments`; PPO learners
+    only); reproducible for the same seed and number of shards, not step-equal to acting
+    on the learner.
+
     ``action_mask``: optional hook ``f(obs (E, L, D)) -> bool (E, L, 8)`` over the
     concatenated choices (rotate 3, move 3, fire 2); learners that take masks (PPO) never
     sample a masked choice and their losses use the same masks.
@@ -133,7 +139,7 @@ class Trainer:
                  wandb_id: str | None = None,
                  action_mask: Callable[[np.ndarray], np.ndarray] | None = None,
                  scenario: Scenario | None = None, env_runners: int = 0,
-                 env_runner_timeout_s: float = ENV_RUNNER_TIMEOUT_S):
+                 env_runner_timeout_s: float = ENV_RUNNER_TIMEOUT_S, fragments: bool = False):
         if env is not None and getattr(env, "action_repeat", 1) != cfg.action_repeat:
             raise ValueError(f"the env holds actions for {getattr(env, 'action_repeat', 1)} "
                              f"tick(s); the run's action_repeat is {cfg.action_repeat}")
@@ -183,6 +189,7 @@ class Trainer:
                 self.scenario, cfg.num_envs, seed=cfg.seed, num_workers=cfg.num_workers,
                 observation=cfg.observation, game_overrides=cfg.game or None,
                 reward_overrides=cfg.rewards or None, **extra)
+        self.fragments = fragments
         try:
             self._setup(specs, resume, wandb_id)
         except BaseException:
@@ -213,6 +220,12 @@ class Trainer:
         if any(self.rollout_steps % n for n in wants.values()):
             raise ValueError(f"rollout_steps {self.rollout_steps} must be a multiple of every "
                              f"learner's rollout length ({wants})")
+        problems = fragment_problems(self.learners, self.rollout_steps,
+                                     masks=self.action_mask is not None,
+                                     selfplay=bool(cfg.selfplay),
+                                     env=env) if self.fragments else []
+        if problems:
+            raise ValueError("fragments: " + "; ".join(problems))
         steps_per_iter = self.rollout_steps * self.E
         self.total_iterations = max(1, math.ceil(cfg.total_steps / steps_per_iter))
         for lr in self.learners.values():
@@ -492,6 +505,28 @@ class Trainer:
             metrics.update(sp.metrics())
         return obs, metrics
 
+    def _collect_fragment(self, obs: np.ndarray) -> tuple[np.ndarray, dict[str, float]]:
+        """One iteration acted by the env's shards with frozen copies of the learners
+        (:mod:`alphatank.training.fragments`), then each learner's update; a stop during
+        the rollout drops it."""
+        policy = FrozenLearners.of(self.learners, self.cols,
+                                   derive_seed(self.cfg.seed, self.iteration, 17))
+        frag = self.env.rollout(policy, obs, self.rollout_steps)
+        if self.stop():
+            return obs, {}
+        s0 = self.global_step
+        for ep in frag.episodes:  # in step order, as the step loop records them
+            self._record_episode(ep, frag.rewards[ep["step"]],
+                                 self.schedule.victory_scale(s0 + ep["step"] * self.E))
+        ingest_fragment(frag, self.learners, self.cols, self.alive_col)
+        self.global_step += frag.steps * self.E
+        metrics: dict[str, float] = {}
+        for name, learner in self.learners.items():
+            nxt = frag.next_obs[:, self.cols[name]].reshape(-1, self.D)
+            for key, val in learner.update(nxt).items():
+                metrics[f"{key}/{name}" if len(self.learners) > 1 else key] = val
+        return frag.next_obs, metrics
+
     def _window_metrics(self) -> dict[str, float]:
         m: dict[str, float] = {}
         multi = len(self.learners) > 1
@@ -580,7 +615,8 @@ class Trainer:
             sched = self.schedule.apply(self.env, self.global_step)
             t0, s0 = time.perf_counter(), self.global_step
             try:
-                obs, metrics = self._collect(obs)
+                obs, metrics = (self._collect_fragment(obs) if self.fragments
+                                else self._collect(obs))
                 complete = self.global_step - s0 == self.rollout_steps * self.E
             except StopRequested:  # a fixed-rollout learner's update was cut short
                 metrics, complete = {}, False
@@ -693,7 +729,7 @@ class Trainer:
 
 def resume_trainer(path: str | Path, progress: bool = True, env: Any = None,
                    env_runners: int = 0, env_runner_timeout_s: float = ENV_RUNNER_TIMEOUT_S,
-                   **overrides: Any) -> Trainer:
+                   fragments: bool = False, **overrides: Any) -> Trainer:
     """A :class:`Trainer` continuing the run saved at ``path`` (checkpoint or run dir);
     ``overrides`` change run settings such as ``total_steps``; ``env_runners`` and
     ``env_runner_timeout_s``: as for :class:`Trainer`."""
@@ -701,4 +737,5 @@ def resume_trainer(path: str | Path, progress: bool = True, env: Any = None,
     cfg = ckpt.train_config.with_overrides(**overrides)
     return Trainer(cfg, ckpt.path.parent.parent, env=env, resume=ckpt, progress=progress,
                    wandb_id=ckpt.meta.get("wandb_id"), scenario=ckpt.scenario,
-                   env_runners=env_runners, env_runner_timeout_s=env_runner_timeout_s)
+                   env_runners=env_runners, env_runner_timeout_s=env_runner_timeout_s,
+                   fragments=fragments)

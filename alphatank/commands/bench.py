@@ -48,6 +48,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="env worker processes of --train (default: 2)")
     p.add_argument("--train-envs", type=positive_int, default=32, metavar="N",
                    help="matches stepped together in --train (default: 32)")
+    p.add_argument("--train-fragments", action="store_true",
+                   help="--train with the workers acting whole rollouts (train --fragments)")
     p.add_argument("--train-threads", type=positive_int, default=1, metavar="N",
                    help="torch threads of the --train run's learner (default: 1; more help "
                         "only with idle cores: the env workers wait during each update)")
@@ -138,7 +140,8 @@ def run(args: argparse.Namespace) -> int:
         from alphatank.commands.benchtrain import train_bench
 
         results["train"] = train_bench(args.train_preset, args.train_workers, args.train_envs,
-                                       torch_threads=args.train_threads)
+                                       torch_threads=args.train_threads,
+                                       fragments=args.train_fragments)
     if args.sac:
         from alphatank.commands.benchtrain import sac_step_bench, sac_train_bench
 

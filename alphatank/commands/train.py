@@ -127,6 +127,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                          help="with --env-runners: a runner that does not answer a step "
                               "within SECONDS is hung: it is killed and restarted, and the "
                               f"iteration collected again (default: {ENV_RUNNER_TIMEOUT_S:g})")
+    cluster.add_argument("--fragments", action="store_true",
+                         help="each env shard (--env-runners actor, --workers process, or "
+                              "the one process) acts a whole rollout with a copy of the "
+                              "policy and answers once per iteration, not once per step (PPO "
+                              "learners; reproducible for the same seed and shard count, "
+                              "not step-equal to a run without it; docs/distributed.md)")
 
 
 # TrainConfig field -> the flag that sets it (run settings, also allowed with --resume)
@@ -339,7 +345,7 @@ def _run(args: argparse.Namespace, progress: bool, cpus: float = 0.0) -> int:
             with _one_line_warnings():
                 trainer = resume_trainer(args.resume, progress=progress, env_runners=runners,
                                          env_runner_timeout_s=_runner_timeout(args),
-                                         **_overrides(args))
+                                         fragments=args.fragments, **_overrides(args))
         except ValueError as exc:
             raise as_input_error(exc) from None
         rewound = trainer.logger.rewound
@@ -360,9 +366,13 @@ def _run(args: argparse.Namespace, progress: bool, cpus: float = 0.0) -> int:
                              f"{run_dir} or pick another --name")
         from alphatank.training.runner import Trainer
         runners = _env_runners(args, cfg, cpus)
-        with _one_line_warnings():
-            trainer = Trainer(cfg, run_dir, progress=progress, env_runners=runners,
-                              env_runner_timeout_s=_runner_timeout(args))
+        try:
+            with _one_line_warnings():
+                trainer = Trainer(cfg, run_dir, progress=progress, env_runners=runners,
+                                  env_runner_timeout_s=_runner_timeout(args),
+                                  fragments=args.fragments)
+        except ValueError as exc:
+            raise as_input_error(exc) from None
         for name, counts in trainer.warm_start.items():
             print(f"warm start {name} from {cfg.init_from}: {counts['mapped']} features "
                   f"mapped, {counts['new']} new (zero weight), {counts['dropped']} dropped"

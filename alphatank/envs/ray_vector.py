@@ -43,6 +43,7 @@ import numpy as np
 
 from alphatank.cluster import ENV_RUNNER_TIMEOUT_S
 from alphatank.envs.core import check_actions, check_benched
+from alphatank.envs.fragments import Fragment, RolloutPolicy, merge_fragments
 from alphatank.envs.vector import ShardedEnv, VectorMatchEnv
 from alphatank.game.scenarios import Scenario
 from alphatank.sim.policy import Policy
@@ -111,6 +112,12 @@ class EnvRunner:
             rec[f"input:{name}"] = value
         self._dirty = bool(episodes)
         return rec, episodes
+
+    def rollout(self, policy: RolloutPolicy, obs: np.ndarray, steps: int) -> Fragment:
+        """A whole fragment of this shard (:mod:`alphatank.envs.fragments`)."""
+        if not self.started:  # Ray restarted this actor since the last reset
+            raise RolloutLost("the env runner was restarted; its matches were not reset")
+        return self.env.rollout(policy, obs, steps)
 
     def pid(self) -> int:
         import os
@@ -185,15 +192,16 @@ class RayVectorMatchEnv(ShardedEnv):
 
     # ---- remote calls and recovery ---------------------------------------------------
 
-    def _gather(self, refs: Sequence[Any]) -> list:
+    def _gather(self, refs: Sequence[Any], steps: int = 1) -> list:
         """Results of one call per runner; a runner that died is brought back (settings
-        replayed), one silent for ``step_timeout_s`` is killed and brought back, and
-        :class:`RolloutLost` raised once every runner answered."""
+        replayed), one silent for ``step_timeout_s`` per step of the call is killed and
+        brought back, and :class:`RolloutLost` raised once every runner answered."""
         ray = self._ray
         refs = list(refs)
-        deadline = time.monotonic() + self.step_timeout_s
+        timeout = self.step_timeout_s * steps
+        deadline = time.monotonic() + timeout
         try:
-            return ray.get(refs, timeout=self.step_timeout_s)  # one call: the common case
+            return ray.get(refs, timeout=timeout)  # one call: the common case
         except (ray.exceptions.RayError, RolloutLost):
             pass  # find out which runner failed, and how
         _, pending = ray.wait(refs, num_returns=len(refs),
@@ -207,8 +215,8 @@ class RayVectorMatchEnv(ShardedEnv):
         for k, ref in enumerate(refs):
             if ref.hex() in hung:
                 out.append(None)
-                lost.append((k, TimeoutError(f"hung: no answer within "
-                                             f"{self.step_timeout_s:g} s, killed")))
+                lost.append((k, TimeoutError(f"hung: no answer within {timeout:g} s, "
+                                             f"killed")))
                 continue
             try:
                 out.append(ray.get(ref))
@@ -328,15 +336,19 @@ class RayVectorMatchEnv(ShardedEnv):
                        for name in self.input_shapes}
         return np.concatenate([p[0] for p in parts])
 
-    def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
-                                          dict[str, Any]]:
+    def _check_live(self, call: str) -> None:
+        """Raise the loss of a rollout seen outside a step, or if never reset."""
         if self._lost is not None:
             lost, self._lost = self._lost, None
             self._started = False
             self.lost_rollouts += 1
             raise RolloutLost(lost)
         if not self._started:
-            raise RuntimeError("step() before reset()")
+            raise RuntimeError(f"{call}() before reset()")
+
+    def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                                          dict[str, Any]]:
+        self._check_live("step")
         acts = check_actions(actions, self._shape, self._name)
         refs = [r.step.remote(acts[lo:hi]) for r, (lo, hi) in zip(self.runners, self._blocks,
                                                                    strict=True)]
@@ -356,6 +368,20 @@ class RayVectorMatchEnv(ShardedEnv):
                                  for name in self.input_shapes}}
         return (rec["obs"].copy(), rec["rewards"].copy(), rec["terminated"].copy(),
                 rec["truncated"].copy(), info)
+
+    def rollout(self, policy: RolloutPolicy, obs: np.ndarray, steps: int) -> Fragment:
+        """``steps`` vector steps, each runner acting its shard with a copy of ``policy``
+        (sent once) and answering once (:mod:`alphatank.envs.fragments`); the same
+        fragment as :meth:`SubprocVectorMatchEnv.rollout` with as many workers."""
+        self._check_live("rollout")
+        ref = self._ray.put(policy)
+        refs = [r.rollout.remote(ref, obs[lo:hi], steps)
+                for r, (lo, hi) in zip(self.runners, self._blocks, strict=True)]
+        try:
+            return merge_fragments(self._gather(refs, steps))
+        except RolloutLost:
+            self.lost_rollouts += 1
+            raise
 
     @property
     def num_runners(self) -> int:

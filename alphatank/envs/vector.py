@@ -65,6 +65,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from alphatank.envs.core import MatchSet, action_space, check_actions, check_benched
+from alphatank.envs.fragments import Fragment, RolloutPolicy, collect_fragment, merge_fragments
 from alphatank.envs.gym import single_learner_seat
 from alphatank.game.observe import ObsLayout
 from alphatank.game.rewards import TERMS
@@ -277,6 +278,13 @@ class VectorMatchEnv:
             self.inputs = self._read_inputs()
         return episodes
 
+    def rollout(self, policy: RolloutPolicy, obs: np.ndarray, steps: int) -> Fragment:
+        """``steps`` vector steps acted by ``policy`` from the current observations
+        ``obs`` (:mod:`alphatank.envs.fragments`)."""
+        if not self._started:
+            raise RuntimeError("rollout() before reset()")
+        return collect_fragment(self, policy, obs, steps)
+
     def _name(self, idx: tuple[int, ...]) -> str:
         e, slot = idx
         seat = self.learner_seats[slot]
@@ -368,6 +376,8 @@ def _worker(conn: Any, kwargs: dict, lo: int, hi: int, specs: dict, names: dict)
                 name, args = arg
                 getattr(env, name)(*args)
                 conn.send(("ok", None))
+            elif cmd == "rollout":  # (policy, obs, steps): the fragment goes by the pipe
+                conn.send(("ok", env.rollout(*arg)))
             elif cmd == "close":
                 conn.send(("ok", None))
                 break
@@ -548,6 +558,14 @@ class SubprocVectorMatchEnv(ShardedEnv):
                 "final_inputs": self._inputs("final")}
         return (a["obs"].copy(), a["rewards"].copy(), a["terminated"].copy(),
                 a["truncated"].copy(), info)
+
+    def rollout(self, policy: RolloutPolicy, obs: np.ndarray, steps: int) -> Fragment:
+        """As :meth:`VectorMatchEnv.rollout`, each worker acting its own block."""
+        if not self._started:
+            raise RuntimeError("rollout() before reset()")
+        for conn, (lo, hi) in zip(self._conns, self._blocks, strict=True):
+            conn.send(("rollout", (policy, obs[lo:hi], steps)))
+        return merge_fragments(self._gather())
 
     def close(self) -> None:
         if self._closed:

@@ -1,0 +1,128 @@
+"""Rollout fragments: a shard of matches stepped for a whole rollout by a policy copy held
+next to the matches (``alphatank train --fragments``), one call per rollout instead of
+one per step.
+
+A :class:`RolloutPolicy` is a frozen, picklable copy of the learners' acting side, sent
+once per rollout; :func:`collect_fragment` steps a :class:`VectorMatchEnv` with it for
+``steps`` vector steps and returns a :class:`Fragment` of arrays, (steps, n, ...) with n the
+shard's envs. Sampling draws from the policy's generator for the shard, seeded by the
+shard's first env id (:meth:`RolloutPolicy.start`), so for the same policy seed and the
+same shards a fragment is the same in one process, in worker processes and in Ray env
+runners. :func:`merge_fragments` joins the shards' fragments along the env axis.
+
+Fragments carry no extra learner inputs (``env.inputs``): a learner that needs them
+(MAPPO's centralised critic) acts step by step.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+
+class RolloutPolicy(Protocol):
+    """The learners' acting side, frozen for one rollout."""
+
+    def start(self, env_ids: Sequence[int]) -> None:
+        """Seed sampling for the shard of these env ids (called once per fragment)."""
+
+    def act(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Actions int64 (n, L, 3), their log-probabilities and value estimates float32
+        (n, L) for raw observations (n, L, obs_dim)."""
+
+    def values(self, obs: np.ndarray) -> np.ndarray:
+        """Value estimates float32 (k, L) of raw observations (k, L, obs_dim)."""
+
+
+class ShardEnv(Protocol):
+    """What a fragment steps: a :class:`~alphatank.envs.vector.VectorMatchEnv`."""
+
+    num_envs: int
+    num_learners: int
+    obs_dim: int
+    env_ids: list[int]
+    inputs: dict[str, np.ndarray]
+
+    def step_into(self, acts: np.ndarray, obs: np.ndarray, rewards: np.ndarray,
+                  terminated: np.ndarray, truncated: np.ndarray, final_obs: np.ndarray,
+                  final_inputs: dict[str, np.ndarray]) -> list[dict[str, Any]]: ...
+
+
+@dataclass
+class Fragment:
+    """``steps`` vector steps of ``n`` envs: what each learner seat saw (``obs``, raw),
+    did and got, the value of the last observation of each episode cut by the time limit
+    (``bootstrap``, 0 elsewhere), the observations after the last step (``next_obs``)
+    and the episode records, each with the ``step`` it ended in."""
+
+    obs: np.ndarray  # (T, n, L, D) float32
+    actions: np.ndarray  # (T, n, L, 3) int64
+    logprobs: np.ndarray  # (T, n, L) float32
+    values: np.ndarray  # (T, n, L) float32
+    rewards: np.ndarray  # (T, n, L) float32
+    terminated: np.ndarray  # (T, n) bool
+    truncated: np.ndarray  # (T, n) bool
+    bootstrap: np.ndarray  # (T, n, L) float32
+    next_obs: np.ndarray  # (n, L, D) float32
+    episodes: list[dict[str, Any]] = field(default_factory=list)
+
+    @property
+    def steps(self) -> int:
+        return self.obs.shape[0]
+
+
+def collect_fragment(env: ShardEnv, policy: RolloutPolicy, obs: np.ndarray,
+                     steps: int) -> Fragment:
+    """Step ``env`` (already reset; ``obs`` its current observations) ``steps`` times with
+    ``policy``'s actions."""
+    if steps < 1:
+        raise ValueError(f"a fragment needs steps >= 1, got {steps}")
+    if env.inputs:
+        raise ValueError(f"fragments carry no extra learner inputs; this env supplies "
+                         f"{sorted(env.inputs)} (act step by step instead)")
+    n, L, D = env.num_envs, env.num_learners, env.obs_dim
+    obs = np.asarray(obs, dtype=np.float32)
+    if obs.shape != (n, L, D):
+        raise ValueError(f"observations of shape {obs.shape} for a shard of {n} envs x {L} "
+                         f"learners x {D} features")
+    seen = np.empty((steps + 1, n, L, D), np.float32)  # the last row is next_obs
+    seen[0] = obs
+    frag = Fragment(obs=seen[:steps], actions=np.empty((steps, n, L, 3), np.int64),
+                    logprobs=np.empty((steps, n, L), np.float32),
+                    values=np.empty((steps, n, L), np.float32),
+                    rewards=np.empty((steps, n, L), np.float32),
+                    terminated=np.empty((steps, n), bool), truncated=np.empty((steps, n), bool),
+                    bootstrap=np.zeros((steps, n, L), np.float32), next_obs=seen[steps])
+    final_obs = np.zeros((n, L, D), np.float32)
+    policy.start(env.env_ids)
+    for t in range(steps):
+        actions, frag.logprobs[t], frag.values[t] = policy.act(seen[t])
+        frag.actions[t] = actions
+        episodes = env.step_into(frag.actions[t], seen[t + 1], frag.rewards[t],
+                                 frag.terminated[t], frag.truncated[t], final_obs, {})
+        if episodes:
+            cut = np.flatnonzero(frag.truncated[t] & ~frag.terminated[t])
+            if cut.size:
+                frag.bootstrap[t, cut] = policy.values(final_obs[cut])
+            final_obs.fill(0.0)
+            for ep in episodes:
+                ep["step"] = t
+            frag.episodes.extend(episodes)
+    return frag
+
+
+def merge_fragments(parts: Sequence[Fragment]) -> Fragment:
+    """The shards' fragments (in env-id order) as one, envs concatenated; episode
+    records in step order, shards in order within a step (as stepping them together
+    lists them)."""
+    if len(parts) == 1:
+        return parts[0]
+    arrays = {name: np.concatenate([getattr(p, name) for p in parts], axis=1)
+              for name in ("obs", "actions", "logprobs", "values", "rewards", "terminated",
+                           "truncated", "bootstrap")}
+    episodes = sorted((ep for p in parts for ep in p.episodes), key=lambda ep: ep["step"])
+    return Fragment(**arrays, next_obs=np.concatenate([p.next_obs for p in parts]),
+                    episodes=episodes)

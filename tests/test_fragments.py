@@ -1,0 +1,136 @@
+"""Rollout fragments (``--fragments``): a shard acts a whole rollout with a frozen copy
+of the learners. The fragment is the step loop's trajectory, worker processes give the
+same fragment as their blocks stepped alone, runs are reproducible, and what fragments
+cannot carry is refused by name."""
+
+from __future__ import annotations
+
+import hashlib
+
+import numpy as np
+import pytest
+
+from alphatank.cli import main
+from alphatank.envs.vector import SubprocVectorMatchEnv, VectorMatchEnv
+from alphatank.training.fragments import FrozenLearners
+from alphatank.training.hparams import PPOConfig
+from alphatank.training.ppo import PPO
+from alphatank.training.presets import LearnerSpec, TrainConfig
+from alphatank.training.runner import Trainer
+
+KW = {"game_overrides": {"max_steps": 20}}
+
+
+def frozen(env, seed: int = 5) -> FrozenLearners:
+    """Two PPO learners of random weights, one per learner seat of ``env``."""
+    learners = {f"p{k}": PPO(env.obs_dim, env.num_envs, PPOConfig(num_steps=8), seed=k)
+                for k in range(env.num_learners)}
+    return FrozenLearners.of(learners, {f"p{k}": [k] for k in range(env.num_learners)}, seed)
+
+
+def test_a_fragment_is_the_trajectory_of_its_actions_and_its_policy():
+    env = VectorMatchEnv("team_vs_bot", 3, seed=2, **KW)
+    policy = frozen(env)
+    frag = env.rollout(policy, env.reset(4), 30)
+    assert frag.steps == 30 and frag.obs.shape == (30, 3, 2, env.obs_dim)
+    assert len(frag.episodes) >= 3  # 20-tick games: every env restarted inside
+    # replaying the actions step by step gives the same observations, rewards and ends
+    again = VectorMatchEnv("team_vs_bot", 3, seed=2, **KW)
+    obs = again.reset(4)
+    replay = []
+    for t in range(30):
+        np.testing.assert_array_equal(obs, frag.obs[t])
+        obs, rewards, term, trunc, info = again.step(frag.actions[t])
+        np.testing.assert_array_equal(rewards, frag.rewards[t])
+        np.testing.assert_array_equal(term, frag.terminated[t])
+        np.testing.assert_array_equal(trunc, frag.truncated[t])
+        cut = trunc & ~term
+        np.testing.assert_array_equal(frag.bootstrap[t][~cut], 0.0)
+        if cut.any():
+            np.testing.assert_array_equal(frag.bootstrap[t][cut],
+                                          policy.values(info["final_obs"][cut]))
+        replay += [(t, ep["env"], ep["length"]) for ep in info["episodes"]]
+    np.testing.assert_array_equal(obs, frag.next_obs)
+    assert replay == [(ep["step"], ep["env"], ep["length"]) for ep in frag.episodes]
+    # and the policy, restarted for the shard, chose those actions from those observations
+    policy.start(env.env_ids)
+    for t in range(30):
+        actions, logprobs, values = policy.act(frag.obs[t])
+        np.testing.assert_array_equal(actions, frag.actions[t])
+        np.testing.assert_array_equal(logprobs, frag.logprobs[t])
+        np.testing.assert_array_equal(values, frag.values[t])
+
+
+def test_worker_processes_give_each_block_its_own_fragment():
+    sv = SubprocVectorMatchEnv("team_vs_bot", 5, seed=2, num_workers=2, **KW)
+    try:
+        policy = frozen(sv)
+        frag = sv.rollout(policy, sv.reset(9), 25)
+    finally:
+        sv.close()
+    steps = []
+    for lo, hi in ((0, 2), (2, 5)):  # the workers' blocks, stepped alone in this process
+        block = VectorMatchEnv("team_vs_bot", hi - lo, seed=2, env_ids=range(lo, hi), **KW)
+        part = block.rollout(policy, block.reset(9), 25)
+        for name in ("obs", "actions", "logprobs", "rewards", "terminated", "bootstrap"):
+            np.testing.assert_array_equal(getattr(frag, name)[:, lo:hi], getattr(part, name))
+        np.testing.assert_array_equal(frag.next_obs[lo:hi], part.next_obs)
+        steps += [(ep["step"], ep["env"]) for ep in part.episodes]
+    assert [(ep["step"], ep["env"]) for ep in frag.episodes] == sorted(steps)
+
+
+def tiny_cfg(name: str, **kw) -> TrainConfig:
+    return TrainConfig(name, "vs_aggressive", total_steps=3 * 16 * 4, num_envs=4,
+                       wandb="disabled", checkpoint_every=0, game={"max_steps": 24},
+                       learners=(LearnerSpec("ppo", "ppo", (0,),
+                                             config=PPOConfig(num_steps=16, update_epochs=1)),),
+                       **kw)
+
+
+def weights(trainer: Trainer) -> str:
+    h = hashlib.sha256()
+    for key, t in sorted(trainer.learners["ppo"].state_dict()["net"].items()):
+        h.update(key.encode() + t.numpy().tobytes())
+    return h.hexdigest()
+
+
+def test_a_run_in_fragments_is_reproducible_and_counts_what_it_played(tmp_path):
+    runs = []
+    for k, workers in enumerate((2, 2, 1)):
+        tr = Trainer(tiny_cfg(f"f{k}", num_workers=workers), tmp_path / f"f{k}",
+                     progress=False, fragments=True)
+        summary = tr.train()
+        runs.append((tr, summary))
+    (a, sa), (b, sb), (one, _) = runs
+    assert a.learners["ppo"].updates == 3 and sa["global_step"] == 3 * 64
+    assert weights(a) == weights(b) and sa["episodes"] == sb["episodes"] >= 8
+    assert weights(one) != weights(a)  # other shards, other samples
+    plain = Trainer(tiny_cfg("plain"), tmp_path / "plain", progress=False)
+    plain.train()
+    assert weights(plain) != weights(one)  # not step-equal to acting on the learner
+    # the observation statistics took in every row of the three rollouts
+    assert a.learners["ppo"].obs_norm.rms.count == pytest.approx(3 * 64, abs=1e-3)
+
+
+@pytest.mark.parametrize(("preset", "message"), [
+    ("team_vs_def", "acted by PPO learners only"),
+    ("team_ppo_vs_ppo", "self-play swaps opponents"),
+])
+def test_what_fragments_cannot_carry_is_one_line(tmp_path, capsys, preset, message):
+    code = main(["train", "--preset", preset, "--runs", str(tmp_path), "--fragments",
+                 "--total-steps", "64", "--num-envs", "2", "--wandb", "disabled",
+                 "--no-progress"])
+    assert code == 2
+    last = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "fragments: " in last and message in last
+
+
+def test_two_learners_act_in_one_fragment_from_the_command_line(tmp_path, capsys):
+    code = main(["train", "--preset", "ppo_vs_ppo", "--runs", str(tmp_path), "--name", "pair",
+                 "--fragments", "--workers", "2", "--num-envs", "4", "--total-steps", "128",
+                 "--ppo", "num_steps=16,update_epochs=1", "--wandb", "disabled",
+                 "--no-progress"])
+    assert code == 0, capsys.readouterr().err
+    rows = (tmp_path / "pair" / "metrics.jsonl").read_text().splitlines()
+    last = [r for r in rows if '"charts/sps"' in r][-1]
+    assert '"losses/approx_kl/' in last and last.count("losses/approx_kl/") == 2
