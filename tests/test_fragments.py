@@ -5,7 +5,9 @@ cannot carry is refused by name."""
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
+import signal
 
 import numpy as np
 import pytest
@@ -16,7 +18,7 @@ from alphatank.training.fragments import FrozenLearners
 from alphatank.training.hparams import PPOConfig
 from alphatank.training.ppo import PPO
 from alphatank.training.presets import LearnerSpec, TrainConfig
-from alphatank.training.runner import Trainer
+from alphatank.training.runner import Trainer, resume_trainer
 
 KW = {"game_overrides": {"max_steps": 20}}
 
@@ -112,6 +114,22 @@ def test_a_run_in_fragments_is_reproducible_and_counts_what_it_played(tmp_path):
     assert a.learners["ppo"].obs_norm.rms.count == pytest.approx(3 * 64, abs=1e-3)
 
 
+def test_a_resumed_run_in_fragments_goes_on_as_the_uninterrupted_one(tmp_path):
+    cfg = dataclasses.replace(tiny_cfg("full", num_workers=2), checkpoint_every=2)
+    full = Trainer(dataclasses.replace(cfg, total_steps=4 * 64), tmp_path / "full",
+                   progress=False, fragments=True)
+    full.train()
+    Trainer(dataclasses.replace(cfg, total_steps=2 * 64), tmp_path / "half", progress=False,
+            fragments=True).train()
+    resumed = resume_trainer(tmp_path / "half", progress=False, fragments=True,
+                             total_steps=4 * 64)
+    resumed.train()
+    assert [h["step"] for h in resumed.history] == [3 * 64, 4 * 64]
+    for key in ("losses/policy_loss", "losses/value_loss", "charts/episodes"):
+        assert [h[key] for h in resumed.history] == [h[key] for h in full.history[2:]], key
+    assert weights(resumed) == weights(full)
+
+
 @pytest.mark.parametrize(("preset", "message"), [
     ("team_vs_def", "acted by PPO learners only"),
     ("team_ppo_vs_ppo", "self-play swaps opponents"),
@@ -134,3 +152,42 @@ def test_two_learners_act_in_one_fragment_from_the_command_line(tmp_path, capsys
     rows = (tmp_path / "pair" / "metrics.jsonl").read_text().splitlines()
     last = [r for r in rows if '"charts/sps"' in r][-1]
     assert '"losses/approx_kl/' in last and last.count("losses/approx_kl/") == 2
+
+
+class SignalInFragment(VectorMatchEnv):
+    """The vector env, raising SIGINT in this process during its ``at``-th step."""
+
+    def __init__(self, *args, at: int, **kw):
+        super().__init__(*args, **kw)
+        self.at, self.calls = at, 0
+
+    def step_into(self, *args):
+        self.calls += 1
+        if self.calls == self.at:
+            signal.raise_signal(signal.SIGINT)
+        return super().step_into(*args)
+
+
+def test_a_stop_during_a_fragment_drops_it_and_resumes_as_the_reference(tmp_path):
+    from test_stopping import states_equal
+
+    def run(name: str, iterations: int, at: int = 0) -> Trainer:
+        cfg = dataclasses.replace(tiny_cfg(name), total_steps=iterations * 64,
+                                  checkpoint_every=2)
+        env = SignalInFragment(cfg.scenario, 4, cfg.seed, game_overrides=cfg.game, at=at)
+        return Trainer(cfg, tmp_path / name, env=env, progress=False, fragments=True)
+
+    assert run("ref", 3).train()["stopped"] is None
+    stopped = run("stop", 5, at=3 * 16 + 6)  # inside the 4th fragment
+    summary = stopped.train()
+    assert summary["exit_code"] == 130
+    assert summary["stopped"] == {"reason": "SIGINT", "checkpoint_step": 3 * 64,
+                                  "dropped_steps": 64}
+    runs = [resume_trainer(tmp_path / name, progress=False, fragments=True,
+                           total_steps=5 * 64) for name in ("ref", "stop")]
+    for tr in runs:
+        assert tr.train()["stopped"] is None
+    assert [h["charts/episodes"] for h in runs[0].history] == \
+        [h["charts/episodes"] for h in runs[1].history]
+    assert states_equal(runs[0].learners["ppo"].state_dict(),
+                        runs[1].learners["ppo"].state_dict())

@@ -9,8 +9,9 @@ Env steps/s (random actions drawn in advance, seeded; no learner) for: one proce
 local instance) for each N of ``--counts``, measured round-robin ``--repeats`` times
 (medians); Ray's start-up (``ray.init`` of a local instance) and the first runners'
 start; PPO updates/s of the shipped ``ppo_vs_aggressive`` learner (128 steps x 16 envs x
-4 epochs) and of Table 7 as is (512 steps x 60 epochs) on one thread; training env
-steps/s of that run with N worker processes and N env runners.
+4 epochs) and of Table 7 as is (512 steps x 60 epochs) on one thread, and of the first
+taking rollout fragments; training env steps/s of that run with N worker processes and N
+env runners, acting step by step and in fragments (``--fragments``).
 """
 
 from __future__ import annotations
@@ -77,6 +78,37 @@ def learner_rate(num_envs: int, repeats: int, **ppo: int) -> dict[str, float]:
     return {"num_steps": lr.rollout_steps, "update_epochs": spec.config.update_epochs,
             "update_s": upd, "acting_s": act_s, "updates_per_s": 1.0 / (upd + act_s),
             "env_steps_per_update": steps, "absorbs_env_steps_per_s": steps / (upd + act_s)}
+
+
+def fragment_learner_rate(num_envs: int, repeats: int) -> dict[str, float]:
+    """The same learner taking rollouts acted elsewhere (``--fragments``): seconds to
+    record one fragment and to update; what it absorbs when envs are free."""
+    from alphatank.envs.vector import VectorMatchEnv
+    from alphatank.training.fragments import FrozenLearners, ingest_fragment
+    from alphatank.training.learners import make_learner
+    from alphatank.training.presets import get_preset
+    from alphatank.training.threads import limit_threads
+
+    limit_threads(1)
+    spec = get_preset("ppo_vs_aggressive").learners[0]
+    env = VectorMatchEnv(SCENARIO, num_envs, seed=0)
+    lr = make_learner(spec, env.obs_dim, num_envs, seed=0)
+    learners, cols = {"ppo": lr}, {"ppo": [0]}
+    obs = env.reset(seed=0)
+    updates, ingests = [], []
+    for k in range(repeats):
+        frag = env.rollout(FrozenLearners.of(learners, cols, k), obs, lr.rollout_steps)
+        t0 = time.perf_counter()
+        ingest_fragment(frag, learners, cols, None)
+        ingests.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        lr.update(frag.next_obs[:, 0])
+        updates.append(time.perf_counter() - t0)
+        obs = frag.next_obs
+    upd, ing = statistics.median(updates), statistics.median(ingests)
+    steps = lr.rollout_steps * num_envs
+    return {"update_s": upd, "ingest_s": ing, "env_steps_per_update": steps,
+            "absorbs_env_steps_per_s": steps / (upd + ing)}
 
 
 def training_rate(iterations: int, tmp: str, counts: list[int]) -> dict[str, float]:
@@ -184,6 +216,7 @@ def main() -> None:
     if not args.no_learner:
         out["learner"] = learner_rate(args.envs, args.repeats)
         out["learner_table7"] = learner_rate(args.envs, 1, num_steps=512, update_epochs=60)
+        out["learner_fragments"] = fragment_learner_rate(args.envs, args.repeats)
     if args.train_iterations:
         import tempfile
 
@@ -211,6 +244,11 @@ def main() -> None:
               f"{lr['update_s']:.2f} s per update + {lr['acting_s']:.2f} s acting per "
               f"{lr['env_steps_per_update']} env steps = {lr['updates_per_s']:.2f} updates/s, "
               f"absorbs {lr['absorbs_env_steps_per_s']:.0f} env steps/s")
+    if "learner_fragments" in out:
+        lr = out["learner_fragments"]
+        print(f"the same learner with --fragments: {lr['update_s']:.2f} s per update + "
+              f"{lr['ingest_s']:.3f} s recording a fragment of {lr['env_steps_per_update']} "
+              f"env steps, absorbs {lr['absorbs_env_steps_per_s']:.0f} env steps/s")
     if args.head:
         out["head"] = head = head_node_start()
         print(f"ray start --head: {head['ray_start_head_s']:.1f} s; a driver joins it in "

@@ -508,13 +508,14 @@ class Trainer:
     def _collect_fragment(self, obs: np.ndarray) -> tuple[np.ndarray, dict[str, float]]:
         """One iteration acted by the env's shards with frozen copies of the learners
         (:mod:`alphatank.training.fragments`), then each learner's update; a stop during
-        the rollout drops it."""
+        the rollout drops it (:class:`StopRequested`, as a stopped update)."""
         policy = FrozenLearners.of(self.learners, self.cols,
                                    derive_seed(self.cfg.seed, self.iteration, 17))
         frag = self.env.rollout(policy, obs, self.rollout_steps)
-        if self.stop():
-            return obs, {}
         s0 = self.global_step
+        if self.stop():  # dropped as a partial rollout is (_save_stopped)
+            self.global_step += frag.steps * self.E
+            raise StopRequested(self.stop.reason)
         for ep in frag.episodes:  # in step order, as the step loop records them
             self._record_episode(ep, frag.rewards[ep["step"]],
                                  self.schedule.victory_scale(s0 + ep["step"] * self.E))

@@ -12,6 +12,10 @@ its block of actions; all runners step at once, and each answers with one record
 one structured row per env: a single buffer for Ray to serialise) plus the records of the
 episodes that ended (usually none).
 
+:meth:`RayVectorMatchEnv.rollout` instead acts a whole rollout in the runners with a
+frozen policy copy (:mod:`alphatank.envs.fragments`): one call per runner per rollout,
+the same fragment as :meth:`SubprocVectorMatchEnv.rollout` with as many workers.
+
 Ray Compiled Graphs (``experimental_compile``) are not used: in Ray 2.60 their
 shared-memory channels wait by polling (``sched_yield`` loops), so each idle runner and the
 waiting learner keep a core busy, which on a host with fewer free cores than runners + 1

@@ -45,6 +45,8 @@ one's trailing shape in ``env.input_shapes``. Input ``x`` is the method ``input_
 :class:`SubprocVectorMatchEnv` has the same interface and, for the same seed, the same
 results bit for bit: worker processes each own a contiguous block of envs and exchange
 arrays through shared memory. :func:`make_vector_env` picks one by ``num_workers``.
+Both also act whole rollouts with a frozen policy copy (``rollout``, one call per shard
+per rollout: :mod:`alphatank.envs.fragments`).
 """
 
 from __future__ import annotations
