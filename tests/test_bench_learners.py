@@ -23,3 +23,22 @@ def test_bench_train_compares_training_with_raw_env_steps(tmp_path):
     assert out["raw_steps_per_s"] > 0 and out["train_steps_per_s"] > 0
     assert (out["preset"], out["workers"], out["num_envs"], out["torch_threads"]) == (
         "ppo_vs_aggressive", 1, 2, 2)
+
+
+def test_bench_train_with_fragments_says_so(tmp_path):
+    assert main(["bench", "--ticks", "50", "--repeats", "1", "--train", "--train-preset",
+                 "ppo_vs_aggressive", "--train-workers", "2", "--train-envs", "2",
+                 "--train-fragments", "--json", str(tmp_path / "b.json")]) == 0
+    out = json.loads((tmp_path / "b.json").read_text())["train"]
+    assert out["fragments"] is True and out["train_steps_per_s"] > 0
+
+
+def test_fragment_scaling_steps_worker_processes_a_fragment_each():
+    from alphatank.commands.benchenv import RandomRollout, fragment_scaling
+    from alphatank.envs.vector import VectorMatchEnv
+
+    env = VectorMatchEnv("team", 3, seed=0)
+    frag = env.rollout(RandomRollout(), env.reset(0), 40)
+    assert frag.actions.min() == 0 and (frag.actions.max(axis=(0, 1, 2)) == [2, 2, 1]).all()
+    rate, ratio = fragment_scaling("vs_random", 2, num_envs=2, steps=20, repeats=1)
+    assert rate > 0 and ratio > 0

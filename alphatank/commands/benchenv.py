@@ -12,7 +12,9 @@ the issue-14 target is ``x floor`` <= 2 for ``vs_smart``); the same with the obs
 and reward layers switched off (their own cost per step is the difference); and with
 ``workers`` processes (``SubprocVectorMatchEnv``, ``num_envs`` matches each): wall-clock
 steps/s, its ratio to one process's wall-clock steps/s (the scaling; needs that many idle
-cores), and steps per CPU-second of all processes together (parent + workers). The
+cores), and steps per CPU-second of all processes together (parent + workers); and those
+workers acting whole rollouts (``train --fragments``: one call per worker per 150-step
+fragment, random actions) against one process doing the same. The
 scaling's ceiling on this machine at this moment is measured once, on the first scenario:
 ``workers`` independent single-process envs side by side against one alone (no pipes, no
 shared memory, no waiting for each other). One env
@@ -157,6 +159,47 @@ def independent_scaling(scenario: str, procs: int, num_envs: int = 16, steps: in
     return max(rate(procs) for _ in range(repeats)) / one
 
 
+class RandomRollout:
+    """A :class:`~alphatank.envs.fragments.RolloutPolicy` of uniform random actions,
+    seeded per shard: a fragment's cost without a network."""
+
+    def start(self, env_ids: Sequence[int]) -> None:
+        self.rng = np.random.default_rng(int(env_ids[0]))
+
+    def act(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        n, L, _ = obs.shape
+        zeros = np.zeros((n, L), np.float32)
+        return self.rng.integers(0, [3, 3, 2], size=(n, L, 3)), zeros, zeros
+
+    def values(self, obs: np.ndarray) -> np.ndarray:
+        return np.zeros(obs.shape[:2], np.float32)
+
+
+def fragment_scaling(scenario: str, workers: int, num_envs: int = 16, steps: int = 150,
+                     seed: int = 0, observation: str = "paper", repeats: int = 3
+                     ) -> tuple[float, float]:
+    """Wall-clock env steps/s of ``workers`` processes acting fragments of ``steps`` steps
+    (one call per worker per fragment: ``train --fragments``), and its ratio to one
+    process doing the same with ``num_envs`` matches; alternating runs, best of each."""
+    one = VectorMatchEnv(scenario, num_envs, seed, observation)
+    many = SubprocVectorMatchEnv(scenario, num_envs * workers, seed, observation,
+                                 num_workers=workers)
+    policy = RandomRollout()
+    try:
+        obs = {id(env): env.rollout(policy, env.reset(seed), 10).next_obs
+               for env in (one, many)}
+        best = {id(one): 0.0, id(many): 0.0}
+        for _ in range(repeats):
+            for env in (one, many):
+                start = time.perf_counter()
+                frag = env.rollout(policy, obs[id(env)], steps)
+                rate = env.num_envs * steps / (time.perf_counter() - start)
+                obs[id(env)], best[id(env)] = frag.next_obs, max(best[id(env)], rate)
+    finally:
+        many.close()
+    return best[id(many)], best[id(many)] / best[id(one)]
+
+
 def env_bench(scenarios: Sequence[str] = DEFAULT_SCENARIOS, observation: str = "paper",
               num_envs: int = 16, steps: int = 150, workers: int = 2, seed: int = 0,
               floor: str | None = None, verbose: bool = True) -> dict[str, dict[str, float]]:
@@ -165,7 +208,8 @@ def env_bench(scenarios: Sequence[str] = DEFAULT_SCENARIOS, observation: str = "
     prototype is found), no_layers_steps_per_s, layers_us_per_step, workers_steps_per_s
     (wall clock), workers_speedup (over one process, wall clock), independent_speedup
     (the ceiling, see the module docstring), workers_steps_per_cpu_s (all processes' CPU
-    time)}}."""
+    time), fragments_steps_per_s / fragments_speedup (the workers acting whole
+    rollouts: :func:`fragment_scaling`)}}."""
     tick = match_tick_us(seed=seed)
     proto = find_floor(floor)
     floor_us = floor_tick_us(proto, seed=seed) if proto is not None else None
@@ -183,7 +227,8 @@ def env_bench(scenarios: Sequence[str] = DEFAULT_SCENARIOS, observation: str = "
               f"random actions, {steps} steps:")
         print(f"  {'scenario':14s} {'1 core':>8s} {'us/step':>8s} {'x tick':>7s} "
               f"{'x floor':>7s} {'no obs/rew':>10s} {'obs+rew us':>10s} "
-              f"{f'{workers} procs':>8s} {'x 1 proc':>8s} {'per cpu-s':>9s}")
+              f"{f'{workers} procs':>8s} {'x 1 proc':>8s} {'per cpu-s':>9s} "
+              f"{'fragments':>9s} {'x 1 proc':>8s}")
     results: dict[str, dict[str, float]] = {}
     for name in scenarios:
         wall_one, one = _rates(VectorMatchEnv(name, num_envs, seed, observation), steps, seed)
@@ -212,6 +257,9 @@ def env_bench(scenarios: Sequence[str] = DEFAULT_SCENARIOS, observation: str = "
                 row["independent_speedup"] = round(ceiling, 2)
             row["workers_speedup"] = round(multi / wall_one, 2)
             row["workers_steps_per_cpu_s"] = round(cpu, 1)
+            frag, frag_x = fragment_scaling(name, workers, num_envs, steps, seed, observation)
+            row["fragments_steps_per_s"] = round(frag, 1)
+            row["fragments_speedup"] = round(frag_x, 2)
         results[name] = row
         if verbose:
             over_floor = f"{row['over_floor']:7.2f}" if floor_us else f"{'-':>7s}"
@@ -219,7 +267,9 @@ def env_bench(scenarios: Sequence[str] = DEFAULT_SCENARIOS, observation: str = "
                   f"{over_floor} {bare:10,.0f} {row['layers_us_per_step']:10.1f} "
                   f"{row.get('workers_steps_per_s', 0):8,.0f} "
                   f"{row.get('workers_speedup', 0):8.2f} "
-                  f"{row.get('workers_steps_per_cpu_s', 0):9,.0f}")
+                  f"{row.get('workers_steps_per_cpu_s', 0):9,.0f} "
+                  f"{row.get('fragments_steps_per_s', 0):9,.0f} "
+                  f"{row.get('fragments_speedup', 0):8.2f}")
     return results
 
 
