@@ -15,10 +15,10 @@ import pytest
 from alphatank.cli import main
 from alphatank.envs.vector import SubprocVectorMatchEnv, VectorMatchEnv
 from alphatank.training.fragments import FrozenLearners
-from alphatank.training.hparams import PPOConfig
+from alphatank.training.hparams import MAPPOConfig, PPOConfig
 from alphatank.training.ppo import PPO
 from alphatank.training.presets import LearnerSpec, TrainConfig
-from alphatank.training.runner import Trainer, resume_trainer
+from alphatank.training.runner import Trainer, derive_seed, resume_trainer
 
 KW = {"game_overrides": {"max_steps": 20}}
 
@@ -50,14 +50,14 @@ def test_a_fragment_is_the_trajectory_of_its_actions_and_its_policy():
         np.testing.assert_array_equal(frag.bootstrap[t][~cut], 0.0)
         if cut.any():
             np.testing.assert_array_equal(frag.bootstrap[t][cut],
-                                          policy.values(info["final_obs"][cut]))
+                                          policy.values(info["final_obs"][cut], {}))
         replay += [(t, ep["env"], ep["length"]) for ep in info["episodes"]]
     np.testing.assert_array_equal(obs, frag.next_obs)
     assert replay == [(ep["step"], ep["env"], ep["length"]) for ep in frag.episodes]
     # and the policy, restarted for the shard, chose those actions from those observations
     policy.start(env.env_ids)
     for t in range(30):
-        actions, logprobs, values = policy.act(frag.obs[t])
+        actions, logprobs, values = policy.act(frag.obs[t], {})
         np.testing.assert_array_equal(actions, frag.actions[t])
         np.testing.assert_array_equal(logprobs, frag.logprobs[t])
         np.testing.assert_array_equal(values, frag.values[t])
@@ -131,7 +131,7 @@ def test_a_resumed_run_in_fragments_goes_on_as_the_uninterrupted_one(tmp_path):
 
 
 @pytest.mark.parametrize(("preset", "message"), [
-    ("team_vs_def", "acted by PPO learners only"),
+    ("sac_vs_aggressive", "acted by PPO and MAPPO learners only"),
     ("team_ppo_vs_ppo", "self-play swaps opponents"),
 ])
 def test_what_fragments_cannot_carry_is_one_line(tmp_path, capsys, preset, message):
@@ -191,3 +191,49 @@ def test_a_stop_during_a_fragment_drops_it_and_resumes_as_the_reference(tmp_path
         [h["charts/episodes"] for h in runs[1].history]
     assert states_equal(runs[0].learners["ppo"].state_dict(),
                         runs[1].learners["ppo"].state_dict())
+
+
+@pytest.mark.parametrize("algo", ["ppo", "mappo"])
+def test_an_update_from_a_fragment_is_the_update_from_acting_step_by_step(tmp_path, algo):
+    """With the normalisers off and the learner sampling from the stream the fragment's
+    shard draws from, acting step by step and in a fragment give the same trajectory,
+    the same buffer and the same update (MAPPO: states, death masks, bootstraps)."""
+    config = {"ppo": PPOConfig(num_steps=24, update_epochs=2, norm_obs=False, hidden=32),
+              "mappo": MAPPOConfig(num_steps=24, update_epochs=2, norm_obs=False,
+                                   norm_state=False, bootstrap_timeouts=True, hidden=32)}[algo]
+    cfg = TrainConfig("eq", "team_vs_bot", total_steps=24 * 3, num_envs=3, seed=4,
+                      wandb="disabled", checkpoint_every=0, game={"max_steps": 20},
+                      learners=(LearnerSpec("team", algo, (0, 1), config=config),))
+    step = Trainer(cfg, tmp_path / "step", progress=False)
+    frag = Trainer(cfg, tmp_path / "frag", progress=False, fragments=True)
+    shard = np.random.SeedSequence(derive_seed(cfg.seed, 0, 17), spawn_key=(0,))
+    step.learners["team"].np_rng = np.random.default_rng(shard)
+    results = []
+    for tr in (step, frag):
+        obs = tr._segment_reset()
+        buf = tr.learners["team"].buffer
+        seen = {}
+        update = tr.learners["team"].update
+
+        def keep(*args, _buf=buf, _seen=seen, _update=update, **kw):
+            _seen.update({k: v.clone() for k, v in vars(_buf).items()
+                          if hasattr(v, "clone")})
+            return _update(*args, **kw)
+
+        tr.learners["team"].update = keep
+        results.append((tr._collect_fragment(obs) if tr.fragments else tr._collect(obs),
+                        seen, tr.episodes))
+    (o1, m1), b1, e1 = results[0]
+    (o2, m2), b2, e2 = results[1]
+    assert e1 == e2 >= 3  # 20-tick games ended inside the rollout
+    for key in b1:
+        assert (b1[key] == b2[key]).all(), key
+    np.testing.assert_array_equal(o1, o2)
+    assert m1 == m2 and weights_of(step) == weights_of(frag)
+
+
+def weights_of(trainer: Trainer) -> str:
+    h = hashlib.sha256()
+    for key, t in sorted(trainer.learners["team"].state_dict()["net"].items()):
+        h.update(key.encode() + t.numpy().tobytes())
+    return h.hexdigest()

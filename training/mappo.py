@@ -30,6 +30,7 @@ reproducible and resumable.
 
 from __future__ import annotations
 
+import copy
 from typing import Any
 
 import numpy as np
@@ -123,7 +124,100 @@ class MAPPONet(nn.Module):
         return logits
 
 
-class MAPPO(OnPolicyPlumbing):
+class MAPPOActing:
+    """What acting needs, shared by :class:`MAPPO` and its frozen copy
+    (:class:`FrozenMAPPO`): the actor's and critic's inputs with the normalisers, the
+    seats alive, and the critic's (team) values."""
+
+    obs_norm: ObsNormalizer
+    state_norm: ObsNormalizer
+    value_norm: ValueNorm
+    critic_np: NumpyMLP
+    onehot: np.ndarray
+    num_seats: int
+    state_dim: int
+    alive_index: int | None
+
+    def _actor_input(self, obs: np.ndarray, seats: np.ndarray, update: bool = False
+                     ) -> np.ndarray:
+        return np.concatenate([self.obs_norm(obs, update=update), self.onehot[seats]], axis=1)
+
+    def _critic_input(self, state: np.ndarray | None, x: np.ndarray, update: bool = False
+                      ) -> np.ndarray:
+        if not self.state_dim:
+            return x
+        if state is None:
+            raise ValueError(f"this MAPPO learner's critic reads a {self.state_dim}-float "
+                             f"agent-specific state: pass state= (AgentState.build())")
+        state = np.asarray(state, dtype=np.float32).reshape(-1, self.state_dim)
+        return self.state_norm(state, update=update)
+
+    def _alive(self, obs: np.ndarray | None, alive: np.ndarray | None = None
+               ) -> np.ndarray | None:
+        """Which streams are alive: the ``alive`` input if given, else the
+        ``alive_index`` column of ``obs``, else unknown (None)."""
+        if alive is not None:
+            return np.asarray(alive).reshape(-1) > 0.5
+        if obs is None or self.alive_index is None:
+            return None
+        return np.asarray(obs)[:, self.alive_index] > 0.5
+
+    def _team_values(self, values: np.ndarray, alive: np.ndarray) -> np.ndarray:
+        """Per stream: its own value if alive, else the mean over its living teammates
+        (its own when none lives)."""
+        k = self.num_seats
+        v, a = values.reshape(-1, k), alive.reshape(-1, k).astype(np.float64)
+        n = a.sum(axis=1, keepdims=True)
+        mates = np.divide((v * a).sum(axis=1, keepdims=True), n, out=np.zeros_like(n),
+                          where=n > 0)
+        out = np.where(a > 0, v, np.where(n > 0, mates, v))
+        return out.reshape(-1)
+
+    def _values(self, state: np.ndarray | None, obs: np.ndarray) -> np.ndarray:
+        """Denormalised critic values for raw obs / states with frozen statistics."""
+        x = self.actor_input(obs)
+        s = self._critic_input(state, x)
+        return self.value_norm.denormalize(self.critic_np.forward(s)[:, 0].astype(np.float64))
+
+    def actor_input(self, obs: np.ndarray) -> np.ndarray:
+        """The actor's input (normalised obs + seat one-hot, frozen statistics) for raw
+        observations whose rows are (env, seat) pairs, env-major, as the streams are."""
+        return self._actor_input(obs, np.arange(len(obs)) % self.num_seats)
+
+
+class FrozenMAPPO(MAPPOActing):
+    """A MAPPO learner's acting side frozen for one rollout acted elsewhere
+    (:mod:`alphatank.training.fragments`): copies of its numpy networks and normalisers."""
+
+    def __init__(self, learner: MAPPO):
+        for name in ("obs_norm", "state_norm", "value_norm", "actor_np", "critic_np"):
+            setattr(self, name, copy.deepcopy(getattr(learner, name)))
+        self.onehot, self.nvec = learner.onehot, learner.nvec
+        self.num_seats, self.state_dim = learner.num_seats, learner.state_dim
+        self.alive_index = learner.alive_index
+        self.bootstrap_timeouts = learner.cfg.bootstrap_timeouts
+
+    def act(self, obs: np.ndarray, inputs: dict[str, np.ndarray], rng: np.random.Generator
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """As :meth:`MAPPO.act` with frozen statistics, recording nothing: actions,
+        log-probabilities and (normalised) values of raw stream observations (B, D)."""
+        x = self._actor_input(obs, np.arange(len(obs)) % self.num_seats)
+        s = self._critic_input(inputs.get("state"), x)
+        actions, logprob = np_sample(self.actor_np.forward(x), self.nvec, rng)
+        return actions, logprob, self.critic_np.forward(s)[:, 0]
+
+    def values(self, obs: np.ndarray, inputs: dict[str, np.ndarray]) -> np.ndarray:
+        """Bootstrap values of time-limit cuts, as :meth:`MAPPO.observe` computes them
+        (0 without ``bootstrap_timeouts``)."""
+        if not self.bootstrap_timeouts:
+            return np.zeros(len(obs), np.float32)
+        live = self._alive(obs, inputs.get("alive"))
+        if live is None:
+            live = np.ones(len(obs), bool)
+        return self._team_values(self._values(inputs.get("state"), obs), live)
+
+
+class MAPPO(OnPolicyPlumbing, MAPPOActing):
     """One MAPPO learner for ``num_streams`` = num_envs x ``num_seats`` streams of a team.
 
     Per env step: :meth:`act` (raw obs, masks, ``state=``), then :meth:`observe`; when
@@ -178,49 +272,6 @@ class MAPPO(OnPolicyPlumbing):
         self.updates = 0
         self.total_updates = 0  # set by plan() for learning-rate annealing
         self.interrupt: Any = None  # set by the runner; polled between minibatches
-
-    # ---- inputs -------------------------------------------------------------------------
-
-    def _actor_input(self, obs: np.ndarray, seats: np.ndarray, update: bool = False
-                     ) -> np.ndarray:
-        return np.concatenate([self.obs_norm(obs, update=update), self.onehot[seats]], axis=1)
-
-    def _critic_input(self, state: np.ndarray | None, x: np.ndarray, update: bool = False
-                      ) -> np.ndarray:
-        if not self.state_dim:
-            return x
-        if state is None:
-            raise ValueError(f"this MAPPO learner's critic reads a {self.state_dim}-float "
-                             f"agent-specific state: pass state= (AgentState.build())")
-        state = np.asarray(state, dtype=np.float32).reshape(-1, self.state_dim)
-        return self.state_norm(state, update=update)
-
-    def _alive(self, obs: np.ndarray | None, alive: np.ndarray | None = None
-               ) -> np.ndarray | None:
-        """Which streams are alive: the ``alive`` input if given, else the
-        ``alive_index`` column of ``obs``, else unknown (None)."""
-        if alive is not None:
-            return np.asarray(alive).reshape(-1) > 0.5
-        if obs is None or self.alive_index is None:
-            return None
-        return np.asarray(obs)[:, self.alive_index] > 0.5
-
-    def _team_values(self, values: np.ndarray, alive: np.ndarray) -> np.ndarray:
-        """Per stream: its own value if alive, else the mean over its living teammates
-        (its own when none lives)."""
-        k = self.num_seats
-        v, a = values.reshape(-1, k), alive.reshape(-1, k).astype(np.float64)
-        n = a.sum(axis=1, keepdims=True)
-        mates = np.divide((v * a).sum(axis=1, keepdims=True), n, out=np.zeros_like(n),
-                          where=n > 0)
-        out = np.where(a > 0, v, np.where(n > 0, mates, v))
-        return out.reshape(-1)
-
-    def _values(self, state: np.ndarray | None, obs: np.ndarray) -> np.ndarray:
-        """Denormalised critic values for raw obs / states with frozen statistics."""
-        x = self.actor_input(obs)
-        s = self._critic_input(state, x)
-        return self.value_norm.denormalize(self.critic_np.forward(s)[:, 0].astype(np.float64))
 
     # ---- acting -------------------------------------------------------------------------
 
@@ -285,6 +336,50 @@ class MAPPO(OnPolicyPlumbing):
     @property
     def ready(self) -> bool:
         return self.buffer.full
+
+    # ---- rollouts acted elsewhere (fragments) ------------------------------------------
+
+    def frozen(self) -> FrozenMAPPO:
+        """A copy of the acting side, for a rollout acted away from the learner
+        (:mod:`alphatank.training.fragments`)."""
+        return FrozenMAPPO(self)
+
+    def ingest(self, obs: np.ndarray, actions: np.ndarray, logprobs: np.ndarray,
+               values: np.ndarray, rewards: np.ndarray, terminated: np.ndarray,
+               truncated: np.ndarray, bootstrap: np.ndarray, active: np.ndarray | None, *,
+               state: np.ndarray | None = None, alive: np.ndarray | None = None) -> None:
+        """Record rows acted by a :meth:`frozen` copy taken at the rollout's start, as
+        :meth:`act` and :meth:`observe` record them: (T, B, ...) arrays of raw
+        observations, the inputs ``state`` / ``alive``, and what followed (``bootstrap``:
+        the copy's values of time-limit cuts). The normalisers take the rows in after."""
+        buf = self.buffer
+        row = buf.np
+        if buf.masks is not None:
+            raise RuntimeError("rollouts acted elsewhere carry no action masks")
+        for t in range(obs.shape[0]):
+            s = buf.step
+            x = self._actor_input(obs[t], self.seat_of)
+            row["obs"][s] = x
+            if self.states_np is not None:
+                self.states_np[s] = self._critic_input(state[t], x)
+            row["actions"][s] = actions[t]
+            row["logprobs"][s] = logprobs[t]
+            row["values"][s] = values[t]
+            row["rewards"][s] = self.ret_norm(rewards[t], terminated[t] | truncated[t])
+            row["terminated"][s] = terminated[t]
+            row["truncated"][s] = truncated[t]
+            if active is None:
+                live = self._alive(obs[t], None if alive is None else alive[t])
+                active_t = live if live is not None else True
+            else:
+                active_t = active[t]
+            row["active"][s] = active_t
+            row["bootstrap"][s] = bootstrap[t]
+            buf.step += 1
+        for t in range(obs.shape[0]):
+            self.obs_norm.update(obs[t])
+            if self.state_dim:
+                self.state_norm.update(np.asarray(state[t]).reshape(-1, self.state_dim))
 
     # ---- learning -----------------------------------------------------------------------
 
@@ -416,11 +511,6 @@ class MAPPO(OnPolicyPlumbing):
         return loss
 
     # ---- inference and persistence --------------------------------------------------------
-
-    def actor_input(self, obs: np.ndarray) -> np.ndarray:
-        """The actor's input (normalised obs + seat one-hot, frozen statistics) for raw
-        observations whose rows are (env, seat) pairs, env-major, as the streams are."""
-        return self._actor_input(obs, np.arange(len(obs)) % self.num_seats)
 
     def sync_mirror(self) -> None:
         """Copy the torch weights to the numpy rollout mirrors (after editing ``net``)."""

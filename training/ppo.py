@@ -220,6 +220,26 @@ def np_sample(logits: np.ndarray, nvec: tuple[int, ...], rng: np.random.Generato
     return actions, logprob
 
 
+class FrozenPPO:
+    """A PPO learner's acting side frozen for one rollout acted elsewhere
+    (:mod:`alphatank.training.fragments`): its numpy network and observation statistics."""
+
+    def __init__(self, net: NumpyActorCritic, norm: ObsNormalizer, nvec: tuple[int, ...]):
+        self.net, self.norm, self.nvec = net, norm, nvec
+
+    def act(self, obs: np.ndarray, inputs: dict[str, np.ndarray], rng: np.random.Generator
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Actions, log-probabilities and values of raw stream observations (B, D)."""
+        del inputs
+        logits, values = self.net.forward(self.norm(obs))
+        return (*np_sample(logits, self.nvec, rng), values)
+
+    def values(self, obs: np.ndarray, inputs: dict[str, np.ndarray]) -> np.ndarray:
+        """Values (B,) of raw stream observations (bootstrap of time-limit cuts)."""
+        del inputs
+        return self.net.forward(self.norm(obs))[1]
+
+
 class PPO(OnPolicyPlumbing):
     """One PPO learner controlling ``num_streams`` = num_envs x its seats (implements
     :class:`alphatank.training.learners.Learner`).
@@ -324,14 +344,15 @@ class PPO(OnPolicyPlumbing):
 
     # ---- rollouts acted elsewhere (fragments) ------------------------------------------
 
-    def frozen(self) -> tuple[NumpyActorCritic, ObsNormalizer]:
+    def frozen(self) -> FrozenPPO:
         """Copies of the acting network and observation statistics, for a rollout acted
         away from the learner (:mod:`alphatank.training.fragments`)."""
-        return copy.deepcopy(self.mirror), copy.deepcopy(self.obs_norm)
+        return FrozenPPO(copy.deepcopy(self.mirror), copy.deepcopy(self.obs_norm), self.nvec)
 
     def ingest(self, obs: np.ndarray, actions: np.ndarray, logprobs: np.ndarray,
                values: np.ndarray, rewards: np.ndarray, terminated: np.ndarray,
-               truncated: np.ndarray, bootstrap: np.ndarray, active: np.ndarray | None) -> None:
+               truncated: np.ndarray, bootstrap: np.ndarray, active: np.ndarray | None
+               ) -> None:
         """Record rows acted by copies of :meth:`frozen` taken at the rollout's start:
         (T, B, ...) arrays of raw observations and what followed (``bootstrap``: V of
         the final observation of a time-limit cut). The observation statistics take the

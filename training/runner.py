@@ -59,7 +59,12 @@ from alphatank.training.checkpoint import (
     save_checkpoint,
     scenario_to_dict,
 )
-from alphatank.training.fragments import FrozenLearners, fragment_problems, ingest_fragment
+from alphatank.training.fragments import (
+    FrozenLearners,
+    fragment_problems,
+    ingest_fragment,
+    stream_rows,
+)
 from alphatank.training.imitate import imitate, imitate_config
 from alphatank.training.learners import learner_class, make_learner
 from alphatank.training.logging import RunLogger
@@ -108,11 +113,6 @@ def opposing_learners(specs: list, teams: list[str]) -> dict[str, tuple[str, ...
     return out
 
 
-def _rows(arr: np.ndarray, cols: list[int]) -> np.ndarray:
-    """(E, L, ...) env array -> (E * len(cols), ...) stream rows of learner columns."""
-    return arr[:, cols].reshape(-1, *arr.shape[2:])
-
-
 class Trainer:
     """Runs a :class:`TrainConfig` in ``run_dir``. ``env`` (a vector env) and
     ``scenario`` may be given instead of being built from ``cfg.scenario``.
@@ -125,8 +125,8 @@ class Trainer:
     ``env_runner_timeout_s`` (it is killed and restarted).
 
     ``fragments``: each iteration is acted by the env's shards with frozen copies of the
-    learners, one call per shard (:mod:`alphatank.training.fragments`; PPO learners
-    only); reproducible for the same seed and number of shards, not step-equal to acting
+    learners, one call per shard (:mod:`alphatank.training.fragments`; PPO and MAPPO
+    learners); reproducible for the same seed and number of shards, not step-equal to acting
     on the learner.
 
     ``action_mask``: optional hook ``f(obs (E, L, D)) -> bool (E, L, 8)`` over the
@@ -468,7 +468,7 @@ class Trainer:
                 cols = self.cols[name]
                 x = obs[:, cols].reshape(-1, D)
                 m = masks[:, cols].reshape(-1, masks.shape[-1]) if masks is not None else None
-                extra = {k: _rows(inputs[k], cols) for k in learner.inputs}
+                extra = {k: stream_rows(inputs[k], cols) for k in learner.inputs}
                 self.actions[:, cols] = learner.act(x, m, **extra).reshape(E, len(cols), 3)
             next_obs, rewards, term, trunc, info = env.step(self.actions)
             if info["episodes"]:
@@ -486,8 +486,8 @@ class Trainer:
                 active = (obs[:, cols, self.alive_col].reshape(-1) > 0.5
                           if self.alive_col is not None else None)
                 nxt = next_obs[:, cols].reshape(-1, D)
-                extra = {x: _rows(inputs[x], cols) for x in learner.inputs}
-                finals = {f"final_{x}": _rows(info["final_inputs"][x], cols)
+                extra = {x: stream_rows(inputs[x], cols) for x in learner.inputs}
+                finals = {f"final_{x}": stream_rows(info["final_inputs"][x], cols)
                           for x in learner.inputs}
                 learner.observe(nxt, rewards[:, cols].reshape(-1), np.repeat(term, k),
                                 np.repeat(trunc, k), final[:, cols].reshape(-1, D), active,
@@ -523,8 +523,9 @@ class Trainer:
         self.global_step += frag.steps * self.E
         metrics: dict[str, float] = {}
         for name, learner in self.learners.items():
-            nxt = frag.next_obs[:, self.cols[name]].reshape(-1, self.D)
-            for key, val in learner.update(nxt).items():
+            cols = self.cols[name]
+            extra = {x: stream_rows(frag.next_inputs[x], cols) for x in learner.inputs}
+            for key, val in learner.update(stream_rows(frag.next_obs, cols), **extra).items():
                 metrics[f"{key}/{name}" if len(self.learners) > 1 else key] = val
         return frag.next_obs, metrics
 

@@ -166,12 +166,13 @@ class RandomRollout:
     def start(self, env_ids: Sequence[int]) -> None:
         self.rng = np.random.default_rng(int(env_ids[0]))
 
-    def act(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def act(self, obs: np.ndarray, inputs: dict[str, np.ndarray]
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         n, L, _ = obs.shape
         zeros = np.zeros((n, L), np.float32)
         return self.rng.integers(0, [3, 3, 2], size=(n, L, 3)), zeros, zeros
 
-    def values(self, obs: np.ndarray) -> np.ndarray:
+    def values(self, obs: np.ndarray, inputs: dict[str, np.ndarray]) -> np.ndarray:
         return np.zeros(obs.shape[:2], np.float32)
 
 

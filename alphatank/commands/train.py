@@ -130,9 +130,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     cluster.add_argument("--fragments", action="store_true",
                          help="each env shard (--env-runners actor, --workers process, or "
                               "the one process) acts a whole rollout with a copy of the "
-                              "policy and answers once per iteration, not once per step (PPO "
-                              "learners; reproducible for the same seed and shard count, "
-                              "not step-equal to a run without it; docs/distributed.md)")
+                              "policy and answers once per iteration, not once per step "
+                              "(PPO and MAPPO learners; reproducible for the same seed and "
+                              "shard count, not step-equal to a run without it; "
+                              "docs/distributed.md)")
 
 
 # TrainConfig field -> the flag that sets it (run settings, also allowed with --resume)

@@ -10,8 +10,8 @@ shard's first env id (:meth:`RolloutPolicy.start`), so for the same policy seed 
 same shards a fragment is the same in one process, in worker processes and in Ray env
 runners. :func:`merge_fragments` joins the shards' fragments along the env axis.
 
-Fragments carry no extra learner inputs (``env.inputs``): a learner that needs them
-(MAPPO's centralised critic) acts step by step.
+A fragment also carries the env's extra learner inputs (``env.inputs``, e.g. MAPPO's
+agent-specific states) of every step, and the policy reads them.
 """
 
 from __future__ import annotations
@@ -29,12 +29,14 @@ class RolloutPolicy(Protocol):
     def start(self, env_ids: Sequence[int]) -> None:
         """Seed sampling for the shard of these env ids (called once per fragment)."""
 
-    def act(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def act(self, obs: np.ndarray, inputs: dict[str, np.ndarray]
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Actions int64 (n, L, 3), their log-probabilities and value estimates float32
-        (n, L) for raw observations (n, L, obs_dim)."""
+        (n, L) for raw observations (n, L, obs_dim) and the env's inputs (n, L, ...)."""
 
-    def values(self, obs: np.ndarray) -> np.ndarray:
-        """Value estimates float32 (k, L) of raw observations (k, L, obs_dim)."""
+    def values(self, obs: np.ndarray, inputs: dict[str, np.ndarray]) -> np.ndarray:
+        """Bootstrap values float32 (k, L) of the last observations (k, L, obs_dim) and
+        inputs of episodes cut by the time limit."""
 
 
 class ShardEnv(Protocol):
@@ -53,10 +55,11 @@ class ShardEnv(Protocol):
 
 @dataclass
 class Fragment:
-    """``steps`` vector steps of ``n`` envs: what each learner seat saw (``obs``, raw),
-    did and got, the value of the last observation of each episode cut by the time limit
-    (``bootstrap``, 0 elsewhere), the observations after the last step (``next_obs``)
-    and the episode records, each with the ``step`` it ended in."""
+    """``steps`` vector steps of ``n`` envs: what each learner seat saw (``obs``, raw, and
+    the env's ``inputs``), did and got, the value of the last observation of each episode
+    cut by the time limit (``bootstrap``, 0 elsewhere), the observations and inputs after
+    the last step (``next_obs``, ``next_inputs``) and the episode records, each with the
+    ``step`` it ended in."""
 
     obs: np.ndarray  # (T, n, L, D) float32
     actions: np.ndarray  # (T, n, L, 3) int64
@@ -67,6 +70,8 @@ class Fragment:
     truncated: np.ndarray  # (T, n) bool
     bootstrap: np.ndarray  # (T, n, L) float32
     next_obs: np.ndarray  # (n, L, D) float32
+    inputs: dict[str, np.ndarray] = field(default_factory=dict)  # (T, n, L, ...) each
+    next_inputs: dict[str, np.ndarray] = field(default_factory=dict)  # (n, L, ...) each
     episodes: list[dict[str, Any]] = field(default_factory=list)
 
     @property
@@ -80,9 +85,6 @@ def collect_fragment(env: ShardEnv, policy: RolloutPolicy, obs: np.ndarray,
     ``policy``'s actions."""
     if steps < 1:
         raise ValueError(f"a fragment needs steps >= 1, got {steps}")
-    if env.inputs:
-        raise ValueError(f"fragments carry no extra learner inputs; this env supplies "
-                         f"{sorted(env.inputs)} (act step by step instead)")
     n, L, D = env.num_envs, env.num_learners, env.obs_dim
     obs = np.asarray(obs, dtype=np.float32)
     if obs.shape != (n, L, D):
@@ -96,21 +98,34 @@ def collect_fragment(env: ShardEnv, policy: RolloutPolicy, obs: np.ndarray,
                     rewards=np.empty((steps, n, L), np.float32),
                     terminated=np.empty((steps, n), bool), truncated=np.empty((steps, n), bool),
                     bootstrap=np.zeros((steps, n, L), np.float32), next_obs=seen[steps])
+    ins = {name: np.empty((steps + 1, *a.shape), np.float32) for name, a in env.inputs.items()}
+    frag.inputs = {name: a[:steps] for name, a in ins.items()}
+    frag.next_inputs = {name: a[steps] for name, a in ins.items()}
     final_obs = np.zeros((n, L, D), np.float32)
+    finals = {name: np.zeros(a.shape, np.float32) for name, a in env.inputs.items()}
     policy.start(env.env_ids)
     for t in range(steps):
-        actions, frag.logprobs[t], frag.values[t] = policy.act(seen[t])
+        now = {}
+        for name, a in ins.items():
+            a[t] = env.inputs[name]
+            now[name] = a[t]
+        actions, frag.logprobs[t], frag.values[t] = policy.act(seen[t], now)
         frag.actions[t] = actions
         episodes = env.step_into(frag.actions[t], seen[t + 1], frag.rewards[t],
-                                 frag.terminated[t], frag.truncated[t], final_obs, {})
+                                 frag.terminated[t], frag.truncated[t], final_obs, finals)
         if episodes:
             cut = np.flatnonzero(frag.truncated[t] & ~frag.terminated[t])
             if cut.size:
-                frag.bootstrap[t, cut] = policy.values(final_obs[cut])
+                frag.bootstrap[t, cut] = policy.values(
+                    final_obs[cut], {name: a[cut] for name, a in finals.items()})
             final_obs.fill(0.0)
+            for a in finals.values():
+                a.fill(0.0)
             for ep in episodes:
                 ep["step"] = t
             frag.episodes.extend(episodes)
+    for name, a in ins.items():
+        a[steps] = env.inputs[name]
     return frag
 
 
@@ -125,4 +140,8 @@ def merge_fragments(parts: Sequence[Fragment]) -> Fragment:
                            "truncated", "bootstrap")}
     episodes = sorted((ep for p in parts for ep in p.episodes), key=lambda ep: ep["step"])
     return Fragment(**arrays, next_obs=np.concatenate([p.next_obs for p in parts]),
+                    inputs={k: np.concatenate([p.inputs[k] for p in parts], axis=1)
+                            for k in parts[0].inputs},
+                    next_inputs={k: np.concatenate([p.next_inputs[k] for p in parts])
+                                 for k in parts[0].next_inputs},
                     episodes=episodes)
