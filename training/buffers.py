@@ -9,6 +9,8 @@ truncation is bootstrapped with ``V(final_obs)`` stored in ``bootstrap[t]``.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import torch
 
@@ -127,6 +129,25 @@ class OnPolicyPlumbing:
     def drop_rollout(self) -> None:
         """Forget the unfinished rollout (its matches were lost)."""
         self.buffer.clear()
+
+    def record_acted(self, x: np.ndarray, actions: np.ndarray, logprobs: np.ndarray,
+                     values: np.ndarray, rewards: np.ndarray, terminated: np.ndarray,
+                     truncated: np.ndarray, bootstrap: np.ndarray, active: Any) -> None:
+        """Append one row acted elsewhere (a fragment's step): the network input ``x``,
+        what was sampled, and what followed, rewards scaled as :meth:`observe` scales
+        them."""
+        buf = self.buffer
+        row, s = buf.np, buf.step
+        row["obs"][s] = x
+        row["actions"][s] = actions
+        row["logprobs"][s] = logprobs
+        row["values"][s] = values
+        row["rewards"][s] = self.ret_norm(rewards, terminated | truncated)
+        row["terminated"][s] = terminated
+        row["truncated"][s] = truncated
+        row["bootstrap"][s] = bootstrap
+        row["active"][s] = active
+        buf.step += 1
 
     def arrays(self) -> dict[str, np.ndarray]:
         return {}

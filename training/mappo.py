@@ -352,30 +352,19 @@ class MAPPO(OnPolicyPlumbing, MAPPOActing):
         :meth:`act` and :meth:`observe` record them: (T, B, ...) arrays of raw
         observations, the inputs ``state`` / ``alive``, and what followed (``bootstrap``:
         the copy's values of time-limit cuts). The normalisers take the rows in after."""
-        buf = self.buffer
-        row = buf.np
-        if buf.masks is not None:
+        if self.buffer.masks is not None:
             raise RuntimeError("rollouts acted elsewhere carry no action masks")
         for t in range(obs.shape[0]):
-            s = buf.step
             x = self._actor_input(obs[t], self.seat_of)
-            row["obs"][s] = x
             if self.states_np is not None:
-                self.states_np[s] = self._critic_input(state[t], x)
-            row["actions"][s] = actions[t]
-            row["logprobs"][s] = logprobs[t]
-            row["values"][s] = values[t]
-            row["rewards"][s] = self.ret_norm(rewards[t], terminated[t] | truncated[t])
-            row["terminated"][s] = terminated[t]
-            row["truncated"][s] = truncated[t]
+                self.states_np[self.buffer.step] = self._critic_input(state[t], x)
             if active is None:
                 live = self._alive(obs[t], None if alive is None else alive[t])
                 active_t = live if live is not None else True
             else:
                 active_t = active[t]
-            row["active"][s] = active_t
-            row["bootstrap"][s] = bootstrap[t]
-            buf.step += 1
+            self.record_acted(x, actions[t], logprobs[t], values[t], rewards[t],
+                              terminated[t], truncated[t], bootstrap[t], active_t)
         for t in range(obs.shape[0]):
             self.obs_norm.update(obs[t])
             if self.state_dim:

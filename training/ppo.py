@@ -357,23 +357,13 @@ class PPO(OnPolicyPlumbing):
         (T, B, ...) arrays of raw observations and what followed (``bootstrap``: V of
         the final observation of a time-limit cut). The observation statistics take the
         rows in after them (the copies acted with the statistics of the start)."""
-        buf = self.buffer
-        row = buf.np
-        if buf.anchor_logits is not None or buf.masks is not None:
+        if self.buffer.anchor_logits is not None or self.buffer.masks is not None:
             raise RuntimeError("rollouts acted elsewhere carry no anchor logits or action "
                                "masks")
         for t in range(obs.shape[0]):
-            s = buf.step
-            row["obs"][s] = self.obs_norm(obs[t])
-            row["actions"][s] = actions[t]
-            row["logprobs"][s] = logprobs[t]
-            row["values"][s] = values[t]
-            row["rewards"][s] = self.ret_norm(rewards[t], terminated[t] | truncated[t])
-            row["terminated"][s] = terminated[t]
-            row["truncated"][s] = truncated[t]
-            row["bootstrap"][s] = bootstrap[t]
-            row["active"][s] = True if active is None else active[t]
-            buf.step += 1
+            self.record_acted(self.obs_norm(obs[t]), actions[t], logprobs[t], values[t],
+                              rewards[t], terminated[t], truncated[t], bootstrap[t],
+                              True if active is None else active[t])
         for t in range(obs.shape[0]):
             self.obs_norm.update(obs[t])
 
