@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from alphatank.cli import main
 from alphatank.commands.benchtrain import sac_step_bench
 
@@ -25,12 +27,14 @@ def test_bench_train_compares_training_with_raw_env_steps(tmp_path):
         "ppo_vs_aggressive", 1, 2, 2)
 
 
-def test_bench_train_with_fragments_says_so(tmp_path):
+@pytest.mark.parametrize("flag", ["--train-fragments", "--train-overlap"])
+def test_bench_train_with_fragments_says_so(tmp_path, flag):
     assert main(["bench", "--ticks", "50", "--repeats", "1", "--train", "--train-preset",
                  "ppo_vs_aggressive", "--train-workers", "2", "--train-envs", "2",
-                 "--train-fragments", "--json", str(tmp_path / "b.json")]) == 0
+                 flag, "--json", str(tmp_path / "b.json")]) == 0
     out = json.loads((tmp_path / "b.json").read_text())["train"]
     assert out["fragments"] is True and out["train_steps_per_s"] > 0
+    assert out["overlap"] is (flag == "--train-overlap")
 
 
 def test_fragment_scaling_steps_worker_processes_a_fragment_each():

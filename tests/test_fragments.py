@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import json
 import signal
 
 import numpy as np
@@ -143,15 +144,22 @@ def test_what_fragments_cannot_carry_is_one_line(tmp_path, capsys, preset, messa
     assert "fragments: " in last and message in last
 
 
-def test_two_learners_act_in_one_fragment_from_the_command_line(tmp_path, capsys):
+@pytest.mark.parametrize("flag", ["--fragments", "--overlap"])
+def test_two_learners_act_in_one_fragment_from_the_command_line(tmp_path, capsys, flag):
     code = main(["train", "--preset", "ppo_vs_ppo", "--runs", str(tmp_path), "--name", "pair",
-                 "--fragments", "--workers", "2", "--num-envs", "4", "--total-steps", "128",
+                 flag, "--workers", "2", "--num-envs", "4", "--total-steps", "128",
                  "--ppo", "num_steps=16,update_epochs=1", "--wandb", "disabled",
                  "--no-progress"])
     assert code == 0, capsys.readouterr().err
     rows = (tmp_path / "pair" / "metrics.jsonl").read_text().splitlines()
     last = [r for r in rows if '"charts/sps"' in r][-1]
     assert '"losses/approx_kl/' in last and last.count("losses/approx_kl/") == 2
+    assert main(["train", "--resume", str(tmp_path / "pair"), flag, "--total-steps", "256",
+                 "--no-progress"]) == 0
+    assert "resuming" in capsys.readouterr().out
+    steps = [json.loads(r)["step"] for r in
+             (tmp_path / "pair" / "metrics.jsonl").read_text().splitlines()]
+    assert steps[-1] == 256
 
 
 class SignalInFragment(VectorMatchEnv):
@@ -168,14 +176,18 @@ class SignalInFragment(VectorMatchEnv):
         return super().step_into(*args)
 
 
-def test_a_stop_during_a_fragment_drops_it_and_resumes_as_the_reference(tmp_path):
+@pytest.mark.parametrize("overlap", [False, True])
+def test_a_stop_during_a_fragment_drops_it_and_resumes_as_the_reference(tmp_path, overlap):
+    """With ``overlap`` the stopped 4th fragment was started ahead, by the learners of
+    one update earlier; the save is the state at that iteration's start all the same."""
     from test_stopping import states_equal
 
     def run(name: str, iterations: int, at: int = 0) -> Trainer:
         cfg = dataclasses.replace(tiny_cfg(name), total_steps=iterations * 64,
                                   checkpoint_every=2)
         env = SignalInFragment(cfg.scenario, 4, cfg.seed, game_overrides=cfg.game, at=at)
-        return Trainer(cfg, tmp_path / name, env=env, progress=False, fragments=True)
+        return Trainer(cfg, tmp_path / name, env=env, progress=False, fragments=True,
+                       overlap=overlap)
 
     assert run("ref", 3).train()["stopped"] is None
     stopped = run("stop", 5, at=3 * 16 + 6)  # inside the 4th fragment
@@ -183,7 +195,7 @@ def test_a_stop_during_a_fragment_drops_it_and_resumes_as_the_reference(tmp_path
     assert summary["exit_code"] == 130
     assert summary["stopped"] == {"reason": "SIGINT", "checkpoint_step": 3 * 64,
                                   "dropped_steps": 64}
-    runs = [resume_trainer(tmp_path / name, progress=False, fragments=True,
+    runs = [resume_trainer(tmp_path / name, progress=False, fragments=True, overlap=overlap,
                            total_steps=5 * 64) for name in ("ref", "stop")]
     for tr in runs:
         assert tr.train()["stopped"] is None
@@ -191,6 +203,69 @@ def test_a_stop_during_a_fragment_drops_it_and_resumes_as_the_reference(tmp_path
         [h["charts/episodes"] for h in runs[1].history]
     assert states_equal(runs[0].learners["ppo"].state_dict(),
                         runs[1].learners["ppo"].state_dict())
+
+
+class StartsSeen(VectorMatchEnv):
+    """The vector env, noting how many updates its trainer's learner had made each time a
+    rollout started."""
+
+    trainer: Trainer | None = None
+
+    def rollout_start(self, *args):
+        self.starts = [*getattr(self, "starts", []), self.trainer.learners["ppo"].updates]
+        super().rollout_start(*args)
+
+
+@pytest.mark.parametrize(("overlap", "checkpoint_every", "starts"), [
+    (False, 0, [0, 1, 2, 3]),
+    (True, 0, [0, 0, 1, 2]),  # each rollout acted by the learner of one update earlier
+    (True, 2, [0, 0, 2, 2]),  # none across a checkpoint: the matches restart there
+])
+def test_an_overlapped_run_acts_each_rollout_with_the_learner_one_update_behind(
+        tmp_path, overlap, checkpoint_every, starts):
+    cfg = dataclasses.replace(tiny_cfg("seen"), total_steps=4 * 64,
+                              checkpoint_every=checkpoint_every)
+    env = StartsSeen(cfg.scenario, 4, cfg.seed, game_overrides=cfg.game)
+    tr = Trainer(cfg, tmp_path / "seen", env=env, progress=False, fragments=True,
+                 overlap=overlap)
+    env.trainer = tr
+    assert tr.train()["global_step"] == 4 * 64
+    assert env.starts == starts and tr.learners["ppo"].updates == 4
+
+
+def test_an_overlapped_run_is_the_same_in_one_process_and_in_a_worker(tmp_path):
+    """One process plays a rollout started ahead when it is collected, by the copy given
+    at the start; a worker plays it during the update: the same run. Reproducible, and
+    not the run that acts every rollout with the current learner."""
+    cfg = dataclasses.replace(tiny_cfg("one"), total_steps=4 * 64)
+    runs = {}
+    for name in ("one", "again", "worker", "sync"):
+        env = (SubprocVectorMatchEnv(cfg.scenario, 4, cfg.seed, num_workers=1,
+                                     game_overrides=cfg.game) if name == "worker" else None)
+        tr = Trainer(dataclasses.replace(cfg, name=name), tmp_path / name, env=env,
+                     progress=False, fragments=True, overlap=name != "sync")
+        summary = tr.train()
+        runs[name] = (summary["global_step"], summary["episodes"], weights(tr),
+                      [h["losses/policy_loss"] for h in tr.history])
+    assert runs["one"] == runs["again"] == runs["worker"]
+    assert runs["one"][0] == runs["sync"][0] == 4 * 64 and runs["one"][2] != runs["sync"][2]
+
+
+def test_a_worker_rollout_in_flight_is_one_at_a_time_and_closes_cleanly():
+    sv = SubprocVectorMatchEnv("team_vs_bot", 4, seed=2, num_workers=2, **KW)
+    policy = frozen(sv)
+    try:
+        with pytest.raises(RuntimeError, match="without rollout_start"):
+            sv.rollout_finish()
+        obs = sv.reset(9)
+        sv.rollout_start(policy, obs, 40)
+        with pytest.raises(RuntimeError, match="while a rollout is in flight"):
+            sv.rollout_start(policy, obs, 40)
+        assert sv.rollout_finish().steps == 40
+        sv.rollout_start(policy, obs, 40)
+    finally:
+        sv.close()  # collects the answer in flight before closing the workers
+    assert not any(p.is_alive() for p in sv._procs)
 
 
 @pytest.mark.parametrize("algo", ["ppo", "mappo"])

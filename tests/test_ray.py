@@ -233,14 +233,16 @@ def test_fragments_on_env_runners_match_worker_processes_and_a_lost_one(cluster)
         sv.close()
 
 
-def test_a_run_in_fragments_on_env_runners_is_the_one_on_worker_processes(cluster, tmp_path):
-    local = Trainer(tiny_cfg("local", iterations=2, num_workers=2), tmp_path / "local",
-                    progress=False, fragments=True)
+@pytest.mark.parametrize("overlap", [False, True])
+def test_a_run_in_fragments_on_env_runners_is_the_one_on_worker_processes(cluster, tmp_path,
+                                                                          overlap):
+    local = Trainer(tiny_cfg("local", iterations=3, num_workers=2), tmp_path / "local",
+                    progress=False, fragments=True, overlap=overlap)
     local.train()
-    remote = Trainer(tiny_cfg("ray", iterations=2), tmp_path / "ray", progress=False,
-                     env_runners=2, fragments=True)
+    remote = Trainer(tiny_cfg("ray", iterations=3), tmp_path / "ray", progress=False,
+                     env_runners=2, fragments=True, overlap=overlap)
     remote.train()
-    assert remote.learners["ppo"].updates == 2
+    assert remote.learners["ppo"].updates == 3
     assert weights(local) == weights(remote)
 
 

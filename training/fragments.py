@@ -99,7 +99,7 @@ def fragment_problems(learners: Mapping[str, Any], rollout_steps: int, *, masks:
         out.append("action masks are applied step by step; fragments carry none")
     if selfplay:
         out.append("self-play swaps opponents on episode ends inside a rollout")
-    if not callable(getattr(env, "rollout", None)):
+    if not callable(getattr(env, "rollout_start", None)):
         out.append(f"the env ({type(env).__name__}) does not collect fragments")
     return out
 

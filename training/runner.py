@@ -127,7 +127,10 @@ class Trainer:
     ``fragments``: each iteration is acted by the env's shards with frozen copies of the
     learners, one call per shard (:mod:`alphatank.training.fragments`; PPO and MAPPO
     learners); reproducible for the same seed and number of shards, not step-equal to acting
-    on the learner.
+    on the learner. ``overlap`` (implies ``fragments``): the shards act the next rollout
+    while the learners update on this one, so each rollout is acted by the learners as they
+    were one update earlier (the first rollout, and the first after each checkpoint, by the
+    current ones: a resumed run goes on as the uninterrupted one).
 
     ``action_mask``: optional hook ``f(obs (E, L, D)) -> bool (E, L, 8)`` over the
     concatenated choices (rotate 3, move 3, fire 2); learners that take masks (PPO) never
@@ -139,7 +142,8 @@ class Trainer:
                  wandb_id: str | None = None,
                  action_mask: Callable[[np.ndarray], np.ndarray] | None = None,
                  scenario: Scenario | None = None, env_runners: int = 0,
-                 env_runner_timeout_s: float = ENV_RUNNER_TIMEOUT_S, fragments: bool = False):
+                 env_runner_timeout_s: float = ENV_RUNNER_TIMEOUT_S, fragments: bool = False,
+                 overlap: bool = False):
         if env is not None and getattr(env, "action_repeat", 1) != cfg.action_repeat:
             raise ValueError(f"the env holds actions for {getattr(env, 'action_repeat', 1)} "
                              f"tick(s); the run's action_repeat is {cfg.action_repeat}")
@@ -189,7 +193,9 @@ class Trainer:
                 self.scenario, cfg.num_envs, seed=cfg.seed, num_workers=cfg.num_workers,
                 observation=cfg.observation, game_overrides=cfg.game or None,
                 reward_overrides=cfg.rewards or None, **extra)
-        self.fragments = fragments
+        self.fragments = fragments or overlap
+        self.overlap = overlap
+        self.ahead: dict[str, float] | None = None  # schedule metrics of a rollout in flight
         try:
             self._setup(specs, resume, wandb_id)
         except BaseException:
@@ -505,13 +511,33 @@ class Trainer:
             metrics.update(sp.metrics())
         return obs, metrics
 
-    def _collect_fragment(self, obs: np.ndarray) -> tuple[np.ndarray, dict[str, float]]:
+    def _start_fragment(self, obs: np.ndarray, iteration: int) -> None:
+        """Send the rollout of ``iteration`` to the env's shards, acted by frozen copies of
+        the learners as they are now."""
+        policy = FrozenLearners.of(self.learners, self.cols,
+                                   derive_seed(self.cfg.seed, iteration, 17))
+        self.env.rollout_start(policy, obs, self.rollout_steps)
+
+    def _ahead_allowed(self, last_round: bool) -> bool:
+        """Whether the next iteration's rollout may start before this one's update: with
+        ``overlap``, unless this iteration ends the run, is stopped or saves a checkpoint
+        (after which every match restarts)."""
+        cfg, nxt = self.cfg, self.iteration + 1
+        return (self.overlap and not last_round and not self.stop()
+                and self.global_step < cfg.total_steps
+                and not (cfg.checkpoint_every and nxt % cfg.checkpoint_every == 0))
+
+    def _collect_fragment(self, obs: np.ndarray, last_round: bool = False
+                          ) -> tuple[np.ndarray, dict[str, float]]:
         """One iteration acted by the env's shards with frozen copies of the learners
         (:mod:`alphatank.training.fragments`), then each learner's update; a stop during
-        the rollout drops it (:class:`StopRequested`, as a stopped update)."""
-        policy = FrozenLearners.of(self.learners, self.cols,
-                                   derive_seed(self.cfg.seed, self.iteration, 17))
-        frag = self.env.rollout(policy, obs, self.rollout_steps)
+        the rollout drops it (:class:`StopRequested`, as a stopped update). With
+        ``overlap`` the next iteration's rollout (its schedule applied first) starts before
+        the update, unless ``last_round`` (a caller that stops after this iteration)."""
+        if self.ahead is None:
+            self._start_fragment(obs, self.iteration)
+        self.ahead = None
+        frag = self.env.rollout_finish()
         s0 = self.global_step
         if self.stop():  # dropped as a partial rollout is (_save_stopped)
             self.global_step += frag.steps * self.E
@@ -521,6 +547,10 @@ class Trainer:
                                  self.schedule.victory_scale(s0 + ep["step"] * self.E))
         ingest_fragment(frag, self.learners, self.cols, self.alive_col)
         self.global_step += frag.steps * self.E
+        if self._ahead_allowed(last_round):
+            sched = self.schedule.apply(self.env, self.global_step)
+            self._start_fragment(frag.next_obs, self.iteration + 1)
+            self.ahead = sched
         metrics: dict[str, float] = {}
         for name, learner in self.learners.items():
             cols = self.cols[name]
@@ -589,7 +619,8 @@ class Trainer:
                 if bar is not None:
                     bar.close()
                 self.logger.close()
-                self.env.close()
+                self.ahead = None
+                self.env.close()  # a rollout started ahead is dropped with it
                 self.lock.release()
         if self.stop.reason is not None:
             self.stopped = {"reason": self.stop.reason, "checkpoint_step": self.saved_step,
@@ -614,7 +645,8 @@ class Trainer:
         while self.global_step < cfg.total_steps and not self.stop():
             before = self._iteration_start()
             rollback = self._rollback_point()
-            sched = self.schedule.apply(self.env, self.global_step)
+            sched = (self.ahead if self.ahead is not None  # applied when it started
+                     else self.schedule.apply(self.env, self.global_step))
             t0, s0 = time.perf_counter(), self.global_step
             try:
                 obs, metrics = (self._collect_fragment(obs) if self.fragments
@@ -731,13 +763,14 @@ class Trainer:
 
 def resume_trainer(path: str | Path, progress: bool = True, env: Any = None,
                    env_runners: int = 0, env_runner_timeout_s: float = ENV_RUNNER_TIMEOUT_S,
-                   fragments: bool = False, **overrides: Any) -> Trainer:
+                   fragments: bool = False, overlap: bool = False, **overrides: Any
+                   ) -> Trainer:
     """A :class:`Trainer` continuing the run saved at ``path`` (checkpoint or run dir);
-    ``overrides`` change run settings such as ``total_steps``; ``env_runners`` and
-    ``env_runner_timeout_s``: as for :class:`Trainer`."""
+    ``overrides`` change run settings such as ``total_steps``; ``env_runners``,
+    ``env_runner_timeout_s``, ``fragments`` and ``overlap``: as for :class:`Trainer`."""
     ckpt = load_checkpoint(path)
     cfg = ckpt.train_config.with_overrides(**overrides)
     return Trainer(cfg, ckpt.path.parent.parent, env=env, resume=ckpt, progress=progress,
                    wandb_id=ckpt.meta.get("wandb_id"), scenario=ckpt.scenario,
                    env_runners=env_runners, env_runner_timeout_s=env_runner_timeout_s,
-                   fragments=fragments)
+                   fragments=fragments, overlap=overlap)

@@ -50,6 +50,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="matches stepped together in --train (default: 32)")
     p.add_argument("--train-fragments", action="store_true",
                    help="--train with the workers acting whole rollouts (train --fragments)")
+    p.add_argument("--train-overlap", action="store_true",
+                   help="--train with the workers acting the next rollout during each "
+                        "update (train --overlap)")
     p.add_argument("--train-threads", type=positive_int, default=1, metavar="N",
                    help="torch threads of the --train run's learner (default: 1; more help "
                         "only with idle cores: the env workers wait during each update)")
@@ -141,7 +144,8 @@ def run(args: argparse.Namespace) -> int:
 
         results["train"] = train_bench(args.train_preset, args.train_workers, args.train_envs,
                                        torch_threads=args.train_threads,
-                                       fragments=args.train_fragments)
+                                       fragments=args.train_fragments,
+                                       overlap=args.train_overlap)
     if args.sac:
         from alphatank.commands.benchtrain import sac_step_bench, sac_train_bench
 

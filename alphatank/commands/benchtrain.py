@@ -153,14 +153,16 @@ def _raw_round(env: Any, actions: np.ndarray, steps: int) -> tuple[float, float]
 def train_bench(preset: str = "ppo_vs_smart", workers: int = 2, num_envs: int = 32,
                 hp: Sequence[str] | None = None, rounds: int = 3, iterations: int = 3,
                 seed: int = 0, torch_threads: int = 1, fragments: bool = False,
-                verbose: bool = True) -> dict[str, Any]:
+                overlap: bool = False, verbose: bool = True) -> dict[str, Any]:
     """Training steps/s of ``preset`` (``hp``: ``--hp`` strings) against raw env steps/s of
     the same scenario, workers and envs, alternating ``rounds`` rounds; each training
     round runs ``iterations`` iterations (after one warm-up iteration), each raw round
     the same number of vector steps. Medians; CPU s per step counts all processes.
     ``hp`` None: :data:`DEFAULT_HP` when the preset trains PPO learners, else none.
     ``torch_threads``: the run's torch threads (PPO's updates; rollouts use numpy).
-    ``fragments``: the workers act the rollouts (``alphatank train --fragments``)."""
+    ``fragments``: the workers act the rollouts (``alphatank train --fragments``);
+    ``overlap``: and the next one during each update (``train --overlap``), except after
+    a round's last iteration, so that no rollout runs into the raw round."""
     from alphatank.envs.vector import make_vector_env
     from alphatank.training.presets import get_preset, parse_hp, run_scenario, with_hp
     from alphatank.training.runner import Trainer
@@ -177,8 +179,14 @@ def train_bench(preset: str = "ppo_vs_smart", workers: int = 2, num_envs: int = 
                              time_limit_s=0.0, total_steps=10**12, name="bench",
                              torch_threads=torch_threads)
     tmp = tempfile.mkdtemp(prefix="alphatank-bench-")
-    trainer = Trainer(cfg, os.path.join(tmp, "run"), progress=False, fragments=fragments)
-    collect = trainer._collect_fragment if fragments else trainer._collect
+    trainer = Trainer(cfg, os.path.join(tmp, "run"), progress=False, fragments=fragments,
+                      overlap=overlap)
+    fragments = trainer.fragments
+
+    def collect(obs: np.ndarray, last: bool) -> tuple[np.ndarray, dict[str, float]]:
+        if fragments:
+            return trainer._collect_fragment(obs, last_round=last)
+        return trainer._collect(obs)
     # the raw env does what the training env does: game and reward overrides, and the
     # learners' extra inputs (MAPPO's agent-specific states)
     env = make_vector_env(scenario, num_envs, seed=seed, num_workers=workers,
@@ -195,14 +203,14 @@ def train_bench(preset: str = "ppo_vs_smart", workers: int = 2, num_envs: int = 
         env.reset(seed)
         _raw_round(env, actions, 32)
         obs = trainer._segment_reset()
-        obs, _ = collect(obs)  # warm-up iteration
+        obs, _ = collect(obs, True)  # warm-up iteration
         for _ in range(rounds):
             sps, cpu = _raw_round(env, actions, vector_steps)
             raw.append(sps)
             raw_cpu.append(cpu)
             t, c, s0 = time.perf_counter(), _cpu_seconds(pids), trainer.global_step
-            for _ in range(iterations):
-                obs, _ = collect(obs)
+            for k in range(iterations):
+                obs, _ = collect(obs, k == iterations - 1)
             n = trainer.global_step - s0
             train.append(n / (time.perf_counter() - t))
             train_cpu.append((_cpu_seconds(pids) - c) / n)
@@ -212,7 +220,7 @@ def train_bench(preset: str = "ppo_vs_smart", workers: int = 2, num_envs: int = 
         trainer.env.close()
         shutil.rmtree(tmp, ignore_errors=True)
     out = {"preset": preset, "workers": workers, "num_envs": num_envs, "hp": list(hp),
-           "torch_threads": torch_threads, "fragments": fragments,
+           "torch_threads": torch_threads, "fragments": fragments, "overlap": overlap,
            "raw_steps_per_s": round(statistics.median(raw)),
            "train_steps_per_s": round(statistics.median(train)),
            "raw_cpu_us_per_step": round(1e6 * statistics.median(raw_cpu), 1),
@@ -222,7 +230,8 @@ def train_bench(preset: str = "ppo_vs_smart", workers: int = 2, num_envs: int = 
     out["cpu_ratio"] = round(out["raw_cpu_us_per_step"] / out["train_cpu_us_per_step"], 3)
     if verbose:
         print(f"{preset} ({' '.join(hp) or 'preset hyperparameters'}), {workers} workers"
-              f"{' acting in fragments' if fragments else ''}, {num_envs} envs, "
+              f"{' acting in fragments' if fragments else ''}"
+              f"{' overlapping the updates' if overlap else ''}, {num_envs} envs, "
               f"{torch_threads} torch threads; {rounds} alternating rounds of "
               f"{vector_steps} vector steps "
               f"(load average {out['load_average']:.1f}):")

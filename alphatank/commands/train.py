@@ -134,6 +134,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                               "(PPO and MAPPO learners; reproducible for the same seed and "
                               "shard count, not step-equal to a run without it; "
                               "docs/distributed.md)")
+    cluster.add_argument("--overlap", action="store_true",
+                         help="--fragments, and the shards act the next rollout while the "
+                              "learner updates on this one (each rollout acted by the "
+                              "policy of one update earlier): the learner no longer "
+                              "leaves the env cores idle (docs/distributed.md)")
 
 
 # TrainConfig field -> the flag that sets it (run settings, also allowed with --resume)
@@ -346,7 +351,8 @@ def _run(args: argparse.Namespace, progress: bool, cpus: float = 0.0) -> int:
             with _one_line_warnings():
                 trainer = resume_trainer(args.resume, progress=progress, env_runners=runners,
                                          env_runner_timeout_s=_runner_timeout(args),
-                                         fragments=args.fragments, **_overrides(args))
+                                         fragments=args.fragments, overlap=args.overlap,
+                                         **_overrides(args))
         except ValueError as exc:
             raise as_input_error(exc) from None
         rewound = trainer.logger.rewound
@@ -371,7 +377,7 @@ def _run(args: argparse.Namespace, progress: bool, cpus: float = 0.0) -> int:
             with _one_line_warnings():
                 trainer = Trainer(cfg, run_dir, progress=progress, env_runners=runners,
                                   env_runner_timeout_s=_runner_timeout(args),
-                                  fragments=args.fragments)
+                                  fragments=args.fragments, overlap=args.overlap)
         except ValueError as exc:
             raise as_input_error(exc) from None
         for name, counts in trainer.warm_start.items():

@@ -9,6 +9,7 @@ shard's envs. Sampling draws from the policy's generator for the shard, seeded b
 shard's first env id (:meth:`RolloutPolicy.start`), so for the same policy seed and the
 same shards a fragment is the same in one process, in worker processes and in Ray env
 runners. :func:`merge_fragments` joins the shards' fragments along the env axis.
+:class:`SplitRollout` lets a caller start a rollout and collect it later.
 
 A fragment also carries the env's extra learner inputs (``env.inputs``, e.g. MAPPO's
 agent-specific states) of every step, and the policy reads them.
@@ -127,6 +128,24 @@ def collect_fragment(env: ShardEnv, policy: RolloutPolicy, obs: np.ndarray,
     for name, a in ins.items():
         a[steps] = env.inputs[name]
     return frag
+
+
+class SplitRollout:
+    """``rollout`` as ``rollout_start`` then ``rollout_finish``: an env whose shards run
+    apart from the caller plays the rollout in between, while the caller does other work
+    (``alphatank train --overlap``: the learner's update)."""
+
+    def rollout(self, policy: RolloutPolicy, obs: np.ndarray, steps: int) -> Fragment:
+        """``steps`` vector steps acted by ``policy`` from the current observations
+        ``obs``."""
+        self.rollout_start(policy, obs, steps)
+        return self.rollout_finish()
+
+    def rollout_start(self, policy: RolloutPolicy, obs: np.ndarray, steps: int) -> None:
+        raise NotImplementedError
+
+    def rollout_finish(self) -> Fragment:
+        raise NotImplementedError
 
 
 def merge_fragments(parts: Sequence[Fragment]) -> Fragment:

@@ -47,7 +47,7 @@ import numpy as np
 
 from alphatank.cluster import ENV_RUNNER_TIMEOUT_S
 from alphatank.envs.core import check_actions, check_benched
-from alphatank.envs.fragments import Fragment, RolloutPolicy, merge_fragments
+from alphatank.envs.fragments import Fragment, RolloutPolicy, SplitRollout, merge_fragments
 from alphatank.envs.vector import ShardedEnv, VectorMatchEnv
 from alphatank.game.scenarios import Scenario
 from alphatank.sim.policy import Policy
@@ -129,7 +129,7 @@ class EnvRunner:
         return os.getpid()
 
 
-class RayVectorMatchEnv(ShardedEnv):
+class RayVectorMatchEnv(ShardedEnv, SplitRollout):
     """:class:`VectorMatchEnv` split over ``num_runners`` Ray actors (same interface and
     results as :class:`~alphatank.envs.vector.SubprocVectorMatchEnv` with that many
     workers). Connects to Ray first if this process has not (a local instance)."""
@@ -179,6 +179,7 @@ class RayVectorMatchEnv(ShardedEnv):
         self._lost: str | None = None  # a loss seen outside step(), raised by the next step
         self._closed = False
         self._started = False
+        self._pending: tuple[list[Any], int] | None = None  # refs of rollout_start, steps
         self._shape = (num_envs, self.num_learners, 3)
         try:
             pids = [r.pid.remote() for r in self.runners]
@@ -373,14 +374,23 @@ class RayVectorMatchEnv(ShardedEnv):
         return (rec["obs"].copy(), rec["rewards"].copy(), rec["terminated"].copy(),
                 rec["truncated"].copy(), info)
 
-    def rollout(self, policy: RolloutPolicy, obs: np.ndarray, steps: int) -> Fragment:
-        """``steps`` vector steps, each runner acting its shard with a copy of ``policy``
-        (sent once) and answering once (:mod:`alphatank.envs.fragments`); the same
-        fragment as :meth:`SubprocVectorMatchEnv.rollout` with as many workers."""
+    def rollout_start(self, policy: RolloutPolicy, obs: np.ndarray, steps: int) -> None:
+        """Send the rollout to the runners and return at once (:meth:`rollout_finish`
+        collects it)."""
         self._check_live("rollout")
+        if self._pending is not None:
+            raise RuntimeError("rollout_start() while a rollout is in flight")
         ref = self._ray.put(policy)
-        refs = [r.rollout.remote(ref, obs[lo:hi], steps)
-                for r, (lo, hi) in zip(self.runners, self._blocks, strict=True)]
+        self._pending = ([r.rollout.remote(ref, obs[lo:hi], steps)
+                          for r, (lo, hi) in zip(self.runners, self._blocks, strict=True)],
+                         steps)
+
+    def rollout_finish(self) -> Fragment:
+        """The fragment of the rollout sent by :meth:`rollout_start`; raises
+        :class:`RolloutLost` if a runner died while playing it."""
+        if self._pending is None:
+            raise RuntimeError("rollout_finish() without rollout_start()")
+        (refs, steps), self._pending = self._pending, None
         try:
             return merge_fragments(self._gather(refs, steps))
         except RolloutLost:
@@ -396,6 +406,7 @@ class RayVectorMatchEnv(ShardedEnv):
         if self._closed:
             return
         self._closed = True
+        self._pending = None  # a rollout in flight goes with its runners
         for r in self.runners:
             with contextlib.suppress(Exception):  # already gone, or the cluster is down
                 self._ray.kill(r, no_restart=True)

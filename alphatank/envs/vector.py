@@ -67,7 +67,13 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from alphatank.envs.core import MatchSet, action_space, check_actions, check_benched
-from alphatank.envs.fragments import Fragment, RolloutPolicy, collect_fragment, merge_fragments
+from alphatank.envs.fragments import (
+    Fragment,
+    RolloutPolicy,
+    SplitRollout,
+    collect_fragment,
+    merge_fragments,
+)
 from alphatank.envs.gym import single_learner_seat
 from alphatank.game.observe import ObsLayout
 from alphatank.game.rewards import TERMS
@@ -81,7 +87,7 @@ def episode_seed(seed: int, env_id: int, episode: int) -> int:
     return int(ss.generate_state(1, np.uint64)[0])
 
 
-class VectorMatchEnv:
+class VectorMatchEnv(SplitRollout):
     """``num_envs`` matches of ``scenario`` with every learner seat driven by the caller.
 
     Dead learners keep their slot until their match ends (alive flag 0 in the
@@ -120,6 +126,7 @@ class VectorMatchEnv:
         self._terms = np.zeros((num_envs, len(TERMS), L))
         self._length = np.zeros(num_envs, dtype=np.int64)
         self._started = False
+        self._pending: tuple[RolloutPolicy, np.ndarray, int] | None = None  # rollout_start
         self._shape = (num_envs, L, 3)
         self._input_names = tuple(inputs)
         self._agent_state: Any = None  # built on first use of input_state
@@ -280,12 +287,23 @@ class VectorMatchEnv:
             self.inputs = self._read_inputs()
         return episodes
 
-    def rollout(self, policy: RolloutPolicy, obs: np.ndarray, steps: int) -> Fragment:
-        """``steps`` vector steps acted by ``policy`` from the current observations
-        ``obs`` (:mod:`alphatank.envs.fragments`)."""
+    def rollout_start(self, policy: RolloutPolicy, obs: np.ndarray, steps: int) -> None:
+        """Begin :meth:`rollout`; :meth:`rollout_finish` returns its fragment. In one
+        process the rollout is played at the finish, by the copy given here, so a run that
+        overlaps rollouts with updates (``train --overlap``) is the same run here as in one
+        worker process."""
         if not self._started:
             raise RuntimeError("rollout() before reset()")
-        return collect_fragment(self, policy, obs, steps)
+        if self._pending is not None:
+            raise RuntimeError("rollout_start() while a rollout is in flight")
+        self._pending = (policy, obs.copy(), steps)
+
+    def rollout_finish(self) -> Fragment:
+        """The fragment of the rollout begun by :meth:`rollout_start`."""
+        if self._pending is None:
+            raise RuntimeError("rollout_finish() without rollout_start()")
+        args, self._pending = self._pending, None
+        return collect_fragment(self, *args)
 
     def _name(self, idx: tuple[int, ...]) -> str:
         e, slot = idx
@@ -299,7 +317,8 @@ class VectorMatchEnv:
         return state
 
     def close(self) -> None:
-        """Nothing to release in-process (present for interface parity)."""
+        """Drop a rollout started and not finished (nothing else to release in-process)."""
+        self._pending = None
 
 
 # ---- worker processes ---------------------------------------------------------------
@@ -428,7 +447,7 @@ class ShardedEnv:
                 f"{self.learner_teams[slot]})")
 
 
-class SubprocVectorMatchEnv(ShardedEnv):
+class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
     """:class:`VectorMatchEnv` split over ``num_workers`` processes (shared-memory arrays,
     same interface, bit-identical results for the same seed). Workers start with
     ``start_method`` ("spawn": safe next to torch threads; a script must then create the
@@ -469,6 +488,7 @@ class SubprocVectorMatchEnv(ShardedEnv):
             self._conns.append(parent)
             self._procs.append(p)
         self._closed = False
+        self._in_flight = False  # a rollout sent by rollout_start, not yet collected
         self._gather()
         self._started = False
 
@@ -561,12 +581,22 @@ class SubprocVectorMatchEnv(ShardedEnv):
         return (a["obs"].copy(), a["rewards"].copy(), a["terminated"].copy(),
                 a["truncated"].copy(), info)
 
-    def rollout(self, policy: RolloutPolicy, obs: np.ndarray, steps: int) -> Fragment:
-        """As :meth:`VectorMatchEnv.rollout`, each worker acting its own block."""
+    def rollout_start(self, policy: RolloutPolicy, obs: np.ndarray, steps: int) -> None:
+        """Send the rollout to the workers and return at once: they play it while this
+        process does other work (:meth:`rollout_finish` collects it)."""
         if not self._started:
             raise RuntimeError("rollout() before reset()")
+        if self._in_flight:
+            raise RuntimeError("rollout_start() while a rollout is in flight")
         for conn, (lo, hi) in zip(self._conns, self._blocks, strict=True):
             conn.send(("rollout", (policy, obs[lo:hi], steps)))
+        self._in_flight = True
+
+    def rollout_finish(self) -> Fragment:
+        """The fragment of the rollout sent by :meth:`rollout_start`."""
+        if not self._in_flight:
+            raise RuntimeError("rollout_finish() without rollout_start()")
+        self._in_flight = False
         return merge_fragments(self._gather())
 
     def close(self) -> None:
@@ -575,6 +605,8 @@ class SubprocVectorMatchEnv(ShardedEnv):
         self._closed = True
         for conn in self._conns:
             try:
+                if self._in_flight:  # its answer comes before close's
+                    conn.recv()
                 conn.send(("close", None))
                 conn.recv()
             except (OSError, EOFError):
