@@ -20,6 +20,7 @@ from alphatank.mapgen import (
     generate,
     generate_from,
     is_symmetric,
+    map_variants,
     map_warnings,
 )
 from alphatank.mapgen.generate import image, lines_clear
@@ -313,6 +314,39 @@ def test_shipped_train_and_test_maps_are_valid_and_rebuildable(folder, count):
     train = {p.stem for p in (ROOT / "maps" / "train").glob("*.txt")}
     test = {p.stem for p in (ROOT / "maps" / "test").glob("*.txt")}
     assert not train & test
+
+
+def test_variants_turn_and_flip_walls_spawns_and_zones_together(tmp_path):
+    spec = load_map(ROOT / "maps" / "train" / "rooms_0002.txt")
+    variants = map_variants(spec)
+    assert map_text(variants[0]) == map_text(spec)  # the original first, under its name
+    assert [v.name for v in variants[1:4]] == [f"rooms_0002_{t}"
+                                                for t in ("flipv", "fliph", "rot180")]
+    rot90 = next(v for v in variants if v.name.endswith("_rot90"))
+    np.testing.assert_array_equal(rot90.walls, np.rot90(spec.walls))
+    n = spec.rows - 1
+    for slot, (r, c) in spec.spawns.items():  # numpy's rot90: (r, c) -> (n - c, r)
+        assert rot90.spawns[slot] == (n - c, r)
+    assert sorted(rot90.buffs) == sorted((n - c, r) for r, c in spec.buffs)
+    assert sorted(rot90.debuffs) == sorted((n - c, r) for r, c in spec.debuffs)
+    texts = [map_text(v).partition("\n\n")[2] for v in variants]
+    assert len(set(texts)) == len(texts) <= 8  # an image equal to an earlier one is left out
+    # a map that is its own mirror image (spawn digits aside) keeps what differs
+    plain = load_map(ROOT / "maps" / "open.txt")
+    assert 1 <= len(map_variants(plain)) <= 8
+    assert cli.main(["variants", str(ROOT / "maps" / "train" / "rooms_0002.txt"), "--out",
+                     str(tmp_path)]) == 0
+    assert sorted(p.stem for p in tmp_path.glob("*.txt")) == sorted(v.name for v in variants)
+    assert cli.main(["variants", "rooms_0002.txt", "--out", str(tmp_path)]) == 1  # no such map
+
+
+def test_shipped_train_d8_is_the_variants_of_train():
+    made = {v.name: map_text(v) for p in sorted((ROOT / "maps" / "train").glob("*.txt"))
+            for v in map_variants(load_map(p))}
+    shipped = {p.stem: p.read_text() for p in (ROOT / "maps" / "train_d8").glob("*.txt")}
+    assert shipped == made and len(shipped) == 128
+    test = {p.stem for p in (ROOT / "maps" / "test").glob("*.txt")}
+    assert not {n.split("_")[0] + "_" + n.split("_")[1] for n in shipped} & test
 
 
 def test_env_reset_samples_maps_from_a_folder_by_seed_and_names_them(tmp_path, capsys):

@@ -3,6 +3,7 @@
     python tools/mapgen.py generate --size 11x11 --algorithm maze --symmetry mirror -o maps/new.txt
     python tools/mapgen.py batch --count 20 --seed 0 --out maps --split 0.8
     python tools/mapgen.py validate maps/*.txt maps/train
+    python tools/mapgen.py variants maps/train --out maps/train_d8
     python tools/mapgen.py preview maps/new.txt --png new.png
     python tools/mapgen.py edit maps/new.txt
 
@@ -31,6 +32,7 @@ from alphatank.mapgen import (
     check_map,
     describe,
     generate_from,
+    map_variants,
     map_warnings,
 )
 from alphatank.sim.mapspec import MapError, MapSpec, load_map, map_text
@@ -149,6 +151,22 @@ def cmd_batch(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_variants(args: argparse.Namespace) -> int:
+    out = Path(args.out)
+    written = 0
+    for src in _map_sources(args.maps):
+        try:
+            spec = load_map(src)
+        except MapError as err:
+            print(err)
+            return 1
+        for variant in map_variants(spec):
+            _write(variant, out / f"{variant.name}.txt", args.force)
+            written += 1
+    print(f"wrote {written} maps to {out}")
+    return 0
+
+
 def _map_sources(items: list[str]) -> list[str]:
     """Files and shipped names as given; folders expand to their .txt maps."""
     out: list[str] = []
@@ -262,6 +280,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="train share, e.g. 0.8: writes OUT/train and OUT/test (every 5th map "
                         "held out)")
     p.set_defaults(run=cmd_batch)
+
+    p = sub.add_parser("variants", help="write every map with its turned and flipped images "
+                                        "(data augmentation for training maps)")
+    p.add_argument("maps", nargs="+", metavar="MAP", help="map files, folders or shipped names")
+    p.add_argument("--out", required=True, help="folder to write into")
+    p.add_argument("--force", action="store_true", help="overwrite existing files")
+    p.set_defaults(run=cmd_variants)
 
     p = sub.add_parser("validate", help="check maps with the game's loader, plus warnings")
     p.add_argument("maps", nargs="+", metavar="MAP", help="map files, folders or shipped names")

@@ -8,10 +8,11 @@ from alphatank.mapgen.generate import (
     generate,
     generate_from,
     is_symmetric,
+    map_variants,
 )
 from alphatank.mapgen.lint import MapWarning, ascii_art, check_map, describe, map_warnings
 from alphatank.mapgen.model import EditorModel
 
 __all__ = ["ALGORITHMS", "SYMMETRIES", "EditorModel", "GenOptions", "MapGenError",
            "MapWarning", "ascii_art", "check_map", "describe", "generate", "generate_from",
-           "is_symmetric", "map_warnings"]
+           "is_symmetric", "map_variants", "map_warnings"]

@@ -12,7 +12,7 @@ All randomness comes from ``numpy.random.default_rng(seed)``: one seed, one file
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -20,6 +20,7 @@ from alphatank.errors import InputError
 from alphatank.sim.grid import STEPS, components, distance_field, open_sides
 from alphatank.sim.mapspec import (
     MapSpec,
+    map_text,
     parse_map,
 )
 
@@ -180,6 +181,38 @@ def _fixed_interior(rows: int, cols: int, symmetry: str) -> int:
     if symmetry == "rotational":
         return 1 if rows % 2 and cols % 2 else 0
     return 0
+
+
+# The symmetries of a rectangle (every map), then the four more of a square: name -> the
+# image of a (rows, cols) array.
+RECT_IMAGES = {"id": lambda g: g, "flipv": lambda g: g[::-1], "fliph": lambda g: g[:, ::-1],
+               "rot180": lambda g: g[::-1, ::-1]}
+SQUARE_IMAGES = {"rot90": lambda g: np.rot90(g, 1), "rot270": lambda g: np.rot90(g, 3),
+                 "transpose": lambda g: g.T, "antitranspose": lambda g: np.rot90(g, 2).T}
+
+
+def map_variants(spec: MapSpec) -> list[MapSpec]:
+    """The distinct images of ``spec`` under the symmetries of its grid (4 for a rectangle,
+    8 for a square): walls, spawns and zones move together, so each is the same layout
+    seen turned or flipped. The original comes first under its own name, each other as
+    ``<name>_<image>``; images equal to an earlier one are left out."""
+    body = map_text(spec).partition("\n\n")[2]
+    chars = np.array([list(row) for row in body.splitlines()])
+    images = dict(RECT_IMAGES)
+    if spec.rows == spec.cols:
+        images.update(SQUARE_IMAGES)
+    out, seen = [], set()
+    for tag, image in images.items():
+        grid = "\n".join("".join(row) for row in image(chars))
+        if grid in seen:
+            continue
+        seen.add(grid)
+        named = spec if tag == "id" else replace(
+            spec, name=f"{spec.name}_{tag}",
+            description=f"{spec.name} seen as {tag} (tools/mapgen.py variants)")
+        head = map_text(named).partition("\n\n")[0]
+        out.append(parse_map(f"{head}\n\n{grid}\n", f"{spec.source} ({tag})", name=named.name))
+    return out
 
 
 def is_symmetric(spec: MapSpec, symmetry: str) -> bool:
