@@ -31,10 +31,10 @@ def test_bench_train_compares_training_with_raw_env_steps(tmp_path):
 def test_bench_train_with_fragments_says_so(tmp_path, flag):
     assert main(["bench", "--ticks", "50", "--repeats", "1", "--train", "--train-preset",
                  "ppo_vs_aggressive", "--train-workers", "2", "--train-envs", "2",
-                 flag, "--json", str(tmp_path / "b.json")]) == 0
+                 flag, "--train-iterations", "2", "--json", str(tmp_path / "b.json")]) == 0
     out = json.loads((tmp_path / "b.json").read_text())["train"]
     assert out["fragments"] is True and out["train_steps_per_s"] > 0
-    assert out["overlap"] is (flag == "--train-overlap")
+    assert out["overlap"] is (flag == "--train-overlap") and out["iterations"] == 2
 
 
 def test_fragment_scaling_steps_worker_processes_a_fragment_each():

@@ -53,6 +53,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--train-overlap", action="store_true",
                    help="--train with the workers acting the next rollout during each "
                         "update (train --overlap)")
+    p.add_argument("--train-iterations", type=positive_int, default=3, metavar="N",
+                   help="training iterations per round of --train (default: 3; with "
+                        "--train-overlap a round's first rollout and last update overlap "
+                        "nothing, so longer rounds come nearer a long run)")
     p.add_argument("--train-threads", type=positive_int, default=1, metavar="N",
                    help="torch threads of the --train run's learner (default: 1; more help "
                         "only with idle cores: the env workers wait during each update)")
@@ -145,7 +149,8 @@ def run(args: argparse.Namespace) -> int:
         results["train"] = train_bench(args.train_preset, args.train_workers, args.train_envs,
                                        torch_threads=args.train_threads,
                                        fragments=args.train_fragments,
-                                       overlap=args.train_overlap)
+                                       overlap=args.train_overlap,
+                                       iterations=args.train_iterations)
     if args.sac:
         from alphatank.commands.benchtrain import sac_step_bench, sac_train_bench
 

@@ -221,6 +221,7 @@ def train_bench(preset: str = "ppo_vs_smart", workers: int = 2, num_envs: int = 
         shutil.rmtree(tmp, ignore_errors=True)
     out = {"preset": preset, "workers": workers, "num_envs": num_envs, "hp": list(hp),
            "torch_threads": torch_threads, "fragments": fragments, "overlap": overlap,
+           "iterations": iterations,
            "raw_steps_per_s": round(statistics.median(raw)),
            "train_steps_per_s": round(statistics.median(train)),
            "raw_cpu_us_per_step": round(1e6 * statistics.median(raw_cpu), 1),
