@@ -268,6 +268,45 @@ def test_a_worker_rollout_in_flight_is_one_at_a_time_and_closes_cleanly():
     assert not any(p.is_alive() for p in sv._procs)
 
 
+@pytest.mark.parametrize("workers", [0, 2])
+def test_steps_resets_and_settings_wait_for_the_rollout_in_flight(workers):
+    """While a rollout is in flight, a step, a reset or an opponent setting is refused
+    with an error naming it, and nothing is lost: the rollout is then collected whole,
+    the call goes through, and the run goes on as one that made the call between
+    rollouts."""
+    def make():
+        return (SubprocVectorMatchEnv("team_vs_bot", 4, seed=2, num_workers=workers, **KW)
+                if workers else VectorMatchEnv("team_vs_bot", 4, seed=2, **KW))
+
+    def run(env, interrupt):
+        policy = frozen(env)
+        obs = env.reset(9)
+        env.rollout_start(policy, obs, 30)
+        if interrupt:
+            calls = {"step": lambda: env.step(np.ones((4, 2, 3), dtype=np.int64)),
+                     "reset": lambda: env.reset(), "set_bot_weakness":
+                     lambda: env.set_bot_weakness(0.5),
+                     "set_env_opponents": lambda: env.set_env_opponents([None] * 4),
+                     "add_opponent": lambda: env.add_opponent("w", "smart@0.5")}
+            for name, call in calls.items():
+                with pytest.raises(RuntimeError, match=rf"^{name}\(\) while a rollout is "
+                                                       "in flight: call rollout_finish"):
+                    call()
+        first = env.rollout_finish()
+        env.set_bot_weakness(0.5)
+        second = env.rollout(policy, first.next_obs, 30)
+        return [hashlib.sha256(b"".join(np.ascontiguousarray(a).tobytes() for a in (
+            f.obs, f.actions, f.rewards, f.terminated, f.next_obs))).hexdigest()
+            for f in (first, second)]
+
+    envs = [make(), make()]
+    try:
+        assert run(envs[0], True) == run(envs[1], False)
+    finally:
+        for env in envs:
+            env.close()
+
+
 @pytest.mark.parametrize("algo", ["ppo", "mappo"])
 def test_an_update_from_a_fragment_is_the_update_from_acting_step_by_step(tmp_path, algo):
     """With the normalisers off and the learner sampling from the stream the fragment's

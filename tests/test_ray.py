@@ -223,6 +223,13 @@ def test_fragments_on_env_runners_match_worker_processes_and_a_lost_one(cluster)
 
     try:
         same_fragments(7)
+        rv.rollout_start(policy, rv.reset(7), 30)  # what waits for a rollout in flight
+        for name, call in {"set_bot_weakness": lambda: rv.set_bot_weakness(0.5),
+                           "reset": rv.reset,
+                           "step": lambda: rv.step(np.ones((5, 2, 3), np.int64))}.items():
+            with pytest.raises(RuntimeError, match=rf"^{name}\(\) while a rollout is in"):
+                call()
+        assert rv.rollout_finish().steps == 30
         os.kill(ray.get(rv.runners[0].pid.remote()), signal.SIGKILL)
         with pytest.raises(RolloutLost, match=r"env runner 0 \(envs 0-1\) was lost"):
             rv.rollout(policy, np.zeros((5, 2, rv.obs_dim), np.float32), 30)

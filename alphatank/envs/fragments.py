@@ -147,6 +147,20 @@ class SplitRollout:
     def rollout_finish(self) -> Fragment:
         raise NotImplementedError
 
+    @property
+    def rollout_in_flight(self) -> bool:
+        """A rollout begun by :meth:`rollout_start` that :meth:`rollout_finish` has not
+        collected yet."""
+        raise NotImplementedError
+
+    def check_idle(self, call: str) -> None:
+        """RuntimeError naming ``call`` while a rollout is in flight: steps, resets and
+        opponent settings would land in the middle of it (or, in worker processes, take
+        its answer), so they wait for :meth:`rollout_finish`."""
+        if self.rollout_in_flight:
+            raise RuntimeError(f"{call}() while a rollout is in flight: call "
+                               f"rollout_finish() first")
+
 
 def merge_fragments(parts: Sequence[Fragment]) -> Fragment:
     """The shards' fragments (in env-id order) as one, envs concatenated; episode

@@ -277,6 +277,7 @@ class RayVectorMatchEnv(ShardedEnv, SplitRollout):
         arguments) and remember it for replay after a restart."""
         if self._closed:
             raise RuntimeError("the env is closed")
+        self.check_idle(name)
         each = list(per_runner) if per_runner is not None else [args] * self.num_runners
         self._settings.pop(key, None)
         self._settings[key] = (name, each)
@@ -325,6 +326,7 @@ class RayVectorMatchEnv(ShardedEnv, SplitRollout):
     # ---- episodes ---------------------------------------------------------------------
 
     def reset(self, seed: int | None = None) -> np.ndarray:
+        self.check_idle("reset")
         if seed is not None:
             self.seed = int(seed)
         for _ in range(self.num_runners * (self.max_restarts + 1) + 1):
@@ -354,6 +356,7 @@ class RayVectorMatchEnv(ShardedEnv, SplitRollout):
     def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
                                           dict[str, Any]]:
         self._check_live("step")
+        self.check_idle("step")
         acts = check_actions(actions, self._shape, self._name)
         refs = [r.step.remote(acts[lo:hi]) for r, (lo, hi) in zip(self.runners, self._blocks,
                                                                    strict=True)]
@@ -396,6 +399,10 @@ class RayVectorMatchEnv(ShardedEnv, SplitRollout):
         except RolloutLost:
             self.lost_rollouts += 1
             raise
+
+    @property
+    def rollout_in_flight(self) -> bool:
+        return self._pending is not None
 
     @property
     def num_runners(self) -> int:

@@ -166,6 +166,7 @@ class VectorMatchEnv(SplitRollout):
         """Weakness (0..1) of every bot seat from the next episode on (curriculum)."""
         if not 0.0 <= weakness <= 1.0:
             raise ValueError(f"weakness must be in [0, 1], got {weakness!r}")
+        self.check_idle("set_bot_weakness")
         self.core.weakness = float(weakness)
 
     def set_opponents(self, bot_names: Sequence[str] | None,
@@ -173,6 +174,7 @@ class VectorMatchEnv(SplitRollout):
         """Bot type of the bot seats from the next episode on: env ``i`` uses
         ``bot_names[i % len(bot_names)]`` (one name: all envs; several: a mixture for
         cycle learning). ``None`` restores the scenario's bots."""
+        self.check_idle("set_opponents")
         if bot_names is not None:
             from alphatank.game.scenarios import bot_names as valid_names
             valid = valid_names()
@@ -188,22 +190,26 @@ class VectorMatchEnv(SplitRollout):
     def set_opponent_policy(self, policy: Policy | None) -> None:
         """A frozen Policy in every non-learner seat from the next episode on (self-play
         against a snapshot); ``None`` restores the scenario's controllers."""
+        self.check_idle("set_opponent_policy")
         self.core.opponent_policy = policy
 
     def set_benched(self, seats: Sequence[int]) -> None:
         """Bot seats left out of the next episodes (dead from the start: a line-up
         curriculum); ``()`` restores the full line-up."""
+        self.check_idle("set_benched")
         self.core.set_benched(seats)
 
     def add_opponent(self, name: str, opponent: str | Policy) -> None:
         """Register a named opponent (a seat spec such as ``smart@0.5`` or
         ``checkpoint:PATH``, or a Policy) for :meth:`set_env_opponents`."""
+        self.check_idle("add_opponent")
         self.core.add_opponent(name, opponent)
 
     def set_env_opponents(self, names: Sequence[str | None]) -> None:
         """One registered opponent name per env (None: the scenario's own controllers),
         filling every non-learner seat from that env's next episode (league and
         self-play pools)."""
+        self.check_idle("set_env_opponents")
         self.core.set_env_opponents(names)
 
     # ---- episodes -------------------------------------------------------------------
@@ -218,6 +224,7 @@ class VectorMatchEnv(SplitRollout):
     def reset(self, seed: int | None = None) -> np.ndarray:
         """Reset every env. A new ``seed`` restarts the episode sequence; ``None``
         continues it (fresh episodes). Returns (num_envs, L, obs_dim) float32."""
+        self.check_idle("reset")
         if seed is not None:
             self.seed = int(seed)
             self._episode[:] = 0
@@ -233,6 +240,7 @@ class VectorMatchEnv(SplitRollout):
         """One tick in every env, with SAME_STEP autoreset of ended envs."""
         if not self._started:
             raise RuntimeError("step() before reset()")
+        self.check_idle("step")
         return self._step(check_actions(actions, self._shape, self._name))
 
     def _step(self, acts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray,
@@ -304,6 +312,10 @@ class VectorMatchEnv(SplitRollout):
             raise RuntimeError("rollout_finish() without rollout_start()")
         args, self._pending = self._pending, None
         return collect_fragment(self, *args)
+
+    @property
+    def rollout_in_flight(self) -> bool:
+        return self._pending is not None
 
     def _name(self, idx: tuple[int, ...]) -> str:
         e, slot = idx
@@ -518,6 +530,9 @@ class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
         return out
 
     def _broadcast(self, cmd: str, arg: Any = None) -> list:
+        """Send ``cmd`` to every worker and gather the answers (refused while a rollout
+        is in flight: the workers would answer it first)."""
+        self.check_idle(arg[0] if cmd == "call" else cmd)
         for conn in self._conns:
             conn.send((cmd, arg))
         return self._gather()
@@ -545,6 +560,7 @@ class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
         if len(names) != self.num_envs:
             raise ValueError(f"need one opponent name per env ({self.num_envs}), got "
                              f"{len(names)}")
+        self.check_idle("set_env_opponents")
         for conn, (lo, hi) in zip(self._conns, self._blocks, strict=True):
             conn.send(("call", ("set_env_opponents", (list(names[lo:hi]),))))
         self._gather()
@@ -561,6 +577,7 @@ class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
                                           dict[str, Any]]:
         if not self._started:
             raise RuntimeError("step() before reset()")
+        self.check_idle("step")
         return self._step(check_actions(actions, self._shared.arr["actions"].shape,
                                         self._name))
 
@@ -598,6 +615,10 @@ class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
             raise RuntimeError("rollout_finish() without rollout_start()")
         self._in_flight = False
         return merge_fragments(self._gather())
+
+    @property
+    def rollout_in_flight(self) -> bool:
+        return self._in_flight
 
     def close(self) -> None:
         if self._closed:
