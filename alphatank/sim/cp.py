@@ -34,6 +34,40 @@ def set_angular_velocity(body: pymunk.Body, w: float) -> None:
     lib.cpBodySetAngularVelocity(body._body, w)
 
 
+def space_step(space: pymunk.Space, dt: float) -> None:
+    """``space.step(dt)``: Chipmunk's step with the space locked, as the wrapper makes
+    it. The wrapper's bookkeeping (bodies to check, additions and removals deferred by
+    callbacks, post-step callbacks) runs only when there is some: then the wrapper's
+    own code finishes it."""
+    if space._bodies_to_check or space.threaded:
+        space.step(dt)
+        return
+    space._locked = True
+    try:
+        lib.cpSpaceStep(space._space, dt)
+        space._removed_shapes.clear()
+    finally:
+        space._locked = False
+    if space._add_later or space._remove_later or space._post_step_callbacks:
+        _finish_step(space)
+
+
+def _finish_step(space: pymunk.Space) -> None:
+    """The end of pymunk 7's ``Space.step``: deferred additions, then deferred removals
+    (each once), then the post-step callbacks."""
+    space.add(*space._add_later)
+    space._add_later.clear()
+    removed = set()
+    while space._remove_later:
+        to_remove, _ = space._remove_later.popitem()
+        if to_remove not in removed:
+            removed.add(to_remove)
+            space._remove(to_remove)
+    for key in space._post_step_callbacks:
+        space._post_step_callbacks[key](space)
+    space._post_step_callbacks.clear()
+
+
 class Hit(NamedTuple):
     """A segment query's answer: ``shape`` is Chipmunk's handle of the shape (compare
     with :func:`handle`), ``normal`` and ``alpha`` as in ``pymunk.SegmentQueryInfo``."""

@@ -359,7 +359,7 @@ class World:
         self.expired.clear()
         space, dt = self.space, self.dt_sub
         for _ in range(self.substeps):
-            space.step(dt)
+            cp.space_step(space, dt)
             self.substep += 1
             if self.substep >= self._next_event:
                 self._fly()
