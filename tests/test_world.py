@@ -306,3 +306,42 @@ def test_direct_chipmunk_calls_match_pymunk():
     cp.set_angular_velocity(body, -0.75)
     assert (body.position, body.velocity, body.angular_velocity) == ((1.5, -2.5), (3.25, 4.0),
                                                                       -0.75)
+
+
+def test_direct_space_step_matches_pymunk_with_deferred_work():
+    """cp.space_step steps a space as pymunk's Space.step does: the first step checks
+    new bodies, removals and additions made by callbacks wait for the end of the step,
+    post-step callbacks run once, and the trajectories are bit-identical."""
+    import pymunk
+
+    from alphatank.sim import cp
+
+    def scene(stepper):
+        space = pymunk.Space()
+        log = []
+        ball = pymunk.Body(1.0, 10.0)
+        ball.position, ball.velocity = (0.0, 0.0), (30.0, 7.0)
+        disc = pymunk.Circle(ball, 2.0)
+        disc.collision_type = 1
+        wall = pymunk.Segment(space.static_body, (20.0, -50.0), (20.0, 50.0), 1.0)
+        wall.collision_type, wall.elasticity, disc.elasticity = 2, 1.0, 1.0
+        late = pymunk.Circle(space.static_body, 1.0, (100.0, 100.0))
+
+        def begin(arbiter, space, data):
+            log.append(("begin", space._locked))
+            space.remove(wall)  # deferred until the step ends
+            space.add(late)
+            space.add_post_step_callback(lambda s, key: log.append((key, len(s.shapes))), "post")
+
+        space.on_collision(1, 2, begin=begin)
+        space.add(ball, disc, wall)
+        path = []
+        for _ in range(60):
+            stepper(space, 0.05)
+            path.append((*ball.position, *ball.velocity, len(space.shapes), space._locked))
+        return path, log
+
+    fast = scene(cp.space_step)
+    slow = scene(lambda space, dt: space.step(dt))
+    assert fast == slow
+    assert fast[1] == [("begin", True), ("post", 2)]  # the wall gone, the late disc in
