@@ -144,6 +144,31 @@ def test_eval_command_prints_table_and_writes_files(checkpoint, tmp_path, capsys
     assert "no such checkpoint" in err
 
 
+def test_eval_game_settings_override_the_checkpoints_own(checkpoint, capsys, tmp_path):
+    """--game changes the game played over the one the checkpoint trained in (here its
+    60-tick limit) and nothing else; bad keys and values are one-line errors."""
+    own = evaluate_checkpoint(checkpoint, ["random"], games=6, num_envs=3)[0]
+    short = evaluate_checkpoint(checkpoint, ["random"], games=6, num_envs=3,
+                                game={"max_steps": 20})[0]
+    assert max(own.lengths) > 20 >= max(short.lengths)
+    same = evaluate_checkpoint(checkpoint, ["random"], games=6, num_envs=3,
+                               game={"max_steps": 60})[0]
+    assert (same.outcomes, same.lengths) == (own.outcomes, own.lengths)
+    assert main(["eval", str(checkpoint), "--vs", "random", "--games", "6", "--num-envs",
+                 "3", "--game", "max_steps=20", "--json", str(tmp_path / "g.json")]) == 0
+    capsys.readouterr()
+    assert json.loads((tmp_path / "g.json").read_text())[0]["wins"] == short.wins
+    (bot,) = evaluate_stand_in("smart", "vs_smart", [None], games=4, game={"max_steps": 15})
+    assert max(bot.lengths) <= 15
+    for text, words in (("nope=1", ["--game nope: unknown game setting", "random_spawns"]),
+                        ("max_steps=abc", ["--game max_steps:", "'abc'"]),
+                        ("max_steps", ["--game: expected KEY=VALUE"]),
+                        ("max_steps=0", ["max_steps"])):
+        assert main(["eval", str(checkpoint), "--games", "2", "--game", text]) == 2
+        err = capsys.readouterr().err
+        assert all(w in err for w in words) and len(err.strip().splitlines()) == 1, err
+
+
 
 
 @pytest.fixture(scope="module")

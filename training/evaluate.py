@@ -244,10 +244,12 @@ def evaluate_checkpoint(checkpoint: str | Path | Checkpoint, opponents: Sequence
                         team: str | None = None, deterministic: bool = False,
                         num_envs: int = 16, weakness: float | None = None,
                         map_name: str | None = None, label: str | None = None,
-                        team_stats: bool = False) -> list[EvalResult]:
+                        team_stats: bool = False, game: dict[str, Any] | None = None
+                        ) -> list[EvalResult]:
     """One :class:`EvalResult` per opponent for a saved checkpoint (see
     :func:`evaluate_learners`), each labelled ``label`` (default: the checkpoint's path);
-    ``map_name`` plays the scenario on other maps."""
+    ``map_name`` plays the scenario on other maps; ``game`` changes settings of the game
+    the checkpoint trained in (e.g. ``{"random_spawns": False}``)."""
     ckpt = checkpoint if isinstance(checkpoint, Checkpoint) else load_checkpoint(checkpoint)
     tc = ckpt.train_config
     learners = {name: ckpt.load_learner(name, weights_only=True)
@@ -257,7 +259,8 @@ def evaluate_checkpoint(checkpoint: str | Path | Checkpoint, opponents: Sequence
         learners, ckpt.meta["observation"], {s.name: s.algo for s in ckpt.learner_specs},
         with_map(base, map_name), opponents, games=games, seed=seed, team=team,
         deterministic=deterministic, num_envs=num_envs, weakness=weakness,
-        game_overrides=tc.game, reward_overrides=tc.rewards, source=str(ckpt.path),
+        game_overrides={**tc.game, **(game or {})}, reward_overrides=tc.rewards,
+        source=str(ckpt.path),
         team_stats=team_stats, trained_as=ckpt.trained_as)
     for r in results:
         r.agent = label if label is not None else str(checkpoint if not isinstance(
@@ -347,11 +350,12 @@ def evaluate_stand_in(bot: str, scenario: str | Scenario, opponents: Sequence[st
                       games: int = 100, seed: int = 0, team: str | None = None,
                       num_envs: int = 16, weakness: float | None = None,
                       map_name: str | None = None, label: str | None = None,
-                      team_stats: bool = False) -> list[EvalResult]:
+                      team_stats: bool = False, game: dict[str, Any] | None = None
+                      ) -> list[EvalResult]:
     """Bot parity: :func:`evaluate_learners`'s games (same seeds, same opponents) with a
     bot (a seat spec such as ``smart`` or ``smart@0.5``) in every learner seat of
     ``team``, so an agent's win rate (and, with ``team_stats``, its cooperation figures)
-    can be set beside a rule-based player's."""
+    can be set beside a rule-based player's; ``game`` overrides the scenario's game."""
     from alphatank.game.lineup import spec_seat
 
     base = with_map(load_scenario(scenario), map_name)
@@ -363,7 +367,7 @@ def evaluate_stand_in(bot: str, scenario: str | Scenario, opponents: Sequence[st
         played = [stand if s.team == team and s.controller == "learner" else s for s in seats]
         sc = dataclasses.replace(base, seats=tuple(played))
         n_env = max(1, min(num_envs, games))
-        core = MatchSet(sc, n_env, driven=[])
+        core = MatchSet(sc, n_env, driven=[], game_overrides=game)
         ours = [i for i, s in enumerate(played) if s.team == team]
         theirs = [i for i, s in enumerate(played) if s.team != team]
         res = EvalResult(name=f"{_label(played, {}, ours, True)} vs "

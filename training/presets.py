@@ -309,6 +309,28 @@ def parse_hp(items: Iterable[tuple[str, str]]) -> dict[str, dict[str, Any]]:
     return out
 
 
+def parse_game(flag: str, text: str) -> dict[str, Any]:
+    """``"random_spawns=false,max_steps=600"`` -> typed GameConfig overrides (ranges are
+    checked where the game is built). Errors are one line naming the flag, the key and
+    what is allowed."""
+    from alphatank.sim.config import GameConfig
+
+    fields = field_map(GameConfig)
+    out: dict[str, Any] = {}
+    for item in filter(None, (part.strip() for part in text.split(","))):
+        key, sep, raw = item.partition("=")
+        key = key.strip()
+        if not sep or not key:
+            raise ValueError(f"{flag}: expected KEY=VALUE, got {item!r}")
+        if key not in fields:
+            raise ValueError(f"{flag} {key}: unknown game setting; valid: {sorted(fields)}")
+        try:
+            out[key] = parse_value(GameConfig, key, raw)
+        except FieldError as exc:
+            raise ValueError(f"{flag} {key}: {exc.problem}") from None
+    return out
+
+
 def with_hp(cfg: TrainConfig, overrides: dict[str, dict[str, Any]], num_learners: int
             ) -> TrainConfig:
     """``cfg`` with hyperparameters changed for every learner of each algorithm named."""

@@ -32,6 +32,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="play on other maps: a shipped map, a shipped folder such as 'test', "
                         "a .txt file or a folder of maps")
     p.add_argument("--weakness", type=float, help="bot weakness 0..1 (default: as trained)")
+    p.add_argument("--game", metavar="KEY=VALUE,...", default="",
+                   help="change settings of the game played (over the checkpoint's own), "
+                        "e.g. random_spawns=false,max_steps=600 (keys: docs/rules.md)")
     p.add_argument("--greedy", action="store_true", help="most likely actions, no sampling")
     p.add_argument("--seed", type=seed, default=0, help="seed of the game sequence")
     p.add_argument("--num-envs", type=positive_int, default=16, help="matches played at once")
@@ -58,6 +61,7 @@ def run(args: argparse.Namespace) -> int:
         write_csv,
         write_json,
     )
+    from alphatank.training.presets import parse_game
     from alphatank.training.threads import limit_threads
 
     limit_threads()
@@ -66,6 +70,7 @@ def run(args: argparse.Namespace) -> int:
     opponents = [b.strip() for b in args.vs.split(",") if b.strip()] or [None]
     results = []
     try:
+        game = parse_game("--game", args.game)
         for arg in args.checkpoints:
             if arg.startswith("bot:"):
                 if args.scenario is None:
@@ -75,14 +80,16 @@ def run(args: argparse.Namespace) -> int:
                                              games=args.games, seed=args.seed,
                                              team=args.team, num_envs=args.num_envs,
                                              weakness=args.weakness, map_name=args.map,
-                                             label=arg, team_stats=args.team_stats)
+                                             label=arg, team_stats=args.team_stats,
+                                             game=game)
                 continue
             results += evaluate_checkpoint(checkpoint_source(arg), opponents,
                                            games=args.games, seed=args.seed,
                                            scenario=args.scenario, team=args.team,
                                            deterministic=args.greedy, num_envs=args.num_envs,
                                            weakness=args.weakness, map_name=args.map,
-                                           label=arg, team_stats=args.team_stats)
+                                           label=arg, team_stats=args.team_stats,
+                                           game=game)
     except ValueError as exc:  # scenario, seat, option errors (a CheckpointError is not one)
         raise as_input_error(exc) from None
     print(format_table(results))
