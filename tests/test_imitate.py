@@ -66,6 +66,31 @@ def test_cloning_makes_the_learner_act_like_the_bot():
     np.testing.assert_allclose(ppo.obs_norm.rms.mean, obs[:240].reshape(-1, D).mean(0), atol=1e-4)
 
 
+@pytest.mark.parametrize("eps", [0.0, 0.3])
+def test_label_smoothing_leaves_the_clone_that_share_of_its_choices(eps):
+    """Actions written into the observations (as the advice block shows the smart bot's):
+    a plain clone copies them with near certainty; with label smoothing e each head keeps
+    about e spread over its choices, 1 - e + e / k on the bot's."""
+    rng = np.random.default_rng(3)
+    T = 600
+    acts = rng.integers((3, 3, 2), size=(T, 3))
+    obs = np.zeros((T, 8), dtype=np.float32)
+    obs[np.arange(T), acts[:, 0]] = 1.0
+    obs[np.arange(T), 3 + acts[:, 1]] = 1.0
+    obs[:, 6] = acts[:, 2]
+    obs[:, 7] = rng.normal(size=T)
+    ppo = PPO(8, 1, PPOConfig(), seed=0)
+    cfg = ImitateConfig(epochs=120, minibatch=300, learning_rate=3e-3, label_smoothing=eps)
+    fit(ppo, samples(ppo, obs[:, None], acts[:, None], np.ones((T, 1), bool),
+                     np.zeros((T, 1)), np.zeros(T, bool)), cfg, 0)
+    logits, _ = ppo.mirror.forward(ppo.obs_norm(obs, update=False))
+    for h, (lo, k) in enumerate([(0, 3), (3, 3), (6, 2)]):
+        p = torch.softmax(torch.from_numpy(logits[:, lo:lo + k]), -1).numpy()
+        on_bot = p[np.arange(T), acts[:, h]].mean()
+        want = 1 - eps + eps / k if eps else 0.97
+        assert (on_bot == pytest.approx(want, abs=0.03) if eps else on_bot > want), (h, on_bot)
+
+
 def test_a_mappo_team_actor_is_cloned_per_seat_and_its_critic_left_to_warm_up():
     sc = load_scenario("team_vs_def_bot")
     cfg = ImitateConfig(bot="aggressive", steps=300, epochs=12, minibatch=256)
@@ -169,6 +194,7 @@ def test_the_time_limit_cuts_the_demonstrations(tmp_path):
     ({"bot": "smrt"}, "unknown bot 'smrt'"),
     ({"stepz": 5}, "imitate.stepz"),
     ({"steps": 0}, "imitate.steps"),
+    ({"label_smoothing": 1.0}, "imitate.label_smoothing"),
 ])
 def test_bad_imitate_tables_name_the_field(tmp_path, table, fragment):
     with pytest.raises((FieldError, ValueError), match=fragment):

@@ -350,6 +350,53 @@ def test_full_kind_adds_the_closest_incoming_bullet():
     assert obs[0, 0, lay["threat"]].tolist() == [0.0, 0.0, 0.0, 0.0]
 
 
+def test_advice_kind_adds_what_the_smart_bot_would_do():
+    """``advice``: the one-hot action a smart bot kept for the seat takes on each
+    observation (the same as a smart bot playing the seat decides on that state); every
+    other feature is ``egocentric_full``'s; a dead seat's advice is all zeros."""
+    from alphatank.game.seats import Seat, make_controller
+
+    runs = {k: MatchSet("team_vs_def_smart", 2, observation=k, action_repeat=2)
+            for k in ("egocentric_advice", "egocentric_full")}
+    obs = {k: ms.reset_all([3, 4]) for k, ms in runs.items()}
+    ms = runs["egocentric_advice"]
+    lay, full = ms.obs.layout, runs["egocentric_full"].obs.layout
+    assert lay.fields == full.fields + [f"advice.{f}" for f in (
+        "rot_ccw", "rot_none", "rot_cw", "back", "stop", "forward", "fire")]
+    seats = ms.driven
+    players = [[make_controller(Seat("A", "bot", bot="smart"), 0) for _ in seats]
+               for _ in range(2)]
+    for e, m in enumerate(ms.matches):
+        for bot, seat in zip(players[e], seats, strict=True):
+            bot.reset(m, seat, 0)
+    advised, seen = 0, set()
+    for _ in range(40):
+        acts = np.ones((2, len(seats), 3), dtype=np.int64)
+        for e, m in enumerate(ms.matches):
+            for k, (bot, seat) in enumerate(zip(players[e], seats, strict=True)):
+                advice = obs["egocentric_advice"][e, k, lay["advice"]]
+                if not m.alive[seat]:
+                    assert not advice.any()
+                    continue
+                acts[e, k] = bot.act(m, seat)
+                rot, move, fire = acts[e, k].tolist()
+                want = np.zeros(7)
+                want[rot] = want[3 + move] = 1.0
+                want[6] = fire
+                assert advice.tolist() == want.tolist()
+                advised += 1
+                seen.add((rot, move, fire))
+        for k, run in runs.items():
+            _, obs[k] = run.step(acts)
+        assert np.array_equal(obs["egocentric_advice"][..., :full.size], obs["egocentric_full"])
+        assert not (ms.terminated | ms.truncated).any()
+    assert advised > 100 and len(seen) >= 4  # the bot turns, drives and stops
+    m = ms.matches[0]
+    m.alive[seats[0]] = False
+    ms.batch.gather(0, m)
+    assert not ms.obs.build()[0, 0, lay["advice"]].any()
+
+
 def test_egocentric_frame_and_rays_against_known_walls():
     ms = duel("egocentric")
     # Facing +y (down the screen); the enemy 100 px to the tank's left on screen (+x).

@@ -40,7 +40,7 @@ from alphatank.sim.episode import episode_seeds, reset_controllers
 from alphatank.sim.policy import NOOP
 from alphatank.training.fields import build, hp, validate
 from alphatank.training.mappo import MAPPO
-from alphatank.training.ppo import PPO, evaluate_actions
+from alphatank.training.ppo import PPO, evaluate_actions, head_log_probs
 
 Clonable = PPO | MAPPO
 
@@ -54,6 +54,8 @@ class ImitateConfig:
     epochs: int = hp(8, "passes over the demonstrations", gt=0)
     minibatch: int = hp(2048, "samples per gradient step", gt=0)
     learning_rate: float = hp(1e-3, "Adam learning rate of the cloning", gt=0)
+    label_smoothing: float = hp(0.0, "share of each head's target spread evenly over its "
+                                     "choices (a clone that keeps exploring)", ge=0, lt=1)
     dagger: int = hp(0, "DAgger rounds after the first fit: the learners play, the bot "
                         "labels their states, the fit is redone on all the data", ge=0)
     dagger_steps: int = hp(2048, "vector steps of each DAgger round", gt=0)
@@ -203,10 +205,11 @@ def samples(learner: Clonable, obs: np.ndarray, actions: np.ndarray, alive: np.n
 def fit(learner: Clonable, data: Samples, cfg: ImitateConfig, seed: int,
         stop: Callable[[], bool] = bool, epochs: int | None = None) -> dict[str, float]:
     """Fit ``learner``'s actor to ``data``'s actions (cross-entropy on every head, live
-    samples only) and its critic to the targets for ``epochs`` (default ``cfg.epochs``)
-    passes; stops early when ``stop()`` turns true. A MAPPO critic reads a global state
-    the demonstrations do not hold: only its actor is fitted (its
-    ``critic_warmup_updates`` then train the critic first).
+    samples only; with ``label_smoothing`` e each head's target is 1 - e on the bot's
+    choice plus e spread evenly over the head's choices) and its critic to the targets for
+    ``epochs`` (default ``cfg.epochs``) passes; stops early when ``stop()`` turns true.
+    A MAPPO critic reads a global state the demonstrations do not hold: only its actor is
+    fitted (its ``critic_warmup_updates`` then train the critic first).
     Returns the last minibatch's losses and the share of live samples whose most likely
     action (every head) is the bot's."""
     x = torch.from_numpy(learner.actor_input(data.obs))
@@ -218,6 +221,10 @@ def fit(learner: Clonable, data: Samples, cfg: ImitateConfig, seed: int,
     opt = torch.optim.Adam(net.parameters(), lr=cfg.learning_rate)
     gen = torch.Generator().manual_seed(seed)
     n = len(x)
+    eps = cfg.label_smoothing
+    # each head's uniform target over its own choices (0 on the padding of narrower heads)
+    k = torch.tensor(net.nvec, dtype=torch.float32)[:, None]
+    uniform = (torch.arange(max(net.nvec))[None, :] < k) / k
     stats: dict[str, float] = {}
     for _ in range(epochs or cfg.epochs):
         order = torch.randperm(n, generator=gen)
@@ -227,8 +234,13 @@ def fit(learner: Clonable, data: Samples, cfg: ImitateConfig, seed: int,
             idx = order[lo:lo + cfg.minibatch]
             logits = net.logits(x[idx])
             logprob, _ = evaluate_actions(logits, a[idx], net.nvec)
+            nll = -logprob
+            if eps:
+                logp = head_log_probs(logits, net.nvec)
+                spread = -(torch.where(uniform > 0, logp, 0.0) * uniform).sum((-2, -1))
+                nll = (1 - eps) * nll + eps * spread
             m = live[idx].float()
-            policy_loss = -(logprob * m).sum() / m.sum().clamp(min=1.0)
+            policy_loss = (nll * m).sum() / m.sum().clamp(min=1.0)
             loss = policy_loss
             if fit_critic:
                 value_loss = 0.5 * ((net.value(x[idx]) - y[idx]) ** 2).mean()

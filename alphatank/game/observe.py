@@ -1,6 +1,6 @@
 """Per-agent observation vectors, built for many matches and agents at once.
 
-Seven kinds (``OBS_KINDS``), all float32, clipped to [-1, 1], with a fixed size per
+Eight kinds (``OBS_KINDS``), all float32, clipped to [-1, 1], with a fixed size per
 scenario and an index map (:class:`ObsLayout`, feature name -> slice):
 
 ``paper``       every component of the paper's Table 1 in map coordinates: own tank
@@ -34,6 +34,11 @@ scenario and an index map (:class:`ObsLayout`, feature name -> slice):
 ``egocentric_full``  ``egocentric_aim_path`` plus a ``threat`` block: of the other tanks'
                 bullets, the one that will pass closest to me within a second (straight
                 lines, like the bots' dodging): how close, how soon, and on which side.
+``egocentric_advice``  ``egocentric_full`` plus an ``advice`` block: what the smart bot
+                would do now in my seat (its rotate, move and fire, one-hot), from a
+                bot kept per seat and asked at every observation. The policy sees the
+                bot's route memory, lead and bank-shot search, and learns when to do
+                otherwise.
 
 Scales: map positions ``2 x / W - 1``; relative positions divided by ``max(W, H)``;
 distances by the map diagonal; tank velocities by ``tank_speed``; bullet velocities by
@@ -52,6 +57,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from alphatank.game.seats import Seat, make_controller
 from alphatank.sim.ballistics import predict_path, segment_distances
 from alphatank.sim.config import GameConfig, hit_radius
 from alphatank.sim.mapspec import MapSpec
@@ -59,14 +65,22 @@ from alphatank.sim.navigation import NavGrid, nav_grid
 
 if TYPE_CHECKING:
     from alphatank.sim.match import Match
+    from alphatank.sim.policy import Policy
 
 OBS_KINDS = ("paper", "egocentric", "egocentric_path", "egocentric_nearest", "egocentric_aim",
-             "egocentric_aim_path", "egocentric_full")
-# What the egocentric kinds add: other tanks nearest first, the way to each, the shot block.
-NEAREST_KINDS = ("egocentric_nearest", "egocentric_aim", "egocentric_aim_path", "egocentric_full")
-PATH_KINDS = ("egocentric_path", "egocentric_aim_path", "egocentric_full")
-SHOT_KINDS = ("egocentric_aim", "egocentric_aim_path", "egocentric_full")
-THREAT_KINDS = ("egocentric_full",)
+             "egocentric_aim_path", "egocentric_full", "egocentric_advice")
+# What the egocentric kinds add: other tanks nearest first, the way to each, the shot
+# block, the threat block, the advice block.
+NEAREST_KINDS = ("egocentric_nearest", "egocentric_aim", "egocentric_aim_path", "egocentric_full",
+                 "egocentric_advice")
+PATH_KINDS = ("egocentric_path", "egocentric_aim_path", "egocentric_full", "egocentric_advice")
+SHOT_KINDS = ("egocentric_aim", "egocentric_aim_path", "egocentric_full", "egocentric_advice")
+THREAT_KINDS = ("egocentric_full", "egocentric_advice")
+ADVICE_KINDS = ("egocentric_advice",)
+ADVICE_BOT = "smart"  # the bot whose action the advice block shows
+# the advice block: one-hot rotate (0 ccw, 1 none, 2 cw), one-hot move (0 back, 1 stop,
+# 2 forward), fire
+ADVICE_FIELDS = ("rot_ccw", "rot_none", "rot_cw", "back", "stop", "forward", "fire")
 THREAT_FIELDS = ("near", "eta", "dir_fwd", "dir_side")
 THREAT_HORIZON_S = 1.0  # bullets closing in later than this are no threat yet
 SHOT_FIELDS = ("enemy", "friend", "miss")  # the shot block (StateBatch.shots' columns)
@@ -110,6 +124,10 @@ FIELD_HELP = {
     "eta": "1 - seconds to its closest approach / 1 s",
     "dir_fwd": "unit direction from me to its closest point, along my heading",
     "dir_side": "the same direction towards my right (on screen)",
+    "rot_ccw": "1 if the smart bot in my seat would turn counter-clockwise now",
+    "rot_none": "1 if it would not turn", "rot_cw": "1 if it would turn clockwise",
+    "back": "1 if it would drive backwards", "stop": "1 if it would stand",
+    "forward": "1 if it would drive forwards", "fire": "1 if it would fire",
     "enemy": "1 if a bullet fired now (ricochets predicted) first reaches an enemy tank",
     "friend": "1 if a bullet fired now first reaches a teammate",
     "miss": "closest approach of a bullet fired now to a live enemy (centres) / "
@@ -128,6 +146,7 @@ BLOCK_HELP = {
     "shot": "a bullet fired now along my heading (0 while I am dead)",
     "threat": "the other tanks' bullet that will pass closest to me within 1 s (straight "
               "lines; all 0 if none)",
+    "advice": "what the smart bot would do now in my seat (0 while I am dead)",
 }
 DEFAULT_RAYS = 16
 DEFAULT_RAY_LENGTH = 350.0  # px: five cells of the default map
@@ -261,6 +280,14 @@ class StateBatch:
         self._path_len = np.zeros((E, n), dtype=np.int64)
         self._shots_due = False
         self._tank_z = np.zeros((E, n), dtype=np.complex128)
+        # Per tank, the advice block (ADVICE_FIELDS) of the seats of want_advice(): one
+        # advisor bot per env and seat (reset with the statics), asked in reach_advice()
+        # for the envs gathered since the last call.
+        self.advice = np.zeros((E, n, len(ADVICE_FIELDS)))
+        self.advice_seats: tuple[int, ...] = ()
+        self._advisors: list[dict[int, Policy]] = [{} for _ in range(E)]
+        self._matches: list[Match | None] = [None] * E
+        self._advice_due = np.zeros(E, dtype=bool)
         self.team = np.zeros((E, n), dtype=np.int64)  # team index of every seat
         # Per-episode statics.
         self.size = np.ones((E, 2))  # map width, height (px)
@@ -299,6 +326,31 @@ class StateBatch:
         self.tick[e] = match.tick
         if self.shot_seats:
             self._gather_shots(e, match)
+        if self.advice_seats:
+            self._matches[e] = match
+            self._advice_due[e] = True
+
+    def want_advice(self, seats: Sequence[int]) -> None:
+        """Ask an advisor bot (``ADVICE_BOT``) what it would do in these seats
+        (``advice``); takes effect from the next :meth:`set_static` of each env."""
+        self.advice_seats = tuple(sorted(set(self.advice_seats) | {int(s) for s in seats}))
+
+    def reach_advice(self) -> None:
+        """Fill ``advice`` of every env gathered since the last call: each wanted live
+        seat's advisor acts on the match (its per-episode memory moves on, as a bot's
+        does when it plays); dead seats get zeros."""
+        adv = self.advice
+        for e in np.flatnonzero(self._advice_due).tolist():
+            match = self._matches[e]
+            advisors = self._advisors[e]
+            for s in self.advice_seats:
+                row = adv[e, s]
+                row.fill(0.0)
+                if match.alive[s]:
+                    rot, move, fire = advisors[s].act(match, s).tolist()
+                    row[rot] = row[3 + move] = 1.0
+                    row[6] = fire
+        self._advice_due.fill(False)
 
     def want_shots(self, seats: Sequence[int]) -> None:
         """Predict a shot of these seats in every :meth:`gather` (``shots``)."""
@@ -369,6 +421,12 @@ class StateBatch:
         spec = match.spec
         g = self.cfg
         self.specs[e] = spec
+        for s in self.advice_seats:
+            advisor = self._advisors[e].get(s)
+            if advisor is None:
+                advisor = make_controller(Seat(match.teams[s], "bot", bot=ADVICE_BOT), 0)
+                self._advisors[e][s] = advisor
+            advisor.reset(match, s, 0)  # the smart bot draws no random numbers
         self.team[e] = match.team_index
         self.size[e] = (spec.width, spec.height)
         inv = 2.0 / self.size[e]
@@ -508,6 +566,8 @@ class ObservationBuilder:
                 lay.add("shot", None, SHOT_FIELDS)
             if self.kind in THREAT_KINDS:
                 lay.add("threat", None, THREAT_FIELDS)
+            if self.kind in ADVICE_KINDS:
+                lay.add("advice", None, ADVICE_FIELDS)
         return lay
 
     def _columns(self) -> dict[str, int | slice]:
@@ -578,6 +638,10 @@ class ObservationBuilder:
             self.v_shot = self.out[:, :, lay["shot"]]
             self.batch.want_shots(self.observers.tolist())
             self._shot_src = pick(self.batch.shots, self.observers[:, None])  # (E, L, 1, 3)
+        if self.kind in ADVICE_KINDS:
+            self.v_advice = self.out[:, :, lay["advice"]]
+            self.batch.want_advice(self.observers.tolist())
+            self._advice_src = pick(self.batch.advice, self.observers[:, None])  # (E, L, 1, 7)
 
     # ---- statics --------------------------------------------------------------------
 
@@ -631,6 +695,11 @@ class ObservationBuilder:
                 self.batch.reach_shots()
                 src = self._shot_src
                 np.copyto(self.v_shot, self.batch.shots[:, self.observers] if src is None
+                          else src[:, :, 0])
+            if self.kind in ADVICE_KINDS:
+                self.batch.reach_advice()
+                src = self._advice_src
+                np.copyto(self.v_advice, self.batch.advice[:, self.observers] if src is None
                           else src[:, :, 0])
         out = self.out
         np.minimum(out, 1.0, out=out)
