@@ -3,6 +3,7 @@ training, evaluation, md/csv/json, heatmap and curves; --resume redoes nothing f
 a failing row is reported while the other finishes; the shipped tables all load."""
 
 import csv
+import dataclasses
 import json
 import os
 import shutil
@@ -245,6 +246,10 @@ def test_shipped_tables_load_and_plan(tmp_path):
         assert mixed.schedule["pool"] == [bot] and mixed.schedule["kind"] == "cycle"
         assert (mixed.learners[0].config, mixed.imitate, mixed.observation) == \
             (full.learners[0].config, full.imitate, full.observation)
+        if bot != "random":  # the same, every tank's cell drawn at random in training
+            spawns = row_config(t4.row(f"{bot}_mix_spawns"), 0, 15)
+            assert spawns.game == {"random_spawns": True} and not mixed.game
+            assert dataclasses.replace(spawns, game={}, name=mixed.name) == mixed
     sac = row_config(next(t for t in tables if t.name == "sac").row("sac_vs_ppo"), 1, 15)
     assert {s.name: s.config.utd_ratio for s in sac.learners if s.algo == "sac"} == \
         {"sac": 0.125} and sac.seed == 1
@@ -253,7 +258,7 @@ def test_shipped_tables_load_and_plan(tmp_path):
     # Table 4's specialists and adaptive cycle are shared with the league table
     shared = [j for j in plan.jobs if len(j.rows) > 1]
     assert len(shared) == 2 * 5 and all(len(j.rows) == 2 for j in shared)
-    assert len(plan.jobs) == 2 * (8 + 24 + 3 + 8 + 6) - len(shared)
+    assert len(plan.jobs) == 2 * (8 + 27 + 3 + 8 + 6) - len(shared)
 
 
 def test_a_setting_added_later_keeps_the_digests_of_runs_made_before_it(tmp_path):
