@@ -239,9 +239,12 @@ def _row(table: str, name: str, data: dict[str, Any], source: str,
                                   f"folder")
         if "same_as" in other[0]:
             raise ExperimentError(f"{source}: same_as: {same_as!r} is itself a same_as row")
+        own_run = data.get("run")
         data = {**{k: other[0][k] for k in ("preset", "run", "hp", "scenarios",
                                             "steps_per_minute", "budget_fractions")
                    if k in other[0]}, **data}
+        if isinstance(own_run, dict) and isinstance(other[0].get("run"), dict):
+            data["run"] = _merge(other[0]["run"], own_run)  # its own run, on top
     preset = _typed(data, "preset", str, source)
     run = _typed(data, "run", dict, source, {})
     if preset is None and not run:
