@@ -63,6 +63,7 @@ def write_rows(root: Path, broken: bool = False) -> Path:
     (table / "_table.toml").write_text(TABLE)
     (table / "a_random.toml").write_text('title = "Random Bot"\norder = 1\n'
                                          'paper = { random = 50, dodge = 10 }\n'
+                                         'eval_game = { max_steps = 60 }\n'
                                          + RUN.format(extra=""))
     cycle = ('title = "Cycle"\norder = 2\nscenarios = ["vs_random", "vs_dodge"]\n'
              + RUN.format(extra='schedule = { kind = "cycle", pool = ["random", "dodge"], '
@@ -115,6 +116,13 @@ def test_two_rows_train_evaluate_and_report(made):
     evals = [json.loads(p.read_text()) for p in (runs[0] / "eval").iterdir()]
     assert {e["spec"]["seed"] for e in evals} == {EVAL_SEED_BASE}
     assert {e["spec"]["scenario"] for e in evals} == {"vs_random", "vs_dodge"}
+    # the row's eval_game plays over the run's own game (max_steps 120 in training)
+    assert all(e["spec"]["game"] == {"max_steps": 60} for e in evals)
+    assert max(max(e["lengths"]) for e in evals) <= 60
+    assert data["rows"][0]["eval_game"] == {"max_steps": 60} and "max_steps = 60" in md
+    cycle_evals = [json.loads(p.read_text()) for p in (runs[1] / "eval").iterdir()]
+    assert all("game" not in e["spec"] or not e["spec"]["game"] for e in cycle_evals)
+    assert max(max(e["lengths"]) for e in cycle_evals) > 60
 
 
 def test_resume_redoes_nothing_finished(made, capsys):
@@ -209,6 +217,11 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
     assert cli("tiny", "--experiments-dir", str(root), "--list") == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "c_bad.toml: prest: unknown key" in err
+    (root / "tiny" / "c_bad.toml").write_text('preset = "ppo_vs_smart"\n'
+                                              'eval_game = { max_stepz = 5 }\n')
+    assert cli("tiny", "--experiments-dir", str(root), "--list") == 2
+    err = capsys.readouterr().err
+    assert "c_bad.toml: eval_game: unknown GameConfig key(s) ['max_stepz']" in err
     (root / "tiny" / "c_bad.toml").write_text('preset = "ppo_vs_smart"\n[run]\nnum_envs = 0\n')
     assert cli("tiny", "--experiments-dir", str(root), "--list") == 2
     assert "c_bad.toml" in capsys.readouterr().err
@@ -250,6 +263,13 @@ def test_shipped_tables_load_and_plan(tmp_path):
             spawns = row_config(t4.row(f"{bot}_mix_spawns"), 0, 15)
             assert spawns.game == {"random_spawns": True} and not mixed.game
             assert dataclasses.replace(spawns, game={}, name=mixed.name) == mixed
+            assert t4.row(f"{bot}_mix_spawns").eval_game == {"random_spawns": False}
+        if bot in ("aggressive", "defensive"):  # in half of the training matches
+            half = t4.row(f"{bot}_mix_spawns_half")
+            spawns = row_config(half, 0, 15)
+            assert spawns.game == {"random_spawns": True, "random_spawn_share": 0.5}
+            assert dataclasses.replace(spawns, game={}, name=mixed.name) == mixed
+            assert half.eval_game == {"random_spawns": False}
     sac = row_config(next(t for t in tables if t.name == "sac").row("sac_vs_ppo"), 1, 15)
     assert {s.name: s.config.utd_ratio for s in sac.learners if s.algo == "sac"} == \
         {"sac": 0.125} and sac.seed == 1
@@ -258,7 +278,7 @@ def test_shipped_tables_load_and_plan(tmp_path):
     # Table 4's specialists and adaptive cycle are shared with the league table
     shared = [j for j in plan.jobs if len(j.rows) > 1]
     assert len(shared) == 2 * 5 and all(len(j.rows) == 2 for j in shared)
-    assert len(plan.jobs) == 2 * (8 + 27 + 3 + 8 + 6) - len(shared)
+    assert len(plan.jobs) == 2 * (8 + 29 + 3 + 8 + 6) - len(shared)
 
 
 def test_a_setting_added_later_keeps_the_digests_of_runs_made_before_it(tmp_path):

@@ -40,6 +40,7 @@ from pathlib import Path
 from typing import Any
 
 from alphatank.files import FolderLock, write_text_atomic
+from alphatank.sim.config import GameConfig, from_dict
 from alphatank.training.presets import (
     TrainConfig,
     get_preset,
@@ -109,6 +110,7 @@ class Row:
     fractions: dict[str, float] = field(default_factory=dict)
     columns: tuple[str, ...] = ()  # subset of the table's columns ((): all)
     note: str = ""
+    eval_game: dict[str, Any] = field(default_factory=dict)  # over the run's game, in evals
 
     @property
     def id(self) -> str:
@@ -220,7 +222,7 @@ def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
 
 
 ROW_KEYS = ("title", "order", "preset", "same_as", "run", "hp", "scenarios", "paper",
-            "steps_per_minute", "budget_fractions", "columns", "note")
+            "steps_per_minute", "budget_fractions", "columns", "note", "eval_game")
 
 
 def _row(table: str, name: str, data: dict[str, Any], source: str,
@@ -241,7 +243,8 @@ def _row(table: str, name: str, data: dict[str, Any], source: str,
             raise ExperimentError(f"{source}: same_as: {same_as!r} is itself a same_as row")
         own_run = data.get("run")
         data = {**{k: other[0][k] for k in ("preset", "run", "hp", "scenarios",
-                                            "steps_per_minute", "budget_fractions")
+                                            "steps_per_minute", "budget_fractions",
+                                            "eval_game")
                    if k in other[0]}, **data}
         if isinstance(own_run, dict) and isinstance(other[0].get("run"), dict):
             data["run"] = _merge(other[0]["run"], own_run)  # its own run, on top
@@ -272,12 +275,17 @@ def _row(table: str, name: str, data: dict[str, Any], source: str,
     if rate <= 0:
         raise ExperimentError(f"{source}: steps_per_minute: must be > 0, got {rate}")
     cols = _typed(data, "columns", list, source, [])
+    eval_game = _typed(data, "eval_game", dict, source, {})
+    try:
+        from_dict(GameConfig, eval_game, where=f"{source}: eval_game")
+    except ValueError as exc:
+        raise ExperimentError(str(exc)) from None
     return Row(table, name, _typed(data, "title", str, source, name),
                int(_typed(data, "order", int, source, 0)), merged, source,
                tuple(str(h) for h in hp_items), tuple(str(s) for s in scenarios),
                {str(k): float(v) for k, v in paper.items()}, float(rate),
                {str(k): float(v) for k, v in fractions.items()}, tuple(str(c) for c in cols),
-               _typed(data, "note", str, source, ""))
+               _typed(data, "note", str, source, ""), dict(eval_game))
 
 
 TABLE_KEYS = ("title", "description", "layout", "columns", "average", "heatmap", "checks",
@@ -418,10 +426,14 @@ class EvalSpec:
     weakness: float
     games: int
     seed: int
+    game: dict[str, Any] = field(default_factory=dict)  # over the checkpoint's own game
 
     @property
     def key(self) -> str:
-        return f"{self.column}-{digest(dataclasses.asdict(self))}"
+        data = dataclasses.asdict(self)
+        if not self.game:  # the digests of evaluations from before this field
+            del data["game"]
+        return f"{self.column}-{digest(data)}"
 
 
 @dataclass
@@ -462,11 +474,11 @@ class Plan:
     games: int
 
 
-def _eval_spec(col: Column, cfg: TrainConfig, games: int, seed: int) -> EvalSpec:
+def _eval_spec(col: Column, row: Row, cfg: TrainConfig, games: int, seed: int) -> EvalSpec:
     scenario = col.scenario or cfg.scenario
     map_name = col.map if col.map is not None else (cfg.map if col.scenario is None else None)
     return EvalSpec(col.name, scenario, col.bot, map_name, col.weakness, games,
-                    EVAL_SEED_BASE + seed)
+                    EVAL_SEED_BASE + seed, dict(row.eval_game))
 
 
 def make_plan(tables: Sequence[Table], out: str | Path, seeds: int = 1,
@@ -511,7 +523,7 @@ def make_plan(tables: Sequence[Table], out: str | Path, seeds: int = 1,
                 job.rows.append(row.id)
                 specs = {}
                 for col in table.row_columns(row):
-                    spec = _eval_spec(col, cfg, games, s)
+                    spec = _eval_spec(col, row, cfg, games, s)
                     if all(e.key != spec.key for e in job.evals):
                         job.evals.append(spec)
                     specs[col.name] = spec
@@ -581,7 +593,7 @@ def _evaluate(job: Job, spec: EvalSpec) -> dict[str, Any]:
     res = evaluate_checkpoint(job.run_dir, [spec.bot], games=spec.games, seed=spec.seed,
                               scenario=spec.scenario, weakness=spec.weakness,
                               map_name=spec.map, num_envs=min(EVAL_ENVS, spec.games),
-                              label=Path(job.run_dir).name)[0]
+                              label=Path(job.run_dir).name, game=spec.game or None)[0]
     data = {**res.as_dict(per_game=True), "spec": dataclasses.asdict(spec),
             "lengths": res.lengths, "wall_s": time.time() - t0}
     _write_json(job.eval_file(spec), data)
@@ -705,9 +717,10 @@ def execute(jobs: Sequence[Job], workers: int = 1, progress: bool = True,
 
 
 def estimate_minutes(plan: Plan, jobs: Sequence[Job], workers: int) -> float:
-    """Rough wall time of ``jobs``: the budget per run plus ~1.5 min per evaluation of 200
-    games (200 games of up to 1,200 ticks took 1-3 min on a shared 2-core machine),
-    spread over the workers."""
-    total = sum(plan.budget_min + 1.5 * len(j.evals) * plan.games / DEFAULT_GAMES
-                for j in jobs)
+    """Rough wall time of ``jobs``: the budget per run still to train plus ~1.5 min per
+    evaluation of 200 games still to play (200 games of up to 1,200 ticks took 1-3 min on
+    a shared 2-core machine), spread over the workers."""
+    total = sum((0.0 if j.done_file.is_file() else plan.budget_min)
+                + 1.5 * sum(not j.eval_file(s).is_file() for s in j.evals)
+                * plan.games / DEFAULT_GAMES for j in jobs)
     return total / max(1, workers)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 import math
 import os
 import platform
@@ -432,6 +433,9 @@ def _markdown(plan: Plan, table: Table, results: list[RowResult], checks: list[d
     for rr in results:
         mix = (f"; trains on a mix of {', '.join(rr.row.scenarios)}" if rr.row.scenarios
                else "")
+        if rr.row.eval_game:
+            mix += "; evaluated with " + ", ".join(f"{k} = {json.dumps(v)}"
+                                                   for k, v in rr.row.eval_game.items())
         lines.append(f"- **{rr.row.title}** (`{rr.row.source}`){mix}"
                      + (f". {rr.row.note}" if rr.row.note else ""))
     if checks:
@@ -487,7 +491,8 @@ def _json(plan: Plan, table: Table, results: list[RowResult], checks: list[dict]
             cols[c.name] = {**_agg_json(rr.agg(c.name), rr.paper_value(c.name)),
                             "per_seed": runs}
         rows.append({"row": rr.row.name, "title": rr.row.title, "source": rr.row.source,
-                     "scenarios": list(rr.row.scenarios), "columns": cols,
+                     "scenarios": list(rr.row.scenarios), "eval_game": rr.row.eval_game,
+                     "columns": cols,
                      "average": _agg_json(rr.average(), rr.paper_value("average")),
                      "runs": [{"seed": s, "run_dir": rr.run_dirs[s],
                                "steps": rr.runs[s]["summary"]["global_step"] if s in rr.runs
