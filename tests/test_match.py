@@ -232,24 +232,6 @@ def test_random_spawns_ignore_the_map_slots_and_follow_the_seed():
     assert fixed.spawn_cells[:2] == [bf.spawns[1], bf.spawns[2]]
 
 
-def test_random_spawn_share_draws_that_share_of_matches_and_follows_the_seed():
-    bf = load_map("battlefield")
-    slots = [bf.spawns[1], bf.spawns[2]]
-
-    def cells(seed: int, share: float) -> list:
-        return _match(teams=("A", "B"), spec=bf, seed=seed, random_spawns=True,
-                      random_spawn_share=share).spawn_cells
-
-    half = [cells(s, 0.5) for s in range(40)]
-    on_slots = sum(c == slots for c in half)
-    assert 10 <= on_slots <= 30  # about half of 40 matches keep the map's slots
-    assert [cells(s, 0.5) for s in range(5)] == half[:5]
-    assert all(cells(s, 0.0) == slots for s in range(5))
-    assert [cells(s, 1.0) for s in range(5)] == [
-        _match(teams=("A", "B"), spec=bf, seed=s, random_spawns=True).spawn_cells
-        for s in range(5)]
-
-
 def test_benched_tanks_are_out_from_the_start_and_the_rest_play_to_the_end():
     m = _match(teams=("A", "B", "B"), seed=2)
     m.bench([1])

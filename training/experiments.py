@@ -214,10 +214,15 @@ def _column(data: Any, source: str) -> Column:
 
 
 def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
-    """``over`` on top of ``base``; tables (schedule, game, rewards) merge key by key."""
+    """``over`` on top of ``base``; tables (schedule, game, rewards) merge key by key,
+    except a table naming another ``kind`` (a schedule of another kind), which replaces
+    the base's."""
     out = dict(base)
     for k, v in over.items():
-        out[k] = {**out[k], **v} if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+        old = out.get(k)
+        same_kind = isinstance(old, dict) and old.get("kind") == v.get("kind", old.get("kind")) \
+            if isinstance(v, dict) else False
+        out[k] = {**old, **v} if same_kind else v
     return out
 
 

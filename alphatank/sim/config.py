@@ -136,8 +136,6 @@ class GameConfig:
     immortal: bool = False  # the paper's TERMINATE_TIME training mode: hits score, nobody dies
     # every tank starts on a random free cell, the map's spawn slots unused (the paper's team env)
     random_spawns: bool = False
-    # with random_spawns: the share of matches drawn so (the rest use the map's slots)
-    random_spawn_share: float = bounded(1.0, 0.0, 1.0)
     max_steps: int = bounded(1200, 1, 10_000_000)
 
     def __post_init__(self) -> None:
