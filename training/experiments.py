@@ -220,9 +220,11 @@ def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
     out = dict(base)
     for k, v in over.items():
         old = out.get(k)
-        same_kind = isinstance(old, dict) and old.get("kind") == v.get("kind", old.get("kind")) \
-            if isinstance(v, dict) else False
-        out[k] = {**old, **v} if same_kind else v
+        if isinstance(v, dict) and isinstance(old, dict) \
+                and v.get("kind", old.get("kind")) == old.get("kind"):
+            out[k] = {**old, **v}
+        else:
+            out[k] = v
     return out
 
 
