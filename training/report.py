@@ -431,12 +431,12 @@ def _markdown(plan: Plan, table: Table, results: list[RowResult], checks: list[d
                      f"{c.weakness:g}" + (f". {c.note}" if c.note else ""))
     lines += ["", "Rows:", ""]
     for rr in results:
-        mix = (f"; trains on a mix of {', '.join(rr.row.scenarios)}" if rr.row.scenarios
+        how = (f"; trains on a mix of {', '.join(rr.row.scenarios)}" if rr.row.scenarios
                else "")
         if rr.row.eval_game:
-            mix += "; evaluated with " + ", ".join(f"{k} = {json.dumps(v)}"
+            how += "; evaluated with " + ", ".join(f"{k} = {json.dumps(v)}"
                                                    for k, v in rr.row.eval_game.items())
-        lines.append(f"- **{rr.row.title}** (`{rr.row.source}`){mix}"
+        lines.append(f"- **{rr.row.title}** (`{rr.row.source}`){how}"
                      + (f". {rr.row.note}" if rr.row.note else ""))
     if checks:
         lines += ["", "## Targets", ""]
