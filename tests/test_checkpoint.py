@@ -9,7 +9,9 @@ import pytest
 import torch
 
 from alphatank.envs.core import MatchSet
-from alphatank.game.scenarios import parse_scenario
+from alphatank.game.scenarios import load_scenario, parse_scenario
+from alphatank.game.seats import make_controller
+from alphatank.sim.episode import start_episode
 from alphatank.sim.policy import Policy
 from alphatank.training.checkpoint import CheckpointError, load_checkpoint, load_policy
 from alphatank.training.ppo import PPOConfig
@@ -89,6 +91,47 @@ def test_checkpoint_is_a_policy_in_any_seat(trained):
     core.reset_env(0, 5)
     a = core.controllers[0][0].act(core.matches[0], 0)
     assert a.shape == (3,) and a.dtype == np.int64
+
+
+def test_one_policy_in_many_envs_plays_each_env_as_it_would_alone(tmp_path):
+    """A checkpoint asked for many matches at once (one observation build, one forward
+    pass) samples and acts in each exactly as when it plays that match alone."""
+    run = tmp_path / "full"
+    Trainer(tiny_config("full", 1, observation="egocentric_full", checkpoint_every=0), run,
+            progress=False).train()
+
+    def play(core: MatchSet, seeds: list[int]) -> np.ndarray:
+        for e, seed in enumerate(seeds):
+            core.reset_env(e, seed)
+        path = []
+        for _ in range(50):
+            core.step(np.zeros((core.num_envs, 0, 3), dtype=np.int64))
+            path.append([m.tank_xy.copy() for m in core.matches])
+        return np.array(path).transpose(1, 0, 2, 3)  # (env, tick, tank, xy)
+
+    seeds = [21, 22, 23, 24, 25]
+    many = play(MatchSet("vs_aggressive", 5, driven=[], seat_policies={0: load_policy(run)}),
+                seeds)
+    alone = [play(MatchSet("vs_aggressive", 1, driven=[], seat_policies={0: load_policy(run)}),
+                  [s])[0] for s in seeds]
+    assert np.array_equal(many, np.array(alone))
+    assert not np.array_equal(many[0], many[1])  # different games
+    # the env serves the policy observations from its own batch; asked one match at a
+    # time (an episode loop), the policy builds its own: the same game (greedy, so that
+    # the actions follow the observations, not the sampling noise)
+    sc = load_scenario("vs_aggressive")
+    greedy_set = MatchSet(sc, 2, driven=[],
+                          seat_policies={0: load_policy(run, deterministic=True)})
+    greedy = play(greedy_set, seeds[:2])
+    for e in range(2):
+        ep = start_episode(sc.game_config(), sc.map_specs(), sc.teams,
+                           [load_policy(run, deterministic=True),
+                            make_controller(sc.seats[1], 0)], seeds[e])
+        path = []
+        for _ in range(50):
+            ep.tick()
+            path.append(ep.match.tank_xy.copy())
+        assert np.array_equal(np.array(path), greedy[e])
 
 
 def test_checkpoint_policy_rejects_a_match_it_cannot_observe(trained):

@@ -35,7 +35,7 @@ def test_pfsp_weights_follow_the_loss_rate_with_a_floor():
 
 def test_opponent_names_and_bad_settings():
     assert opponent_name("B:smart@0.5") == "smart@0.5"
-    assert opponent_name("B:self@4096/3") == "self@4096"
+    assert opponent_name("B:self@4096") == "self@4096"
     assert opponent_name("B:x, C:x") == "x"
     with pytest.raises(ValueError, match="league bots"):
         LeagueSchedule(bots=["genius"])

@@ -25,6 +25,7 @@ import os
 import shutil
 import time
 import weakref
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -37,9 +38,10 @@ from alphatank.files import write_text_atomic
 from alphatank.game.scenarios import Scenario, ScenarioError, parse_scenario
 from alphatank.game.seats import agent_path
 from alphatank.sim.config import ACTION_REPEAT_MAX, check_value
-from alphatank.sim.policy import NOOP
+from alphatank.sim.policy import NOOP, Observe
 from alphatank.training.learners import make_learner
 from alphatank.training.presets import LearnerSpec, TrainConfig
+from alphatank.training.streams import GameStreams
 
 FORMAT = "alphatank-checkpoint"
 VERSION = 1
@@ -386,16 +388,58 @@ def non_finite(state: Any, prefix: str = "") -> str | None:
     return None
 
 
+BANK_ROWS = 16  # matches one observation bank of a NetworkPolicy holds
+
+
+class _Bank:
+    """Observation rows of up to :data:`BANK_ROWS` matches for one seat, built in one
+    call: row ``r`` belongs to the match ``owners[r]`` refers to (free when that match is
+    gone or the row was given up)."""
+
+    def __init__(self, kind: str, match: Any, seat: int, slots: tuple[int, int, int],
+                 team_flags: bool):
+        from alphatank.game.observe import ObservationBuilder, StateBatch
+
+        self.key = (match.cfg, tuple(match.teams), seat)
+        self.walls = slots[0]
+        self.batch = StateBatch(match.cfg, match.n, BANK_ROWS, *slots)
+        self.builder = ObservationBuilder(kind, self.batch, match.teams, [seat],
+                                          team_flags=team_flags)
+        self.owners: list[weakref.ref | None] = [None] * BANK_ROWS
+
+    def owner(self, row: int) -> Any:
+        ref = self.owners[row]
+        return None if ref is None else ref()
+
+    def free_row(self) -> int | None:
+        return next((r for r in range(BANK_ROWS) if self.owner(r) is None), None)
+
+
+@dataclass
+class _SeatState:
+    """What a :class:`NetworkPolicy` keeps for one seat of one match."""
+
+    learner: Any
+    bank: _Bank
+    row: int
+    rng: np.random.Generator
+    sid: int | None  # MAPPO's seat id
+    held: np.ndarray  # the action of the last decision
+
+
 class NetworkPolicy:
-    """Trained learners as a :class:`alphatank.sim.policy.Policy` for any seat of any match
-    with the same number of tanks and observation size as their training scenario.
+    """Trained learners as a :class:`alphatank.sim.policy.BatchPolicy` for any seat of any
+    match with the same number of tanks and observation size as their training scenario.
 
     The learner is picked per seat at :meth:`reset`: ``learner`` if given, else the one
-    that trained in that scenario seat, else the first. Observations are built for the
-    seat with the env's own :class:`~alphatank.game.observe.ObservationBuilder`. One
-    object may fill several seats of several matches at once: everything per seat (the
-    learner, the observation builder, the random generator, MAPPO's seat id) is kept per
-    (match, seat) and replaced at that seat's next :meth:`reset`.
+    that trained in that scenario seat, else the first. Observations are built with the
+    env's own :class:`~alphatank.game.observe.ObservationBuilder`, for up to
+    :data:`BANK_ROWS` matches per call (one bank per seat and game), and
+    :meth:`act_batch` decides for many matches in one forward pass, each row's sampling
+    noise drawn from that seat's own generator, so a seat's actions do not depend on the
+    other matches of the call. One object may fill several seats of several matches at
+    once: everything per seat (the learner, the bank row, the random generator, MAPPO's
+    seat id) is kept per (match, seat) and replaced at that seat's next :meth:`reset`.
     """
 
     def __init__(self, observation: dict[str, Any], learner_names: list[str],
@@ -415,9 +459,11 @@ class NetworkPolicy:
         self.repeat = int(observation["action_repeat"])  # ticks an action is held
         self.trained_as = trained_as  # the training scenario, for error messages
         self._seats: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+        self._banks: list[_Bank] = []
 
     def __getstate__(self) -> dict[str, Any]:
-        return {**self.__dict__, "_seats": None}  # per-match state stays with the matches
+        # per-match state stays with the matches
+        return {**self.__dict__, "_seats": None, "_banks": []}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
@@ -445,13 +491,37 @@ class NetworkPolicy:
         return (f"; it fits seats of matches with {self.n_tanks} tanks and the same team "
                 f"sizes as {self.trained_as}" if self.trained_as else "")
 
+    def _row(self, match: Any, seat: int, old: _SeatState | None, walls: int
+             ) -> tuple[_Bank, int]:
+        """A bank row for ``seat`` of ``match``: its old one if it still fits, else a free
+        row of a fitting bank (a new bank when none has one)."""
+        key = (match.cfg, tuple(match.teams), seat)
+        if (old is not None and old.bank.key == key and old.bank.walls >= walls
+                and old.bank.owner(old.row) is match):
+            return old.bank, old.row
+        if old is not None and old.bank.owner(old.row) is match:
+            old.bank.owners[old.row] = None
+        for bank in self._banks:
+            if bank.key == key and bank.walls >= walls:
+                row = bank.free_row()
+                if row is not None:
+                    return bank, row
+        bank = _Bank(self.kind, match, seat, (walls, *self.slots[1:]), self.team_flags)
+        if bank.builder.layout.size != self.obs_dim:
+            raise CheckpointError(
+                f"{self.source}: expects {self.obs_dim} observation features "
+                f"({self.kind}, {self.n_tanks} tanks); seat {seat} of this match "
+                f"({match.n} tanks, teams {match.teams}) gives {bank.builder.layout.size}"
+                f"{self._fit_hint()}")
+        self._banks.append(bank)
+        return bank, 0
+
     def reset(self, match: Any, seat: int, seed: int | None = None) -> None:
-        from alphatank.game.observe import ObservationBuilder, StateBatch, slot_counts
+        from alphatank.game.observe import slot_counts
 
         name = self.name_for_seat(seat)
         learner = self.get_learner(name)
         per_match = self._seats.setdefault(match, {})
-        old = per_match.get(seat)
         walls, buffs, debuffs = self.slots
         need, nb, nd = slot_counts(match.cfg, [match.spec])
         if self.kind == "paper" and need > walls:
@@ -464,42 +534,79 @@ class NetworkPolicy:
             raise CheckpointError(
                 f"{self.source}: trained with room for {buffs} buff and {debuffs} "
                 f"debuff zones; map {match.spec.name!r} has {nb} and {nd}")
-        builder = old[1] if (old is not None and old[4] == (match.cfg, tuple(match.teams))
-                             and old[1].batch.walls.shape[1] >= need) else None
-        if builder is None:
-            # Only the paper kind has a wall block; the others read the walls through
-            # rays and routes, so any map's walls fit.
-            batch = StateBatch(match.cfg, match.n, 1, max(walls, need), buffs, debuffs)
-            builder = ObservationBuilder(self.kind, batch, match.teams, [seat],
-                                         team_flags=self.team_flags)
-            if builder.layout.size != self.obs_dim:
-                raise CheckpointError(
-                    f"{self.source}: expects {self.obs_dim} observation features "
-                    f"({self.kind}, {self.n_tanks} tanks); seat {seat} of this match "
-                    f"({match.n} tanks, teams {match.teams}) gives {builder.layout.size}"
-                    f"{self._fit_hint()}")
+        # Only the paper kind has a wall block; the others read the walls through rays
+        # and routes, so any map's walls fit.
+        bank, row = self._row(match, seat, per_match.get(seat), max(walls, need))
+        bank.owners[row] = weakref.ref(match)
         num_seats = getattr(learner, "num_seats", None)  # learners with seat ids (MAPPO)
         sid = None if num_seats is None else self.seat_id(match, seat, name, num_seats)
-        per_match[seat] = (learner, builder, np.random.default_rng(seed), sid,
-                           (match.cfg, tuple(match.teams)), NOOP.copy())
-        builder.batch.set_static(0, match)
-        builder.batch.gather(0, match)
-        builder.set_static(0)
+        per_match[seat] = _SeatState(learner, bank, row, np.random.default_rng(seed), sid,
+                                     NOOP.copy())
+        bank.batch.set_static(row, match)
+        bank.batch.gather(row, match)
+        bank.builder.set_static(row)
+
+    @property
+    def setting(self) -> tuple[Any, ...]:
+        """What the observations depend on besides the match: kind, team flags, slots."""
+        return (self.kind, self.team_flags, *self.slots)
 
     def act(self, match: Any, seat: int) -> np.ndarray:
-        if not match.alive[seat]:
-            return NOOP.copy()
-        learner, builder, rng, sid, _, held = self._seats[match][seat]
-        if match.tick % self.repeat:  # between decisions: the action trained as held
-            return held.copy()
-        builder.batch.gather(0, match)
-        obs = builder.build()[0]
-        if sid is None:
-            act = learner.policy_actions(obs, self.deterministic, rng)[0]
-        else:
-            act = learner.policy_actions(obs, self.deterministic, rng, seat=sid)[0]
-        held[:] = act
-        return act
+        return self.act_batch(((match, seat),))[0]
+
+    def act_batch(self, pairs: Sequence[tuple[Any, int]],
+                  observe: Observe | None = None) -> np.ndarray:
+        """Actions (k, 3) of ``pairs`` (match, seat): the held action between decisions,
+        else the observations from ``observe`` (or one build per bank of our own) and one
+        forward pass per learner."""
+        out = np.empty((len(pairs), 3), dtype=np.int64)
+        due: list[tuple[int, _SeatState]] = []
+        for i, (match, seat) in enumerate(pairs):
+            if not match.alive[seat]:
+                out[i] = NOOP
+                continue
+            st = self._seats[match][seat]
+            if match.tick % self.repeat:  # between decisions: the action trained as held
+                out[i] = st.held
+                continue
+            due.append((i, st))
+        if due:
+            self._decide(pairs, due, out, observe)
+        return out
+
+    def _observations(self, pairs: Sequence[tuple[Any, int]],
+                      due: list[tuple[int, _SeatState]], observe: Observe | None
+                      ) -> np.ndarray:
+        """The observations (len(due), obs_dim) of the pairs due to decide."""
+        if observe is not None:
+            x = observe(self.setting, self.obs_dim, np.array([i for i, _ in due]))
+            if x is not None:
+                return x
+        banks: dict[int, Any] = {}
+        for i, st in due:
+            st.bank.batch.gather(st.row, pairs[i][0])
+            banks[id(st.bank)] = st.bank
+        built = {k: bank.builder.build() for k, bank in banks.items()}
+        return np.stack([built[id(st.bank)][st.row, 0] for _, st in due])
+
+    def _decide(self, pairs: Sequence[tuple[Any, int]], due: list[tuple[int, _SeatState]],
+                out: np.ndarray, observe: Observe | None) -> None:
+        obs = self._observations(pairs, due, observe)
+        groups: dict[int, list[tuple[int, int, _SeatState]]] = {}
+        for k, (i, st) in enumerate(due):
+            groups.setdefault(id(st.learner), []).append((k, i, st))
+        for group in groups.values():
+            learner = group[0][2].learner
+            x = obs[[k for k, _, _ in group]]
+            rng = GameStreams([st.rng for _, _, st in group], 1)
+            if group[0][2].sid is None:
+                acts = learner.policy_actions(x, self.deterministic, rng)
+            else:
+                acts = learner.policy_actions(x, self.deterministic, rng,
+                                              seat=np.array([st.sid for _, _, st in group]))
+            for (_, i, st), a in zip(group, acts, strict=True):
+                st.held[:] = a
+                out[i] = a
 
 
 class LivePolicy(NetworkPolicy):

@@ -40,11 +40,10 @@ LEARNER = "learner"
 
 
 def opponent_name(label: str) -> str:
-    """The league name in an episode's opponent label: ``B:smart@0.5`` -> ``smart@0.5``;
-    ``B:self@4096/3`` (env 3's copy of a snapshot) -> ``self@4096``."""
+    """The league name in an episode's opponent label: ``B:smart@0.5`` -> ``smart@0.5``,
+    ``B:self@4096`` -> ``self@4096``."""
     first = label.split(", ")[0]
-    name = first.partition(":")[2] if ":" in first else first
-    return name.split("/")[0]
+    return first.partition(":")[2] if ":" in first else first
 
 
 class LeagueSchedule(OpponentSchedule):
@@ -132,9 +131,8 @@ class LeagueSchedule(OpponentSchedule):
             cores = [b.core for b in getattr(env, "blocks", [env]) if hasattr(b, "core")]
             meta["max_walls"] = max([int(meta["max_walls"]),
                                      *(c.batch.walls.shape[1] for c in cores)])
-        # one Policy object per env: a policy keeps one match's observation state
-        for e in range(env.num_envs):
-            env.add_opponent(f"{name}/{e}", LivePolicy({spec.name: learner}, meta, spec.name))
+        # one Policy object for every env: it acts for all the matches it plays at once
+        env.add_opponent(name, LivePolicy({spec.name: learner}, meta, spec.name))
         if name not in self.index:
             self._add(name)
         self.pool.append(name)
@@ -154,8 +152,7 @@ class LeagueSchedule(OpponentSchedule):
         names = self.opponents()
         rng = np.random.default_rng([self.seed, int(step), 0x1EA6])
         picks = rng.choice(len(names), size=env.num_envs, p=self.probabilities())
-        env.set_env_opponents([names[i] if names[i] in self.bots else f"{names[i]}/{e}"
-                               for e, i in enumerate(picks)])
+        env.set_env_opponents([names[i] for i in picks])
         return self.metrics()
 
     def record(self, opponent: str, outcome: str) -> None:

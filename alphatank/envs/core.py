@@ -30,6 +30,7 @@ from gymnasium import spaces
 
 from alphatank.game.lineup import spec_seat
 from alphatank.game.observe import (
+    ADVICE_KINDS,
     OBS_KINDS,
     GlobalState,
     ObservationBuilder,
@@ -42,7 +43,7 @@ from alphatank.game.seats import make_controller
 from alphatank.sim.config import ACTION_REPEAT_MAX, check_value
 from alphatank.sim.episode import episode_match, episode_seeds, reset_controllers
 from alphatank.sim.match import Match, TickEvents
-from alphatank.sim.policy import NOOP, Policy
+from alphatank.sim.policy import NOOP, BatchPolicy, Policy
 
 ACTION_NVEC = np.array([3, 3, 2], dtype=np.int64)
 _NVEC_U = ACTION_NVEC.astype(np.uint64)
@@ -157,7 +158,20 @@ class MatchSet:
         self.map_index = np.zeros(E, dtype=np.int64)
         self.controllers: list[list[Policy | None]] = [[None] * n for _ in range(E)]
         self._bots: list[dict[int, tuple[tuple, Policy]]] = [{} for _ in range(E)]
+        # seat specs whose controller is a batch policy: one object for every env and seat
+        self._shared: dict[tuple, BatchPolicy] = {}
+        # per env, the seats this set plays and their controllers: all of them, those that
+        # act one match at a time, and the batch policies (asked for every env at once)
         self._played: list[list[tuple[int, Policy]]] = [[] for _ in range(E)]
+        self._single: list[list[tuple[int, Policy]]] = [[] for _ in range(E)]
+        self._batched: list[list[tuple[int, BatchPolicy]]] = [[] for _ in range(E)]
+        # the observations of the seats this set plays, per observation setting of the
+        # batch policies that play them (built from ``batch`` when it changed; None: a
+        # setting this batch cannot serve), and the batch version they were built at
+        self.played_seats = np.array([s for s in range(n) if s not in self.driven],
+                                     dtype=np.int64)
+        self._seat_obs: dict[Any, tuple[ObservationBuilder, list[int]] | None] = {}
+        self._version = 0  # counts the changes to ``batch`` (gathers)
         self.joint = np.ones((E, n, 3), dtype=np.int64)
         self._joint_rows = list(self.joint)  # per-env views
         self.driven_idx = np.array(self.driven, dtype=np.int64)
@@ -179,9 +193,12 @@ class MatchSet:
         are reproducible from their seeds)."""
         state = self.__dict__.copy()
         state["matches"] = []
+        state["_seat_obs"] = {}  # rebuilt on demand (its builders want a live batch)
         state["controllers"] = [[None] * self.n for _ in range(self.num_envs)]
         state["_bots"] = [{} for _ in range(self.num_envs)]
-        state["_played"] = [[] for _ in range(self.num_envs)]
+        state["_shared"] = {}
+        for key in ("_played", "_single", "_batched"):
+            state[key] = [[] for _ in range(self.num_envs)]
         del state["_joint_rows"]  # views of ``joint``: rebuilt on unpickling
         return state
 
@@ -283,7 +300,9 @@ class MatchSet:
         cached = self._bots[e].get(seat)
         if cached is not None and cached[0] == key:
             return cached[1]
-        pol = make_controller(spec, seed)
+        pol = self._shared.get(key) or make_controller(spec, seed)
+        if isinstance(pol, BatchPolicy):  # keeps its state per match and seat
+            self._shared[key] = pol
         self._bots[e][seat] = (key, pol)
         return pol
 
@@ -306,13 +325,19 @@ class MatchSet:
             ctrls[seat] = self._controller(e, seat, seeds.seat_seeds[seat])
         reset_controllers(m, ctrls, seeds)
         self.episode_label[e] = self.describe_opponents(e)
-        self._played[e] = [(seat, c) for seat, c in enumerate(ctrls) if c is not None]
+        played = self._played[e] = [(seat, c) for seat, c in enumerate(ctrls) if c is not None]
+        self._single[e] = [(s, c) for s, c in played if not isinstance(c, BatchPolicy)]
+        self._batched[e] = [(s, c) for s, c in played if isinstance(c, BatchPolicy)]
         self.joint[e] = 1
         self.terminated[e] = self.truncated[e] = False
         b = self.batch
         b.set_static(e, m)
         b.gather(e, m)
+        self._version += 1
         self.obs.set_static(e)
+        for served in self._seat_obs.values():
+            if served is not None:
+                served[0].set_static(e)
         self.tracker.reset_env(e, m)
 
     def reset_all(self, seeds: Sequence[int]) -> np.ndarray:
@@ -322,18 +347,20 @@ class MatchSet:
 
     # ---- stepping -------------------------------------------------------------------
 
-    def _tick(self, e: int) -> None:
+    def _tick(self, e: int, batched: bool = False) -> None:
         """One tick of env ``e`` with the driven seats' rows of ``joint`` already set;
-        the set's controllers fill the other live seats."""
+        the set's controllers fill the other live seats (``batched``: the batch policies'
+        seats are set too, by :meth:`_act_batched`)."""
         m, joint = self.matches[e], self._joint_rows[e]
         alive = m.alive
-        for seat, ctrl in self._played[e]:
+        for seat, ctrl in (self._single[e] if batched else self._played[e]):
             if alive[seat]:
                 joint[seat] = ctrl.act(m, seat)
         events = m.step(joint)
         if self.tick_watch is not None:
             self.tick_watch(e, m, events)
         self.batch.gather(e, m)
+        self._version += 1
         if m.terminated or m.truncated:
             self.terminated[e], self.truncated[e] = m.terminated, m.truncated
 
@@ -361,9 +388,12 @@ class MatchSet:
         """One tick of every env (of the ``live`` ones only, when given); its terms."""
         if len(self.driven):
             self.joint[:, self._driven_sel] = actions
+        batched = any(self._batched)
+        if batched:
+            self._act_batched(live)
         for e in range(self.num_envs):
             if live is None or live[e]:
-                self._tick(e)
+                self._tick(e, batched)
         terms = self.tracker.step(slice(None), self.batch, self.matches, self.joint)
         if len(self.driven):  # no driven seat alive: play the match out now
             gone = np.flatnonzero(~np.logical_or.reduce(
@@ -372,6 +402,70 @@ class MatchSet:
                 if not (self.terminated[e] or self.truncated[e]):
                     self._play_out(e)
         return terms
+
+    def _act_batched(self, live: np.ndarray | None) -> None:
+        """Into ``joint``: the actions of every batch policy's live seats in the envs
+        about to tick, one :meth:`~alphatank.sim.policy.BatchPolicy.act_batch` call per
+        policy object."""
+        groups: dict[int, tuple[BatchPolicy, list[tuple[int, int]]]] = {}
+        for e in range(self.num_envs):
+            if live is not None and not live[e]:
+                continue
+            alive = self.matches[e].alive
+            for seat, ctrl in self._batched[e]:
+                if alive[seat]:
+                    groups.setdefault(id(ctrl), (ctrl, []))[1].append((e, seat))
+        matches, joint = self.matches, self.joint
+        for ctrl, pairs in groups.values():
+            envs = np.array([e for e, _ in pairs])
+            seats = np.array([seat for _, seat in pairs])
+
+            def observe(setting: Any, obs_dim: int, rows: np.ndarray,
+                        envs: np.ndarray = envs, seats: np.ndarray = seats
+                        ) -> np.ndarray | None:
+                return self.seat_observations(setting, obs_dim, envs[rows], seats[rows])
+
+            acts = ctrl.act_batch([(matches[e], seat) for e, seat in pairs], observe)
+            for (e, seat), a in zip(pairs, acts, strict=True):
+                joint[e, seat] = a
+
+    def seat_observations(self, setting: Any, obs_dim: int, envs: np.ndarray,
+                          seats: np.ndarray) -> np.ndarray | None:
+        """Observations (k, obs_dim) of played seats ``seats`` of envs ``envs`` in
+        ``setting`` = (kind, team_flags, max_walls, max_buffs, max_debuffs), from this
+        set's ``batch`` as gathered now; one build per setting and batch change serves
+        every policy. None where this batch cannot build them exactly as the policy's own
+        observations: another size, or the ``advice`` kinds (whose bot asked per
+        observation would move on every tick, not at the policy's decisions)."""
+        served = self._seat_obs.get(setting, False)
+        if served is False:
+            served = self._seat_obs[setting] = self._serve(setting, obs_dim)
+        if served is None:
+            return None
+        builder, stamp = served
+        if stamp[0] != self._version:
+            builder.build()
+            stamp[0] = self._version
+        col = np.searchsorted(self.played_seats, seats)
+        return builder.out[envs, col]
+
+    def _serve(self, setting: Any, obs_dim: int
+               ) -> tuple[ObservationBuilder, list[int]] | None:
+        kind, team_flags, walls, buffs, debuffs = setting
+        b = self.batch
+        if (kind in ADVICE_KINDS or not len(self.played_seats)
+                or (kind == "paper" and (b.walls.shape[1], b.max_buffs, b.max_debuffs)
+                    != (walls, buffs, debuffs))):
+            return None
+        builder = ObservationBuilder(kind, b, self.teams, self.played_seats.tolist(),
+                                     team_flags=team_flags)
+        if builder.layout.size != obs_dim:
+            return None
+        for e, m in enumerate(self.matches):
+            builder.set_static(e)
+            if b.shot_seats:  # the shots of seats wanted only now
+                b.trace_shots(e, m)
+        return builder, [-1]
 
     def _play_out(self, e: int) -> None:
         """Finish env ``e``'s match without its (dead) driven seats; adds the rewards of

@@ -325,7 +325,7 @@ class StateBatch:
         c[1] = match.bullets_alive
         self.tick[e] = match.tick
         if self.shot_seats:
-            self._gather_shots(e, match)
+            self.trace_shots(e, match)
         if self.advice_seats:
             self._matches[e] = match
             self._advice_due[e] = True
@@ -350,13 +350,14 @@ class StateBatch:
                     rot, move, fire = advisors[s].act(match, s).tolist()
                     row[rot] = row[3 + move] = 1.0
                     row[6] = fire
+            self._matches[e] = None  # keep no match alive (gather sets it again)
         self._advice_due.fill(False)
 
     def want_shots(self, seats: Sequence[int]) -> None:
         """Predict a shot of these seats in every :meth:`gather` (``shots``)."""
         self.shot_seats = tuple(sorted(set(self.shot_seats) | {int(s) for s in seats}))
 
-    def _gather_shots(self, e: int, match: Match) -> None:
+    def trace_shots(self, e: int, match: Match) -> None:
         """Trace a bullet fired now along the heading of each wanted live seat of match
         ``e``, like the bots' search (``predict_path(exact=False)``)."""
         w, alive = match.world, match.alive

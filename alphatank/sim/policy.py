@@ -3,6 +3,7 @@ and the idle seat."""
 
 from __future__ import annotations
 
+from collections.abc import Callable, Hashable, Sequence
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
@@ -23,6 +24,24 @@ class Policy(Protocol):
     def reset(self, match: Match, seat: int, seed: int | None = None) -> None: ...
 
     def act(self, match: Match, seat: int) -> np.ndarray: ...
+
+
+# observe(setting, obs_dim, rows): the (len(rows), obs_dim) observations of those pairs of
+# an act_batch call in an observation setting, or None where the caller cannot build them
+Observe = Callable[[Hashable, int, np.ndarray], "np.ndarray | None"]
+
+
+@runtime_checkable
+class BatchPolicy(Policy, Protocol):
+    """A Policy that can also act for many (match, seat) pairs in one call (one batched
+    observation and forward pass for a network). ``act_batch`` returns the (k, 3) actions
+    that ``act`` would return for each pair, whatever the other pairs of the call.
+    ``observe``, when given, offers observations the caller already keeps (an env's
+    :class:`~alphatank.game.observe.StateBatch`), built once for every policy that
+    observes the same way."""
+
+    def act_batch(self, pairs: Sequence[tuple[Match, int]],
+                  observe: Observe | None = None) -> np.ndarray: ...
 
 
 NOOP = np.array([1, 1, 0], dtype=np.int64)
