@@ -264,13 +264,15 @@ def test_shipped_tables_load_and_plan(tmp_path):
             assert spawns.game == {"random_spawns": True} and not mixed.game
             assert dataclasses.replace(spawns, game={}, name=mixed.name) == mixed
             assert t4.row(f"{bot}_mix_spawns").eval_game == {"random_spawns": False}
-        for kind, weaknesses in (("still", [0.05, 1.0]), ("strengths", [0.05, 0.25, 1.0])):
-            if bot not in ("defensive", "dodge"):
+        for kind, weaknesses, power in (("still", [0.05, 1.0], 1.0),
+                                        ("strengths", [0.05, 0.25, 1.0], 1.0),
+                                        ("even", [0.05, 1.0], 0.0)):
+            if bot not in ("defensive", "dodge") or (kind, bot) == ("even", "dodge"):
                 continue  # the same, meeting its bot weakened too (PFSP over strengths)
             weak = row_config(t4.row(f"{bot}_mix_{kind}"), 0, 15)
             assert weak.schedule == {"kind": "league", "bots": [bot],
                                      "weaknesses": weaknesses, "snapshots": 0,
-                                     "power": 1.0, "floor": 0.1, "window": 50}
+                                     "power": power, "floor": 0.1, "window": 50}
             assert dataclasses.replace(weak, schedule=mixed.schedule,
                                        name=mixed.name) == mixed
     sac = row_config(next(t for t in tables if t.name == "sac").row("sac_vs_ppo"), 1, 15)
@@ -281,7 +283,7 @@ def test_shipped_tables_load_and_plan(tmp_path):
     # Table 4's specialists and adaptive cycle are shared with the league table
     shared = [j for j in plan.jobs if len(j.rows) > 1]
     assert len(shared) == 2 * 5 and all(len(j.rows) == 2 for j in shared)
-    assert len(plan.jobs) == 2 * (8 + 31 + 3 + 8 + 6) - len(shared)
+    assert len(plan.jobs) == 2 * (8 + 32 + 3 + 8 + 6) - len(shared)
 
 
 def test_a_setting_added_later_keeps_the_digests_of_runs_made_before_it(tmp_path):
