@@ -165,13 +165,14 @@ class MatchSet:
         self._played: list[list[tuple[int, Policy]]] = [[] for _ in range(E)]
         self._single: list[list[tuple[int, Policy]]] = [[] for _ in range(E)]
         self._batched: list[list[tuple[int, BatchPolicy]]] = [[] for _ in range(E)]
-        # the observations of the seats this set plays, per observation setting of the
-        # batch policies that play them (built from ``batch`` when it changed; None: a
-        # setting this batch cannot serve), and the batch version they were built at
+        # the observations of the seats this set plays, one builder per way the batch
+        # policies that play them observe (None: one this batch cannot serve), rebuilt
+        # when ``batch`` changed since (``_version`` counts its gathers)
         self.played_seats = np.array([s for s in range(n) if s not in self.driven],
                                      dtype=np.int64)
-        self._seat_obs: dict[Any, tuple[ObservationBuilder, list[int]] | None] = {}
-        self._version = 0  # counts the changes to ``batch`` (gathers)
+        self._seat_obs: dict[tuple, ObservationBuilder | None] = {}
+        self._seat_obs_at: dict[tuple, int] = {}
+        self._version = 0
         self.joint = np.ones((E, n, 3), dtype=np.int64)
         self._joint_rows = list(self.joint)  # per-env views
         self.driven_idx = np.array(self.driven, dtype=np.int64)
@@ -193,7 +194,7 @@ class MatchSet:
         are reproducible from their seeds)."""
         state = self.__dict__.copy()
         state["matches"] = []
-        state["_seat_obs"] = {}  # rebuilt on demand (its builders want a live batch)
+        state["_seat_obs"], state["_seat_obs_at"] = {}, {}  # rebuilt on demand
         state["controllers"] = [[None] * self.n for _ in range(self.num_envs)]
         state["_bots"] = [{} for _ in range(self.num_envs)]
         state["_shared"] = {}
@@ -335,9 +336,9 @@ class MatchSet:
         b.gather(e, m)
         self._version += 1
         self.obs.set_static(e)
-        for served in self._seat_obs.values():
-            if served is not None:
-                served[0].set_static(e)
+        for builder in self._seat_obs.values():
+            if builder is not None:
+                builder.set_static(e)
         self.tracker.reset_env(e, m)
 
     def reset_all(self, seeds: Sequence[int]) -> np.ndarray:
@@ -433,39 +434,40 @@ class MatchSet:
                           seats: np.ndarray) -> np.ndarray | None:
         """Observations (k, obs_dim) of played seats ``seats`` of envs ``envs`` in
         ``setting`` = (kind, team_flags, max_walls, max_buffs, max_debuffs), from this
-        set's ``batch`` as gathered now; one build per setting and batch change serves
-        every policy. None where this batch cannot build them exactly as the policy's own
+        set's ``batch`` as gathered now; one build per way of observing and batch change
+        serves every policy. None where this batch cannot build them exactly as the policy's own
         observations: another size, or the ``advice`` kinds (whose bot asked per
         observation would move on every tick, not at the policy's decisions)."""
-        served = self._seat_obs.get(setting, False)
-        if served is False:
-            served = self._seat_obs[setting] = self._serve(setting, obs_dim)
-        if served is None:
+        kind, team_flags, walls, buffs, debuffs = setting
+        # only the paper kind has wall and zone blocks; the others read any capacity
+        key = (kind, team_flags, *((walls, buffs, debuffs) if kind == "paper" else ()))
+        if key not in self._seat_obs:
+            self._seat_obs[key] = self._serve(kind, team_flags, (walls, buffs, debuffs))
+        builder = self._seat_obs[key]
+        if builder is None or builder.layout.size != obs_dim:
             return None
-        builder, stamp = served
-        if stamp[0] != self._version:
+        if self._seat_obs_at.get(key) != self._version:
             builder.build()
-            stamp[0] = self._version
+            self._seat_obs_at[key] = self._version
         col = np.searchsorted(self.played_seats, seats)
         return builder.out[envs, col]
 
-    def _serve(self, setting: Any, obs_dim: int
-               ) -> tuple[ObservationBuilder, list[int]] | None:
-        kind, team_flags, walls, buffs, debuffs = setting
+    def _serve(self, kind: str, team_flags: bool, slots: tuple[int, int, int]
+               ) -> ObservationBuilder | None:
+        """A builder of the played seats' observations on ``batch``, statics set; None
+        where it could not match the policy's own (see :meth:`seat_observations`)."""
         b = self.batch
         if (kind in ADVICE_KINDS or not len(self.played_seats)
-                or (kind == "paper" and (b.walls.shape[1], b.max_buffs, b.max_debuffs)
-                    != (walls, buffs, debuffs))):
+                or (kind == "paper"
+                    and (b.walls.shape[1], b.max_buffs, b.max_debuffs) != slots)):
             return None
         builder = ObservationBuilder(kind, b, self.teams, self.played_seats.tolist(),
                                      team_flags=team_flags)
-        if builder.layout.size != obs_dim:
-            return None
         for e, m in enumerate(self.matches):
             builder.set_static(e)
             if b.shot_seats:  # the shots of seats wanted only now
                 b.trace_shots(e, m)
-        return builder, [-1]
+        return builder
 
     def _play_out(self, e: int) -> None:
         """Finish env ``e``'s match without its (dead) driven seats; adds the rewards of
