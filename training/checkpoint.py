@@ -432,9 +432,10 @@ class NetworkPolicy:
     match with the same number of tanks and observation size as their training scenario.
 
     The learner is picked per seat at :meth:`reset`: ``learner`` if given, else the one
-    that trained in that scenario seat, else the first. Observations are built with the
-    env's own :class:`~alphatank.game.observe.ObservationBuilder`, for up to
-    :data:`BANK_ROWS` matches per call (one bank per seat and game), and
+    that trained in that scenario seat, else the first. Observations come from the
+    caller's ``observe`` where it can build them (an env's own batch), else from banks of
+    the policy's own (the env's :class:`~alphatank.game.observe.ObservationBuilder` for up
+    to :data:`BANK_ROWS` matches per call, one bank per seat and game).
     :meth:`act_batch` decides for many matches in one forward pass, each row's sampling
     noise drawn from that seat's own generator, so a seat's actions do not depend on the
     other matches of the call. One object may fill several seats of several matches at
