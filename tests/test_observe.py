@@ -350,6 +350,56 @@ def test_full_kind_adds_the_closest_incoming_bullet():
     assert obs[0, 0, lay["threat"]].tolist() == [0.0, 0.0, 0.0, 0.0]
 
 
+def test_fire_kind_adds_every_other_tanks_line_of_fire():
+    """``tank[k].aimed / aim_near / ready``: a bullet the other tank fired now reaches me
+    first, how close it passes me, whether its gun is ready; they move with the tank's
+    slot, and everything else is ``egocentric_full``'s."""
+    teams = ("A", "A", "B", "B")
+    fire, full = duel("egocentric_fire", "open", teams), duel("egocentric_full", "open", teams)
+    lay, r = fire.obs.layout, hit_radius(fire.matches[0].cfg)
+    extra = ("aimed", "aim_near", "ready")
+    # Seat 0 at the centre; enemy 2 to its right facing it, 10 px off its centre line;
+    # enemy 3 farther off, facing sideways (its ricochets stay 275 px away); the mate far
+    # off, facing away.
+    poses = [(385.0, 385.0, 0.0), (150.0, 150.0, math.pi), (560.0, 395.0, math.pi),
+             (385.0, 660.0, 0.0)]
+    obs, base = place(fire, poses), place(full, poses)
+    rest = [k for k, name in enumerate(lay.fields) if name.split(".")[-1] not in extra]
+    assert np.array_equal(obs[..., rest], base)
+    f = lambda name, o=0: feat(fire, obs, name, learner=o)  # noqa: E731
+    # Nearest first: tank[0] the mate, tank[1] enemy 2 (175 px), tank[2] enemy 3 (275 px).
+    assert f("tank[1].fwd") == pytest.approx(175.0 / W)
+    assert (f("tank[1].aimed"), f("tank[1].ready")) == (1.0, 1.0)
+    assert f("tank[1].aim_near") == pytest.approx(1 - 10.0 / (4 * r), abs=1e-6)
+    assert [f(f"tank[{k}].{x}") for k in (0, 2) for x in extra[:2]] == [0.0] * 4
+    assert (f("tank[0].ready"), f("tank[2].ready")) == (1.0, 1.0)
+    # Enemy 2 seen by the mate (seat 1): its shot reaches seat 0, not the mate.
+    assert feat(fire, obs, "tank[1].aimed", learner=1) == 0.0
+    # Enemy 3 comes nearer than enemy 2 and faces seat 0: the slots swap, the fields go
+    # with their tank; enemy 2 reloading is not ready.
+    m = fire.matches[0]
+    m.cooldown[2] = 5
+    poses[3] = (385.0, 485.0, -math.pi / 2)
+    obs = place(fire, poses)
+    assert f("tank[1].side") == pytest.approx(100.0 / W)
+    assert (f("tank[1].aimed"), f("tank[1].aim_near"), f("tank[1].ready")) == (1.0, 1.0, 1.0)
+    assert (f("tank[2].aimed"), f("tank[2].ready")) == (1.0, 0.0)
+    # Enemy 3 at its bullet limit is not ready either; the mate in enemy 3's line of fire
+    # takes the shot: it no longer reaches seat 0 first.
+    m.bullets_alive[3] = m.cfg.max_bullets
+    poses[1] = (385.0, 435.0, 0.0)
+    obs = place(fire, poses)
+    assert (f("tank[1].aimed"), f("tank[1].ready")) == (0.0, 0.0)
+    assert feat(fire, obs, "tank[1].aimed", learner=1) == 1.0  # the mate sees it aimed
+    # Dead tanks aim at no one, and a dead observer sees no line of fire.
+    m.alive[2] = False
+    obs = place(fire, poses)
+    assert [f(f"tank[2].{x}") for x in extra] == [0.0, 0.0, 0.0]
+    m.alive[2], m.alive[0] = True, False
+    obs = place(fire, poses)
+    assert [f(f"tank[{k}].{x}") for k in range(3) for x in extra[:2]] == [0.0] * 6
+
+
 def test_advice_kind_adds_what_the_smart_bot_would_do():
     """``advice``: the one-hot action a smart bot kept for the seat takes on each
     observation (the same as a smart bot playing the seat decides on that state); every
@@ -514,6 +564,7 @@ PINNED_OBS = {0: {
     ("mixed_teams", "egocentric_aim"): "78fe9702e9789cde",
     ("mixed_teams", "egocentric_aim_path"): "1402310e5a2f05cc",
     ("mixed_teams", "egocentric_full"): "9ae7c293eeff04f5",
+    ("mixed_teams", "egocentric_fire"): "91a4dad3b2f675d7",
 }}
 
 

@@ -1,6 +1,6 @@
 """Per-agent observation vectors, built for many matches and agents at once.
 
-Eight kinds (``OBS_KINDS``), all float32, clipped to [-1, 1], with a fixed size per
+Nine kinds (``OBS_KINDS``), all float32, clipped to [-1, 1], with a fixed size per
 scenario and an index map (:class:`ObsLayout`, feature name -> slice):
 
 ``paper``       every component of the paper's Table 1 in map coordinates: own tank
@@ -34,6 +34,11 @@ scenario and an index map (:class:`ObsLayout`, feature name -> slice):
 ``egocentric_full``  ``egocentric_aim_path`` plus a ``threat`` block: of the other tanks'
                 bullets, the one that will pass closest to me within a second (straight
                 lines, like the bots' dodging): how close, how soon, and on which side.
+``egocentric_fire``  ``egocentric_full`` plus every other tank's line of fire, in its
+                ``tank[k]`` slot: whether a bullet it fired now would reach me first
+                (the same ricochet prediction), how close it would pass me, and whether
+                its gun is ready. The bots fire when their prediction meets a target, so
+                this shows who is about to shoot at me before the bullet flies.
 ``egocentric_advice``  ``egocentric_full`` plus an ``advice`` block: what the smart bot
                 would do now in my seat (its rotate, move and fire, one-hot), from a
                 bot kept per seat and asked at every observation. The policy sees the
@@ -68,14 +73,17 @@ if TYPE_CHECKING:
     from alphatank.sim.policy import Policy
 
 OBS_KINDS = ("paper", "egocentric", "egocentric_path", "egocentric_nearest", "egocentric_aim",
-             "egocentric_aim_path", "egocentric_full", "egocentric_advice")
+             "egocentric_aim_path", "egocentric_full", "egocentric_fire", "egocentric_advice")
 # What the egocentric kinds add: other tanks nearest first, the way to each, the shot
-# block, the threat block, the advice block.
+# block, the threat block, the other tanks' lines of fire, the advice block.
 NEAREST_KINDS = ("egocentric_nearest", "egocentric_aim", "egocentric_aim_path", "egocentric_full",
-                 "egocentric_advice")
-PATH_KINDS = ("egocentric_path", "egocentric_aim_path", "egocentric_full", "egocentric_advice")
-SHOT_KINDS = ("egocentric_aim", "egocentric_aim_path", "egocentric_full", "egocentric_advice")
-THREAT_KINDS = ("egocentric_full", "egocentric_advice")
+                 "egocentric_fire", "egocentric_advice")
+PATH_KINDS = ("egocentric_path", "egocentric_aim_path", "egocentric_full", "egocentric_fire",
+              "egocentric_advice")
+SHOT_KINDS = ("egocentric_aim", "egocentric_aim_path", "egocentric_full", "egocentric_fire",
+              "egocentric_advice")
+THREAT_KINDS = ("egocentric_full", "egocentric_fire", "egocentric_advice")
+FIRE_KINDS = ("egocentric_fire",)
 ADVICE_KINDS = ("egocentric_advice",)
 ADVICE_BOT = "smart"  # the bot whose action the advice block shows
 # the advice block: one-hot rotate (0 ccw, 1 none, 2 cw), one-hot move (0 back, 1 stop,
@@ -84,6 +92,7 @@ ADVICE_FIELDS = ("rot_ccw", "rot_none", "rot_cw", "back", "stop", "forward", "fi
 THREAT_FIELDS = ("near", "eta", "dir_fwd", "dir_side")
 THREAT_HORIZON_S = 1.0  # bullets closing in later than this are no threat yet
 SHOT_FIELDS = ("enemy", "friend", "miss")  # the shot block (StateBatch.shots' columns)
+FIRE_FIELDS = ("aimed", "aim_near", "ready")  # FIRE_KINDS' extra fields of every tank[k]
 TANK_FIELDS = ("alive", "x", "y", "sin", "cos", "vx", "vy", "c0x", "c0y", "c1x", "c1y",
                "c2x", "c2y", "c3x", "c3y", "wall")  # columns of tank_table()
 BULLET_FIELDS = ("x", "y", "vx", "vy")  # columns of bullet_table()
@@ -132,6 +141,11 @@ FIELD_HELP = {
     "friend": "1 if a bullet fired now first reaches a teammate",
     "miss": "closest approach of a bullet fired now to a live enemy (centres) / "
             "bullet_max_distance, at most 1 (1 with no enemy alive)",
+    "aimed": "1 if a bullet the tank fired now (ricochets predicted) would reach me first",
+    "aim_near": "1 - the closest approach to me of a bullet it fired now / (4 x hit radius), "
+                "at least 0; 0 while either of us is dead",
+    "ready": "1 if a fire action of the tank now would spawn a bullet (alive, reloaded, "
+             "under its bullet limit)",
 }
 BLOCK_HELP = {
     "self": "the observing tank",
@@ -274,6 +288,10 @@ class StateBatch:
         # from their predicted paths (complex points, padded with the end point) and
         # lengths (0: dead), traced in gather() and reached for all envs in reach_shots().
         self.shots = np.zeros((E, n, len(SHOT_FIELDS)))
+        # ... and of the same shots: the first tank each reaches (-1: none, or not
+        # traced) and its closest approach to every tank (inf: itself, dead, not traced).
+        self.shot_first = np.full((E, n), -1, dtype=np.int64)
+        self.shot_pass = np.full((E, n, n), np.inf)
         self.shot_seats: tuple[int, ...] = ()
         self._shot_radius = hit_radius(cfg)
         self._paths = np.zeros((E, n, cfg.bullet_max_bounces + 2), dtype=np.complex128)
@@ -387,6 +405,8 @@ class StateBatch:
         P = int(length.max())
         if P == 0:
             self.shots[:, seats] = 0.0
+            self.shot_first[:, seats] = -1
+            self.shot_pass[:, seats] = np.inf
             return
         w = self._tank_z
         w.real, w.imag = self.tank_xy[..., 0], self.tank_xy[..., 1]
@@ -405,6 +425,8 @@ class StateBatch:
         chord = np.sqrt(np.maximum(r * r - np.minimum(d_seg, r) ** 2, 0.0))
         entry = np.where(d_seg <= r, along - chord, np.inf)  # where each enters the leg
         first = entry.argmin(axis=-1)  # (E, S)
+        self.shot_first[:, seats] = np.where(hit & (length > 0), first, -1)
+        self.shot_pass[:, seats] = dist.min(axis=2)
         team = self.team
         mine = team[:, seats]
         mate = np.take_along_axis(team, first, axis=1) == mine
@@ -557,8 +579,9 @@ class ObservationBuilder:
                                    "bullets", "in_buff", "in_debuff"))
             lay.add("ray", self.rays, ("dist",))
             path = ("path_fwd", "path_side", "path_dist") if self.kind in PATH_KINDS else ()
+            fire = FIRE_FIELDS if self.kind in FIRE_KINDS else ()
             lay.add("tank", n_oth, t + ("alive", "fwd", "side", "dist", "sin", "cos", "v_fwd",
-                                        "v_side", "wall") + path)
+                                        "v_side", "wall") + path + fire)
             lay.add("own_bullet", cap, ("mask", "fwd", "side", "v_fwd", "v_side", "dist"))
             lay.add("bullet", K, ("mask",) + t + ("fwd", "side", "v_fwd", "v_side", "dist"))
             lay.add("buff", B, ("mask", "fwd", "side", "dist"))
@@ -611,6 +634,8 @@ class ObservationBuilder:
             cols("tank", "alive", "sin", "cos", "wall")
             if self.kind in PATH_KINDS:
                 cols("tank", "path_fwd", "path_side", "path_dist")
+            if self.kind in FIRE_KINDS:
+                cols("tank", *FIRE_FIELDS)
         return at
 
     def _block(self, name: str, count: int) -> np.ndarray:
@@ -639,6 +664,8 @@ class ObservationBuilder:
             self.v_shot = self.out[:, :, lay["shot"]]
             self.batch.want_shots(self.observers.tolist())
             self._shot_src = pick(self.batch.shots, self.observers[:, None])  # (E, L, 1, 3)
+        if self.kind in FIRE_KINDS:
+            self.batch.want_shots(np.unique(self.other_idx).tolist())
         if self.kind in ADVICE_KINDS:
             self.v_advice = self.out[:, :, lay["advice"]]
             self.batch.want_advice(self.observers.tolist())
@@ -958,6 +985,26 @@ class ObservationBuilder:
         self.v_debuff[..., at["debuff.mask"]] = b.zone_mask[:, None, b.max_buffs:]
         if self._nav_groups:
             self._build_paths(c3, s3, self_xy)
+        if self.kind in FIRE_KINDS:
+            self._build_fire()
+
+    def _build_fire(self) -> None:
+        """``tank.aimed``, ``tank.aim_near`` and ``tank.ready`` (``FIRE_KINDS``): every
+        other tank's shot if it fired now, as :meth:`StateBatch.reach_shots` traced it,
+        seen from each observer (in seat order; :meth:`_order_nearest` moves them on)."""
+        b, at, vt = self.batch, self.at, self.v_tank
+        obs, oi = self.observers, self.other_idx
+        b.reach_shots()
+        both = b.alive[:, oi] & b.alive[:, obs][..., None]  # (E, L, O)
+        vt[..., at["tank.aimed"]] = (b.shot_first[:, oi] == obs[:, None]) & both
+        passing = b.shot_pass[:, oi, obs[:, None]]  # (E, L, O)
+        near = np.maximum(1.0 - passing / (4.0 * self._hit_radius), 0.0)
+        vt[..., at["tank.aim_near"]] = np.where(both, near, 0.0)
+        g = self.cfg
+        limit = np.where(b.in_debuff, g.debuff_max_bullets,
+                         np.where(b.in_buff, g.buff_max_bullets, g.max_bullets))
+        ready = (b.cooldown <= 1) & (b.bullets_alive < limit) & b.alive  # (E, n)
+        vt[..., at["tank.ready"]] = ready[:, oi]
 
     def _build_threat(self, bullets: tuple[np.ndarray, ...] | None, c3: np.ndarray,
                       s3: np.ndarray) -> None:
