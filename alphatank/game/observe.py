@@ -426,7 +426,8 @@ class StateBatch:
         entry = np.where(d_seg <= r, along - chord, np.inf)  # where each enters the leg
         first = entry.argmin(axis=-1)  # (E, S)
         self.shot_first[:, seats] = np.where(hit & (length > 0), first, -1)
-        self.shot_pass[:, seats] = dist.min(axis=2)
+        passing = dist.min(axis=2)  # (E, S, n)
+        self.shot_pass[:, seats] = passing
         team = self.team
         mine = team[:, seats]
         mate = np.take_along_axis(team, first, axis=1) == mine
@@ -434,7 +435,7 @@ class StateBatch:
         out[..., 0] = hit & ~mate
         out[..., 1] = hit & mate
         foe = target & (team[:, None, :] != mine[..., None])
-        closest = np.where(foe, dist.min(axis=2), np.inf).min(axis=-1)
+        closest = np.where(foe, passing, np.inf).min(axis=-1)
         out[..., 2] = np.minimum(closest / self.cfg.bullet_max_distance, 1.0)
         out[length == 0] = 0.0
         self.shots[:, seats] = out
