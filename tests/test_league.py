@@ -46,6 +46,32 @@ def test_opponent_names_and_bad_settings():
         make_schedule({"kind": "league", "colour": "red"}, 100)
 
 
+def test_settings_keep_each_bot_to_its_scenarios_blocks():
+    mix = MixedVectorEnv(["vs_random", "vs_dodge"], 5, seed=0, observation="egocentric",
+                         game_overrides={"max_steps": 8})
+    lg = LeagueSchedule(bots=["random", "aggressive", "dodge"], weaknesses=[0.5, 1.0],
+                        snapshots=0, settings={"random": ["vs_random"], "dodge": ["vs_dodge"]})
+    picks = set()
+    for step in range(0, 4000, 100):
+        lg.apply(mix, step)
+        names = mix.blocks[0].core.env_opponent + mix.blocks[1].core.env_opponent
+        assert not any(n.startswith("dodge") for n in names[:3])
+        assert not any(n.startswith("random") for n in names[3:])
+        picks |= {(e < 3, n.partition("@")[0]) for e, n in enumerate(names)}
+    # aggressive, named nowhere, plays in both blocks
+    assert picks == {(True, "random"), (True, "aggressive"), (False, "dodge"),
+                     (False, "aggressive")}
+    only_dodge = LeagueSchedule(bots=["dodge"], snapshots=0, settings={"dodge": ["vs_dodge"]})
+    with pytest.raises(ValueError, match="no opponent plays in scenario 'vs_random'"):
+        only_dodge.apply(mix, 0)
+    elsewhere = LeagueSchedule(bots=["dodge"], snapshots=0, settings={"dodge": ["vs_smart"]})
+    with pytest.raises(ValueError, match=r"scenario\(s\) \['vs_smart'\] that the env"):
+        elsewhere.apply(mix, 0)
+    for bad in ({"smart": ["vs_smart"]}, {"dodge": "vs_dodge"}, {"dodge": []}):
+        with pytest.raises(ValueError, match="league settings"):
+            LeagueSchedule(bots=["dodge"], settings=bad)
+
+
 def test_labels_name_the_opponent_the_episode_was_played_against():
     env = VectorMatchEnv("vs_random", 2, seed=0, game_overrides={"max_steps": 6})
     env.add_opponent("idle_smart", "smart@0.0")

@@ -15,6 +15,12 @@ rollout, :meth:`~LeagueSchedule.record` for every finished episode. At each ``ap
   played has ``s_o = 0``: it is tried first). Draws come from a generator seeded by
   ``(seed, step)``, so a run is reproducible.
 
+``settings`` (bot name -> scenario names) keeps a bot to the matches of those scenarios
+of a mixed env (:class:`~alphatank.training.mixed.MixedVectorEnv`), e.g. each bot in the
+map and game preset its specialist trains on; each scenario's block of envs then draws
+among the bots allowed there and the snapshots, with the same weights renormalised. A bot
+not named plays everywhere.
+
 Bots are named ``NAME@WEAKNESS`` (a seat spec, e.g. ``smart@0.5``); snapshots
 ``self@STEP``. Every finished game rates the learner against its opponent in one
 openskill (Plackett-Luce) table (draws are ties), logged as ``league/*`` and kept in the
@@ -54,7 +60,8 @@ class LeagueSchedule(OpponentSchedule):
     def __init__(self, bots: Sequence[str] = DEFAULT_BOTS,
                  weaknesses: Sequence[float] = (0.25, 0.5, 1.0),
                  snapshot_every: int = 200_000, snapshots: int = 8, power: float = 2.0,
-                 floor: float = 0.1, window: int = 50, seed: int = 0):
+                 floor: float = 0.1, window: int = 50, seed: int = 0,
+                 settings: dict[str, Sequence[str]] | None = None):
         from alphatank.game.scenarios import bot_names
 
         valid = bot_names()
@@ -70,6 +77,12 @@ class LeagueSchedule(OpponentSchedule):
             raise ValueError(f"league needs power >= 0, floor in (0, 1] and window >= 1, got "
                              f"{power}, {floor}, {window}")
         self.bots = [f"{b}@{float(w):g}" for b in bots for w in weaknesses]
+        for b, sc in (settings or {}).items():
+            if b not in bots or isinstance(sc, str) or not sc:
+                raise ValueError(f"league settings: {b!r} = {sc!r}; keys must be some of the "
+                                 f"league's bots {list(bots)}, values non-empty lists of "
+                                 f"scenario names")
+        self.settings = {str(b): [str(x) for x in sc] for b, sc in (settings or {}).items()}
         self.snapshot_every, self.max_snapshots = int(snapshot_every), int(snapshots)
         self.power, self.floor, self.window, self.seed = float(power), float(floor), \
             int(window), int(seed)
@@ -151,9 +164,42 @@ class LeagueSchedule(OpponentSchedule):
             self._snapshot(env, step)
         names = self.opponents()
         rng = np.random.default_rng([self.seed, int(step), 0x1EA6])
-        picks = rng.choice(len(names), size=env.num_envs, p=self.probabilities())
-        env.set_env_opponents([names[i] for i in picks])
+        if not self.settings:
+            picks = rng.choice(len(names), size=env.num_envs, p=self.probabilities())
+            env.set_env_opponents([names[i] for i in picks])
+            return self.metrics()
+        w = self.probabilities()
+        chosen: list[str] = []
+        for scenario, size in self._blocks(env):
+            ok = np.array([self._plays_in(n, scenario) for n in names])
+            if not ok.any():
+                raise ValueError(f"league settings: no opponent plays in scenario "
+                                 f"{scenario!r} (settings {self.settings})")
+            p = np.where(ok, w, 0.0)
+            chosen += [names[i] for i in rng.choice(len(names), size=size, p=p / p.sum())]
+        env.set_env_opponents(chosen)
         return self.metrics()
+
+    def _plays_in(self, name: str, scenario: str) -> bool:
+        """Whether opponent ``name`` (``bot@w`` or ``self@step``) may fill a match of
+        ``scenario`` (see ``settings``)."""
+        allowed = self.settings.get(name.partition("@")[0])
+        return allowed is None or scenario in allowed
+
+    def _blocks(self, env: Any) -> list[tuple[str, int]]:
+        """(scenario name, number of envs) of each block of ``env``, in env order; every
+        scenario named in ``settings`` must be one of them."""
+        if hasattr(env, "slices"):
+            blocks = [(sc.name, sl.stop - sl.start)
+                      for sc, sl in zip(env.scenarios, env.slices, strict=True)]
+        else:
+            blocks = [(env.scenario.name, env.num_envs)]
+        have = {name for name, _ in blocks}
+        missing = sorted({x for sc in self.settings.values() for x in sc} - have)
+        if missing:
+            raise ValueError(f"league settings name scenario(s) {missing} that the env does "
+                             f"not play; it plays {sorted(have)}")
+        return blocks
 
     def record(self, opponent: str, outcome: str) -> None:
         name = opponent_name(opponent)
