@@ -283,7 +283,7 @@ def test_shipped_tables_load_and_plan(tmp_path):
     # Table 4's specialists and adaptive cycle are shared with the league table
     shared = [j for j in plan.jobs if len(j.rows) > 1]
     assert len(shared) == 2 * 5 and all(len(j.rows) == 2 for j in shared)
-    assert len(plan.jobs) == 2 * (8 + 34 + 3 + 8 + 6) - len(shared)
+    assert len(plan.jobs) == 2 * (8 + 35 + 3 + 8 + 6) - len(shared)
 
 
 def test_a_setting_added_later_keeps_the_digests_of_runs_made_before_it(tmp_path):
