@@ -144,6 +144,22 @@ def test_eval_command_prints_table_and_writes_files(checkpoint, tmp_path, capsys
     assert "no such checkpoint" in err
 
 
+def test_eval_pool_adds_up_the_rows_against_each_opponent(capsys):
+    args = ["eval", "bot:aggressive", "bot:smart", "--scenario", "vs_aggressive", "--games",
+            "6", "--num-envs", "3", "--seed", "4"]
+    assert main(args) == 0
+    rows = capsys.readouterr().out
+    assert main(args + ["--pool"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith(rows)  # the same table, then one pooled line
+    (line,) = [x for x in out.splitlines() if x.startswith("pooled vs ")]
+    counts = [x.split("|")[3:6] for x in rows.splitlines() if x.startswith("| bot:")]
+    w, lo, d = (sum(int(c[k]) for c in counts) for k in range(3))
+    assert f"(2 rows): {w}/{lo}/{d} (W/L/D) of 12 games" in line and "permutation p = " in line
+    assert main(["eval", "bot:smart", "--scenario", "vs_aggressive", "--pool"]) == 2
+    assert "--pool needs two or more checkpoints" in capsys.readouterr().err
+
+
 def test_eval_game_settings_override_the_checkpoints_own(checkpoint, capsys, tmp_path):
     """--game changes the game played over the one the checkpoint trained in (here its
     60-tick limit) and nothing else; bad keys and values are one-line errors."""

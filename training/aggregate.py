@@ -6,13 +6,19 @@ evaluation target; one column for a single win rate). The IQM is the mean of the
 half of all scores (``floor(n / 4)`` cut from each end, scipy's ``trim_mean(x, 0.25)``);
 the stratified bootstrap resamples the runs of each task independently, with
 replacement, and takes percentiles of the statistic over the resamples.
+
+:func:`pool_runs` asks the other question of several runs' win counts: do the runs differ
+more than the luck of their evaluation games would make one agent's runs differ?
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 
 import numpy as np
+
+from alphatank.stats import wilson_interval
 
 
 def iqm(scores: np.ndarray) -> float:
@@ -52,3 +58,57 @@ def stratified_bootstrap(scores: np.ndarray, stat: Callable[[np.ndarray], float]
     tail = 100.0 * (1.0 - confidence) / 2.0
     lo, hi = np.percentile(values, [tail, 100.0 - tail])
     return float(lo), float(hi)
+
+
+@dataclass(frozen=True)
+class Pooled:
+    """Several runs' wins pooled (:func:`pool_runs`); rates as fractions."""
+
+    wins: int
+    games: int
+    interval: tuple[float, float]  # Wilson 95% of the pooled win rate
+    spread: float  # standard deviation of the runs' win rates
+    noise: float  # what the games' luck alone gives that deviation at the pooled rate
+    p_value: float  # share of shuffles of the games between runs at least as spread out
+
+    @property
+    def rate(self) -> float:
+        return self.wins / self.games
+
+
+def pool_runs(wins: Sequence[int], games: Sequence[int], reps: int = 2000,
+              seed: int = 0) -> Pooled:
+    """Pool the win counts of two or more runs (each ``wins[i]`` of ``games[i]``) and test
+    whether they differ more than chance: the statistic is ``sum_i games_i (rate_i -
+    pooled)^2``; each of ``reps`` shuffles deals the pooled games out again, each run
+    keeping its number of games (a multivariate hypergeometric draw), and the p-value is
+    the share of shuffles with a statistic at least the observed one (add-one corrected).
+    A large p-value says the runs play like one agent as far as their games can tell."""
+    w = np.asarray(wins, dtype=np.int64)
+    n = np.asarray(games, dtype=np.int64)
+    if w.ndim != 1 or w.shape != n.shape or w.size < 2:
+        raise ValueError(f"pool_runs needs the wins and games of two or more runs, got "
+                         f"{list(wins)} and {list(games)}")
+    if (n <= 0).any() or (w < 0).any() or (w > n).any():
+        raise ValueError(f"pool_runs: every run needs 0 <= wins <= games and games > 0, "
+                         f"got wins {w.tolist()} of games {n.tolist()}")
+    total, won = int(n.sum()), int(w.sum())
+    p = won / total
+
+    def stat(k: np.ndarray) -> np.ndarray:
+        return (n * (k / n - p) ** 2).sum(axis=-1)
+
+    rng = np.random.default_rng(seed)
+    dealt = np.empty((reps, w.size), dtype=np.int64)
+    good = np.full(reps, won)
+    left = total
+    for i, size in enumerate(n.tolist()):  # deal each run its games from what is left
+        dealt[:, i] = rng.hypergeometric(good, left - good, size) if size < left else good
+        good -= dealt[:, i]
+        left -= size
+    observed = float(stat(w))
+    at_least = int((stat(dealt) >= observed - 1e-12).sum())
+    return Pooled(wins=won, games=total, interval=wilson_interval(won, total),
+                  spread=float(np.std(w / n, ddof=1)),
+                  noise=float(np.sqrt(p * (1 - p) * np.mean(1.0 / n))),
+                  p_value=(at_least + 1) / (reps + 1))

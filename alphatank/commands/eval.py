@@ -48,6 +48,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--ratings", action="store_true",
                    help="also print an openskill table rating checkpoints and opponents "
                         "together from these games")
+    p.add_argument("--pool", action="store_true",
+                   help="also pool the rows against each opponent (several checkpoints, "
+                        "e.g. one set-up's seeds): their wins together with a Wilson "
+                        "interval, and whether they differ more than their games' luck "
+                        "(a permutation test)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -65,6 +70,8 @@ def run(args: argparse.Namespace) -> int:
     from alphatank.training.threads import limit_threads
 
     limit_threads()
+    if args.pool and len(args.checkpoints) < 2:
+        raise InputError("--pool needs two or more checkpoints (e.g. the seeds of one set-up)")
     if args.weakness is not None and not 0.0 <= args.weakness <= 1.0:
         raise InputError(f"--weakness must be in [0, 1], got {args.weakness}")
     opponents = [b.strip() for b in args.vs.split(",") if b.strip()] or [None]
@@ -93,6 +100,8 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:  # scenario, seat, option errors (a CheckpointError is not one)
         raise as_input_error(exc) from None
     print(format_table(results))
+    if args.pool:
+        print_pooled(results)
     if args.ratings:
         print("\nopenskill (Plackett-Luce) ratings from these games (draws are ties):")
         print(rating_table(results_league(results)))
@@ -113,3 +122,26 @@ def run(args: argparse.Namespace) -> int:
     except OSError as exc:
         raise InputError(f"cannot write {exc.filename}: {exc.strerror}") from None
     return 0
+
+
+def print_pooled(results: list) -> None:
+    """One line per opponent met by two or more rows: :func:`pool_runs` of their wins."""
+    from alphatank.training.aggregate import pool_runs
+
+    rows: dict[str, list] = {}
+    for r in results:
+        rows.setdefault(r.opponent, []).append(r)
+    if not any(len(rs) > 1 for rs in rows.values()):
+        raise InputError("--pool needs two or more checkpoints against the same opponents "
+                         "(e.g. the seeds of one set-up)")
+    for opp, rs in rows.items():
+        if len(rs) < 2:
+            continue
+        pool = pool_runs([r.wins for r in rs], [r.games for r in rs])
+        lo, hi = pool.interval
+        losses, draws = sum(r.losses for r in rs), sum(r.draws for r in rs)
+        print(f"pooled vs {opp} ({len(rs)} rows): {pool.wins}/{losses}/{draws} (W/L/D) of "
+              f"{pool.games} games, {100 * pool.rate:.1f}% [{100 * lo:.1f}, {100 * hi:.1f}]; "
+              f"the rows' win rates spread by {100 * pool.spread:.1f} points (sd), their "
+              f"games' luck alone gives {100 * pool.noise:.1f}: permutation p = "
+              f"{pool.p_value:.3f} (small: the rows differ more than chance)")
