@@ -45,6 +45,7 @@ def test_pooled_runs_alike_and_apart():
     assert same.rate == 0.5 and same.interval[0] < 0.5 < same.interval[1]
     apart = pool_runs([10, 90], [100, 100])
     assert apart.p_value < 0.01 and apart.spread == pytest.approx(0.8 / math.sqrt(2))
+    assert apart.p_text == "< 0.001" and same.p_text == "1"
     # the shuffles come from the seeded generator alone
     assert pool_runs([40, 55], [100, 100], seed=3) != pool_runs([40, 55], [100, 100], seed=4)
     assert pool_runs([40, 55], [100, 100], seed=3) == pool_runs([40, 55], [100, 100], seed=3)

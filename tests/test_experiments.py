@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 
 from alphatank.cli import main
+from alphatank.training.aggregate import pool_runs
 from alphatank.training.experiments import (
     EVAL_SEED_BASE,
     load_tables,
@@ -141,6 +142,24 @@ def test_resume_redoes_nothing_finished(made, capsys):
     assert {p: p.stat().st_mtime_ns for p in done} == done  # no run trained again
     assert {p: p.stat().st_mtime_ns for p in kept} == kept
     assert gone.is_file()  # only the missing evaluation was played
+
+
+def test_two_seeds_pool_their_games_in_the_report(made, tmp_path):
+    root, one_seed, _ = made
+    assert "## Seeds pooled" not in (one_seed / "tiny.md").read_text()
+    assert json.loads((one_seed / "tiny.json").read_text())[
+        "rows"][0]["columns"]["random"]["pooled"] is None
+    assert cli("tiny", "--experiments-dir", str(root), "--out", str(tmp_path), "--rows",
+               "a_random", "--seeds", "2", "--steps", "512", "--games", "6", "--budget", "2",
+               "--no-progress") == 0
+    cell = json.loads((tmp_path / "tiny.json").read_text())["rows"][0]["columns"]["random"]
+    wins = [r["wins"] for r in cell["per_seed"]]
+    pool = cell["pooled"]
+    assert (pool["wins"], pool["games"]) == (sum(wins), 12) and 0 < pool["p_value"] <= 1
+    assert pool["p_value"] == round(pool_runs(wins, [6, 6]).p_value, 4)
+    md = (tmp_path / "tiny.md").read_text()
+    section = md.split("## Seeds pooled")[1].split("\n## ")[0]
+    assert "| Random Bot " in section and f"p {pool_runs(wins, [6, 6]).p_text}" in section
 
 
 def test_a_failing_row_is_reported_and_the_other_finishes(tmp_path, capsys):

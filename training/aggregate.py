@@ -75,6 +75,11 @@ class Pooled:
     def rate(self) -> float:
         return self.wins / self.games
 
+    @property
+    def p_text(self) -> str:
+        """The p-value for a table: two significant digits, below 0.001 as ``< 0.001``."""
+        return "< 0.001" if self.p_value < 0.001 else f"{self.p_value:.2g}"
+
 
 def pool_runs(wins: Sequence[int], games: Sequence[int], reps: int = 2000,
               seed: int = 0) -> Pooled:

@@ -5,8 +5,10 @@ Per (row, column): every seed's counts with its Wilson 95% interval; over seeds 
 median and the interquartile mean (IQM) with a 95% stratified bootstrap interval
 (:mod:`alphatank.training.aggregate`); the paper's figure beside ours. Missing cells
 (runs not finished or failed) show as ``-`` and are listed. Checks (the issue's targets)
-are evaluated on the IQM. One openskill table rates every run of the table and the bots
-it met, from the evaluation games.
+are evaluated on the IQM. With several seeds, each cell's games are also pooled, with a
+permutation test of whether its seeds differ more than their games' luck
+(:func:`~alphatank.training.aggregate.pool_runs`). One openskill table rates every run of
+the table and the bots it met, from the evaluation games.
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ import numpy as np
 
 from alphatank.files import write_text_atomic
 from alphatank.stats import wilson_interval
-from alphatank.training.aggregate import iqm, median, stratified_bootstrap
+from alphatank.training.aggregate import Pooled, iqm, median, pool_runs, stratified_bootstrap
 from alphatank.training.evaluate import markdown_table, rate_games, rating_table
 from alphatank.training.experiments import (
     EVAL_SEED_BASE,
@@ -46,6 +48,7 @@ class Agg:
     wins: int = 0
     losses: int = 0
     draws: int = 0
+    counts: list[tuple[int, int]] = field(default_factory=list)  # per seed (wins, games)
 
     @property
     def games(self) -> int:
@@ -70,6 +73,13 @@ class Agg:
     def wilson(self) -> tuple[float, float]:
         return wilson_interval(self.wins, self.games)
 
+    @property
+    def pooled(self) -> Pooled | None:
+        """The seeds' games pooled and tested (None without two seeds' counts)."""
+        if len(self.counts) < 2:
+            return None
+        return pool_runs([w for w, _ in self.counts], [n for _, n in self.counts])
+
 
 @dataclass
 class RowResult:
@@ -85,10 +95,11 @@ class RowResult:
         if not cells:
             return None
         a = Agg([c["wins"] / c["games"] for _, c in sorted(cells.items())])
-        for c in cells.values():
+        for _, c in sorted(cells.items()):
             a.wins += c["wins"]
             a.losses += c["losses"]
             a.draws += c["draws"]
+            a.counts.append((c["wins"], c["games"]))
         return a
 
     def average(self) -> Agg | None:
@@ -217,6 +228,25 @@ def matrix_table(table: Table, results: list[RowResult]) -> str:
             row.append(cell_text(rr.average(), paper))
         rows.append(row + [_steps(rr)])
     return markdown_table(head, rows)
+
+
+def pooled_table(results: list[RowResult]) -> str | None:
+    """Per row and column with two or more seeds: their games pooled (win rate, Wilson
+    95%) and the permutation p-value of the seeds' spread; None when no cell has two."""
+    cols = list(dict.fromkeys((c.name, c.label) for rr in results for c in rr.columns))
+    body = []
+    for rr in results:
+        cells = []
+        for name, _ in cols:
+            a = rr.agg(name) if any(c.name == name for c in rr.columns) else None
+            pool = None if a is None else a.pooled
+            cells.append("-" if pool is None else
+                         f"{pct(pool.rate)} {interval(pool.interval)}, p {pool.p_text}")
+        if any(c != "-" for c in cells):
+            body.append([rr.row.title] + cells)
+    if not body:
+        return None
+    return markdown_table(["Row"] + [label for _, label in cols], body)
 
 
 def runs_table(results: list[RowResult]) -> str:
@@ -438,6 +468,14 @@ def _markdown(plan: Plan, table: Table, results: list[RowResult], checks: list[d
                                                    for k, v in rr.row.eval_game.items())
         lines.append(f"- **{rr.row.title}** (`{rr.row.source}`){how}"
                      + (f". {rr.row.note}" if rr.row.note else ""))
+    pooled = pooled_table(results)
+    if pooled is not None:
+        lines += ["", "## Seeds pooled", "",
+                  "Each cell: the seeds' evaluation games together (win rate, Wilson 95%) and "
+                  "the permutation p-value of the spread of their win rates (the games dealt "
+                  "out to the seeds again 2,000 times): a small p says the seeds differ more "
+                  "than their games' luck (a bad or a lucky run), a large one that they play "
+                  "like one agent, so the pooled interval is the row's figure.", "", pooled]
     if checks:
         lines += ["", "## Targets", ""]
         for c in checks:
@@ -468,10 +506,15 @@ def _markdown(plan: Plan, table: Table, results: list[RowResult], checks: list[d
 def _agg_json(a: Agg | None, paper: float | None) -> dict[str, Any]:
     if a is None:
         return {"runs": [], "paper": paper}
-    ci = a.ci
+    ci, pool = a.ci, a.pooled
     return {"rates": [round(r, 4) for r in a.rates], "median": round(a.median, 4),
             "iqm": round(a.iqm, 4), "iqm_ci95": None if ci is None else [round(ci[0], 4),
                                                                          round(ci[1], 4)],
+            "pooled": None if pool is None else {
+                "wins": pool.wins, "games": pool.games,
+                "wilson95": [round(pool.interval[0], 4), round(pool.interval[1], 4)],
+                "spread": round(pool.spread, 4), "noise": round(pool.noise, 4),
+                "p_value": round(pool.p_value, 4)},
             "paper": paper}
 
 
