@@ -238,7 +238,7 @@ def pooled_table(results: list[RowResult]) -> str | None:
     for rr in results:
         cells = []
         for name, _ in cols:
-            a = rr.agg(name) if any(c.name == name for c in rr.columns) else None
+            a = rr.agg(name)  # None for a column the row has no evaluation in
             pool = None if a is None else a.pooled
             cells.append("-" if pool is None else
                          f"{pct(pool.rate)} {interval(pool.interval)}, p {pool.p_text}")

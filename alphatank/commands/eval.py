@@ -1,6 +1,7 @@
 """``alphatank eval``: win/loss/draw counts of checkpoints against bots, with Wilson 95%
 intervals, printed in the layout of the paper's Table 3 (and as CSV / JSON), every row
-labelled with its checkpoint; ``--ratings`` adds an openskill table of the games.
+labelled with its checkpoint; ``--ratings`` adds an openskill table of the games,
+``--pool`` the rows of several checkpoints (e.g. seeds) pooled and tested for spread.
 
 Game ``i`` depends only on ``(--seed, i)`` (its match seed and, for sampled policies, the
 generator its actions are drawn from), so results do not change with ``--num-envs``."""
@@ -9,11 +10,16 @@ from __future__ import annotations
 
 import argparse
 import json
+from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from alphatank.commands.argtypes import positive_int, seed
 from alphatank.errors import InputError, as_input_error
 from alphatank.files import write_text_atomic
+
+if TYPE_CHECKING:
+    from alphatank.training.evaluate import EvalResult
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -124,11 +130,11 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def print_pooled(results: list) -> None:
+def print_pooled(results: Sequence[EvalResult]) -> None:
     """One line per opponent met by two or more rows: :func:`pool_runs` of their wins."""
     from alphatank.training.aggregate import pool_runs
 
-    rows: dict[str, list] = {}
+    rows: dict[str, list[EvalResult]] = {}
     for r in results:
         rows.setdefault(r.opponent, []).append(r)
     if not any(len(rs) > 1 for rs in rows.values()):
