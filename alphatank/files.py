@@ -1,12 +1,18 @@
 """Text files in and out: UTF-8 reading with errors that name the file, and atomic writes
 (a temporary sibling, then ``os.replace``), so a reader never sees half a file; and an
-exclusive lock on a folder, so two processes never write one run at once."""
+exclusive lock on a folder, so two processes never write one run at once.
+
+Every atomic writer finishes with :func:`replace_into`, which never swaps a file in for
+what is not a regular file (``--json /dev/stdout``, ``/dev/null``, a pipe): those get the
+bytes written into them."""
 
 from __future__ import annotations
 
 import fcntl
 import os
+import shutil
 import socket
+import stat
 import warnings
 from pathlib import Path
 from typing import IO, Any
@@ -46,11 +52,31 @@ def write_text_atomic(path: str | Path, text: str, newline: str | None = None) -
     try:
         with open(tmp, "w", encoding="utf-8", newline=newline) as f:
             f.write(text)
-        os.replace(tmp, path)
+        replace_into(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
     return path
+
+
+def replace_into(tmp: str | Path, path: str | Path) -> None:
+    """Finish an atomic write: ``os.replace`` the complete temporary file ``tmp`` onto
+    ``path``. Where ``path`` (its links followed) is something other than a regular file
+    (a device such as ``/dev/null`` or ``/dev/stdout``, a pipe), a rename would put a file
+    in its place (as root, ``/dev/null`` itself), so the bytes are copied into it instead
+    and ``tmp`` removed."""
+    try:
+        mode = os.stat(path).st_mode
+    except (FileNotFoundError, NotADirectoryError):
+        mode = None
+    if mode is None or stat.S_ISREG(mode):
+        os.replace(tmp, path)
+        return
+    try:
+        with open(tmp, "rb") as src, open(path, "wb") as dst:
+            shutil.copyfileobj(src, dst)
+    finally:
+        Path(tmp).unlink(missing_ok=True)
 
 
 _HELD: dict[str, list[Any]] = {}  # lock file -> [open file, holds] of the locks held here

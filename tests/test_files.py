@@ -6,12 +6,13 @@ from __future__ import annotations
 
 import json
 import os
+import stat
 import subprocess
 import sys
 
 import pytest
 
-from alphatank.files import FolderLock, read_text, write_text_atomic
+from alphatank.files import FolderLock, read_text, replace_into, write_text_atomic
 from alphatank.training.evaluate import EvalResult, write_csv, write_json
 
 
@@ -42,6 +43,34 @@ def test_eval_writers_are_atomic_and_readable(tmp_path):
     assert lines[0].split(",")[0] == next(iter(results[0].as_dict()))
     assert len(lines) == 2 and ",vs smart,smart," in lines[1]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.csv", "r.json"]
+
+
+@pytest.mark.parametrize("via_link", [False, True])
+def test_atomic_write_to_a_pipe_writes_into_it_and_leaves_it_a_pipe(tmp_path, via_link):
+    """``--json /dev/stdout`` or ``/dev/null``: no file swapped in for what is not one (as
+    root a rename would replace the device itself); a fifo stands in for them here."""
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    target = fifo
+    if via_link:  # as /dev/stdout links to the process's output
+        target = tmp_path / "stdout"
+        target.symlink_to(fifo)
+    reader = os.open(fifo, os.O_RDONLY | os.O_NONBLOCK)
+    try:
+        write_text_atomic(target, '{"ok": 1}\n')
+        assert os.read(reader, 100) == b'{"ok": 1}\n'
+    finally:
+        os.close(reader)
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode) and target.is_symlink() == via_link
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted({"pipe", target.name})
+
+
+def test_replace_into_swaps_a_regular_file_whole(tmp_path):
+    tmp = tmp_path / ".out.tmp"
+    tmp.write_bytes(b"new")
+    (tmp_path / "out").write_bytes(b"old")
+    replace_into(tmp, tmp_path / "out")  # a regular file: swapped whole
+    assert (tmp_path / "out").read_bytes() == b"new" and not tmp.exists()
 
 
 def lock_in_another_process(folder) -> str:

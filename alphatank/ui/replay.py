@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from alphatank.errors import InputError
+from alphatank.files import replace_into
 from alphatank.sim.config import ConfigError, GameConfig, check_value, from_dict
 from alphatank.sim.episode import Episode, EpisodeHook, EpisodeSeeds
 from alphatank.sim.mapspec import MapError, MapSpec, map_text, parse_map
@@ -253,7 +254,7 @@ def save_replay(replay: Replay, path: str | Path) -> Path:
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600 files
-        os.replace(tmp, path)
+        replace_into(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise

@@ -10,7 +10,6 @@ streams them to an MP4; an optional GIF gets a downscaled, thinned copy.
 
 from __future__ import annotations
 
-import os
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from alphatank.extras import require
+from alphatank.files import replace_into
 from alphatank.sim.episode import Episode, EpisodeHook
 from alphatank.ui.render import DEFAULT_OVERLAYS, Renderer, surface_to_array
 
@@ -66,7 +66,7 @@ class _Mp4:
     def close(self, ok: bool) -> None:
         self.writer.close()
         if ok:
-            os.replace(self.tmp, self.path)
+            replace_into(self.tmp, self.path)
         else:
             self.tmp.unlink(missing_ok=True)
 
@@ -194,7 +194,7 @@ def _write_gif(path: Path, frames: list[np.ndarray], fps: float) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.stem}.partial{path.suffix}")
     iio.imwrite(tmp, np.stack(frames), extension=".gif", duration=1000.0 / fps, loop=0)
-    os.replace(tmp, path)
+    replace_into(tmp, path)
 
 
 def wandb_video(recording: Recording, caption: str | None = None) -> Any:
