@@ -33,6 +33,32 @@ def test_pfsp_weights_follow_the_loss_rate_with_a_floor():
     assert mu["learner"] > mu["random@1"]  # four wins rated
 
 
+def test_snapshot_share_splits_the_draws_between_snapshots_and_bots():
+    lg = LeagueSchedule(bots=["random", "smart"], weaknesses=[1.0], power=1.0, floor=0.1,
+                        window=4, snapshots=2, snapshot_share=0.25)
+    for name in ("self@100", "self@200"):  # as _snapshot adds them, without a trainer
+        lg._add(name)
+        lg.pool.append(name)
+    for out in ("win", "win", "win", "loss"):
+        lg.record("B:random@1", out)  # score 0.75 -> weight 0.25
+    for out in ("win", "loss", "loss", "loss"):
+        lg.record("B:self@100", out)  # 0.75; self@200 never played: 1.0
+    p = lg.probabilities()
+    assert lg.opponents() == ["random@1", "smart@1", "self@100", "self@200"]
+    assert np.allclose(p, [0.75 * 0.25 / 1.25, 0.75 * 1.0 / 1.25, 0.25 * 0.75 / 1.75,
+                           0.25 * 1.0 / 1.75])
+    # a block where smart does not play: the bots' three quarters all go to random
+    assert np.allclose(lg.probabilities(np.array([True, False, True, True])),
+                       [0.75, 0.0, 0.25 * 0.75 / 1.75, 0.25 / 1.75])
+    plain = LeagueSchedule(bots=["random", "smart"], weaknesses=[1.0], snapshots=2)
+    plain._add("self@100")
+    plain.pool.append("self@100")
+    assert np.allclose(plain.probabilities(), [1 / 3] * 3)  # no share: weighed together
+    for bad in (1.0, -0.1):
+        with pytest.raises(ValueError, match="snapshot_share must be in"):
+            LeagueSchedule(snapshot_share=bad)
+
+
 def test_opponent_names_and_bad_settings():
     assert opponent_name("B:smart@0.5") == "smart@0.5"
     assert opponent_name("B:self@4096") == "self@4096"

@@ -12,8 +12,10 @@ rollout, :meth:`~LeagueSchedule.record` for every finished episode. At each ``ap
   vector env, :meth:`set_env_opponents`): opponent ``o`` with probability proportional
   to ``max(floor, (1 - s_o) ** power)``, where ``s_o`` is the learner's score against
   ``o`` (wins + draws / 2) over its last ``window`` games against it (an opponent never
-  played has ``s_o = 0``: it is tried first). Draws come from a generator seeded by
-  ``(seed, step)``, so a run is reproducible.
+  played has ``s_o = 0``: it is tried first). With ``snapshot_share`` set, the snapshots
+  together get that share of the draws (of each scenario's block) and the bots the rest,
+  each side weighted as above. Draws come from a generator seeded by ``(seed, step)``, so
+  a run is reproducible.
 
 ``settings`` (bot name -> scenario names) keeps a bot to the matches of those scenarios
 of a mixed env (:class:`~alphatank.training.mixed.MixedVectorEnv`), e.g. each bot in the
@@ -61,7 +63,8 @@ class LeagueSchedule(OpponentSchedule):
                  weaknesses: Sequence[float] = (0.25, 0.5, 1.0),
                  snapshot_every: int = 200_000, snapshots: int = 8, power: float = 2.0,
                  floor: float = 0.1, window: int = 50, seed: int = 0,
-                 settings: dict[str, Sequence[str]] | None = None):
+                 settings: dict[str, Sequence[str]] | None = None,
+                 snapshot_share: float | None = None):
         from alphatank.game.scenarios import bot_names
 
         valid = bot_names()
@@ -76,6 +79,11 @@ class LeagueSchedule(OpponentSchedule):
         if power < 0 or not 0.0 < floor <= 1.0 or window < 1:
             raise ValueError(f"league needs power >= 0, floor in (0, 1] and window >= 1, got "
                              f"{power}, {floor}, {window}")
+        if snapshot_share is not None and not 0.0 <= snapshot_share < 1.0:
+            raise ValueError(f"league snapshot_share must be in [0, 1) (the snapshots' share "
+                             f"of the games; leave it out to weigh them with the bots), got "
+                             f"{snapshot_share}")
+        self.snapshot_share = None if snapshot_share is None else float(snapshot_share)
         self.bots = [f"{b}@{float(w):g}" for b in bots for w in weaknesses]
         for b, sc in (settings or {}).items():
             if b not in bots or isinstance(sc, str) or not sc:
@@ -122,10 +130,18 @@ class LeagueSchedule(OpponentSchedule):
         res = self.results[name]
         return float(np.mean(res)) if res else 0.0
 
-    def probabilities(self) -> np.ndarray:
-        """Sampling probability of each of :meth:`opponents`."""
+    def probabilities(self, allowed: np.ndarray | None = None) -> np.ndarray:
+        """Sampling probability of each of :meth:`opponents` (of those ``allowed``, a
+        boolean mask over them, when given)."""
         w = np.array([max(self.floor, (1.0 - self.score(n)) ** self.power)
                       for n in self.opponents()])
+        if allowed is not None:
+            w = np.where(allowed, w, 0.0)
+        if self.snapshot_share is not None and self.pool:
+            snap = np.arange(len(w)) >= len(self.bots)
+            if w[~snap].sum() > 0:
+                w[snap] *= self.snapshot_share / w[snap].sum()
+                w[~snap] *= (1.0 - self.snapshot_share) / w[~snap].sum()
         return w / w.sum()
 
     def _snapshot(self, env: Any, step: int) -> None:
@@ -168,15 +184,14 @@ class LeagueSchedule(OpponentSchedule):
             picks = rng.choice(len(names), size=env.num_envs, p=self.probabilities())
             env.set_env_opponents([names[i] for i in picks])
             return self.metrics()
-        w = self.probabilities()
         chosen: list[str] = []
         for scenario, size in self._blocks(env):
             ok = np.array([self._plays_in(n, scenario) for n in names])
             if not ok.any():
                 raise ValueError(f"league settings: no opponent plays in scenario "
                                  f"{scenario!r} (settings {self.settings})")
-            p = np.where(ok, w, 0.0)
-            chosen += [names[i] for i in rng.choice(len(names), size=size, p=p / p.sum())]
+            p = self.probabilities(ok)
+            chosen += [names[i] for i in rng.choice(len(names), size=size, p=p)]
         env.set_env_opponents(chosen)
         return self.metrics()
 
