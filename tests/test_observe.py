@@ -615,28 +615,3 @@ def test_layout_columns_and_markdown():
     table = lay.markdown().splitlines()
     assert table[0].startswith("| block | slots |") and len(table) == 2 + len(lay.blocks())
     assert f"| `tank[k]` | 3 | {3 * lay.widths['tank']} | {lay['tank'].start}:" in table[4]
-
-
-def test_rules_kind_adds_the_bullet_speed_and_range_of_the_setting():
-    """``rules``: tank_speed / bullet_speed and bullet_max_distance / map diagonal, the
-    same for every seat and tick, different between the ``paper`` and ``long_range``
-    presets on one map; every other feature is ``egocentric_full``'s."""
-    seen = {}
-    for sc in ("vs_smart", "vs_dodge"):
-        runs = {k: MatchSet(sc, 2, observation=k) for k in ("egocentric_rules", "egocentric_full")}
-        obs = {k: ms.reset_all([5, 6]) for k, ms in runs.items()}
-        lay, full = runs["egocentric_rules"].obs.layout, runs["egocentric_full"].obs.layout
-        assert lay.fields == full.fields + ["rules.bullet_speed", "rules.bullet_range"]
-        spec = runs["egocentric_rules"].matches[0].spec
-        for _ in range(30):
-            rules = obs["egocentric_rules"][..., lay["rules"]]
-            assert np.allclose(rules, rules[0, 0])
-            assert np.array_equal(obs["egocentric_rules"][..., :full.size],
-                                  obs["egocentric_full"])
-            acts = np.ones((2, 1, 3), dtype=np.int64)
-            for k, run in runs.items():
-                _, obs[k] = run.step(acts)
-        seen[sc] = rules[0, 0].tolist()
-        diag = math.hypot(spec.width, spec.height)
-    assert seen["vs_smart"] == pytest.approx([120 / 300, 300 / diag])
-    assert seen["vs_dodge"] == pytest.approx([120 / 1200, 800 / diag])

@@ -29,8 +29,8 @@ Episode end
 Arguments
     ``scenario`` (name or TOML path), ``observation`` (one of ``OBS_KINDS``: "paper",
     "egocentric", "egocentric_path", "egocentric_nearest", "egocentric_aim",
-    "egocentric_aim_path", "egocentric_full", "egocentric_fire", "egocentric_advice",
-    "egocentric_rules"; default: the scenario's),
+    "egocentric_aim_path", "egocentric_full", "egocentric_fire", "egocentric_advice";
+    default: the scenario's),
     ``learner_seat`` (default: the first learner seat), ``opponent_policy`` (a Policy in
     every seat the env plays),
     ``seat_policies`` ({seat: Policy}; the scenario's other learner seats need one),
@@ -41,8 +41,8 @@ Version history (``ENV_VERSION`` in :mod:`alphatank.envs.ids`, shared by every A
 env and written into checkpoints)
     * v0: the initial release: paper and egocentric observations, Table 5 rewards; later
       the additive egocentric_path, egocentric_nearest, egocentric_aim,
-      egocentric_aim_path, egocentric_full, egocentric_fire, egocentric_advice and
-      egocentric_rules kinds (the other kinds unchanged, their digests pinned).
+      egocentric_aim_path, egocentric_full, egocentric_fire and egocentric_advice kinds
+      (the other kinds unchanged, their digests pinned).
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Per-agent observation vectors, built for many matches and agents at once.
 
-Ten kinds (``OBS_KINDS``), all float32, clipped to [-1, 1], with a fixed size per
+Nine kinds (``OBS_KINDS``), all float32, clipped to [-1, 1], with a fixed size per
 scenario and an index map (:class:`ObsLayout`, feature name -> slice):
 
 ``paper``       every component of the paper's Table 1 in map coordinates: own tank
@@ -44,11 +44,6 @@ scenario and an index map (:class:`ObsLayout`, feature name -> slice):
                 bot kept per seat and asked at every observation. The policy sees the
                 bot's route memory, lead and bank-shot search, and learns when to do
                 otherwise.
-``egocentric_rules``  ``egocentric_full`` plus a ``rules`` block: the game's bullet speed
-                and range (``[game]`` settings, e.g. the ``paper`` and ``long_range``
-                presets). Nothing else shows them before a bullet flies, so an agent
-                trained on several settings at once (a league) cannot otherwise tell two
-                settings on one map apart at its first tick.
 
 Scales: map positions ``2 x / W - 1``; relative positions divided by ``max(W, H)``;
 distances by the map diagonal; tank velocities by ``tank_speed``; bullet velocities by
@@ -78,19 +73,16 @@ if TYPE_CHECKING:
     from alphatank.sim.policy import Policy
 
 OBS_KINDS = ("paper", "egocentric", "egocentric_path", "egocentric_nearest", "egocentric_aim",
-             "egocentric_aim_path", "egocentric_full", "egocentric_fire", "egocentric_advice",
-             "egocentric_rules")
+             "egocentric_aim_path", "egocentric_full", "egocentric_fire", "egocentric_advice")
 # What the egocentric kinds add: other tanks nearest first, the way to each, the shot
-# block, the threat block, the other tanks' lines of fire, the advice block, the rules.
+# block, the threat block, the other tanks' lines of fire, the advice block.
 NEAREST_KINDS = ("egocentric_nearest", "egocentric_aim", "egocentric_aim_path", "egocentric_full",
-                 "egocentric_fire", "egocentric_advice", "egocentric_rules")
+                 "egocentric_fire", "egocentric_advice")
 PATH_KINDS = ("egocentric_path", "egocentric_aim_path", "egocentric_full", "egocentric_fire",
-              "egocentric_advice", "egocentric_rules")
+              "egocentric_advice")
 SHOT_KINDS = ("egocentric_aim", "egocentric_aim_path", "egocentric_full", "egocentric_fire",
-              "egocentric_advice", "egocentric_rules")
-THREAT_KINDS = ("egocentric_full", "egocentric_fire", "egocentric_advice", "egocentric_rules")
-RULES_KINDS = ("egocentric_rules",)
-RULES_FIELDS = ("bullet_speed", "bullet_range")  # the rules block
+              "egocentric_advice")
+THREAT_KINDS = ("egocentric_full", "egocentric_fire", "egocentric_advice")
 FIRE_KINDS = ("egocentric_fire",)
 ADVICE_KINDS = ("egocentric_advice",)
 ADVICE_BOT = "smart"  # the bot whose action the advice block shows
@@ -154,8 +146,6 @@ FIELD_HELP = {
                 "at least 0; 0 while either of us is dead",
     "ready": "1 if a fire action of the tank now would spawn a bullet (alive, reloaded, "
              "under its bullet limit)",
-    "bullet_speed": "tank_speed / bullet_speed (paper preset 0.4, long_range 0.1)",
-    "bullet_range": "bullet_max_distance / map diagonal, at most 1",
 }
 BLOCK_HELP = {
     "self": "the observing tank",
@@ -171,7 +161,6 @@ BLOCK_HELP = {
     "threat": "the other tanks' bullet that will pass closest to me within 1 s (straight "
               "lines; all 0 if none)",
     "advice": "what the smart bot would do now in my seat (0 while I am dead)",
-    "rules": "the game's bullet speed and range (the same for every seat and tick)",
 }
 DEFAULT_RAYS = 16
 DEFAULT_RAY_LENGTH = 350.0  # px: five cells of the default map
@@ -604,8 +593,6 @@ class ObservationBuilder:
                 lay.add("threat", None, THREAT_FIELDS)
             if self.kind in ADVICE_KINDS:
                 lay.add("advice", None, ADVICE_FIELDS)
-            if self.kind in RULES_KINDS:
-                lay.add("rules", None, RULES_FIELDS)
         return lay
 
     def _columns(self) -> dict[str, int | slice]:
@@ -684,8 +671,6 @@ class ObservationBuilder:
             self.v_advice = self.out[:, :, lay["advice"]]
             self.batch.want_advice(self.observers.tolist())
             self._advice_src = pick(self.batch.advice, self.observers[:, None])  # (E, L, 1, 7)
-        if self.kind in RULES_KINDS:
-            self.v_rules = self.out[:, :, lay["rules"]]
 
     # ---- statics --------------------------------------------------------------------
 
@@ -745,11 +730,6 @@ class ObservationBuilder:
                 src = self._advice_src
                 np.copyto(self.v_advice, self.batch.advice[:, self.observers] if src is None
                           else src[:, :, 0])
-            if self.kind in RULES_KINDS:
-                cfg = self.cfg
-                self.v_rules[..., 0] = cfg.tank_speed / cfg.bullet_speed
-                np.multiply(self.batch.idiag[:, :, 0], cfg.bullet_max_distance,
-                            out=self.v_rules[..., 1])
         out = self.out
         np.minimum(out, 1.0, out=out)
         np.maximum(out, -1.0, out=out)
