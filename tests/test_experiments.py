@@ -210,8 +210,8 @@ def test_a_row_stopped_by_a_signal_is_not_finished_nor_evaluated(tmp_path):
 
 def test_a_row_another_command_is_training_is_left_alone(tmp_path, held_elsewhere):
     """Two commands on one --out: the second reports a run the first is training as busy
-    and deletes nothing of it (an unfinished run is otherwise started again from scratch);
-    once it is free, the second trains and evaluates it."""
+    and neither deletes nor writes anything of it (an unfinished run is otherwise started
+    again from scratch); once it is free, the second trains and evaluates it."""
     plan = make_plan(load_tables(["tiny"], write_rows(tmp_path / "exp")), tmp_path / "out",
                      steps=256, games=2, budget_min=2, rows=["a_random"])
     job = plan.jobs[0]
@@ -223,6 +223,7 @@ def test_a_row_another_command_is_training_is_left_alone(tmp_path, held_elsewher
         assert error is not None and error.startswith("BusyError: ")
         assert f"pid {pid} on " in error
         assert (run / "metrics.jsonl").read_text() == '{"step": 64}\n'
+        assert sorted(p.name for p in run.iterdir()) == ["metrics.jsonl"]  # no error.txt
         assert not job.done_file.exists()
     _, error, _ = run_job(job)
     assert error is None and job.complete()

@@ -39,6 +39,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from alphatank.errors import BusyError
 from alphatank.files import FolderLock, write_text_atomic
 from alphatank.sim.config import GameConfig, from_dict
 from alphatank.training.presets import (
@@ -608,6 +609,7 @@ def _evaluate(job: Job, spec: EvalSpec) -> dict[str, Any]:
 
 
 Failure = tuple[str, str]  # (one line: type and message, the traceback)
+BUSY = f"{BusyError.__name__}: "  # a failure's line when another command holds the run
 
 
 def train_step(job: Job) -> Failure | None:
@@ -660,9 +662,12 @@ def record_failures(job: Job, failures: Sequence[Failure]) -> str | None:
 def run_job(job: Job) -> tuple[str, str | None, float]:
     """Train (unless finished) and evaluate what is missing (each evaluation on its own: one
     that fails does not stop the others); returns (key, error or None, seconds). Failures
-    are written to ``<run_dir>/error.txt`` and do not raise."""
+    are written to ``<run_dir>/error.txt`` and do not raise; a run another command is
+    training is reported busy and nothing is written to its folder."""
     t0 = time.time()
     failure = train_step(job)
+    if failure is not None and failure[0].startswith(BUSY):
+        return job.key, failure[0], time.time() - t0
     failures = [failure] if failure else [f for spec in job.evals
                                           if (f := eval_step(job, spec))]
     return job.key, record_failures(job, failures), time.time() - t0

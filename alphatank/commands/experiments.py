@@ -61,6 +61,7 @@ def _error(msg: str) -> int:
 
 def run(args: argparse.Namespace) -> int:
     from alphatank.training.experiments import (
+        BUSY,
         ExperimentError,
         estimate_minutes,
         execute,
@@ -149,12 +150,13 @@ def run(args: argparse.Namespace) -> int:
         print(f"{plan.out / (table.name + '.md')}" + (f"  [{status}]" if status else "")
               + (f"  ({len(data['missing'])} missing)" if data["missing"] else ""))
     if failed:
-        print(f"{len(failed)} run(s) failed (their error.txt holds the traceback):",
-              file=sys.stderr)
+        print(f"{len(failed)} run(s) failed (their error.txt holds the traceback) or "
+              f"busy (another command is training them):", file=sys.stderr)
         by_key = {j.key: j for j in plan.jobs}
         for key, err in failed.items():
+            where = "busy" if err.startswith(BUSY) else f"{by_key[key].run_dir}/error.txt"
             print(f"  {', '.join(by_key[key].rows)} seed {by_key[key].seed}: {err} "
-                  f"({by_key[key].run_dir}/error.txt)", file=sys.stderr)
+                  f"({where})", file=sys.stderr)
         return 1
     return 0
 
