@@ -303,7 +303,7 @@ def test_shipped_tables_load_and_plan(tmp_path):
     # Table 4's specialists and adaptive cycle are shared with the league table
     shared = [j for j in plan.jobs if len(j.rows) > 1]
     assert len(shared) == 2 * 5 and all(len(j.rows) == 2 for j in shared)
-    assert len(plan.jobs) == 2 * (8 + 35 + 3 + 8 + 6) - len(shared)
+    assert len(plan.jobs) == 2 * (8 + 35 + 3 + 9 + 6) - len(shared)
 
 
 def test_a_setting_added_later_keeps_the_digests_of_runs_made_before_it(tmp_path):
@@ -321,3 +321,55 @@ def test_a_setting_added_later_keeps_the_digests_of_runs_made_before_it(tmp_path
     on = cfg.with_overrides(learners=(type(spec)(spec.name, spec.algo, spec.seats, config=
                                                  type(spec.config)(anchor_kl=0.1)),))
     assert run_digest(on, ()) != run_digest(cfg, ())
+
+
+STUDENT = 'title = "Student"\norder = 3\n' + RUN.format(
+    extra='imitate = { steps = 32, epochs = 1, teachers = { vs_random = "TEACHER" } }')
+
+
+def test_a_row_taught_by_another_row_trains_after_it_on_its_checkpoint(tmp_path, capsys):
+    """``row:NAME`` teachers: the named row's run (same seed) trains first, even when
+    only the student was asked for, and teaches from its checkpoint; a student whose
+    teacher's run failed is reported and not trained; unknown and circular rows are
+    refused when planning."""
+    root = write_rows(tmp_path / "exp", broken=True)
+    (root / "tiny" / "c_student.toml").write_text(STUDENT.replace("TEACHER", "row:a_random"))
+    (root / "tiny" / "d_student.toml").write_text(STUDENT.replace("TEACHER", "row:b_cycle"))
+    tables = load_tables(["tiny"], root)
+    plan = make_plan(tables, tmp_path / "out", steps=256, games=2, budget_min=2,
+                     rows=["c_student", "d_student"])
+    teacher, student = plan.jobs[0], plan.jobs[1]
+    assert teacher.rows == ["tiny/a_random"] and not teacher.evals  # planned, not asked for
+    assert student.needs == [teacher.key] and len(student.evals) == 2
+    assert student.cfg["imitate"]["teachers"] == {"vs_random": f"checkpoint:{teacher.run_dir}"}
+    assert cli("tiny", "--experiments-dir", str(root), "--out", str(tmp_path / "out"),
+               "--rows", "c_student,d_student", "--steps", "256", "--games", "2",
+               "--budget", "2", "--no-progress") == 1
+    err = capsys.readouterr().err
+    assert "tiny/d_student seed 0: not trained: it needs the run of tiny/b_cycle seed 0, " \
+           "which did not finish" in err
+    assert teacher.done_file.is_file() and student.complete()
+    first = json.loads((Path(student.run_dir) / "metrics.jsonl").read_text().splitlines()[0])
+    assert first["imitate/samples"] > 0
+    for teacher_spec, message in (("row:nosuch", "no row 'nosuch' in table tiny"),
+                                  ("row:e_student", "rows need each other: tiny/e_student "
+                                                    "-> tiny/e_student")):
+        (root / "tiny" / "e_student.toml").write_text(STUDENT.replace("TEACHER", teacher_spec))
+        with pytest.raises(ValueError, match=message):
+            make_plan(load_tables(["tiny"], root), tmp_path / "x", rows=["e_student"])
+
+
+def test_a_worker_whose_command_has_ended_starts_no_job(tmp_path):
+    """A pool worker keeps its queued jobs after the driver dies; once it knows it is
+    orphaned (training.stopping.exit_with_parent) it starts none of them."""
+    from alphatank.training import stopping
+
+    plan = make_plan(load_tables(["tiny"], write_rows(tmp_path / "exp")), tmp_path / "out",
+                     steps=256, games=2, budget_min=2, rows=["a_random"])
+    stopping._orphaned.set()
+    try:
+        _, error, _ = run_job(plan.jobs[0])
+    finally:
+        stopping._orphaned.clear()
+    assert error == "not started: the command that ran it has ended"
+    assert not Path(plan.jobs[0].run_dir).exists()

@@ -17,6 +17,7 @@ from alphatank.training.imitate import (
     collect,
     discounted_returns,
     fit,
+    gather,
     imitate_config,
     samples,
 )
@@ -192,6 +193,9 @@ def test_the_time_limit_cuts_the_demonstrations(tmp_path):
 
 @pytest.mark.parametrize("table, fragment", [
     ({"bot": "smrt"}, "unknown bot 'smrt'"),
+    ({"teachers": {"vs_smart": "smrt"}}, "imitate.teachers.vs_smart 'smrt'"),
+    ({"teachers": {"vs_smart": 3}}, "imitate.teachers.vs_smart must be a seat spec"),
+    ({"teachers": {"vs_smart": "checkpoint:/no/such/run"}}, "/no/such/run"),
     ({"stepz": 5}, "imitate.stepz"),
     ({"steps": 0}, "imitate.steps"),
     ({"label_smoothing": 1.0}, "imitate.label_smoothing"),
@@ -262,3 +266,49 @@ def test_anchor_kl_without_a_warm_start_is_refused():
     with pytest.raises(FieldError, match="'ppo': anchor_kl = 1.0 needs a warm start"):
         run_config("cold", learners=(spec,))
     run_config("warm", learners=(spec,), init_from="runs/x")  # a warm start: allowed
+
+
+def test_each_scenario_of_a_mixed_run_is_taught_by_its_own_teacher(tmp_path):
+    """``teachers`` overrides ``bot`` per scenario: the random bot fires on about half
+    its ticks, the smart bot only with a shot lined up."""
+    from alphatank.training.mixed import MixedVectorEnv
+
+    cfg = run_config("mix", imitate={"bot": "smart", "teachers": {"vs_random": "random"}})
+    env = MixedVectorEnv(["vs_aggressive", "vs_random"], 4, observation="egocentric")
+    tr = Trainer(cfg.with_overrides(num_envs=4), tmp_path / "mix", env=env, progress=False)
+    demo = gather(tr, tr.imitation, 150, seed=3)
+    fire = demo.actions[..., 2]
+    smart, rand = fire[:, :2][demo.alive[:, :2]], fire[:, 2:][demo.alive[:, 2:]]
+    assert smart.mean() < 0.2 and rand.mean() > 0.35, (smart.mean(), rand.mean())
+    bad = {"bot": "smart", "teachers": {"vs_dodge": "random"}}
+    tr = Trainer(cfg.with_overrides(num_envs=4, imitate=bad), tmp_path / "bad", env=env,
+                 progress=False)
+    with pytest.raises(FieldError, match="imitate.teachers names no scenario of this run: "
+                                         "'vs_dodge'; its scenarios: vs_aggressive, vs_random"):
+        gather(tr, tr.imitation, 8, seed=3)
+
+
+def test_a_checkpoint_teaches_as_the_policy_it_holds(tmp_path):
+    """A run cloned from the aggressive bot, as teacher, labels the same states much as
+    that bot does and far more so than the random bot (the learner plays: the same games
+    whoever labels them)."""
+    clone = {"bot": "aggressive", "steps": 300, "epochs": 12, "minibatch": 256}
+    Trainer(run_config("clone", imitate=clone), tmp_path / "clone", progress=False).train()
+    sc = load_scenario("vs_aggressive")
+
+    def idle(obs: np.ndarray) -> np.ndarray:
+        return np.zeros((*obs.shape[:2], 3), dtype=np.int64)
+
+    demos = {bot: collect(sc, ImitateConfig(), 4, seed=5, observation="egocentric", game={},
+                          rewards={}, driven=[0], steps=200, drive=idle, bot=bot)
+             for bot in (f"checkpoint:{tmp_path / 'clone'}", "aggressive", "random")}
+    taught, bot, rand = demos.values()
+    np.testing.assert_array_equal(taught.obs, bot.obs)
+    np.testing.assert_array_equal(taught.alive, bot.alive)
+    live = bot.alive
+
+    def agree(a, b):  # noqa: ANN001, ANN202
+        return (a.actions == b.actions).all(-1)[live].mean()
+
+    # the teacher samples its actions, so it agrees with the bot less often than greedily
+    assert agree(taught, bot) > agree(rand, bot) + 0.2, (agree(taught, bot), agree(rand, bot))

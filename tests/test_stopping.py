@@ -241,7 +241,7 @@ def test_stop_flag_signals_and_interruptible_blocks():
 # with "ignore" it ignores SIGTERM, so only the grace period can end it
 WORKER = """
 import pathlib, signal, sys, time
-from alphatank.training.stopping import StopFlag, exit_with_parent, stop_on_signals
+from alphatank.training.stopping import StopFlag, exit_with_parent, orphaned, stop_on_signals
 out = pathlib.Path(sys.argv[1])
 exit_with_parent(poll_s=0.05, grace_s=0.5)
 if sys.argv[2] == "ignore":
@@ -253,7 +253,7 @@ with stop_on_signals(flag):
     out.with_suffix(".ready").write_text("ready")
     while not flag():
         time.sleep(0.01)
-out.write_text(flag.reason)
+out.write_text(f"{flag.reason} orphaned={orphaned()}")
 """
 # the driver: starts a worker, waits until it watches, then dies without waiting for it
 DRIVER = """
@@ -287,7 +287,8 @@ def test_a_worker_whose_parent_dies_stops_like_on_sigterm_or_ends_after_the_grac
     while any(_alive(p) for p in pids.values()) and time.monotonic() < deadline:
         time.sleep(0.05)
     assert not any(_alive(p) for p in pids.values())
-    assert (tmp_path / "stop.txt").read_text() == "SIGTERM"  # its run stopped, not killed
+    # its run stopped, not killed, and the worker knows why (so it starts no next job)
+    assert (tmp_path / "stop.txt").read_text() == "SIGTERM orphaned=True"
     assert not (tmp_path / "ignore.txt").exists()
 
 

@@ -17,6 +17,10 @@ Budget: each run trains for at most ``budget`` minutes (``time_limit_s``) and
 row's ``[budget_fractions]`` are set to that fraction of the run's steps (e.g. a cycle
 interval of 1/16 visits each of four bots four times).
 
+Teachers: a row's ``imitate.teachers`` may name another row of its table as
+``row:NAME``; that row's run for the same seed is planned too, trained in an earlier wave
+(:func:`stages`) and copied from its checkpoint.
+
 Runs are keyed by their settings: a run dir is ``runs/<row>-s<seed>-<digest>`` where the
 digest hashes the resolved run settings (not its name), so rows of different tables that
 describe the same run train it once. A run is finished when its ``done.json`` exists;
@@ -50,7 +54,7 @@ from alphatank.training.presets import (
     run_learners,
     with_hp,
 )
-from alphatank.training.stopping import exit_with_parent
+from alphatank.training.stopping import exit_with_parent, orphaned
 
 TABLES = ("table3", "table4", "sac", "league", "heldout")
 EVAL_SEED_BASE = 1_000_000
@@ -370,13 +374,35 @@ def _set_path(data: dict[str, Any], path: str, value: Any) -> None:
     node[keys[-1]] = value
 
 
+ROW_REF = "row:"  # a teacher seat naming another row of the table: that row's run
+
+
+def row_refs(row: Row) -> list[str]:
+    """The rows whose runs ``row`` needs first: its ``imitate.teachers`` written
+    ``row:NAME`` (NAME a row of the same table)."""
+    teachers = (row.run.get("imitate") or {}).get("teachers") or {}
+    return [v[len(ROW_REF):] for v in teachers.values()
+            if isinstance(v, str) and v.startswith(ROW_REF)]
+
+
 def row_config(row: Row, seed: int, budget_min: float, steps: int | None = None,
-               wandb: str = "disabled") -> TrainConfig:
-    """The TrainConfig of ``row`` for seed index ``seed`` under ``budget_min`` minutes."""
+               wandb: str = "disabled", refs: Callable[[str], str] | None = None
+               ) -> TrainConfig:
+    """The TrainConfig of ``row`` for seed index ``seed`` under ``budget_min`` minutes;
+    ``refs(name)`` gives the run folder of row ``name`` for the same seed, for teachers
+    written ``row:NAME``."""
     if not 0 <= seed < EVAL_SEED_BASE:
         raise ExperimentError(f"training seeds must be in [0, {EVAL_SEED_BASE}), got {seed}")
     total = int(steps) if steps else max(1, int(round(budget_min * row.steps_per_minute)))
     data = dict(row.run)
+    if row_refs(row):
+        if refs is None:
+            raise ExperimentError(f"{row.source}: imitate.teachers names rows "
+                                  f"({', '.join(row_refs(row))}): plan it with them")
+        teachers = {k: f"checkpoint:{refs(v[len(ROW_REF):])}"
+                    if isinstance(v, str) and v.startswith(ROW_REF) else v
+                    for k, v in data["imitate"]["teachers"].items()}
+        data["imitate"] = {**data["imitate"], "teachers": teachers}
     data.update(name=f"{row.table}-{row.name}-s{seed}", seed=seed, total_steps=total,
                 time_limit_s=float(budget_min) * 60.0, wandb=wandb, num_workers=1,
                 keep_checkpoints=1, eval_every=0, video_every=0)
@@ -455,6 +481,7 @@ class Job:
     evals: list[EvalSpec]
     rows: list[str]
     seed: int
+    needs: list[str] = field(default_factory=list)  # keys of the jobs to train first
 
     @property
     def done_file(self) -> Path:
@@ -504,6 +531,7 @@ def make_plan(tables: Sequence[Table], out: str | Path, seeds: int = 1,
     if steps is not None and steps < 1:
         raise ExperimentError(f"--steps must be >= 1, got {steps}")
     out = Path(out)
+    every = {(t.name, r.name): r for t in tables for r in t.rows}  # before --rows
     if rows:
         known = {r.name for t in tables for r in t.rows} | {r.id for t in tables for r in t.rows}
         bad = [r for r in rows if r not in known]
@@ -516,19 +544,39 @@ def make_plan(tables: Sequence[Table], out: str | Path, seeds: int = 1,
         tables = [t for t in tables if t.rows]
     jobs: dict[str, Job] = {}
     cells: dict[tuple[str, int], tuple[Job, dict[str, EvalSpec]]] = {}
+
+    def job_for(row: Row, s: int, path: tuple[str, ...] = ()) -> tuple[Job, TrainConfig]:
+        """The job of ``row`` for seed ``s``, after the jobs of the rows it needs."""
+        needs: list[str] = []
+
+        def ref(name: str) -> str:
+            other = every.get((row.table, name))
+            if other is None:
+                raise ExperimentError(f"{row.source}: imitate.teachers: no row {name!r} in "
+                                      f"table {row.table}")
+            if other.id in path:
+                raise ExperimentError(f"{row.source}: imitate.teachers: rows need each "
+                                      f"other: {' -> '.join([*path, other.id])}")
+            job = job_for(other, s, (*path, other.id))[0]
+            needs.append(job.key)
+            return job.run_dir
+
+        cfg = row_config(row, s, budget_min, steps, wandb, ref)
+        d = run_digest(cfg, row.scenarios)
+        job = jobs.get(d)
+        if job is None:
+            found = sorted((out / "runs").glob(f"*-{d}")) if (out / "runs").is_dir() else []
+            run_dir = found[0] if found else out / "runs" / f"{row.name}-s{s}-{d}"
+            job = jobs[d] = Job(d, str(run_dir), cfg.to_dict(), list(row.scenarios), [], [],
+                                s, needs)
+        if row.id not in job.rows:
+            job.rows.append(row.id)
+        return job, cfg
+
     for table in tables:
         for row in table.rows:
             for s in range(seeds):
-                cfg = row_config(row, s, budget_min, steps, wandb)
-                d = run_digest(cfg, row.scenarios)
-                job = jobs.get(d)
-                if job is None:
-                    found = sorted((out / "runs").glob(f"*-{d}")) if (out / "runs").is_dir() \
-                        else []
-                    run_dir = found[0] if found else out / "runs" / f"{row.name}-s{s}-{d}"
-                    job = jobs[d] = Job(d, str(run_dir), cfg.to_dict(), list(row.scenarios),
-                                        [], [], s)
-                job.rows.append(row.id)
+                job, cfg = job_for(row, s, (row.id,))
                 specs = {}
                 for col in table.row_columns(row):
                     spec = _eval_spec(col, row, cfg, games, s)
@@ -663,8 +711,11 @@ def run_job(job: Job) -> tuple[str, str | None, float]:
     """Train (unless finished) and evaluate what is missing (each evaluation on its own: one
     that fails does not stop the others); returns (key, error or None, seconds). Failures
     are written to ``<run_dir>/error.txt`` and do not raise; a run another command is
-    training is reported busy and nothing is written to its folder."""
+    training is reported busy and nothing is written to its folder. A pool worker whose
+    command has ended starts nothing (its queue may still hold jobs)."""
     t0 = time.time()
+    if orphaned():
+        return job.key, "not started: the command that ran it has ended", 0.0
     failure = train_step(job)
     if failure is not None and failure[0].startswith(BUSY):
         return job.key, failure[0], time.time() - t0
@@ -673,14 +724,33 @@ def run_job(job: Job) -> tuple[str, str | None, float]:
     return job.key, record_failures(job, failures), time.time() - t0
 
 
+def stages(jobs: Sequence[Job]) -> list[list[Job]]:
+    """``jobs`` in waves, each job after every job of ``jobs`` it needs (the others are
+    trained already), in plan order within a wave."""
+    by_key = {j.key: j for j in jobs}
+    depth: dict[str, int] = {}
+
+    def level(job: Job) -> int:
+        if job.key not in depth:
+            depth[job.key] = 1 + max((level(by_key[k]) for k in job.needs if k in by_key),
+                                     default=-1)
+        return depth[job.key]
+
+    waves: list[list[Job]] = [[] for _ in range(1 + max(map(level, jobs), default=-1))]
+    for job in jobs:
+        waves[level(job)].append(job)
+    return waves
+
+
 def execute(jobs: Sequence[Job], workers: int = 1, progress: bool = True,
             on_done: Callable[[Job, str | None, float], None] | None = None,
             runner: Callable[[Sequence[Job], Callable[[Job, str | None, float], None]],
                              None] | None = None) -> dict[str, str]:
     """Run ``jobs`` (``workers`` processes; 1: in this process; or ``runner(jobs,
     finish)``, e.g. :func:`alphatank.training.ray_jobs.run_on_ray`, calling ``finish``
-    as each job ends) with a progress bar over them; returns {job key: error} of the
-    failed ones."""
+    as each job ends) with a progress bar over them, wave by wave (:func:`stages`: a
+    row taught by other rows' runs trains after them; not at all if one of them did not
+    finish); returns {job key: error} of the failed ones."""
     failed: dict[str, str] = {}
     if not jobs:
         return failed
@@ -697,11 +767,11 @@ def execute(jobs: Sequence[Job], workers: int = 1, progress: bool = True,
         if bar is not None:
             bar.update(1)
 
-    try:
+    def run(stage: Sequence[Job]) -> None:
         if runner is not None:
-            runner(jobs, finish)
+            runner(stage, finish)
         elif workers <= 1:
-            for job in jobs:
+            for job in stage:
                 if bar is not None:
                     bar.set_postfix_str(", ".join(job.rows), refresh=True)
                 _, error, seconds = run_job(job)
@@ -714,7 +784,7 @@ def execute(jobs: Sequence[Job], workers: int = 1, progress: bool = True,
             # training on as an orphan
             with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"),
                                      initializer=exit_with_parent) as pool:
-                futures = {pool.submit(run_job, job): job for job in jobs}
+                futures = {pool.submit(run_job, job): job for job in stage}
                 for fut in as_completed(futures):
                     job = futures[fut]
                     try:
@@ -722,6 +792,21 @@ def execute(jobs: Sequence[Job], workers: int = 1, progress: bool = True,
                     except Exception as exc:  # the worker process died
                         error, seconds = f"worker died: {type(exc).__name__}: {exc}", 0.0
                     finish(job, error, seconds)
+
+    by_key = {j.key: j for j in jobs}
+    try:
+        for stage in stages(jobs):
+            ready = []
+            for job in stage:
+                lost = [by_key[k] for k in job.needs
+                        if k in by_key and not by_key[k].done_file.is_file()]
+                if lost:  # a teacher's run did not finish: nothing to learn from
+                    finish(job, "not trained: it needs the run of " + ", ".join(
+                        f"{', '.join(j.rows)} seed {j.seed}" for j in lost)
+                        + ", which did not finish", 0.0)
+                else:
+                    ready.append(job)
+            run(ready)
     finally:
         if bar is not None:
             bar.close()

@@ -18,6 +18,10 @@ a global state the demonstrations do not record, so ``critic_warmup_updates`` tr
 first.
 The time it takes counts in the run's wall time (``time_limit_s``).
 
+``teachers`` names a different teacher per scenario of a mixed run (any seat spec: a bot,
+``checkpoint:PATH``, ``agent:NAME``), so one learner can copy several specialists, each in
+the setting it mastered (policy distillation, as in kickstarting: Schmitt et al. 2018).
+
 A clone drifts off the bot's states: one wrong turn and it stands where the bot never
 stood, with no example to follow. ``dagger`` rounds (DAgger, Ross et al. 2011) fix that:
 the learners play ``dagger_steps`` vector steps themselves (sampling, as PPO will), the
@@ -37,8 +41,8 @@ import torch
 from alphatank.envs.core import MatchSet
 from alphatank.game.scenarios import Scenario
 from alphatank.sim.episode import episode_seeds, reset_controllers
-from alphatank.sim.policy import NOOP
-from alphatank.training.fields import build, hp, validate
+from alphatank.sim.policy import NOOP, BatchPolicy
+from alphatank.training.fields import FieldError, build, hp, validate
 from alphatank.training.mappo import MAPPO
 from alphatank.training.ppo import PPO, evaluate_actions, head_log_probs
 
@@ -60,6 +64,9 @@ class ImitateConfig:
                         "labels their states, the fit is redone on all the data", ge=0)
     dagger_steps: int = hp(2048, "vector steps of each DAgger round", gt=0)
     dagger_epochs: int = hp(4, "passes over all the data in each DAgger round's refit", gt=0)
+    teachers: dict[str, str] = hp({}, "per scenario of the run, the seat spec copied there "
+                                      "instead of bot (e.g. { vs_smart = "
+                                      "\"checkpoint:runs/smart\" }: distil specialists)")
 
     def __post_init__(self) -> None:
         validate(self)
@@ -73,7 +80,23 @@ def imitate_config(data: dict[str, Any]) -> ImitateConfig | None:
 
     cfg = build(ImitateConfig, data, "imitate.")
     spec_seat(cfg.bot, where=f"imitate.bot {cfg.bot!r}")
+    for name, spec in cfg.teachers.items():
+        if not isinstance(spec, str):
+            raise FieldError("imitate", f"teachers.{name}", "must be a seat spec string "
+                             f"(smart, checkpoint:PATH, agent:NAME), got {spec!r}")
+        spec_seat(spec, where=f"imitate.teachers.{name} {spec!r}")
     return cfg
+
+
+def teacher(cfg: ImitateConfig, scenario: str, scenarios: list[str]) -> str:
+    """The seat spec copied in ``scenario`` (one of the run's ``scenarios``): its entry in
+    ``cfg.teachers``, else ``cfg.bot``; a teacher for a scenario the run lacks is refused."""
+    unknown = sorted(set(cfg.teachers) - set(scenarios))
+    if unknown:
+        raise FieldError("imitate", "teachers", f"names no scenario of this run: "
+                         f"{', '.join(map(repr, unknown))}; its scenarios: "
+                         f"{', '.join(scenarios)}")
+    return cfg.teachers.get(scenario, cfg.bot)
 
 
 @dataclass
@@ -97,13 +120,15 @@ Drive = Callable[[np.ndarray], np.ndarray]
 def collect(scenario: Scenario, cfg: ImitateConfig, num_envs: int, seed: int,
             observation: str | None, game: dict[str, Any], rewards: dict[str, Any],
             driven: list[int], stop: Callable[[], bool] = bool, steps: int | None = None,
-            drive: Drive | None = None, action_repeat: int = 1) -> Demonstrations:
-    """Play ``steps`` (default ``cfg.steps``) vector steps with ``cfg.bot`` in the
-    learner seats ``driven`` (indices into the scenario's learner seats); fewer when
-    ``stop()`` turns true. With ``drive`` (observations (E, L, D) -> actions (E, L, 3))
-    the learners play instead and the bot's actions are only recorded, as labels. With
-    ``action_repeat`` k a step's action (the bot's decision) is held for k ticks, as the
-    learners will hold theirs."""
+            drive: Drive | None = None, action_repeat: int = 1,
+            bot: str | None = None) -> Demonstrations:
+    """Play ``steps`` (default ``cfg.steps``) vector steps with ``bot`` (default
+    ``cfg.bot``) in the learner seats ``driven`` (indices into the scenario's learner
+    seats); fewer when ``stop()`` turns true. With ``drive`` (observations (E, L, D) ->
+    actions (E, L, 3)) the learners play instead and the bot's actions are only recorded,
+    as labels. With ``action_repeat`` k a step's action (the bot's decision) is held for k
+    ticks, as the learners will hold theirs. A batch policy (a checkpoint) fills every
+    seat of every env as one object, deciding for all of them in one call."""
     from alphatank.game.lineup import spec_seat
     from alphatank.game.seats import make_controller
 
@@ -112,8 +137,12 @@ def collect(scenario: Scenario, cfg: ImitateConfig, num_envs: int, seed: int,
                     action_repeat=action_repeat)
     seats = [scenario.learner_seats[d] for d in driven]
     team = scenario.seats[seats[0]].team
-    stand = spec_seat(cfg.bot, team, where=f"imitate.bot {cfg.bot!r}")
-    bots = [[make_controller(stand) for _ in seats] for _ in range(num_envs)]
+    bot = bot or cfg.bot
+    stand = spec_seat(bot, team, where=f"imitate teacher {bot!r}")
+    shared = make_controller(stand)
+    if not isinstance(shared, BatchPolicy):
+        shared = None
+    bots = [[shared or make_controller(stand) for _ in seats] for _ in range(num_envs)]
     seeds = np.random.default_rng(seed)
     T, E, L = steps or cfg.steps, num_envs, len(seats)
     out = Demonstrations(np.zeros((T, E, L, core.obs_dim), dtype=np.float32),
@@ -138,10 +167,13 @@ def collect(scenario: Scenario, cfg: ImitateConfig, num_envs: int, seed: int,
                                   out.rewards[:t], out.done[:t], out.wins, out.games)
         out.obs[t] = obs
         for e, m in enumerate(core.matches):
-            for k, (bot, seat) in enumerate(zip(bots[e], seats, strict=True)):
-                live = bool(m.alive[seat])
-                out.alive[t, e, k] = live
-                acts[e, k] = bot.act(m, seat) if live else NOOP
+            out.alive[t, e] = m.alive[seats]
+            if shared is None:
+                for k, (ctrl, seat) in enumerate(zip(bots[e], seats, strict=True)):
+                    acts[e, k] = ctrl.act(m, seat) if out.alive[t, e, k] else NOOP
+        if shared is not None:  # dead seats get NOOP from the policy itself
+            pairs = [(m, seat) for m in core.matches for seat in seats]
+            acts[:] = shared.act_batch(pairs).reshape(E, L, 3)
         out.actions[t] = acts
         terms, obs = core.step(acts if drive is None else drive(obs))
         out.rewards[t] = core.rewards(terms)
@@ -278,9 +310,10 @@ def gather(trainer: Any, cfg: ImitateConfig, steps: int, seed: int,
     driven = sorted(s for spec in trainer.specs for s in spec.seats)
     blocks = (list(zip(env.scenarios, (b.stop - b.start for b in env.slices), strict=True))
               if hasattr(env, "slices") else [(trainer.scenario, trainer.E)])
+    names = [sc.name for sc, _ in blocks]
     parts = [collect(sc, cfg, n, seed + k, tc.observation, tc.game, tc.rewards, driven,
                      trainer.stop, steps, None if drive is None else drive(n),
-                     tc.action_repeat)
+                     tc.action_repeat, teacher(cfg, sc.name, names))
              for k, (sc, n) in enumerate(blocks)]
     T = min(len(p.done) for p in parts)
     return Demonstrations(*(np.concatenate([getattr(p, f)[:T] for p in parts], axis=1)

@@ -118,11 +118,20 @@ def stop_on_signals(flag: StopFlag) -> Iterator[StopFlag]:
             signal.setitimer(signal.ITIMER_REAL, max(1e-3, left), timer[1])
 
 
+_orphaned = threading.Event()
+
+
+def orphaned() -> bool:
+    """True once :func:`exit_with_parent` has seen this process's parent die: a pool
+    worker then starts no further job in its grace period."""
+    return _orphaned.is_set()
+
+
 def exit_with_parent(poll_s: float = 1.0, grace_s: float = 60.0) -> None:
-    """In a worker process (e.g. a process pool's initializer): once its parent dies, send
-    this process SIGTERM, so a run in it stops and saves as on any SIGTERM, and end it
-    outright ``grace_s`` seconds later if it is still alive. A daemon thread polls the
-    parent's pid every ``poll_s`` seconds."""
+    """In a worker process (e.g. a process pool's initializer): once its parent dies, mark
+    it :func:`orphaned` and send it SIGTERM, so a run in it stops and saves as on any
+    SIGTERM, and end it outright ``grace_s`` seconds later if it is still alive. A daemon
+    thread polls the parent's pid every ``poll_s`` seconds."""
     if not poll_s > 0 or not grace_s >= 0:
         raise ValueError(f"exit_with_parent: need poll_s > 0 and grace_s >= 0, got "
                            f"poll_s={poll_s}, grace_s={grace_s}")
@@ -131,6 +140,7 @@ def exit_with_parent(poll_s: float = 1.0, grace_s: float = 60.0) -> None:
     def watch() -> None:
         while os.getppid() == parent:
             time.sleep(poll_s)
+        _orphaned.set()
         os.kill(os.getpid(), signal.SIGTERM)
         time.sleep(grace_s)
         os._exit(128 + signal.SIGTERM)
