@@ -342,6 +342,8 @@ def test_a_row_taught_by_another_row_trains_after_it_on_its_checkpoint(tmp_path,
     assert teacher.rows == ["tiny/a_random"] and not teacher.evals  # planned, not asked for
     assert student.needs == [teacher.key] and len(student.evals) == 2
     assert student.cfg["imitate"]["teachers"] == {"vs_random": f"checkpoint:{teacher.run_dir}"}
+    assert cli("tiny", "--experiments-dir", str(root), "--rows", "c_student", "--list") == 0
+    assert "(trains after tiny/a_random)" in capsys.readouterr().out
     assert cli("tiny", "--experiments-dir", str(root), "--out", str(tmp_path / "out"),
                "--rows", "c_student,d_student", "--steps", "256", "--games", "2",
                "--budget", "2", "--no-progress") == 1

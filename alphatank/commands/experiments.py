@@ -179,6 +179,7 @@ def _command(args: argparse.Namespace) -> str:
 
 
 def _print_plan(plan, todo, workers, estimate) -> None:  # noqa: ANN001
+    by_key = {j.key: j for j in plan.jobs}
     for table in plan.tables:
         print(f"{table.name}: {table.title}")
         for row in table.rows:
@@ -186,8 +187,10 @@ def _print_plan(plan, todo, workers, estimate) -> None:  # noqa: ANN001
             cfg = job.cfg
             shared = [r for r in job.rows if r != row.id]
             where = (f"mix of {len(job.scenarios)}" if job.scenarios else cfg["scenario"])
+            after = [r for k in job.needs for r in by_key[k].rows[:1]]
             print(f"  {row.name:18s} {where:18s} steps<={cfg['total_steps']:>9,}"
                   f"  {row.title}" + (f"  (run shared with {', '.join(shared)})"
-                                      if shared else ""))
+                                      if shared else "")
+                  + (f"  (trains after {', '.join(after)})" if after else ""))
     print(f"{len(plan.jobs)} runs ({plan.seeds} seed(s)), {len(todo)} to do: about "
           f"{estimate(plan, todo, workers):.0f} min with {workers} worker(s)")
