@@ -377,12 +377,10 @@ def _set_path(data: dict[str, Any], path: str, value: Any) -> None:
 ROW_REF = "row:"  # a teacher seat naming another row of the table: that row's run
 
 
-def row_refs(row: Row) -> list[str]:
-    """The rows whose runs ``row`` needs first: its ``imitate.teachers`` written
-    ``row:NAME`` (NAME a row of the same table)."""
-    teachers = (row.run.get("imitate") or {}).get("teachers") or {}
-    return [v[len(ROW_REF):] for v in teachers.values()
-            if isinstance(v, str) and v.startswith(ROW_REF)]
+def _row_ref(teacher: Any) -> str | None:
+    """NAME of a teacher written ``row:NAME`` (a row of the same table), else None."""
+    return teacher[len(ROW_REF):] if isinstance(teacher, str) and \
+        teacher.startswith(ROW_REF) else None
 
 
 def row_config(row: Row, seed: int, budget_min: float, steps: int | None = None,
@@ -395,14 +393,15 @@ def row_config(row: Row, seed: int, budget_min: float, steps: int | None = None,
         raise ExperimentError(f"training seeds must be in [0, {EVAL_SEED_BASE}), got {seed}")
     total = int(steps) if steps else max(1, int(round(budget_min * row.steps_per_minute)))
     data = dict(row.run)
-    if row_refs(row):
+    teachers = (data.get("imitate") or {}).get("teachers") or {}
+    named = [n for v in teachers.values() if (n := _row_ref(v)) is not None]
+    if named:
         if refs is None:
             raise ExperimentError(f"{row.source}: imitate.teachers names rows "
-                                  f"({', '.join(row_refs(row))}): plan it with them")
-        teachers = {k: f"checkpoint:{refs(v[len(ROW_REF):])}"
-                    if isinstance(v, str) and v.startswith(ROW_REF) else v
-                    for k, v in data["imitate"]["teachers"].items()}
-        data["imitate"] = {**data["imitate"], "teachers": teachers}
+                                  f"({', '.join(named)}): plan it with them")
+        data["imitate"] = {**data["imitate"], "teachers": {
+            k: v if (n := _row_ref(v)) is None else f"checkpoint:{refs(n)}"
+            for k, v in teachers.items()}}
     data.update(name=f"{row.table}-{row.name}-s{seed}", seed=seed, total_steps=total,
                 time_limit_s=float(budget_min) * 60.0, wandb=wandb, num_workers=1,
                 keep_checkpoints=1, eval_every=0, video_every=0)
