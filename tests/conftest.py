@@ -33,3 +33,11 @@ def _held_elsewhere(folder: Path) -> Iterator[int]:
 def held_elsewhere():
     """A context manager factory: ``with held_elsewhere(folder) as pid: ...``."""
     return _held_elsewhere
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Files that hold a ``slow`` test run first. Under ``-n 2 --dist loadfile`` (with
+    ``--no-loadscope-reorder``) the workers take whole files in collection order, so a
+    minutes-long file collected late would end the run on one core while the other idles."""
+    slow = {item.path for item in items if item.get_closest_marker("slow")}
+    items.sort(key=lambda item: item.path not in slow)  # stable: the rest keep their order

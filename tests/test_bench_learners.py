@@ -28,6 +28,7 @@ def test_bench_train_compares_training_with_raw_env_steps(tmp_path):
 
 
 @pytest.mark.parametrize("flag", ["--train-fragments", "--train-overlap"])
+@pytest.mark.slow
 def test_bench_train_with_fragments_says_so(tmp_path, flag):
     assert main(["bench", "--ticks", "50", "--repeats", "1", "--train", "--train-preset",
                  "ppo_vs_aggressive", "--train-workers", "2", "--train-envs", "2",

@@ -97,6 +97,7 @@ def weights(trainer: Trainer) -> str:
     return h.hexdigest()
 
 
+@pytest.mark.slow
 def test_a_run_in_fragments_is_reproducible_and_counts_what_it_played(tmp_path):
     runs = []
     for k, workers in enumerate((2, 2, 1)):
@@ -115,6 +116,7 @@ def test_a_run_in_fragments_is_reproducible_and_counts_what_it_played(tmp_path):
     assert a.learners["ppo"].obs_norm.rms.count == pytest.approx(3 * 64, abs=1e-3)
 
 
+@pytest.mark.slow
 def test_a_resumed_run_in_fragments_goes_on_as_the_uninterrupted_one(tmp_path):
     cfg = dataclasses.replace(tiny_cfg("full", num_workers=2), checkpoint_every=2)
     full = Trainer(dataclasses.replace(cfg, total_steps=4 * 64), tmp_path / "full",
@@ -145,6 +147,7 @@ def test_what_fragments_cannot_carry_is_one_line(tmp_path, capsys, preset, messa
 
 
 @pytest.mark.parametrize("flag", ["--fragments", "--overlap"])
+@pytest.mark.slow
 def test_two_learners_act_in_one_fragment_from_the_command_line(tmp_path, capsys, flag):
     code = main(["train", "--preset", "ppo_vs_ppo", "--runs", str(tmp_path), "--name", "pair",
                  flag, "--workers", "2", "--num-envs", "4", "--total-steps", "128",
@@ -251,6 +254,7 @@ def test_an_overlapped_run_is_the_same_in_one_process_and_in_a_worker(tmp_path):
     assert runs["one"][0] == runs["sync"][0] == 4 * 64 and runs["one"][2] != runs["sync"][2]
 
 
+@pytest.mark.slow
 def test_a_worker_rollout_in_flight_is_one_at_a_time_and_closes_cleanly():
     sv = SubprocVectorMatchEnv("team_vs_bot", 4, seed=2, num_workers=2, **KW)
     policy = frozen(sv)
@@ -269,6 +273,7 @@ def test_a_worker_rollout_in_flight_is_one_at_a_time_and_closes_cleanly():
 
 
 @pytest.mark.parametrize("workers", [0, 2])
+@pytest.mark.slow
 def test_steps_resets_and_settings_wait_for_the_rollout_in_flight(workers):
     """While a rollout is in flight, a step, a reset or an opponent setting is refused
     with an error naming it, and nothing is lost: the rollout is then collected whole,

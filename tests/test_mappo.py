@@ -228,6 +228,7 @@ description: 5x5 range: two learners and a helpless bot
 """
 
 
+@pytest.mark.slow
 def test_mappo_team_learns_to_shoot_a_helpless_bot(tmp_path):
     (tmp_path / "range3.txt").write_text(RANGE)
     sc = parse_scenario({"name": "range3", "map": str(tmp_path / "range3.txt"),

@@ -196,6 +196,7 @@ def test_bad_config_is_rejected_by_name():
         PPOConfig(gae_lambda=1.5)
 
 
+@pytest.mark.slow
 def test_ppo_learns_to_shoot_a_helpless_bot(tmp_path):
     sc = firing_range(tmp_path)
     cfg = TrainConfig("range", "vs_aggressive", total_steps=28 * 1024, num_envs=8, seed=1,

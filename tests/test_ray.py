@@ -65,6 +65,7 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
+@pytest.mark.slow
 def test_train_through_a_head_node_started_with_ray_start(tmp_path):
     port = free_port()
     # token authentication on, with a token of this test's own (docs/distributed.md)
@@ -204,6 +205,7 @@ def test_first_update_has_the_same_weights_as_with_local_workers(cluster, tmp_pa
     assert weights(alone) == weights(local)
 
 
+@pytest.mark.slow
 def test_fragments_on_env_runners_match_worker_processes_and_a_lost_one(cluster):
     from test_fragments import frozen
 
@@ -241,6 +243,7 @@ def test_fragments_on_env_runners_match_worker_processes_and_a_lost_one(cluster)
 
 
 @pytest.mark.parametrize("overlap", [False, True])
+@pytest.mark.slow
 def test_a_run_in_fragments_on_env_runners_is_the_one_on_worker_processes(cluster, tmp_path,
                                                                           overlap):
     local = Trainer(tiny_cfg("local", iterations=3, num_workers=2), tmp_path / "local",
@@ -253,6 +256,7 @@ def test_a_run_in_fragments_on_env_runners_is_the_one_on_worker_processes(cluste
     assert weights(local) == weights(remote)
 
 
+@pytest.mark.slow
 def test_a_hung_env_runner_is_killed_and_restarted(cluster):
     env = RayVectorMatchEnv("vs_aggressive", 4, seed=3, num_runners=2, step_timeout_s=1.5)
     try:
@@ -320,6 +324,7 @@ def kill_first(title: str, killed: list[int], stop: threading.Event) -> None:
         time.sleep(0.02)
 
 
+@pytest.mark.slow
 def test_two_row_experiment_as_ray_tasks_and_resume(cluster, tmp_path, capsys):
     from test_experiments import write_rows
 

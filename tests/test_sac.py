@@ -71,12 +71,13 @@ class Bandit:
         return self.obs(), r, np.zeros(self.n, bool), trunc, final
 
 
+@pytest.mark.slow
 def test_sac_learns_a_toy_task_within_bounded_updates():
     cfg = SACConfig(hidden=64, batch_size=64, start_steps=256, update_after=256,
                     update_every=32, utd_ratio=0.5, buffer_size=20000)
     env, sac = Bandit(16, 0), SAC(4, 16, cfg, seed=0)
     obs, rewards = env.obs(), []
-    for _ in range(500):
+    for _ in range(300):  # seeds 0, 1, 2 end at 1.94-1.96 a step, greedy all correct
         a = sac.act(obs)
         obs, r, term, trunc, final = env.step(a)
         sac.observe(obs, r, term, trunc, final)
@@ -85,7 +86,7 @@ def test_sac_learns_a_toy_task_within_bounded_updates():
             sac.update()
     assert np.mean(rewards[:16]) < 1.2  # uniform random play earns ~0.83
     assert np.mean(rewards[-50:]) > 1.8, np.mean(rewards[-50:])
-    assert sac.grad_steps <= 0.5 * 500 * 16  # bounded by utd_ratio
+    assert sac.grad_steps <= 0.5 * 300 * 16  # bounded by utd_ratio
     greedy = sac.policy_actions(env.obs(), deterministic=True)
     assert (greedy[:, 0] == env.target).mean() > 0.9
 
@@ -155,6 +156,7 @@ description: 5x5 firing range for learning tests
 """
 
 
+@pytest.mark.slow
 def test_sac_learns_to_shoot_a_helpless_bot(tmp_path):
     """The learner, 2 cells from an aggressive bot of weakness 0, with the paper's
     aiming-streak shaping term on (weight 5; off by default)."""
@@ -165,16 +167,17 @@ def test_sac_learns_to_shoot_a_helpless_bot(tmp_path):
                                    {"team": "B", "controller": "bot", "bot": "aggressive",
                                     "weakness": 0.0}]})
     sac_cfg = SACConfig(hidden=64, batch_size=64, update_every=64, reward_scale=0.05,
-                        gamma=0.95, tau=0.01, policy_lr=1e-3, q_lr=1e-3, alpha_lr=1e-3,
+                        gamma=0.95, tau=0.01, policy_lr=2e-3, q_lr=2e-3, alpha_lr=2e-3,
                         buffer_size=50_000)
-    cfg = TrainConfig("range", "vs_aggressive", total_steps=24 * 1024, num_envs=8,
+    cfg = TrainConfig("range", "vs_aggressive", total_steps=12 * 1024, num_envs=8,
                       rollout_steps=64, wandb="disabled", checkpoint_every=0,
                       learners=(LearnerSpec("sac", "sac", (0,), config=sac_cfg),))
     tr = Trainer(cfg, tmp_path / "run", env=VectorMatchEnv(sc, 8, seed=0), progress=False)
     tr.train()
     sac = tr.learners["sac"]
-    assert sac.grad_steps == 24 * 1024 - 1024  # one per transition after update_after
+    assert sac.grad_steps == 12 * 1024 - 1024  # one per transition after update_after
     first = tr.history[2]["charts/win_rate"]  # random actions (start_steps) and early play
     res = evaluate_learners(tr.learners, tr.observation_meta, {"sac": "sac"}, sc, [None],
                             games=40, seed=5, num_envs=8, deterministic=True)[0]
-    assert first < 0.35 and res.win_rate >= 0.55, (first, res)  # seed 0: 0.2 -> 0.75
+    # run seeds 0, 1, 2: 0.27 / 0.30 / 0.11 -> 0.65 / 0.675 / 0.625
+    assert first < 0.35 and res.win_rate >= 0.5, (first, res)

@@ -10,6 +10,8 @@ import subprocess
 import sys
 import time
 
+import pytest
+
 from alphatank.training.checkpoint import DELAY_ENV, load_checkpoint
 
 BASE = ["--wandb", "disabled", "--no-progress", "--total-steps", "100000000"]
@@ -60,6 +62,7 @@ def stop(proc: subprocess.Popen, signum: int, group: bool) -> tuple[float, str]:
     return time.monotonic() - t, out
 
 
+@pytest.mark.slow
 def test_ctrl_c_stops_a_ppo_run_with_workers_and_resume_continues(tmp_path):
     run = tmp_path / "ppo"
     proc = start(tmp_path, "ppo", [*PPO, "--workers", "2", "--num-envs", "4",
@@ -76,6 +79,7 @@ def test_ctrl_c_stops_a_ppo_run_with_workers_and_resume_continues(tmp_path):
     assert load_checkpoint(run).meta["progress"]["global_step"] == saved + 128
 
 
+@pytest.mark.slow
 def test_sigterm_stops_a_sac_run_inside_its_updates_and_resume_continues(tmp_path):
     run = tmp_path / "sac"
     proc = start(tmp_path, "sac", [*SAC, "--num-envs", "2"])
@@ -94,6 +98,7 @@ def test_sigterm_stops_a_sac_run_inside_its_updates_and_resume_continues(tmp_pat
     assert load_checkpoint(run).meta["progress"]["global_step"] == saved + 512 * 2
 
 
+@pytest.mark.slow
 def test_kill_9_during_a_checkpoint_write_keeps_the_previous_one(tmp_path):
     run = tmp_path / "k9"
     proc = start(tmp_path, "k9", [*PPO, "--num-envs", "2", "--checkpoint-every", "1"],
