@@ -16,6 +16,7 @@ import numpy as np
 
 from alphatank.sim.ballistics import path_hits, predict_path
 from alphatank.sim.navigation import NavGrid, nav_grid
+from alphatank.sim.policy import ACTIONS, NOOP
 from alphatank.sim.sight import WallSight, wall_sight
 
 if TYPE_CHECKING:
@@ -117,13 +118,14 @@ class Bot:
         return row[min(max(int(x // cell), 0), len(row) - 1)]
 
     def act(self, match: Match, seat: int) -> np.ndarray:
+        """The decision as a shared read-only array (``alphatank.sim.policy.ACTIONS``)."""
         if not match.alive[seat]:
-            return np.array((NONE, STOP, 0), dtype=np.int64)
+            return NOOP
         self._route = None
         rot, move, fire = self.decide(match, seat)
         if self.guarded:
             rot, move = self.guard(match, seat, rot, move)
-        return np.array((rot, move, fire), dtype=np.int64)
+        return ACTIONS[6 * rot + 2 * move + fire]
 
     def planned_path(self, match: Match, seat: int) -> list[tuple[int, int]] | None:
         """Grid cells of the BFS route the bot last steered along (for overlays)."""
@@ -381,8 +383,11 @@ class Evader:
                 if not on:
                     continue
                 rx, ry = bx - x, by - y
+                closing = -(rx * vx + ry * vy)
+                if closing <= 0.0:  # moving away or past: t <= 0
+                    continue
                 v2 = vx * vx + vy * vy
-                t = -(rx * vx + ry * vy) / (1e-9 if v2 < 1e-9 else v2)  # np.maximum
+                t = closing / (1e-9 if v2 < 1e-9 else v2)  # np.maximum
                 mx, my = rx + vx * t, ry + vy * t
                 if 0 < t < soon and mx * mx + my * my < danger2:
                     out.append(lo + j)

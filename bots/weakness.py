@@ -16,7 +16,9 @@ if TYPE_CHECKING:
 class Weakened:
     """Each tick the wrapped bot acts with probability ``weakness`` (w in [0, 1]); otherwise
     the seat does nothing (NOOP). w = 0 never acts, w = 1 always acts. The coin flips come
-    from the wrapper's own generator, so the wrapped bot's choices do not depend on w."""
+    from the wrapper's own generator, so the wrapped bot's choices do not depend on w; at
+    w = 0 or 1 no coin is drawn (the generator serves nothing else, so the play is the
+    same with or without the draw)."""
 
     def __init__(self, bot: Bot, weakness: float, seed: int | None = None):
         self.bot, self.seed = bot, seed
@@ -59,7 +61,8 @@ class Weakened:
 
     def act(self, match: Match, seat: int) -> np.ndarray:
         self.ticks += 1
-        if self.rng.random() < self._w:
+        w = self._w
+        if w >= 1.0 or (w > 0.0 and self.rng.random() < w):
             self.acted += 1
             return self.bot.act(match, seat)
-        return NOOP.copy()
+        return NOOP

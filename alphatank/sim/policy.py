@@ -44,7 +44,17 @@ class BatchPolicy(Policy, Protocol):
                   observe: Observe | None = None) -> np.ndarray: ...
 
 
-NOOP = np.array([1, 1, 0], dtype=np.int64)
+def _shared(rotate: int, move: int, fire: int) -> np.ndarray:
+    a = np.array((rotate, move, fire), dtype=np.int64)
+    a.setflags(write=False)
+    return a
+
+
+NOOP = _shared(1, 1, 0)
+# ``ACTIONS[6 * rotate + 2 * move + fire]``: every action as one shared read-only array,
+# so a controller returns its choice without allocating one per tick.
+ACTIONS: tuple[np.ndarray, ...] = tuple(_shared(r, m, f) for r in range(3) for m in range(3)
+                                        for f in range(2))
 
 
 class NoopPolicy:
