@@ -345,3 +345,44 @@ def test_direct_space_step_matches_pymunk_with_deferred_work():
     slow = scene(lambda space, dt: space.step(dt))
     assert fast == slow
     assert fast[1] == [("begin", True), ("post", 2)]  # the wall gone, the late disc in
+
+
+def test_pymunk_attribute_hooks_are_dropped_only_when_they_pass_through():
+    import pickle
+
+    import pymunk
+    from pymunk._typing_attr import TypingAttrMixing
+
+    from alphatank.sim.cp import plain_attributes
+
+    # pymunk's own mixin lost its pass-through hooks at import; attributes behave as before
+    assert "__setattr__" not in TypingAttrMixing.__dict__
+    assert "__getattr__" not in TypingAttrMixing.__dict__
+    body = pymunk.Body(1.0, 2.0)
+    shape = pymunk.Circle(body, 3.0)
+    shape.collision_type, shape.slot = 7, 4
+    assert (shape.collision_type, shape.slot, shape.body is body) == (7, 4, True)
+    with pytest.raises(AttributeError, match="no_such"):
+        _ = shape.no_such
+    copy = pickle.loads(pickle.dumps(shape))
+    assert (copy.collision_type, copy.radius, copy.slot) == (7, 3.0, 4)
+
+    class PassThrough:
+        def __setattr__(self, name, value):
+            super().__setattr__(name, value)
+
+        def __getattr__(self, name):
+            return self.__getattribute__(name)
+
+    class Busy:  # a hook with work of its own: kept
+        writes: list[str] = []
+
+        def __setattr__(self, name, value):
+            type(self).writes.append(name)
+            super().__setattr__(name, value)
+
+    assert plain_attributes(PassThrough) is True
+    assert "__setattr__" not in PassThrough.__dict__ and "__getattr__" not in PassThrough.__dict__
+    assert plain_attributes(Busy) is False
+    Busy().x = 1
+    assert Busy.writes == ["x"]

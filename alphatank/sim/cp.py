@@ -19,6 +19,31 @@ from pymunk._chipmunk_cffi import ffi, lib
 _GET_BODIES = ffi.addressof(lib, "pmSpaceBodyGetIteratorFuncBatched")
 
 
+def plain_attributes(mixin: type | None = None) -> bool:
+    """Drop the two pass-through methods of pymunk 7's ``TypingAttrMixing`` (a base of
+    Body, Shape and Constraint, there for mypy): ``__setattr__`` only calls the default
+    one and ``__getattr__`` only re-raises through ``__getattribute__``. Every attribute
+    write on a pymunk object, pymunk's own included, went through a Python call: about
+    600 per World built (each reset), a fifth of its instructions, and a few per bullet
+    that enters a space. Without them attribute access is the default one, so nothing
+    else changes. Runs once, at import, on pymunk's class (``mixin`` None); a class whose
+    methods do other work (a later pymunk) is left alone and False returned."""
+    if mixin is None:
+        from pymunk._typing_attr import TypingAttrMixing as mixin
+    passes = {"__setattr__": ("super", "__setattr__"), "__getattr__": ("__getattribute__",)}
+    found = {name: mixin.__dict__.get(name) for name in passes}
+    if any(f is not None and f.__code__.co_names != passes[name]
+           for name, f in found.items()):
+        return False
+    for name, f in found.items():
+        if f is not None:
+            delattr(mixin, name)
+    return True
+
+
+plain_attributes()
+
+
 def set_position(body: pymunk.Body, x: float, y: float) -> None:
     """``body.position = (x, y)``."""
     lib.cpBodySetPosition(body._body, (x, y))
