@@ -110,13 +110,15 @@ class SmartBot(Bot):
                         and self.clear_shot(match, seat, target))
                 return rot, move, int(fire)
 
-        ready = self.can_fire(match, seat)
-        in_sight = self.clear_shot(match, seat, target)
+        bank_reach = self.shot_range + self.muzzle_offset
+        # Beyond both reaches neither branch below looks at the line of sight.
+        in_sight = (dist <= max(self.direct_range, bank_reach)
+                    and self.clear_shot(match, seat, target))
         if in_sight and dist <= self.direct_range:
             self._solution = None
             err = wrap(self.lead_angle(match, seat, target) - heading)
             tolerance = math.atan2(0.8 * self.hit_radius, max(dist, 1.0))
-            fire = ready and abs(err) < tolerance
+            fire = abs(err) < tolerance and self.can_fire(match, seat)
             if fire and match.n > 2:  # teammates may stand in the line of fire
                 fire = self.shot_hits(match, seat)[0]
             elif fire:  # the bullet flies along the heading, which may clip a corner
@@ -125,12 +127,12 @@ class SmartBot(Bot):
 
         fire = 0
         # Bank shots only round walls: with a clear line, a bounce is only a longer way.
-        if self.ricochet and not in_sight and dist <= self.shot_range + self.muzzle_offset:
+        if self.ricochet and not in_sight and dist <= bank_reach:
             if self._solution is not None:
                 err = wrap(self._solution - heading)
                 if abs(err) <= 0.5 * self.turn_step + 1e-9:
                     hits = self.shot_hits(match, seat)[0]
-                    if hits and ready:
+                    if hits and self.can_fire(match, seat):
                         fire = 1
                     elif not hits:
                         self._solution = None  # target moved: search again from here
