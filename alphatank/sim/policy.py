@@ -17,7 +17,8 @@ class Policy(Protocol):
     """Chooses one seat's action each tick from a read-only view of the match.
 
     ``act`` returns an int array of shape (3,): rotate {0 ccw, 1 none, 2 cw},
-    move {0 back, 1 stop, 2 forward}, fire {0, 1}. ``reset`` is called at the start of
+    move {0 back, 1 stop, 2 forward}, fire {0, 1}; it may be a shared read-only array
+    (:data:`ACTIONS`), so copy it before changing it. ``reset`` is called at the start of
     every episode with a seed derived from the episode's seed.
     """
 
