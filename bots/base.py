@@ -378,8 +378,8 @@ class Evader:
                 continue
             if x is None:
                 x, y = match.tank_xy[seat].tolist()
-            pos, vel = match.bullet_xy[lo:hi].tolist(), match.bullet_vel[lo:hi].tolist()
-            for j, (on, (bx, by), (vx, vy)) in enumerate(zip(live, pos, vel, strict=True)):
+            rows = match.world.bullet_state[lo:hi].tolist()  # x, y, angle, vx, vy, w
+            for j, (on, (bx, by, _, vx, vy, _)) in enumerate(zip(live, rows, strict=True)):
                 if not on:
                     continue
                 rx, ry = bx - x, by - y

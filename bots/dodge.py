@@ -78,18 +78,21 @@ class DodgeBot(Bot):
             fire = (abs(err) < tolerance and dist < self.shot_range
                     and self.can_fire(match, seat) and self.clear_shot(match, seat, target))
             return rot, move, int(fire)
-        in_sight = self.clear_shot(match, seat, target)
-        if in_sight and dist < self.near_frac * self.shot_range:
+        sr = self.shot_range
+        # Out of range and past both bands nothing below reads the line of sight.
+        in_sight = ((dist < sr or dist <= self.far_frac * sr or dist < self.near_frac * sr)
+                    and self.clear_shot(match, seat, target))
+        if in_sight and dist < self.near_frac * sr:
             gx, gy = self.away_point(x, y, ex, ey)
             rot, move = self.drive(x, y, heading, gx, gy)
             if move == STOP:
                 rot = self.steer(err)
-        elif not in_sight or dist > self.far_frac * self.shot_range:
+        elif not in_sight or dist > self.far_frac * sr:
             nav = self.nav
             gx, gy = self.route(match, x, y, nav.node_of(x, y), nav.node_of(ex, ey))
             rot, move = self.drive(x, y, heading, gx, gy)
         else:  # in the band: strafe side-on, hard to hit, turning to shoot when ready
             rot, move = self.strafe(match, seat, x, y, heading, ex, ey, err)
-        fire = int(in_sight and abs(err) < tolerance and dist < self.shot_range
+        fire = int(in_sight and abs(err) < tolerance and dist < sr
                    and self.can_fire(match, seat))
         return rot, move, fire
