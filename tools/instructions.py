@@ -94,6 +94,11 @@ def main(argv: list[str] | None = None) -> None:
     if args.child:
         child(args.scenario, args.envs, args.steps, args.observation)
         return
+    from alphatank.envs import single_learner_scenarios
+
+    if args.scenario not in (names := single_learner_scenarios()):
+        p.error(f"--scenario {args.scenario!r}: not a shipped scenario with one learner "
+                f"seat; valid: {', '.join(names)}")
     if shutil.which("valgrind") is None:
         sys.exit("instructions: valgrind is not on the PATH (apt install valgrind)")
     with tempfile.TemporaryDirectory() as tmp:
