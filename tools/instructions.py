@@ -2,7 +2,8 @@
 on the machine do not move, for comparing two versions of the code on a noisy machine.
 
     python tools/instructions.py [--scenario vs_smart] [--envs 16] [--steps 100]
-                                 [--observation paper] [--json FILE]
+                                 [--observation paper] [--objects] [--floor]
+                                 [--json FILE]
 
 Runs this file twice under ``valgrind --tool=callgrind`` (no cache simulation), each run
 building the env, stepping it 50 warm-up steps and then ``--steps`` or twice that many
@@ -10,6 +11,10 @@ timed steps with random actions drawn in advance (seeded); the difference of the
 runs' instruction counts, divided by ``--steps x --envs``, is the count per env step
 without the start-up. ``--envs N`` steps N matches together (``gymnasium.make_vec``);
 ``--envs 0`` steps one ``gymnasium.make`` env (the issue-14 "one env" figure).
+``--objects`` also splits the count per step by the shared object that ran it (the Python
+interpreter, numpy, chipmunk, libm, ...). ``--floor`` also counts a 1v1 tick of the bare
+pymunk prototype (``shared/bench/proto``, driven as ``floor_ratio.py`` drives it, 1,000 and
+2,000 ticks) and gives the env step as a ratio to it: the issue-14 ratios in instructions.
 
 Counts repeat to about 0.1% (hash seed fixed), where wall or CPU time on a shared
 2-core VM scatter by 20% or more. Instructions are not time: a change that saves
@@ -32,10 +37,18 @@ import tempfile
 from pathlib import Path
 
 WARMUP = 50
+FLOOR = "floor"  # the child's name for the prototype's tick
+FLOOR_TICKS = 1000
 
 
 def child(scenario: str, envs: int, steps: int, observation: str | None) -> None:
-    """Build the env, warm it up and step it ``steps`` times (runs under valgrind)."""
+    """Build the env, warm it up and step it ``steps`` times (runs under valgrind); with
+    ``scenario`` FLOOR, tick the bare prototype ``steps`` times after its warm-up."""
+    if scenario == FLOOR:
+        from alphatank.commands.benchfloor import find_floor, floor_us_per_tick
+
+        floor_us_per_tick(find_floor(None), 2, steps)
+        return
     import gymnasium as gym
     import numpy as np
 
@@ -58,12 +71,13 @@ def child(scenario: str, envs: int, steps: int, observation: str | None) -> None
         venv.step(a)
 
 
-def count(args: argparse.Namespace, steps: int, folder: Path) -> int:
-    """Instructions of one child run of ``steps`` timed steps."""
-    out = folder / f"callgrind.{steps}.out"
+def count(args: argparse.Namespace, scenario: str, envs: int, steps: int, folder: Path
+          ) -> tuple[int, Path]:
+    """Instructions of one child run of ``steps`` timed steps, and its callgrind file."""
+    out = folder / f"callgrind.{scenario}.{steps}.out"
     cmd = ["valgrind", "--tool=callgrind", "--cache-sim=no", f"--callgrind-out-file={out}",
-           sys.executable, __file__, "--child", "--scenario", args.scenario,
-           "--envs", str(args.envs), "--steps", str(steps)]
+           sys.executable, __file__, "--child", "--scenario", scenario,
+           "--envs", str(envs), "--steps", str(steps)]
     if args.observation:
         cmd += ["--observation", args.observation]
     env = {**os.environ, "PYTHONHASHSEED": "0", "SDL_VIDEODRIVER": "dummy",
@@ -73,7 +87,56 @@ def count(args: argparse.Namespace, steps: int, folder: Path) -> int:
     if run.returncode != 0 or found is None:
         sys.exit(f"instructions: the valgrind run failed (exit {run.returncode}):\n"
                  + run.stderr[-2000:])
-    return int(found.group(1))
+    return int(found.group(1)), out
+
+
+def measure(args: argparse.Namespace, scenario: str, envs: int, steps: int
+            ) -> tuple[float, list[int], dict[str, float]]:
+    """Instructions per step (runs of ``steps`` and twice as many, the difference over
+    ``steps x max(envs, 1)``), both runs' totals, and the per-object split (``--objects``)."""
+    divisor = steps * max(envs, 1)
+    with tempfile.TemporaryDirectory() as tmp:
+        short, short_out = count(args, scenario, envs, steps, Path(tmp))
+        long, long_out = count(args, scenario, envs, 2 * steps, Path(tmp))
+        objects: dict[str, float] = {}
+        if args.objects:
+            a, b = by_object(short_out), by_object(long_out)
+            objects = {k: (b.get(k, 0) - a.get(k, 0)) / divisor for k in set(a) | set(b)}
+    return (long - short) / divisor, [short, long], objects
+
+
+def report(title: str, per_step: float, objects: dict[str, float]) -> None:
+    """One figure, then its split per object (each over 0.1% of it), largest first."""
+    print(title)
+    for name, n in sorted(objects.items(), key=lambda kv: -kv[1]):
+        if abs(n) >= 0.001 * per_step:
+            print(f"  {n:12,.0f}  {100 * n / per_step:5.1f}%  {name}")
+
+
+def by_object(out: Path) -> dict[str, int]:
+    """Instructions of a callgrind file per shared object (file name only): every cost
+    line's own count, not the inclusive cost recorded after each ``calls=`` line."""
+    names: dict[str, str] = {}
+    totals: dict[str, int] = {}
+    obj, skip = "???", False
+    with open(out, encoding="utf-8", errors="replace") as f:
+        for line in f:
+            if line.startswith(("ob=", "cob=")):  # "(id) name" names an id once
+                m = re.match(r"c?ob=(\(\d+\))?\s*(.*)", line.rstrip("\n"))
+                key, name = m.group(1), m.group(2)
+                if key and name:
+                    names[key] = name
+                if line.startswith("ob="):
+                    obj = Path(name or names.get(key, "???")).name
+            elif line.startswith("calls="):
+                skip = True
+            elif line[:1].isdigit() or line[:1] in "+-*":
+                if not skip:
+                    parts = line.split()
+                    if len(parts) > 1:
+                        totals[obj] = totals.get(obj, 0) + int(parts[1])
+                skip = False
+    return totals
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -86,6 +149,10 @@ def main(argv: list[str] | None = None) -> None:
                    help="timed steps of the shorter run; the longer runs twice as many")
     p.add_argument("--observation", default=None, help="observation kind (default: the "
                    "scenario's)")
+    p.add_argument("--objects", action="store_true",
+                   help="also split the count per shared object")
+    p.add_argument("--floor", action="store_true",
+                   help="also count the bare pymunk prototype's 1v1 tick (the floor)")
     p.add_argument("--json", type=Path, default=None, help="also write the figures here")
     p.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = p.parse_args(argv)
@@ -101,19 +168,29 @@ def main(argv: list[str] | None = None) -> None:
                 f"seat; valid: {', '.join(names)}")
     if shutil.which("valgrind") is None:
         sys.exit("instructions: valgrind is not on the PATH (apt install valgrind)")
-    with tempfile.TemporaryDirectory() as tmp:
-        short = count(args, args.steps, Path(tmp))
-        long = count(args, 2 * args.steps, Path(tmp))
-    per_step = (long - short) / (args.steps * max(args.envs, 1))
+    if args.floor:
+        from alphatank.commands.benchfloor import find_floor
+
+        if find_floor(None) is None:
+            sys.exit("instructions: --floor: the prototype (shared/bench/proto) was not "
+                     "found above the project or the working folder")
+    per_step, runs, objects = measure(args, args.scenario, args.envs, args.steps)
     what = "one gymnasium.make env" if args.envs == 0 else f"{args.envs} matches"
-    print(f"{args.scenario}, {what}: {per_step:,.0f} instructions per env step "
-          f"({short:,} and {long:,} in runs of {args.steps} and {2 * args.steps} steps)")
+    report(f"{args.scenario}, {what}: {per_step:,.0f} instructions per env step "
+           f"({runs[0]:,} and {runs[1]:,} in runs of {args.steps} and {2 * args.steps} "
+           "steps)", per_step, objects)
+    figures = {"scenario": args.scenario, "envs": args.envs, "steps": args.steps,
+               "observation": args.observation, "instructions_per_step": per_step,
+               "instructions": runs, "per_object": objects}
+    if args.floor:
+        tick, _, floor_objects = measure(args, FLOOR, 0, FLOOR_TICKS)
+        report(f"bare pymunk floor, 1v1: {tick:,.0f} instructions per tick; the env step "
+               f"is {per_step / tick:.2f}x the floor", tick, floor_objects)
+        figures.update(floor_per_tick=tick, over_floor=per_step / tick,
+                       floor_per_object=floor_objects)
     if args.json is not None:
         from alphatank.files import write_text_atomic
-        write_text_atomic(args.json, json.dumps({
-            "scenario": args.scenario, "envs": args.envs, "steps": args.steps,
-            "observation": args.observation, "instructions_per_step": per_step,
-            "instructions": [short, long]}, indent=2) + "\n")
+        write_text_atomic(args.json, json.dumps(figures, indent=2) + "\n")
 
 
 if __name__ == "__main__":

@@ -397,11 +397,11 @@ class MatchSet:
                 self._tick(e, batched)
         terms = self.tracker.step(slice(None), self.batch, self.matches, self.joint)
         if len(self.driven):  # no driven seat alive: play the match out now
-            gone = np.flatnonzero(~np.logical_or.reduce(
-                self.batch.alive[:, self._driven_sel], axis=1))
-            for e in gone.tolist():
-                if not (self.terminated[e] or self.truncated[e]):
-                    self._play_out(e)
+            held = np.logical_or.reduce(self.batch.alive[:, self._driven_sel], axis=1)
+            if not np.logical_and.reduce(held):  # the common case costs two reductions
+                for e in np.flatnonzero(~held).tolist():
+                    if not (self.terminated[e] or self.truncated[e]):
+                        self._play_out(e)
         return terms
 
     def _act_batched(self, live: np.ndarray | None) -> None:

@@ -148,7 +148,7 @@ class TankBattleEnv(gym.Env):
             info["outcome"] = self.core.outcome(0)[0]
         if self.render_mode == "human":
             self.render()
-        return obs[0, 0].copy(), float(col.sum()), m.terminated, m.truncated, info
+        return obs[0, 0].copy(), float(np.add.reduce(col)), m.terminated, m.truncated, info
 
     def _name(self, _: tuple[int, ...]) -> str:
         return f"seat {self.seat} ({self.scenario.name})"

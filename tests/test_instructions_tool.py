@@ -1,0 +1,53 @@
+"""tools/instructions.py: the per-object split of a real callgrind file, and its bad input."""
+
+import importlib.util
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+_spec = importlib.util.spec_from_file_location("instructions_tool",
+                                               ROOT / "tools" / "instructions.py")
+tool = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(tool)
+
+
+@pytest.mark.skipif(shutil.which("valgrind") is None, reason="valgrind is not installed")
+def test_objects_split_the_whole_count(tmp_path):
+    """Every instruction callgrind collected lands in exactly one object: the split sums
+    to the total (calls' inclusive costs not counted twice) and names libc by file."""
+    out = tmp_path / "callgrind.out"
+    run = subprocess.run(["valgrind", "--tool=callgrind", "--cache-sim=no",
+                          f"--callgrind-out-file={out}", "/bin/ls", str(ROOT)],
+                         capture_output=True, text=True, check=True)
+    collected = int(re.search(r"Collected\s*:\s*(\d+)", run.stderr).group(1))
+    split = tool.by_object(out)
+    assert sum(split.values()) == collected
+    assert any(name.startswith("libc.so") for name in split)
+    assert all("/" not in name for name in split)
+    assert split["ls"] > 0
+
+
+def test_unknown_scenario_lists_the_valid_ones(capsys):
+    with pytest.raises(SystemExit) as exc:
+        tool.main(["--scenario", "vs_nobody", "--objects"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "'vs_nobody': not a shipped scenario" in err and "vs_smart" in err
+
+
+def test_floor_child_ticks_the_prototype(monkeypatch):
+    """``--floor``'s child run ticks the shared prototype, as floor_ratio.py drives it."""
+    from alphatank.commands import benchfloor
+
+    if benchfloor.find_floor(None) is None:
+        pytest.skip("no shared/bench/proto above the project")
+    ticked = []
+    real = benchfloor.floor_us_per_tick
+    monkeypatch.setattr(benchfloor, "floor_us_per_tick",
+                        lambda *a, **k: ticked.append(a) or real(*a, **k))
+    tool.child(tool.FLOOR, 0, 30, None)
+    assert len(ticked) == 1 and ticked[0][1:] == (2, 30)
