@@ -51,3 +51,15 @@ def test_floor_child_ticks_the_prototype(monkeypatch):
                         lambda *a, **k: ticked.append(a) or real(*a, **k))
     tool.child(tool.FLOOR, 0, 30, None)
     assert len(ticked) == 1 and ticked[0][1:] == (2, 30)
+
+
+def test_tick_child_ticks_a_bare_match(monkeypatch):
+    """``--floor``'s second child run ticks a bare 1v1 match, as ``alphatank bench`` does."""
+    from alphatank.commands import benchenv
+
+    ticked = []
+    real = benchenv.match_tick_us
+    monkeypatch.setattr(benchenv, "match_tick_us",
+                        lambda *a, **k: ticked.append((a, k)) or real(*a, **k))
+    tool.child(tool.TICK, 0, 30, None)
+    assert ticked == [((30,), {"repeats": 1})]

@@ -16,6 +16,7 @@ from alphatank.game.observe import (
     OBS_KINDS,
     ObservationBuilder,
     StateBatch,
+    constant,
     slot_counts,
 )
 from alphatank.game.scenarios import load_scenario, parse_scenario
@@ -615,3 +616,18 @@ def test_layout_columns_and_markdown():
     table = lay.markdown().splitlines()
     assert table[0].startswith("| block | slots |") and len(table) == 2 + len(lay.blocks())
     assert f"| `tank[k]` | 3 | {3 * lay.widths['tank']} | {lay['tank'].start}:" in table[4]
+
+
+def test_constant_operands_are_read_only_and_give_the_scalars_results():
+    """The 0-d operands of the per-step ufunc calls: read-only, of their dtype, and the
+    same bits as the Python number they stand for (float32 stays float32)."""
+    one32, inf = constant(1.0, np.float32), constant(np.inf)
+    assert one32.shape == () and one32.dtype == np.float32 and inf.dtype == np.float64
+    with pytest.raises(ValueError):
+        one32[...] = 2.0
+    x = np.random.default_rng(0).normal(scale=2.0, size=50).astype(np.float32)
+    got = np.minimum(x, one32)
+    assert got.dtype == np.float32 and np.array_equal(got, np.minimum(x, 1.0))
+    d = np.random.default_rng(1).random(8)
+    mask = d > 0.5
+    assert np.array_equal(np.where(mask, d, inf), np.where(mask, d, np.inf))

@@ -13,8 +13,10 @@ without the start-up. ``--envs N`` steps N matches together (``gymnasium.make_ve
 ``--envs 0`` steps one ``gymnasium.make`` env (the issue-14 "one env" figure).
 ``--objects`` also splits the count per step by the shared object that ran it (the Python
 interpreter, numpy, chipmunk, libm, ...). ``--floor`` also counts a 1v1 tick of the bare
-pymunk prototype (``shared/bench/proto``, driven as ``floor_ratio.py`` drives it, 1,000 and
-2,000 ticks) and gives the env step as a ratio to it: the issue-14 ratios in instructions.
+pymunk prototype (``shared/bench/proto``, driven as ``floor_ratio.py`` drives it) and a
+bare 1v1 match tick (no bots, observations or rewards; driven as ``alphatank bench``
+drives it), 1,000 and 2,000 ticks each, and gives both the match tick and the env step as
+ratios to the prototype's: the issue-14 ratios in instructions.
 
 Counts repeat to about 0.1% (hash seed fixed), where wall or CPU time on a shared
 2-core VM scatter by 20% or more. Instructions are not time: a change that saves
@@ -37,17 +39,22 @@ import tempfile
 from pathlib import Path
 
 WARMUP = 50
-FLOOR = "floor"  # the child's name for the prototype's tick
+FLOOR, TICK = "floor", "tick"  # the child's names for the prototype's and a match's tick
 FLOOR_TICKS = 1000
 
 
 def child(scenario: str, envs: int, steps: int, observation: str | None) -> None:
     """Build the env, warm it up and step it ``steps`` times (runs under valgrind); with
-    ``scenario`` FLOOR, tick the bare prototype ``steps`` times after its warm-up."""
+    ``scenario`` FLOOR or TICK, tick the bare prototype or a bare 1v1 match instead."""
     if scenario == FLOOR:
         from alphatank.commands.benchfloor import find_floor, floor_us_per_tick
 
         floor_us_per_tick(find_floor(None), 2, steps)
+        return
+    if scenario == TICK:
+        from alphatank.commands.benchenv import match_tick_us
+
+        match_tick_us(steps, repeats=1)
         return
     import gymnasium as gym
     import numpy as np
@@ -152,7 +159,8 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--objects", action="store_true",
                    help="also split the count per shared object")
     p.add_argument("--floor", action="store_true",
-                   help="also count the bare pymunk prototype's 1v1 tick (the floor)")
+                   help="also count the bare pymunk prototype's 1v1 tick (the floor) and a "
+                   "bare 1v1 match tick")
     p.add_argument("--json", type=Path, default=None, help="also write the figures here")
     p.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = p.parse_args(argv)
@@ -183,11 +191,15 @@ def main(argv: list[str] | None = None) -> None:
                "observation": args.observation, "instructions_per_step": per_step,
                "instructions": runs, "per_object": objects}
     if args.floor:
-        tick, _, floor_objects = measure(args, FLOOR, 0, FLOOR_TICKS)
-        report(f"bare pymunk floor, 1v1: {tick:,.0f} instructions per tick; the env step "
-               f"is {per_step / tick:.2f}x the floor", tick, floor_objects)
-        figures.update(floor_per_tick=tick, over_floor=per_step / tick,
-                       floor_per_object=floor_objects)
+        floor, _, floor_objects = measure(args, FLOOR, 0, FLOOR_TICKS)
+        report(f"bare pymunk floor, 1v1: {floor:,.0f} instructions per tick; the env step "
+               f"is {per_step / floor:.2f}x the floor", floor, floor_objects)
+        tick, _, tick_objects = measure(args, TICK, 0, FLOOR_TICKS)
+        report(f"bare match tick, 1v1: {tick:,.0f} instructions per tick, "
+               f"{tick / floor:.2f}x the floor", tick, tick_objects)
+        figures.update(floor_per_tick=floor, over_floor=per_step / floor,
+                       floor_per_object=floor_objects, match_tick=tick,
+                       match_tick_over_floor=tick / floor, match_tick_per_object=tick_objects)
     if args.json is not None:
         from alphatank.files import write_text_atomic
         write_text_atomic(args.json, json.dumps(figures, indent=2) + "\n")
