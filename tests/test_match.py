@@ -189,6 +189,28 @@ def test_bounces_and_wall_contacts_are_events():
     assert {c.tank for c in contacts} == {0}
 
 
+def test_flag_and_count_rows_stay_views_and_wall_follows_contacts():
+    """``alive``/``wall``/``in_buff``/``in_debuff`` are rows of ``flags`` and the counters
+    rows of ``counts`` (a batch copies each in one go), through resets and kills; ``wall``
+    is each tank's wall contact after every tick, leaving the wall included."""
+    m = _match()
+    for episode in range(2):
+        m.reset(episode)
+        assert np.shares_memory(m.alive, m.flags) and np.shares_memory(m.wall, m.flags)
+        assert np.shares_memory(m.cooldown, m.counts)
+        m.place_tank(0, 560, 385, 0.0)
+        m.place_tank(1, 150, 150, 0.0)
+        touched = released = False
+        for t in range(80):
+            m.step(_act(m, (1, 2, 0) if t < 50 else (1, 0, 0)))
+            assert np.array_equal(m.wall, m.world.wall_contacts > 0)
+            touched |= bool(m.wall[0])
+            released |= touched and not m.wall[0]
+        assert touched and released
+        assert np.array_equal(m.flags, [m.alive, m.wall, m.in_buff, m.in_debuff])
+        assert np.array_equal(m.counts, [m.cooldown, m.bullets_alive])
+
+
 def test_config_rejects_unknown_keys_and_slow_bullets():
     with pytest.raises(ConfigError, match="unknown GameConfig key.*'bulet_speed'.*valid keys"):
         from_dict(GameConfig, {"bulet_speed": 3})

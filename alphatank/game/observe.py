@@ -112,7 +112,6 @@ def constant(value: float, dtype: type = np.float64) -> np.ndarray:
 
 ONE, INF = constant(1.0), constant(math.inf)
 ONE32, MINUS_ONE32 = constant(1.0, np.float32), constant(-1.0, np.float32)  # obs dtype
-ZERO_INT = constant(0, np.int64)
 # What each field of a slot means (docs/environments.md's observation tables come from this
 # and the layouts; every field a layout names must be here).
 FIELD_HELP = {
@@ -346,15 +345,9 @@ class StateBatch:
         """Copy match ``e``'s dynamic arrays (one batch read already done by the world)."""
         w = match.world
         self.raw[e] = w.state
-        f = self.flags[e]
-        f[0] = match.alive
-        np.greater(w.wall_contacts, ZERO_INT, out=f[1])
-        f[2] = match.in_buff
-        f[3] = match.in_debuff
+        self.flags[e] = match.flags  # alive, wall, in_buff, in_debuff
         self.bullet_active[e] = w.bullet_active
-        c = self.counts[e]
-        c[0] = match.cooldown
-        c[1] = match.bullets_alive
+        self.counts[e] = match.counts  # cooldown, bullets_alive
         self.tick[e] = match.tick
         if self.shot_seats:
             self.trace_shots(e, match)

@@ -97,7 +97,11 @@ class Match:
     State for readers (bots, observations, rendering) lives in arrays:
     ``tank_xy`` (n, 2), ``tank_angle`` (n,), ``tank_vel`` (n, 2), ``alive`` (n,),
     ``team_index`` (n,), ``bullet_xy``/``bullet_vel`` (n*cap, 2), ``bullet_active``,
-    ``bullet_owner``, ``in_buff``/``in_debuff`` (n,), ``cooldown`` (n,), ``score`` (n,).
+    ``bullet_owner``, ``in_buff``/``in_debuff`` (n,), ``wall`` (n,: touching a wall now),
+    ``cooldown`` (n,), ``bullets_alive`` (n,), ``score`` (n,). ``alive``, ``wall``,
+    ``in_buff``, ``in_debuff`` are the rows of ``flags`` (4, n), ``cooldown`` and
+    ``bullets_alive`` those of ``counts`` (2, n), so that a batch copies each in one go
+    (``StateBatch.gather``); they are written in place, never rebound.
     """
 
     def __init__(self, cfg: GameConfig, spec: MapSpec, teams: Sequence[str],
@@ -157,12 +161,12 @@ class Match:
             can_hit &= self.team_index[:, None] != self.team_index[None, :]
         np.fill_diagonal(can_hit, self.cfg.self_hit)
         w.can_hit[:] = can_hit
-        self.alive = np.ones(n, dtype=bool)
-        self.cooldown = np.zeros(n, dtype=np.int64)
-        self.bullets_alive = np.zeros(n, dtype=np.int64)
+        self.flags = np.zeros((4, n), dtype=bool)
+        self.alive, self.wall, self.in_buff, self.in_debuff = self.flags
+        self.alive[:] = True
+        self.counts = np.zeros((2, n), dtype=np.int64)
+        self.cooldown, self.bullets_alive = self.counts
         self.score = np.zeros(n, dtype=np.int64)  # enemy hits scored
-        self.in_buff = np.zeros(n, dtype=bool)
-        self.in_debuff = np.zeros(n, dtype=bool)
         self._zone = [0] * n  # zone code of each tank's cell (1 buff, -1 debuff)
         self._contacts_seen = -1  # world.contacts_changed when _touching was built
         self._touching: list[WallContact] = []
@@ -266,6 +270,7 @@ class Match:
         if w.contacts_changed != self._contacts_seen:
             self._contacts_seen = w.contacts_changed
             self._touching = [WallContact(int(i)) for i in np.flatnonzero(w.wall_contacts)]
+            np.greater(w.wall_contacts, 0, out=self.wall)
         if self._touching:
             ev.wall_contacts.extend(self._touching)
         self._update_zones(report=True)
