@@ -91,6 +91,7 @@ class Bot:
         nav = self.nav
         self.tables = map_tables(nav)
         self._node_rows: list[list[int]] = self.tables["node_rows"]
+        self._last_row, self._last_col = nav.node.shape[0] - 1, nav.node.shape[1] - 1
         self._centers: list[list[float]] = self.tables["centers"]
         self.turn_step = math.radians(cfg.rotation_speed) / cfg.tick_hz
         self.hit_radius = cfg.tank_height / 2 + cfg.bullet_radius
@@ -111,11 +112,10 @@ class Bot:
 
     def node_of(self, x: float, y: float) -> int:
         """``nav.node_of(x, y)`` from plain-Python tables: the floor node of a pixel."""
-        rows = self._node_rows
-        cell = self.nav.cell
-        r = min(max(int(y // cell), 0), len(rows) - 1)
-        row = rows[r]
-        return row[min(max(int(x // cell), 0), len(row) - 1)]
+        cell, last_r, last_c = self.nav.cell, self._last_row, self._last_col
+        r, c = int(y // cell), int(x // cell)  # clamped below without min/max calls
+        row = self._node_rows[0 if r < 0 else last_r if r > last_r else r]
+        return row[0 if c < 0 else last_c if c > last_c else c]
 
     def act(self, match: Match, seat: int) -> np.ndarray:
         """The decision as a shared read-only array (``alphatank.sim.policy.ACTIONS``)."""
@@ -191,9 +191,13 @@ class Bot:
             gx, gy = centers[me]
             return gx, gy
         r = DRIVE_RADIUS - 2.0
-        for k in (nav.waypoint_idx(me, goal, DRIVE_RADIUS), int(nav.next_table[me, goal])):
+        gx, gy = centers[nav.waypoint_idx(me, goal, DRIVE_RADIUS)]  # a node, never -1
+        if self.ray_clear(match, x, y, gx, gy, r):
+            return gx, gy
+        k = int(nav.next_table[me, goal])  # looked up only when the waypoint is blocked
+        if k >= 0:
             gx, gy = centers[k]
-            if k >= 0 and self.ray_clear(match, x, y, gx, gy, r):
+            if self.ray_clear(match, x, y, gx, gy, r):
                 return gx, gy
         gx, gy = centers[me]
         return gx, gy
@@ -378,8 +382,11 @@ class Evader:
                 continue
             if x is None:
                 x, y = match.tank_xy[seat].tolist()
-            rows = match.world.bullet_state[lo:hi].tolist()  # x, y, angle, vx, vy, w
-            for j, (on, (bx, by, _, vx, vy, _)) in enumerate(zip(live, rows, strict=True)):
+            # Slots fill lowest first, so the run is read up to its last live slot only.
+            end = len(live) - live[::-1].index(True)
+            rows = match.world.bullet_state[lo:lo + end].tolist()  # x, y, angle, vx, vy, w
+            for j, (on, (bx, by, _, vx, vy, _)) in enumerate(zip(live[:end], rows,
+                                                                 strict=True)):
                 if not on:
                     continue
                 rx, ry = bx - x, by - y

@@ -57,7 +57,7 @@ class DefensiveBot(Bot):
                 fire = (abs(err) < tolerance and dist <= self.shot_range
                         and self.can_fire(match, seat) and self.clear_shot(match, seat, target))
                 return rot, move, int(fire)
-        me = self.nav.node_of(x, y)
+        me = self.node_of(x, y)
         goal = self.home(me)
         aim_err = wrap(self.lead_angle(match, seat, target) - heading)
 

@@ -88,8 +88,7 @@ class DodgeBot(Bot):
             if move == STOP:
                 rot = self.steer(err)
         elif not in_sight or dist > self.far_frac * sr:
-            nav = self.nav
-            gx, gy = self.route(match, x, y, nav.node_of(x, y), nav.node_of(ex, ey))
+            gx, gy = self.route(match, x, y, self.node_of(x, y), self.node_of(ex, ey))
             rot, move = self.drive(x, y, heading, gx, gy)
         else:  # in the band: strafe side-on, hard to hit, turning to shoot when ready
             rot, move = self.strafe(match, seat, x, y, heading, ex, ey, err)

@@ -89,10 +89,10 @@ class SmartBot(Bot):
         heading = float(match.tank_angle[seat])
         me = self.node_of(x, y)
         target, enode, best = -1, -1, math.inf
-        steps_from = self.nav.dist_table[me]
+        dist_table = self.nav.dist_table
         for f in foes:
             node = self.node_of(*xy[f])
-            steps = int(steps_from[node])
+            steps = int(dist_table[me, node])
             steps = math.inf if steps < 0 else steps
             if target < 0 or steps < best:
                 target, enode, best = f, node, steps
@@ -107,13 +107,13 @@ class SmartBot(Bot):
                 rot, move = self.evader.evade(match, seat, threats, err)
                 fire = (abs(err) < math.atan2(0.8 * self.hit_radius, max(dist, 1.0))
                         and dist <= self.direct_range and self.can_fire(match, seat)
-                        and self.clear_shot(match, seat, target))
+                        and self.clear(match, x, y, ex, ey, self.cfg.bullet_radius))
                 return rot, move, int(fire)
 
         bank_reach = self.shot_range + self.muzzle_offset
         # Beyond both reaches neither branch below looks at the line of sight.
         in_sight = (dist <= max(self.direct_range, bank_reach)
-                    and self.clear_shot(match, seat, target))
+                    and self.clear(match, x, y, ex, ey, self.cfg.bullet_radius))
         if in_sight and dist <= self.direct_range:
             self._solution = None
             err = wrap(self.lead_angle(match, seat, target) - heading)

@@ -421,6 +421,25 @@ def test_wall_sight_answers_like_the_world(map_name):
     assert hits > 300 and 3000 - hits > 100 and agree < 3000  # both answers; tests differ
 
 
+@pytest.mark.parametrize("map_name", ["maze", "battlefield"])
+def test_bot_node_of_answers_like_the_nav_grid(map_name):
+    """The bots' plain-Python ``node_of`` (clamped without min/max) gives the nav grid's
+    node for pixels inside, on the edges of and outside the map."""
+    m = Match(GameConfig(), load_map(map_name), ["A", "B"], seed=0)
+    bot = make_bot("smart", seed=0)
+    bot.reset(m, 0, 0)
+    nav, spec = bot.nav, m.spec
+    rng = np.random.default_rng(4)
+    pts = rng.uniform([-2 * nav.cell, -2 * nav.cell],
+                      [spec.width + 2 * nav.cell, spec.height + 2 * nav.cell], size=(3000, 2))
+    edges = [(0.0, 0.0), (spec.width, spec.height), (-1e-9, spec.height - 1e-9),
+             (spec.width - 1e-9, -0.5), (nav.cell, nav.cell), (-nav.cell, 2.5 * nav.cell)]
+    got = [bot.node_of(x, y) for x, y in pts.tolist() + edges]
+    want = [nav.node_of(x, y) for x, y in pts.tolist() + edges]
+    assert got == want
+    assert len(set(got)) > nav.n_floor // 2  # the pixels cover most of the floor
+
+
 def test_bots_pickle_after_reset_without_their_wall_queries():
     import pickle
 
