@@ -173,6 +173,7 @@ class MatchSet:
         self._seat_obs: dict[tuple, ObservationBuilder | None] = {}
         self._seat_obs_at: dict[tuple, int] = {}
         self._version = 0
+        self._orphaned: list[int] = []  # envs whose driven seats all died this step
         self.joint = np.ones((E, n, 3), dtype=np.int64)
         self._joint_rows = list(self.joint)  # per-env views
         self.driven_idx = np.array(self.driven, dtype=np.int64)
@@ -358,6 +359,12 @@ class MatchSet:
             if alive[seat]:
                 joint[seat] = ctrl.act(m, seat)
         events = m.step(joint)
+        for seat in self.driven:  # none of them alive: play the match out (_step_all)
+            if alive[seat]:
+                break
+        else:
+            if self.driven:
+                self._orphaned.append(e)
         if self.tick_watch is not None:
             self.tick_watch(e, m, events)
         self.batch.gather(e, m)
@@ -392,16 +399,15 @@ class MatchSet:
         batched = any(self._batched)
         if batched:
             self._act_batched(live)
+        self._orphaned = []
         for e in range(self.num_envs):
             if live is None or live[e]:
                 self._tick(e, batched)
         terms = self.tracker.step(slice(None), self.batch, self.matches, self.joint)
-        if len(self.driven):  # no driven seat alive: play the match out now
-            held = np.logical_or.reduce(self.batch.alive[:, self._driven_sel], axis=1)
-            if not np.logical_and.reduce(held):  # the common case costs two reductions
-                for e in np.flatnonzero(~held).tolist():
-                    if not (self.terminated[e] or self.truncated[e]):
-                        self._play_out(e)
+        orphaned, self._orphaned = self._orphaned, []  # play-outs tick too
+        for e in orphaned:  # no driven seat alive: play the match out now
+            if not (self.terminated[e] or self.truncated[e]):
+                self._play_out(e)
         return terms
 
     def _act_batched(self, live: np.ndarray | None) -> None:

@@ -23,7 +23,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from alphatank.game.observe import constant
 from alphatank.sim.config import ConfigError, GameConfig, RewardConfig, hit_radius
 
 if TYPE_CHECKING:
@@ -36,7 +35,6 @@ TERMS = ("victory", "hit", "hit_penalty", "team_hit_penalty", "trajectory_hit",
          "team_win", "team_loss", "team_draw", "step_cost", "engagement",
          "distance_progress", "trajectory_far")
 T = {name: k for k, name in enumerate(TERMS)}
-NAN = constant(math.nan)  # a per-step ufunc operand (see constant())
 
 
 # ---- pure terms ---------------------------------------------------------------------
@@ -410,7 +408,8 @@ class RewardTracker:
         np.hypot(v.dx, v.dy, out=v.dist)  # (E, nr, n)
         np.logical_and(self.rw_enemy, v.alive, out=v.ok)
         np.logical_and(v.ok, v.act_n, out=v.ok)  # an inactive slot has no distance (NaN)
-        now = np.fmin.reduce(np.where(v.ok, v.dist, NAN), axis=-1, out=v.now)
+        # nearest live enemy of each live slot; NaN where none (no array made per step)
+        now = np.fmin.reduce(v.dist, axis=-1, out=v.now, where=v.ok, initial=math.nan)
         np.less(now, v.prev, out=v.closer)  # bullet_progress()
         np.greater(now, v.prev, out=v.farther)
         np.add.reduce(v.per_slot, axis=-1, out=v.counts)  # (2, E, seats)
