@@ -85,6 +85,23 @@ def test_dead_learner_keeps_its_slot_until_the_match_ends():
     assert not (term | trunc).any() and obs.shape[1] == 2
 
 
+def test_match_is_played_out_in_the_step_its_last_learner_dies():
+    """Learners on two teams (seats 2 and 5 of mixed_teams, bots beside them): with one
+    learner dead the match goes on tick by tick; once the other is dead too, the same
+    step plays the match out to its end."""
+    env = VectorMatchEnv("mixed_teams", 1, seed=0)
+    env.reset(3)
+    m, noop = env.core.matches[0], np.ones((1, 2, 3), dtype=np.int64)
+    for seat in (2, 5):
+        m.alive[seat] = False
+        m.world.remove_tank(seat)
+        tick = m.tick
+        _, _, term, trunc, info = env.step(noop)
+        if seat == 2:
+            assert m.tick == tick + 1 and not (term | trunc).any()
+    assert (term | trunc)[0] and info["episodes"][0]["length"] == tick + 1
+
+
 def test_wrong_actions_name_env_and_learner():
     env = VectorMatchEnv("team_vs_bot", 2)
     env.reset()
