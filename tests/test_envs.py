@@ -91,6 +91,8 @@ def test_make_vec_sync_async_and_wrappers():
     (np.array([1, 1]), "shape"),
     (np.array([1, 3, 0]), "rotate 0..2"),
     (np.array([-1, 1, 0]), "out of range"),
+    (np.array([1, -1, 0]), "out of range"),
+    (np.array([1, 1, 2]), "out of range"),
     (np.array([1.0, 1.0, 0.0]), "integers"),
     ("fire", "integers"),
 ])

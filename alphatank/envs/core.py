@@ -58,10 +58,16 @@ def check_actions(actions: Any, shape: tuple[int, ...], name_of: Any) -> np.ndar
     """Validate an integer action array of ``shape`` (last axis 3); errors name the agent
     (``name_of(index_tuple)``) and the allowed values. Returns an int64 array."""
     arr = actions if type(actions) is np.ndarray else np.asarray(actions)
-    # Common case first: one comparison (negatives wrap round to huge unsigned values).
-    if (arr.dtype == np.int64 and arr.shape == shape and arr.size
-            and not np.count_nonzero(np.greater_equal(arr.view(np.uint64), _NVEC_U))):
-        return arr
+    # Common cases first: one agent's row in plain Python (cheaper than numpy calls);
+    # more rows by one comparison (negatives wrap round to huge unsigned values).
+    if arr.dtype.type is np.int64 and arr.shape == shape:
+        if shape == (3,):
+            rot, move, fire = arr.tolist()
+            if 0 <= rot <= 2 and 0 <= move <= 2 and 0 <= fire <= 1:
+                return arr
+        elif arr.size and not np.count_nonzero(np.greater_equal(arr.view(np.uint64),
+                                                                _NVEC_U)):
+            return arr
     if arr.dtype == object or not (np.issubdtype(arr.dtype, np.integer)
                                    or arr.dtype == np.bool_):
         raise TypeError(f"actions must be integers ({ACTION_HELP}), got dtype {arr.dtype}")
@@ -383,7 +389,7 @@ class MatchSet:
         terms = self._step_all(actions, None)
         if self.action_repeat > 1:
             acc = self._acc
-            np.copyto(acc, terms)
+            acc[...] = terms
             for _ in range(self.action_repeat - 1):
                 live = ~(self.terminated | self.truncated)
                 if not live.any():

@@ -267,15 +267,15 @@ class VectorMatchEnv(SplitRollout):
         core = self.core
         terms, built = core.step(acts)
         lt = terms[:, :, core.driven_idx]  # (E, T, L)
-        reward = lt.sum(axis=1)
+        reward = np.add.reduce(lt, axis=1)
         self._return += reward
         self._terms += lt
         self._length += 1
-        np.copyto(rewards, reward)
-        np.copyto(terminated, core.terminated)
-        np.copyto(truncated, core.truncated)
+        rewards[...] = reward
+        terminated[...] = core.terminated
+        truncated[...] = core.truncated
         episodes = []
-        done = np.flatnonzero(terminated | truncated)
+        done = (terminated | truncated).nonzero()[0]
         if done.size:
             final_obs[done] = built[done]
             for name in self._input_names:
@@ -290,7 +290,7 @@ class VectorMatchEnv(SplitRollout):
                     "terms": dict(zip(TERMS, self._terms[e].copy(), strict=True))})
                 self._reset_env(e)
             built = core.obs.build()
-        np.copyto(obs, built)
+        obs[...] = built
         if self._input_names:
             self.inputs = self._read_inputs()
         return episodes
@@ -585,7 +585,7 @@ class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
                                                np.ndarray, dict[str, Any]]:
         """:meth:`step` with validated int64 (num_envs, L, 3) actions."""
         a = self._shared.arr
-        np.copyto(a["actions"], acts)
+        a["actions"][...] = acts
         for conn in self._conns:
             conn.send_bytes(_STEP)
         episodes = []

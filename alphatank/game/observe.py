@@ -730,13 +730,13 @@ class ObservationBuilder:
             if self.kind in SHOT_KINDS:
                 self.batch.reach_shots()
                 src = self._shot_src
-                np.copyto(self.v_shot, self.batch.shots[:, self.observers] if src is None
-                          else src[:, :, 0])
+                self.v_shot[...] = (self.batch.shots[:, self.observers] if src is None
+                                    else src[:, :, 0])
             if self.kind in ADVICE_KINDS:
                 self.batch.reach_advice()
                 src = self._advice_src
-                np.copyto(self.v_advice, self.batch.advice[:, self.observers] if src is None
-                          else src[:, :, 0])
+                self.v_advice[...] = (self.batch.advice[:, self.observers] if src is None
+                                      else src[:, :, 0])
         out = self.out
         np.minimum(out, ONE32, out=out)
         np.maximum(out, MINUS_ONE32, out=out)
@@ -866,9 +866,9 @@ class ObservationBuilder:
         parts = np.multiply(self._sin_cos, self._corner_vu, out=self._corner_parts)
         np.add.reduce(parts, axis=2, out=self._corners)
         self._corners += self._tank_xy4
-        np.copyto(self._src_f, b.flags)
+        self._src_f[...] = b.flags
         np.multiply(self._counts_t, self._count_scale, out=self._src_c)
-        np.copyto(self._src_a, b.bullet_active)
+        self._src_a[...] = b.bullet_active
         bt = self._bullets
         bt *= self._active
         # Copied fields of every observer.

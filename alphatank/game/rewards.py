@@ -418,7 +418,7 @@ class RewardTracker:
         else:
             terms[:, T["bullet_close"]:T["bullet_away"] + 1, self._rw_s] = (
                 v.counts_t * self._progress_w)
-        np.copyto(v.prev, now)
+        v.prev[...] = now
 
     def _progress_views(self, sl: slice, batch: StateBatch, terms: np.ndarray
                         ) -> SimpleNamespace:

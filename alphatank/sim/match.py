@@ -269,8 +269,9 @@ class Match:
             self._bullet_events(ev, w)
         if w.contacts_changed != self._contacts_seen:
             self._contacts_seen = w.contacts_changed
-            self._touching = [WallContact(int(i)) for i in np.flatnonzero(w.wall_contacts)]
-            np.greater(w.wall_contacts, 0, out=self.wall)
+            touching = [c > 0 for c in w.wall_contacts.tolist()]  # a few tanks: plain Python
+            self._touching = [WallContact(i) for i, t in enumerate(touching) if t]
+            self.wall[:] = touching
         if self._touching:
             ev.wall_contacts.extend(self._touching)
         self._update_zones(report=True)

@@ -436,7 +436,7 @@ class World:
     def read_state(self) -> None:
         """One batch read of every body into ``state`` (x, y, angle, vx, vy, w)."""
         self._reader.read()
-        np.copyto(self.state, self._batch)
+        self.state[...] = self._batch
 
     # ---- queries --------------------------------------------------------------------
 
