@@ -385,10 +385,10 @@ class Evader:
             # Slots fill lowest first, so the run is read up to its last live slot only.
             end = len(live) - live[::-1].index(True)
             rows = match.world.bullet_state[lo:lo + end].tolist()  # x, y, angle, vx, vy, w
-            for j, (on, (bx, by, _, vx, vy, _)) in enumerate(zip(live[:end], rows,
-                                                                 strict=True)):
-                if not on:
+            for j in range(end):  # (enumerate(zip(...)) costs several times more)
+                if not live[j]:
                     continue
+                bx, by, _, vx, vy, _ = rows[j]
                 rx, ry = bx - x, by - y
                 closing = -(rx * vx + ry * vy)
                 if closing <= 0.0:  # moving away or past: t <= 0
