@@ -209,11 +209,11 @@ class Bot:
 
     def nearest(self, match: Match, seat: int, tanks: list[int]) -> int:
         """Tank in ``tanks`` nearest in straight-line distance (-1 if none)."""
-        xy = match.tank_xy.tolist()
-        x, y = xy[seat]
+        rows = match.world.tank_rows()
+        x, y = rows[seat][:2]
         best, best_d = -1, math.inf
         for k in tanks:
-            ex, ey = xy[k]
+            ex, ey = rows[k][:2]
             d = (ex - x) ** 2 + (ey - y) ** 2
             if d < best_d:
                 best, best_d = k, d
@@ -225,11 +225,10 @@ class Bot:
         target = self.nearest(match, seat, self.enemies(match, seat))
         if target < 0:
             return None
-        xy = match.tank_xy.tolist()
-        x, y = xy[seat]
-        ex, ey = xy[target]
-        return Engagement(target, x, y, ex, ey, math.hypot(ex - x, ey - y),
-                          float(match.tank_angle[seat]))
+        rows = match.world.tank_rows()
+        x, y, heading = rows[seat][:3]
+        ex, ey = rows[target][:2]
+        return Engagement(target, x, y, ex, ey, math.hypot(ex - x, ey - y), heading)
 
     def can_fire(self, match: Match, seat: int) -> bool:
         """Whether a fire action this tick would spawn a bullet (cooldown ticks down
@@ -240,10 +239,9 @@ class Bot:
     def lead_angle(self, match: Match, seat: int, target: int) -> float:
         """Angle to shoot a straight bullet that meets ``target`` moving at its current
         velocity (falls back to the direct angle when no intercept exists)."""
-        xy = match.tank_xy.tolist()
-        x, y = xy[seat]
-        ex, ey = xy[target]
-        vx, vy = match.tank_vel[target].tolist()
+        rows = match.world.tank_rows()
+        x, y = rows[seat][:2]
+        ex, ey, _, vx, vy, _ = rows[target]
         rx, ry = ex - x, ey - y
         s, d0 = self.cfg.bullet_speed, self.muzzle_offset
         # |r + v t| = d0 + s t  ->  (v.v - s^2) t^2 + 2 (r.v - d0 s) t + (r.r - d0^2) = 0
@@ -259,9 +257,9 @@ class Bot:
 
     def clear_shot(self, match: Match, seat: int, target: int) -> bool:
         """A bullet-thick straight line from this tank to ``target`` misses every wall."""
-        xy = match.tank_xy.tolist()
-        x, y = xy[seat]
-        tx, ty = xy[target]
+        rows = match.world.tank_rows()
+        x, y = rows[seat][:2]
+        tx, ty = rows[target][:2]
         return self.clear(match, x, y, tx, ty, self.cfg.bullet_radius)
 
     def ray_clear(self, match: Match, x0: float, y0: float, x1: float, y1: float,
@@ -289,8 +287,8 @@ class Bot:
         enemy, the predicted path). Teammates in the way make it False. ``exact=False``
         uses the cheaper search-grade prediction (see ``predict_path``)."""
         w = match.world
-        x, y = match.tank_xy[seat]
-        a = float(match.tank_angle[seat]) if heading is None else heading
+        x, y, a = w.tank_rows()[seat][:3]
+        a = a if heading is None else heading
         d = self.muzzle_offset
         path = predict_path(w, x + math.cos(a) * d, y + math.sin(a) * d, a, exact=exact)
         others = np.flatnonzero(match.alive)
@@ -311,8 +309,7 @@ class Bot:
         if rot == NONE and move == STOP:
             self._stuck_since = -1
             return rot, move
-        x, y = match.tank_xy[seat].tolist()
-        a = float(match.tank_angle[seat])
+        x, y, a = match.world.tank_rows()[seat][:3]
         sx, sy, sa = self._stuck_pose
         if (self._stuck_since < 0 or (x - sx) ** 2 + (y - sy) ** 2 > 64.0
                 or abs(wrap(a - sa)) > 0.14):
@@ -381,7 +378,7 @@ class Evader:
             if True not in live:
                 continue
             if x is None:
-                x, y = match.tank_xy[seat].tolist()
+                x, y = match.world.tank_rows()[seat][:2]
             # Slots fill lowest first, so the run is read up to its last live slot only.
             end = len(live) - live[::-1].index(True)
             rows = match.world.bullet_state[lo:lo + end].tolist()  # x, y, angle, vx, vy, w
@@ -404,8 +401,7 @@ class Evader:
               aim_err: float = 0.0) -> tuple[int, int]:
         """Best (rotate, move) against ``threats`` (bullet indices); among equally safe
         choices, the one turning towards ``aim_err`` (radians to the bot's aim)."""
-        x, y = match.tank_xy[seat].tolist()
-        h = float(match.tank_angle[seat])
+        x, y, h = match.world.tank_rows()[seat][:3]
         c, s = math.cos(h), math.sin(h)
         # Candidate positions, x and y stacked (2, 9, K): (x + c fwd) - s side and
         # (y + s fwd) + c side, the same operations as one axis at a time.

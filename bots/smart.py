@@ -84,19 +84,18 @@ class SmartBot(Bot):
         foes = self.enemies(match, seat)
         if not foes:
             return NONE, STOP, 0
-        xy = match.tank_xy.tolist()  # few tanks: plain Python beats numpy here
-        x, y = xy[seat]
-        heading = float(match.tank_angle[seat])
+        rows = match.world.tank_rows()  # few tanks: plain Python beats numpy here
+        x, y, heading = rows[seat][:3]
         me = self.node_of(x, y)
         target, enode, best = -1, -1, math.inf
         dist_table = self.nav.dist_table
         for f in foes:
-            node = self.node_of(*xy[f])
+            node = self.node_of(rows[f][0], rows[f][1])
             steps = int(dist_table[me, node])
             steps = math.inf if steps < 0 else steps
             if target < 0 or steps < best:
                 target, enode, best = f, node, steps
-        ex, ey = xy[target]
+        ex, ey = rows[target][:2]
         dist = math.hypot(ex - x, ey - y)
 
         if self.evader is not None:
@@ -155,8 +154,7 @@ class SmartBot(Bot):
     def heading_clear(self, match: Match, seat: int, reach: float) -> bool:
         """A bullet fired now flies ``reach`` px along the heading without touching a
         wall (exact swept-circle query from the muzzle)."""
-        x, y = match.tank_xy[seat].tolist()
-        a = float(match.tank_angle[seat])
+        x, y, a = match.world.tank_rows()[seat][:3]
         c, s = math.cos(a), math.sin(a)
         d, reach = self.muzzle_offset, max(reach, self.muzzle_offset)
         return match.world.ray((x + c * d, y + s * d), (x + c * reach, y + s * reach),
@@ -167,8 +165,7 @@ class SmartBot(Bot):
         """Evaluate one heading for a bank shot: first the one-bounce mirror solutions
         (recomputed when this tank or the target changes cell), then a golden-ratio sweep
         over every heading the tank can turn to (multi-bounce shots)."""
-        x, y = match.tank_xy[seat].tolist()
-        heading = float(match.tank_angle[seat])
+        x, y, heading = match.world.tank_rows()[seat][:3]
         key = (me, enode)
         if key != self._search_key:
             self._search_key = key

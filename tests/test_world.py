@@ -217,6 +217,25 @@ def test_state_matches_every_body_after_steps():
     assert w.bullet_active.any()
 
 
+def test_tank_rows_follow_every_read_of_the_state():
+    """``tank_rows()`` (the bots' per-read list of the tanks' poses) equals
+    ``tank_state`` after every tick, and after a teleport once the state is read again."""
+    spec = load_map("maze")
+    w = World(game_config(), spec, np.array([(105, 105, 0.3), (665, 665, 2.0)]))
+    rng = np.random.default_rng(1)
+    for t in range(60):
+        w.tank_rows()  # read before the tick, as the bots do
+        for i in range(2):
+            w.drive(i, int(rng.integers(-1, 2)), int(rng.integers(-1, 2)))
+        w.step()
+        assert w.tank_rows() == w.tank_state.tolist(), t
+    before = w.tank_rows()
+    w.place_tank(0, 385.0, 385.0, 1.0)
+    w.read_state()
+    assert w.tank_rows()[0][:3] == [385.0, 385.0, 1.0] != before[0][:3]
+    assert w.tank_rows() == w.tank_state.tolist()
+
+
 def _box_hit(shape, path: np.ndarray, radius: float) -> bool:
     return any(shape.segment_query(tuple(a), tuple(b), radius) is not None
                for a, b in zip(path[:-1], path[1:], strict=True))

@@ -234,6 +234,7 @@ class World:
         self.state = np.empty((n_bodies, _FLOATS_PER_BODY))
         self.tank_state = self.state[:n]
         self.bullet_state = self.state[n:n + self.n_bullets]
+        self._tank_rows: list[list[float]] | None = None  # tank_state.tolist(), per read
         self.read_state()
 
     def _group(self, tank: int) -> int:
@@ -265,7 +266,7 @@ class World:
         comes from ``tank_state`` (current after construction, every step and
         read_state()). pymunk is only written when a control velocity changes."""
         cfg = self.cfg
-        a = float(self.tank_state[tank, 2])
+        a = self.tank_rows()[tank][2]
         speed = cfg.tank_speed * move
         cmd = (math.cos(a) * speed, math.sin(a) * speed,
                math.radians(cfg.rotation_speed) * rotate)
@@ -280,7 +281,7 @@ class World:
 
     def muzzle(self, tank: int) -> tuple[float, float]:
         """Where a bullet fired now would appear (just clear of the tank's front)."""
-        x, y, a = self.tank_state[tank, :3].tolist()
+        x, y, a = self.tank_rows()[tank][:3]
         d = self.cfg.tank_width / 2 + self.cfg.bullet_radius + 0.5
         return (x + math.cos(a) * d, y + math.sin(a) * d)
 
@@ -327,7 +328,7 @@ class World:
     def fire(self, tank: int) -> int:
         """Spawn a bullet from the tank's muzzle; returns its slot, or -1 if the muzzle is
         in a wall or the tank has no free bullet slot."""
-        x, y, a = self.tank_state[tank, :3].tolist()
+        x, y, a = self.tank_rows()[tank][:3]
         mx, my = self.muzzle(tank)
         if self._first_bullet_hit(x, y, mx, my) is not None:
             return -1
@@ -437,6 +438,16 @@ class World:
         """One batch read of every body into ``state`` (x, y, angle, vx, vy, w)."""
         self._reader.read()
         self.state[...] = self._batch
+        self._tank_rows = None
+
+    def tank_rows(self) -> list[list[float]]:
+        """``tank_state.tolist()`` (x, y, angle, vx, vy, w per tank), made once per
+        :meth:`read_state`: the bots and the rules read the tanks' poses several times a
+        tick, and a list costs less than a numpy read each time. Do not modify it."""
+        rows = self._tank_rows
+        if rows is None:
+            rows = self._tank_rows = self.tank_state.tolist()
+        return rows
 
     # ---- queries --------------------------------------------------------------------
 
