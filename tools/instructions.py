@@ -78,17 +78,25 @@ def child(scenario: str, envs: int, steps: int, observation: str | None) -> None
         venv.step(a)
 
 
-def count(args: argparse.Namespace, scenario: str, envs: int, steps: int, folder: Path
-          ) -> tuple[int, Path]:
-    """Instructions of one child run of ``steps`` timed steps, and its callgrind file."""
-    out = folder / f"callgrind.{scenario}.{steps}.out"
-    cmd = ["valgrind", "--tool=callgrind", "--cache-sim=no", f"--callgrind-out-file={out}",
-           sys.executable, __file__, "--child", "--scenario", scenario,
+def child_command(args: argparse.Namespace, scenario: str, envs: int, steps: int
+                  ) -> tuple[list[str], dict[str, str]]:
+    """The command line and environment of one child run."""
+    cmd = [sys.executable, __file__, "--child", "--scenario", scenario,
            "--envs", str(envs), "--steps", str(steps)]
     if args.observation:
         cmd += ["--observation", args.observation]
     env = {**os.environ, "PYTHONHASHSEED": "0", "SDL_VIDEODRIVER": "dummy",
            "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+    return cmd, env
+
+
+def count(args: argparse.Namespace, scenario: str, envs: int, steps: int, folder: Path
+          ) -> tuple[int, Path]:
+    """Instructions of one child run of ``steps`` timed steps, and its callgrind file."""
+    out = folder / f"callgrind.{scenario}.{steps}.out"
+    cmd, env = child_command(args, scenario, envs, steps)
+    cmd = ["valgrind", "--tool=callgrind", "--cache-sim=no", f"--callgrind-out-file={out}",
+           *cmd]
     run = subprocess.run(cmd, env=env, capture_output=True, text=True, check=False)
     found = re.search(r"Collected\s*:\s*(\d+)", run.stderr)
     if run.returncode != 0 or found is None:
@@ -102,6 +110,10 @@ def measure(args: argparse.Namespace, scenario: str, envs: int, steps: int
     """Instructions per step (runs of ``steps`` and twice as many, the difference over
     ``steps x max(envs, 1)``), both runs' totals, and the per-object split (``--objects``)."""
     divisor = steps * max(envs, 1)
+    # A first run fills numba's cache of compiled kernels for the CPU valgrind presents
+    # (not this machine's), so that both counted runs load them, not the first compiling.
+    cmd, env = child_command(args, scenario, envs, 1)
+    subprocess.run(["valgrind", "--tool=none", *cmd], env=env, capture_output=True, check=True)
     with tempfile.TemporaryDirectory() as tmp:
         short, short_out = count(args, scenario, envs, steps, Path(tmp))
         long, long_out = count(args, scenario, envs, 2 * steps, Path(tmp))

@@ -62,6 +62,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from alphatank.game.kernels import paper_observation
 from alphatank.game.seats import Seat, make_controller
 from alphatank.sim.ballistics import predict_path, segment_distances
 from alphatank.sim.config import GameConfig, hit_radius
@@ -722,33 +723,32 @@ class ObservationBuilder:
     def build(self) -> np.ndarray:
         """Observations of all envs and observers from the batch's current state."""
         if self.kind == "paper":
-            self._build_paper()
-        else:
-            self._build_ego()
-            if self.kind in NEAREST_KINDS and self.n_others > 1:
-                self._order_nearest()
-            if self.kind in SHOT_KINDS:
-                self.batch.reach_shots()
-                src = self._shot_src
-                self.v_shot[...] = (self.batch.shots[:, self.observers] if src is None
-                                    else src[:, :, 0])
-            if self.kind in ADVICE_KINDS:
-                self.batch.reach_advice()
-                src = self._advice_src
-                self.v_advice[...] = (self.batch.advice[:, self.observers] if src is None
-                                      else src[:, :, 0])
+            self._build_paper()  # clipped by its kernel
+            return self.out
+        self._build_ego()
+        if self.kind in NEAREST_KINDS and self.n_others > 1:
+            self._order_nearest()
+        if self.kind in SHOT_KINDS:
+            self.batch.reach_shots()
+            src = self._shot_src
+            self.v_shot[...] = (self.batch.shots[:, self.observers] if src is None
+                                else src[:, :, 0])
+        if self.kind in ADVICE_KINDS:
+            self.batch.reach_advice()
+            src = self._advice_src
+            self.v_advice[...] = (self.batch.advice[:, self.observers] if src is None
+                                  else src[:, :, 0])
         out = self.out
         np.minimum(out, ONE32, out=out)
         np.maximum(out, MINUS_ONE32, out=out)
         return out
 
     def _paper_plan(self) -> None:
-        """Buffers of the ``paper`` kind: every feature an observation copies unchanged
-        (own tank, other tanks' table fields, own bullets, zone flags) is computed once
-        per tank or bullet slot into one float64 source row per env, then copied to all
-        observers with one ``take`` and one ``put`` through precomputed flat indices.
-        Tanks and bullets sit in consecutive rows of ``StateBatch.raw``, so one operation
-        scales the positions (and one the velocities) of both."""
+        """Arguments of the ``paper`` kind's kernel
+        (:func:`~alphatank.game.kernels.paper_observation`): every feature an observation
+        copies unchanged (own tank, other tanks' table fields, own bullets, zone flags) is
+        computed once per tank or bullet slot into one float64 source row per env, then
+        copied to all observers through precomputed flat indices."""
         b, lay, at = self.batch, self.layout, self.at
         E, L, D = self.out.shape
         n, nb = b.n, b.n_bullets
@@ -757,26 +757,10 @@ class ObservationBuilder:
         for k, size in parts.items():
             start[k] = S
             S += size
-        src = np.zeros((E, S))
-        # x, y, vx, vy of tanks then bullets (tank_table / bullet_table fields)
-        body = src[:, start["P"]:start["T"]].reshape(E, n + nb, 4)
-        self._body_xy, self._body_v = body[..., 0:2], body[..., 2:4]
-        self._raw_xy, self._raw_v = b.raw[:, :n + nb, 0:2], b.raw[:, :n + nb, 3:5]
+        self._src = np.zeros((E, S))
         self._v_scale = np.r_[np.full(n, 1.0 / self.cfg.tank_speed),
                               np.full(nb, 1.0 / self.cfg.bullet_speed)][:, None]
-        self._bullets = body[:, n:]  # bullet_table(): inactive slots zeroed
-        tab = src[:, start["T"]:start["F"]].reshape(E, n, 10)  # TANK_COLS
-        self._sin, self._cos = tab[..., 0], tab[..., 1]
-        self._sin_cos = tab[..., 0:2, None, None]  # (E, n, 2, 1, 1)
-        self._corners = tab[..., 2:10].reshape(E, n, 4, 2)
-        self._corner_parts = np.zeros((E, n, 2, 4, 2))
         self._corner_vu = np.zeros((E, 1, 2, 4, 2))  # corner_v, corner_u (set_static)
-        self._tank_xy4 = self._body_xy[:, :n, None, :]
-        self._src_f = src[:, start["F"]:start["C"]].reshape(E, 4, n)  # alive, wall, zones
-        self._src_c = src[:, start["C"]:start["A"]].reshape(E, n, 2)  # reload, bullets
-        self._src_a = src[:, start["A"]:]  # bullet active
-        self._active = self._src_a[..., None]
-        self._counts_t = b.counts.transpose(0, 2, 1)  # (E, n, 2) view
         table = ("x", "y", "vx", "vy")
 
         def tank_src(j: int, field: str) -> int:
@@ -810,16 +794,12 @@ class ObservationBuilder:
         envs = np.arange(E, dtype=np.intp)[:, None]
         self._take = (envs * S + col).reshape(-1)
         self._put = (envs * (L * D) + dst).reshape(-1)
-        self._moved = np.zeros(self._take.size)
-        self._src_flat = src.reshape(-1)
-        self._out_flat = self.out.reshape(-1)
-        # Other tanks: offsets (px), distances.
-        self._rel = np.zeros((E, L, self.n_others, 2))
-        self._rel_x, self._rel_y = self._rel[..., 0], self._rel[..., 1]
-        self._dist = np.zeros((E, L, self.n_others))
-        self._v_rel = self.v_tank[..., at["tank.rel_x:rel_y"]]
-        self._v_dist = self.v_tank[..., at["tank.dist"]]
-        self._scale4 = b.scale[..., None]
+        team = at["bullet.team"] if self.team_flags else -1
+        self._tank_cols = np.array([lay["tank"].start, lay.widths["tank"],
+                                    at["tank.rel_x:rel_y"].start, at["tank.dist"]])
+        self._bullet_cols = np.array([lay["bullet"].start, lay.widths["bullet"],
+                                      at["bullet.mask"], team, at["bullet.x:vy"].start,
+                                      at["bullet.rel_x:rel_y"].start, at["bullet.dist"]])
 
     def _self_counts(self, out: np.ndarray) -> None:
         """reload (cooldown / cooldown ticks) and bullets (in flight / capacity)."""
@@ -851,49 +831,14 @@ class ObservationBuilder:
         return bidx[gl, order], rel[ge, gl, order], dist[ge, gl, order], mask
 
     def _build_paper(self) -> None:
-        """The ``paper`` kind (see :meth:`_paper_plan`); same values as
-        :func:`tank_table` / :func:`bullet_table` with the same operations, in fewer
-        numpy calls."""
-        b, at = self.batch, self.at
-        # Tank and bullet fields, once per tank / slot.
-        xy = self._body_xy
-        np.multiply(self._raw_xy, b.inv, out=xy)
-        np.subtract(xy, ONE, out=xy)
-        np.multiply(self._raw_v, self._v_scale, out=self._body_v)
-        np.sin(b.tank_angle, out=self._sin)
-        np.cos(b.tank_angle, out=self._cos)
-        # corners: cos u + sin v + xy, the products stacked and summed (two terms)
-        parts = np.multiply(self._sin_cos, self._corner_vu, out=self._corner_parts)
-        np.add.reduce(parts, axis=2, out=self._corners)
-        self._corners += self._tank_xy4
-        self._src_f[...] = b.flags
-        np.multiply(self._counts_t, self._count_scale, out=self._src_c)
-        self._src_a[...] = b.bullet_active
-        bt = self._bullets
-        bt *= self._active
-        # Copied fields of every observer.
-        self._src_flat.take(self._take, out=self._moved)
-        self._out_flat.put(self._put, self._moved)
-        # Other tanks: offsets and distances.
-        self_xy = self._self_xy
-        if self_xy is None:
-            self_xy = b.tank_xy[:, self.observers][:, :, None, :]  # (E, L, 1, 2)
-        other_xy = self._other_xy
-        if other_xy is None:
-            other_xy = b.tank_xy[:, self.other_idx]
-        rel = np.subtract(other_xy, self_xy, out=self._rel)
-        np.multiply(rel, self._scale4, out=self._v_rel)
-        dist = np.hypot(self._rel_x, self._rel_y, out=self._dist)
-        np.multiply(dist, b.idiag, out=self._v_dist)
-        # Other tanks' bullets nearest first; inactive slots zero.
-        others = self._other_bullets(self_xy)
-        if others is not None:
-            sel, brel, bdist, mask = others
-            vb = self.v_bullet
-            vb[..., at["bullet.x:vy"]] = bt[self._ge, sel]
-            k = mask * b.scale
-            np.multiply(brel, k[..., None], out=vb[..., at["bullet.rel_x:rel_y"]])
-            np.multiply(bdist, k * (b.idiag / b.scale), out=vb[..., at["bullet.dist"]])
+        """The ``paper`` kind, clipped (see :meth:`_paper_plan`); the same values as
+        :func:`tank_table` / :func:`bullet_table` with the same operations."""
+        b = self.batch
+        paper_observation(b.raw, b.n, b.inv, b.scale, b.idiag, self._v_scale,
+                          self._corner_vu, b.flags, b.counts, self._count_scale,
+                          b.bullet_active, self._src, self._take, self._put, self.observers,
+                          self.other_idx, self.other_bidx, self.other_bteam,
+                          self._tank_cols, self._bullet_cols, self.out)
 
     def _ego_tables(self) -> None:
         """Column maps of the egocentric kind: every relative position (other tanks, own

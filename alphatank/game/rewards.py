@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from alphatank.game.kernels import progress_counts
 from alphatank.sim.config import ConfigError, GameConfig, RewardConfig, hit_radius
 
 if TYPE_CHECKING:
@@ -243,7 +244,7 @@ class RewardTracker:
         self.rw_bullets = (self.rw_seats[:, None] * cap + np.arange(cap)).reshape(-1)
         self.rw_enemy = self.enemy[self.rw_bullets]  # (nr, n)
         self._rw_b, self._rw_s = as_index(self.rw_bullets), as_index(self.rw_seats)
-        self._progress_w = np.array([[cfg.bullet_close], [cfg.bullet_away]])
+        self._progress_w = np.array([cfg.bullet_close, cfg.bullet_away])
         self._pv: SimpleNamespace | None = None  # _progress views of the whole batch
         self.bullet_prev = np.full((E, len(self.rw_bullets)), np.nan)
         self.wall_count = np.zeros((E, n), dtype=np.int64)
@@ -397,57 +398,36 @@ class RewardTracker:
 
     def _progress(self, sl: slice, batch: StateBatch, terms: np.ndarray) -> None:
         """bullet_close / bullet_away: each live bullet of a rewarded seat closer to /
-        farther from its nearest live enemy than on the previous tick. A slot is only ever
-        re-fired after a tick in which it was inactive (NaN), so fresh bullets never
-        compare."""
+        farther from its nearest live enemy than on the previous tick
+        (:func:`bullet_progress` of every slot, compiled:
+        :func:`~alphatank.game.kernels.progress_counts`). A slot is only ever re-fired
+        after a tick in which it was inactive (NaN), so fresh bullets never compare."""
         v = self._progress_views(sl, batch, terms)
-        if not np.count_nonzero(v.act):
-            v.prev.fill(np.nan)
-            return
-        np.subtract(v.bullet_xy, v.tank_xy, out=v.d)
-        np.hypot(v.dx, v.dy, out=v.dist)  # (E, nr, n)
-        np.logical_and(self.rw_enemy, v.alive, out=v.ok)
-        np.logical_and(v.ok, v.act_n, out=v.ok)  # an inactive slot has no distance (NaN)
-        # nearest live enemy of each live slot; NaN where none (no array made per step)
-        now = np.fmin.reduce(v.dist, axis=-1, out=v.now, where=v.ok, initial=math.nan)
-        np.less(now, v.prev, out=v.closer)  # bullet_progress()
-        np.greater(now, v.prev, out=v.farther)
-        np.add.reduce(v.per_slot, axis=-1, out=v.counts)  # (2, E, seats)
-        if v.terms is not None:
-            np.multiply(v.counts_t, self._progress_w, out=v.terms)
-        else:
-            terms[:, T["bullet_close"]:T["bullet_away"] + 1, self._rw_s] = (
-                v.counts_t * self._progress_w)
-        v.prev[...] = now
+        progress_counts(v.bullet_xy, v.tank_xy, v.alive, v.act, self.rw_enemy, v.prev,
+                        self.capacity, self._progress_w, v.out)
+        if v.terms is None:
+            terms[:, T["bullet_close"]:T["bullet_away"] + 1, self._rw_s] = v.out
 
     def _progress_views(self, sl: slice, batch: StateBatch, terms: np.ndarray
                         ) -> SimpleNamespace:
-        """Views and buffers of :meth:`_progress` for the envs ``sl``; cached for the whole
-        batch (every step) when the rewarded seats are contiguous (reads are views), else
-        built afresh (play-outs, scattered seats)."""
+        """Arguments of :meth:`_progress` for the envs ``sl``; cached for the whole
+        batch (every step) when the rewarded seats are contiguous (reads are views and the
+        terms are written in place), else built afresh (play-outs, scattered seats)."""
         full = (sl == slice(None) and isinstance(self._rw_b, slice)
                 and isinstance(self._rw_s, slice))
         if full and self._pv is not None and self._pv.batch is batch:
             return self._pv
-        rw_b = self._rw_b
-        act = batch.bullet_active[sl][:, rw_b]
-        E, nr = act.shape
-        n, cap = self.n, self.capacity
-        d = np.zeros((E, nr, n, 2))
-        cmp = np.zeros((2, E, nr), dtype=bool)
-        counts = np.zeros((2, E, nr // cap), dtype=np.int64)
+        rw_b, seats = self._rw_b, self._rw_s
         close = T["bullet_close"]
         assert T["bullet_away"] == close + 1
-        seats = self._rw_s
+        act = batch.bullet_active[sl][:, rw_b]
+        direct = isinstance(seats, slice)
         v = SimpleNamespace(
-            batch=batch, act=act, act_n=act[..., None], prev=self.bullet_prev[sl],
-            bullet_xy=batch.bullet_xy[sl][:, rw_b, None, :], tank_xy=batch.tank_xy[sl][:, None],
-            alive=batch.alive[sl][:, None, :], d=d, dx=d[..., 0], dy=d[..., 1],
-            dist=np.zeros((E, nr, n)), ok=np.zeros((E, nr, n), dtype=bool),
-            now=np.zeros((E, nr)), closer=cmp[0], farther=cmp[1],
-            per_slot=cmp.reshape(2, E, -1, cap), counts=counts,
-            counts_t=counts.transpose(1, 0, 2),
-            terms=terms[:, close:close + 2, seats] if isinstance(seats, slice) else None)
+            batch=batch, act=act, prev=self.bullet_prev[sl],
+            bullet_xy=batch.bullet_xy[sl][:, rw_b], tank_xy=batch.tank_xy[sl],
+            alive=batch.alive[sl],
+            terms=terms[:, close:close + 2, seats] if direct else None)
+        v.out = v.terms if direct else np.zeros((len(act), 2, len(self.rw_seats)))
         if full:
             self._pv = v
         return v

@@ -1,0 +1,181 @@
+"""Compiled loops of the observation and reward hot paths (numba).
+
+A step's numpy calls each cost about a microsecond of dispatch on arrays of a few
+elements, whatever their size; a loop compiled once does the same arithmetic in a
+fraction of one. Every kernel performs the same IEEE operations, in the same order, as
+the numpy expressions it replaces, so the values are the same bits (pinned by
+``tests/test_kernels.py`` against those expressions and by the seeded-episode pins of
+``tests/test_rewards.py`` and ``tests/test_observe.py``). Compiled code is cached next to
+this module (``cache=True``), so a process compiles only what an earlier one has not.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def progress_counts(bullet_xy: np.ndarray, tank_xy: np.ndarray, alive: np.ndarray,
+                    active: np.ndarray, enemy: np.ndarray, prev: np.ndarray, cap: int,
+                    weights: np.ndarray, out: np.ndarray) -> None:
+    """The bullet_close / bullet_away terms of a tick, and the distances they compare.
+
+    ``bullet_xy`` (E, S*cap, 2): the scored bullet slots, ``cap`` per seat, seat by
+    seat; ``tank_xy`` (E, n, 2); ``alive`` (E, n); ``active`` (E, S*cap); ``enemy``
+    (S*cap, n): tank j is an enemy of the slot's owner; ``prev`` (E, S*cap): each slot's
+    distance to its nearest live enemy on the previous tick (NaN: none), replaced by this
+    tick's; ``weights`` (2,): bullet_close, bullet_away. Into ``out`` (E, 2, S): per seat,
+    its slots that came closer and went farther, times the weights. With no slot active
+    anywhere, ``prev`` becomes NaN and ``out`` is left as it is."""
+    E, nr = active.shape
+    n = tank_xy.shape[1]
+    if not active.any():
+        prev[:, :] = np.nan
+        return
+    for e in range(E):
+        for k in range(nr // cap):
+            close = 0
+            away = 0
+            for s in range(k * cap, (k + 1) * cap):
+                now = np.nan
+                if active[e, s]:
+                    bx, by = bullet_xy[e, s, 0], bullet_xy[e, s, 1]
+                    for j in range(n):
+                        if enemy[s, j] and alive[e, j]:
+                            d = np.hypot(bx - tank_xy[e, j, 0], by - tank_xy[e, j, 1])
+                            if now != now or d < now:  # np.fmin: NaN only when all are
+                                now = d
+                p = prev[e, s]
+                if now < p:
+                    close += 1
+                elif now > p:
+                    away += 1
+                prev[e, s] = now
+            out[e, 0, k] = close * weights[0]
+            out[e, 1, k] = away * weights[1]
+
+
+@njit(cache=True)
+def paper_observation(raw: np.ndarray, n: int, inv: np.ndarray, scale: np.ndarray,
+                      idiag: np.ndarray, v_scale: np.ndarray, corner_vu: np.ndarray,
+                      flags: np.ndarray, counts: np.ndarray, count_scale: np.ndarray,
+                      active: np.ndarray, src: np.ndarray, take: np.ndarray, put: np.ndarray,
+                      observers: np.ndarray, other_idx: np.ndarray, other_bidx: np.ndarray,
+                      other_bteam: np.ndarray, tank_cols: np.ndarray, bullet_cols: np.ndarray,
+                      out: np.ndarray) -> None:
+    """The ``paper`` observation of every env and observer into ``out`` (E, L, D),
+    clipped to [-1, 1] (``ObservationBuilder._paper_plan`` lays out the arguments).
+
+    ``raw`` (E, rows, 6): the batch's world state (tanks, then bullets); ``src`` (E, S):
+    one source row per env (positions and velocities of tanks then bullets, 4 each; per
+    tank sin, cos and 4 corners; the flags; reload and bullets; bullet active), copied to
+    ``out`` through the flat indices ``take`` -> ``put``. ``tank_cols``: block start,
+    slot width, rel_x, dist; ``bullet_cols``: block start, slot width, mask, team (-1:
+    none), x, rel_x, dist. Other bullets are sorted nearest first (stable, inactive
+    last); the whole block is zero while no other bullet flies anywhere in the batch."""
+    E = raw.shape[0]
+    nb = active.shape[1]
+    T = 4 * (n + nb)
+    F = T + 10 * n
+    C = F + 4 * n
+    A = C + 2 * n
+    for e in range(E):
+        s = src[e]
+        ix, iy = inv[e, 0, 0], inv[e, 0, 1]
+        for r in range(n + nb):
+            vs = v_scale[r, 0]
+            x = raw[e, r, 0] * ix - 1.0
+            y = raw[e, r, 1] * iy - 1.0
+            vx = raw[e, r, 3] * vs
+            vy = raw[e, r, 4] * vs
+            if r >= n:  # bullet_table(): inactive slots zeroed (times 0, as numpy)
+                a = 1.0 if active[e, r - n] else 0.0
+                x, y, vx, vy = x * a, y * a, vx * a, vy * a
+            s[4 * r] = x
+            s[4 * r + 1] = y
+            s[4 * r + 2] = vx
+            s[4 * r + 3] = vy
+        for j in range(n):
+            sn, cs = np.sin(raw[e, j, 2]), np.cos(raw[e, j, 2])
+            t = T + 10 * j
+            s[t] = sn
+            s[t + 1] = cs
+            for c in range(4):
+                for a in range(2):
+                    s[t + 2 + 2 * c + a] = ((sn * corner_vu[e, 0, 0, c, a]
+                                             + cs * corner_vu[e, 0, 1, c, a]) + s[4 * j + a])
+            for k in range(4):
+                s[F + k * n + j] = 1.0 if flags[e, k, j] else 0.0
+            s[C + 2 * j] = counts[e, 0, j] * count_scale[0]
+            s[C + 2 * j + 1] = counts[e, 1, j] * count_scale[1]
+        for b in range(nb):
+            s[A + b] = 1.0 if active[e, b] else 0.0
+    flat_src = src.reshape(-1)
+    flat_out = out.reshape(-1)
+    for i in range(take.size):
+        flat_out[put[i]] = flat_src[take[i]]
+    L, n_oth = other_idx.shape
+    K = other_bidx.shape[1]
+    t0, tw, trel, tdist = tank_cols[0], tank_cols[1], tank_cols[2], tank_cols[3]
+    b0, bw, bmask, bteam = bullet_cols[0], bullet_cols[1], bullet_cols[2], bullet_cols[3]
+    bx, brel, bdist = bullet_cols[4], bullet_cols[5], bullet_cols[6]
+    flying = False
+    for e in range(E):
+        for i in range(L):
+            for q in range(K):
+                if active[e, other_bidx[i, q]]:
+                    flying = True
+    rel = np.empty((K, 2))
+    dist = np.empty(K)
+    key = np.empty(K)
+    order = np.empty(K, dtype=np.int64)
+    for e in range(E):
+        sc, dg = scale[e, 0, 0], idiag[e, 0, 0]
+        ratio = dg / sc
+        for i in range(L):
+            o = observers[i]
+            sx, sy = raw[e, o, 0], raw[e, o, 1]
+            row = out[e, i]
+            for k in range(n_oth):
+                j = other_idx[i, k]
+                rx, ry = raw[e, j, 0] - sx, raw[e, j, 1] - sy
+                c = t0 + k * tw
+                row[c + trel] = rx * sc
+                row[c + trel + 1] = ry * sc
+                row[c + tdist] = np.hypot(rx, ry) * dg
+            if not flying:
+                for c in range(b0, b0 + K * bw):
+                    row[c] = 0.0
+                continue
+            for q in range(K):
+                slot = other_bidx[i, q]
+                rx, ry = raw[e, n + slot, 0] - sx, raw[e, n + slot, 1] - sy
+                rel[q, 0], rel[q, 1] = rx, ry
+                dist[q] = np.hypot(rx, ry)
+                key[q] = dist[q] if active[e, slot] else np.inf
+                p = q  # insertion sort: stable, as argsort(kind="stable")
+                while p > 0 and key[order[p - 1]] > key[q]:
+                    order[p] = order[p - 1]
+                    p -= 1
+                order[p] = q
+            for p in range(K):
+                q = order[p]
+                slot = other_bidx[i, q]
+                m = 1.0 if active[e, slot] else 0.0
+                c = b0 + p * bw
+                row[c + bmask] = m
+                if bteam >= 0:
+                    row[c + bteam] = other_bteam[i, q] * m
+                for f in range(4):
+                    row[c + bx + f] = src[e, 4 * (n + slot) + f]
+                k = m * sc
+                row[c + brel] = rel[q, 0] * k
+                row[c + brel + 1] = rel[q, 1] * k
+                row[c + bdist] = dist[q] * (k * ratio)
+    for i in range(flat_out.size):
+        v = flat_out[i]
+        if v > 1.0:
+            flat_out[i] = 1.0
+        elif v < -1.0:
+            flat_out[i] = -1.0
