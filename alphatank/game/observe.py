@@ -111,7 +111,7 @@ def constant(value: float, dtype: type = np.float64) -> np.ndarray:
     return arr
 
 
-ONE, INF = constant(1.0), constant(math.inf)
+INF = constant(math.inf)
 ONE32, MINUS_ONE32 = constant(1.0, np.float32), constant(-1.0, np.float32)  # obs dtype
 # What each field of a slot means (docs/environments.md's observation tables come from this
 # and the layouts; every field a layout names must be here).
@@ -552,10 +552,8 @@ class ObservationBuilder:
         self._ray_angles = np.arange(rays) * (2 * math.pi / rays)
         self._ray_work: np.ndarray | None = None  # ray_distances' work arrays
         self._ray_far: np.ndarray | None = None
-        # Reads of other tanks and bullets: views when the seat pattern allows (a 1v1 is
-        # all views), else fancy indexing each step.
-        self._self_xy = pick(batch.tank_xy, self.observers[:, None])  # (E, L, 1, 2)
-        self._other_xy = pick(batch.tank_xy, self.other_idx)  # (E, L, O, 2)
+        # Reads of other tanks' bullets: a view when the seat pattern allows (a 1v1),
+        # else fancy indexing each step.
         self._other_act = pick(batch.bullet_active, self.other_bidx)  # (E, L, K)
         self._bullets_zero = False  # the other-bullet block is all zeros already
         # egocentric_path: each env's NavGrid, and the envs grouped by grid (one group
