@@ -405,7 +405,7 @@ class RewardTracker:
         v = self._progress_views(sl, batch, terms)
         progress_counts(v.bullet_xy, v.tank_xy, v.alive, v.act, self.rw_enemy, v.prev,
                         self.capacity, self._progress_w, v.out)
-        if v.terms is None:
+        if not v.direct:
             terms[:, T["bullet_close"]:T["bullet_away"] + 1, self._rw_s] = v.out
 
     def _progress_views(self, sl: slice, batch: StateBatch, terms: np.ndarray
@@ -425,9 +425,9 @@ class RewardTracker:
         v = SimpleNamespace(
             batch=batch, act=act, prev=self.bullet_prev[sl],
             bullet_xy=batch.bullet_xy[sl][:, rw_b], tank_xy=batch.tank_xy[sl],
-            alive=batch.alive[sl],
-            terms=terms[:, close:close + 2, seats] if direct else None)
-        v.out = v.terms if direct else np.zeros((len(act), 2, len(self.rw_seats)))
+            alive=batch.alive[sl], direct=direct,
+            out=(terms[:, close:close + 2, seats] if direct
+                 else np.zeros((len(act), 2, len(self.rw_seats)))))
         if full:
             self._pv = v
         return v
