@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 
 import numpy as np
 
+from alphatank.bots.kernels import evade_choice
 from alphatank.sim.ballistics import path_hits, predict_path
 from alphatank.sim.navigation import NavGrid, nav_grid
 from alphatank.sim.policy import ACTIONS, NOOP
@@ -343,10 +344,7 @@ class Evader:
                                                            self.dt, horizon_ticks)
         self.raster = bot.nav.clearance_map()  # distance to walls, 5 px raster
         self.res = 5.0
-        h_r, w_r = self.raster.shape
-        self._raster_last = np.array([w_r - 1, h_r - 1]).reshape(2, 1, 1)
-        self._coef = np.zeros((3, 2, 1, 1))  # (x, y), (c, s), (-s, c) of evade()
-        self._pos, self._tmp = np.zeros((2,) + self.fwd.shape), np.zeros((2,) + self.fwd.shape)
+        self._score = np.zeros(9)  # evade()'s candidate scores
         # tanks whose bullets can hit this seat (own bullets never: grace, self_hit off)
         can_hit = match.world.can_hit[:, seat].copy()
         can_hit[seat] = False
@@ -402,30 +400,11 @@ class Evader:
         """Best (rotate, move) against ``threats`` (bullet indices); among equally safe
         choices, the one turning towards ``aim_err`` (radians to the bot's aim)."""
         x, y, h = match.world.tank_rows()[seat][:3]
-        c, s = math.cos(h), math.sin(h)
-        # Candidate positions, x and y stacked (2, 9, K): (x + c fwd) - s side and
-        # (y + s fwd) + c side, the same operations as one axis at a time.
-        coef, pos, tmp = self._coef, self._pos, self._tmp
-        coef.reshape(-1)[:] = (x, y, c, s, -s, c)
-        np.multiply(coef[1], self.fwd, out=tmp)
-        np.add(coef[0], tmp, out=pos)
-        np.multiply(coef[2], self.side, out=tmp)
-        pos += tmp
-        bxy = match.bullet_xy[threats][:, :, None]
-        bv = match.bullet_vel[threats][:, :, None]
-        bpos = bxy + bv * self.times  # (T, 2, K)
-        d = pos[:, :, None, :] - bpos.transpose(1, 0, 2)[:, None]  # (2, 9, T, K)
-        d *= d
-        gap2 = (d[0] + d[1]).reshape(9, -1).min(axis=1)
-        score = np.sqrt(np.minimum(gap2, 4 * self.danger * self.danger))
-        cell = (pos * (1 / self.res)).astype(np.intp)  # raster (column, row) per point
-        np.maximum(cell, 0, out=cell)
-        np.minimum(cell, self._raster_last, out=cell)
-        wall = self.raster[cell[1], cell[0]].min(axis=1)
-        score[wall < self.wall_margin] -= 2 * self.danger
-        turn = self.bot.steer(aim_err)
-        score[3 * turn:3 * turn + 3] += 0.5
-        best = int(np.argmax(score))
+        best = evade_choice(x, y, math.cos(h), math.sin(h), self.fwd, self.side, self.times,
+                            match.world.bullet_state, np.array(threats, dtype=np.int64),
+                            len(threats), self.raster, 1 / self.res,
+                            4 * self.danger * self.danger, self.wall_margin,
+                            2 * self.danger, 0.5, self.bot.steer(aim_err), self._score)
         return best // 3, best % 3
 
 

@@ -5,6 +5,7 @@ import math
 import numpy as np
 import pytest
 
+from alphatank.bots.kernels import evade_choice
 from alphatank.game.kernels import progress_counts
 from alphatank.game.observe import ObservationBuilder, StateBatch, slot_counts
 from alphatank.sim.config import game_config
@@ -88,3 +89,103 @@ def test_paper_observation_sorts_other_bullets_nearest_first_ties_in_slot_order(
     assert slot[:, at["bullet.mask"]].tolist() == [1.0, 1.0, 1.0] + [0.0] * (cap - 3)
     assert rel_y[:3].tolist() == pytest.approx([40 * scale, 0.0, 120 * scale])
     assert (np.abs(obs) <= 1.0).all()
+
+
+# ---- the bots' dodge ------------------------------------------------------------------
+
+
+def numpy_evade(ev, x, y, h, bullet_xy, bullet_vel, turn, raster, margin):
+    """Evader.evade's choice and scores as numpy computed them before the kernel."""
+    c, s = math.cos(h), math.sin(h)
+    coef = np.zeros((3, 2, 1, 1))
+    coef.reshape(-1)[:] = (x, y, c, s, -s, c)
+    tmp, pos = np.empty((2,) + ev.fwd.shape), np.empty((2,) + ev.fwd.shape)
+    np.multiply(coef[1], ev.fwd, out=tmp)
+    np.add(coef[0], tmp, out=pos)
+    np.multiply(coef[2], ev.side, out=tmp)
+    pos += tmp
+    bpos = bullet_xy[:, :, None] + bullet_vel[:, :, None] * ev.times
+    d = pos[:, :, None, :] - bpos.transpose(1, 0, 2)[:, None]
+    d *= d
+    gap2 = (d[0] + d[1]).reshape(9, -1).min(axis=1)
+    score = np.sqrt(np.minimum(gap2, 4 * ev.danger * ev.danger))
+    cell = (pos * (1 / ev.res)).astype(np.intp)
+    np.maximum(cell, 0, out=cell)
+    np.minimum(cell, np.array([raster.shape[1] - 1, raster.shape[0] - 1]).reshape(2, 1, 1),
+               out=cell)
+    wall = raster[cell[1], cell[0]].min(axis=1)
+    score[wall < margin] -= 2 * ev.danger
+    score[3 * turn:3 * turn + 3] += 0.5
+    return int(np.argmax(score)), score
+
+
+def kernel_evade(ev, x, y, h, state, threats, turn, raster, margin):
+    score = np.full(9, np.nan)
+    best = evade_choice(x, y, math.cos(h), math.sin(h), ev.fwd, ev.side, ev.times, state,
+                        np.array(threats, dtype=np.int64), len(threats), raster, 1 / ev.res,
+                        4 * ev.danger * ev.danger, margin, 2 * ev.danger, 0.5,
+                        turn, score)
+    return best, score
+
+
+@pytest.fixture(scope="module")
+def evader():
+    from alphatank.bots import SmartBot
+
+    match = Match(game_config("paper"), load_map("maze"), ["A", "B"], seed=0)
+    bot = SmartBot(seed=0)
+    bot.reset(match, 0)
+    return bot.evader
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_evade_choice_equals_the_numpy_dodge_bit_for_bit(evader, seed):
+    """Random poses (some off the map's raster, some against walls), 1-4 bullets, every
+    turn preference; bullets far off make capped, equal gaps, so ties are broken as
+    argmax breaks them (first best)."""
+    ev, rng = evader, np.random.default_rng(seed)
+    H, W = ev.raster.shape[0] * ev.res, ev.raster.shape[1] * ev.res
+    best_seen, penalised = set(), 0
+    for trial in range(200):
+        x, y = rng.uniform(-20, W + 20), rng.uniform(-20, H + 20)
+        h = rng.uniform(-math.pi, math.pi)
+        n = int(rng.integers(1, 5))
+        state = np.zeros((12, 6))
+        slots = sorted(rng.choice(12, size=n, replace=False).tolist())
+        far = trial % 5 == 0
+        for b in slots:
+            ang = rng.uniform(-math.pi, math.pi)
+            dist = rng.uniform(5000, 6000) if far else rng.uniform(0, 120)
+            state[b, 0:2] = x + dist * math.cos(ang), y + dist * math.sin(ang)
+            speed = rng.uniform(100, 400)
+            state[b, 3:5] = -speed * math.cos(ang + rng.normal(0, 0.3)), \
+                -speed * math.sin(ang + rng.normal(0, 0.3))
+        turn = trial % 3
+        want = numpy_evade(ev, x, y, h, state[slots, 0:2], state[slots, 3:5], turn,
+                           ev.raster, ev.wall_margin)
+        got = kernel_evade(ev, x, y, h, state, slots, turn, ev.raster, ev.wall_margin)
+        assert got[0] == want[0], (trial, got, want)
+        assert got[1].tobytes() == want[1].tobytes(), trial
+        best_seen.add(got[0])
+        penalised += int((want[1] < 0.5 * ev.danger).any())
+    assert len(best_seen) >= 4 and penalised, "the cases exercise choices and walls"
+
+
+def test_evade_choice_compares_the_raster_in_float32(evader):
+    """numpy compares the float32 raster with a Python float in float32 (NEP 50): a
+    clearance equal to the margin's float32 rounding is not below it, even where the
+    margin's float64 value is larger (13.7 rounds down in float32)."""
+    ev = evader
+    margin = 13.7
+    raster = np.full(ev.raster.shape, 100.0, dtype=np.float32)
+    raster[:, :] = np.float32(margin)
+    raster[:, : raster.shape[1] // 2] = np.nextafter(np.float32(margin), np.float32(0))
+    raster.setflags(write=False)
+    state = np.zeros((4, 6))
+    state[0, 0:2], state[0, 3:5] = (400.0, 300.0), (-200.0, 0.0)
+    for x in (100.0, raster.shape[1] * ev.res * 0.75):
+        want = numpy_evade(ev, x, 300.0, 0.3, state[[0], 0:2], state[[0], 3:5], 1, raster,
+                           margin)
+        got = kernel_evade(ev, x, 300.0, 0.3, state, [0], 1, raster, margin)
+        assert got[0] == want[0] and got[1].tobytes() == want[1].tobytes()
+    assert float(np.float32(margin)) < margin  # the case the float64 comparison gets wrong

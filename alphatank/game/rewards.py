@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from alphatank.game.kernels import progress_counts
+from alphatank.sim.ballistics import predict_path
 from alphatank.sim.config import ConfigError, GameConfig, RewardConfig, hit_radius
 
 if TYPE_CHECKING:
@@ -111,19 +112,19 @@ def trajectory_far(d: float, cfg: RewardConfig) -> float:
     return cfg.trajectory_far * min(1.0, (d - far) / far)
 
 
-def path_min_distance(path: np.ndarray, targets: np.ndarray) -> float:
-    """Closest approach of the polyline ``path`` (k, 2) to any of ``targets`` (m, 2).
+def path_min_distance(path: np.ndarray, targets: Sequence[Sequence[float]]) -> float:
+    """Closest approach of the polyline ``path`` (k, 2) to any of ``targets`` (m rows of
+    x, y).
 
     Same result as :func:`alphatank.sim.ballistics.path_min_distance`; a scalar loop, because
     a shot's path has a handful of legs and a match a handful of tanks, where this is
     several times cheaper than the array version (it runs on every shot)."""
     best = math.inf
     pts = path.tolist()
-    tgs = targets.tolist()
     for (ax, ay), (bx, by) in zip(pts, pts[1:], strict=False):
         dx, dy = bx - ax, by - ay
         len2 = dx * dx + dy * dy
-        for tx, ty in tgs:
+        for tx, ty in targets:
             rx, ry = tx - ax, ty - ay
             u = 0.0 if len2 == 0.0 else min(1.0, max(0.0, (rx * dx + ry * dy) / len2))
             ex, ey = rx - u * dx, ry - u * dy
@@ -239,6 +240,7 @@ class RewardTracker:
         # enemy[b, j]: tank j is an enemy of bullet b's owner.
         self.enemy = self.team_index[owner][:, None] != self.team_index[None, :]
         self.foe = self.team_index[:, None] != self.team_index[None, :]  # (n, n)
+        self._foes = [np.flatnonzero(row).tolist() for row in self.foe]  # per tank
         # Bullet slots of rewarded seats (only their progress is scored), NaN = none.
         self.rw_seats = np.flatnonzero(self.rewarded)
         self.rw_bullets = (self.rw_seats[:, None] * cap + np.arange(cap)).reshape(-1)
@@ -381,20 +383,20 @@ class RewardTracker:
             terms[T["team_win"]], terms[T["team_loss"]], terms[T["team_draw"]] = out
 
     def _shot_distance(self, match: Match, tank: int, b: int) -> float:
-        """Closest approach of a just-fired bullet's predicted path to a live enemy."""
-        from alphatank.sim.ballistics import predict_path
+        """Closest approach of a just-fired bullet's predicted path to a live enemy (plain
+        Python reads: this runs on every shot, on a few numbers)."""
         w = match.world
         if not w.bullet_active[b]:
             return math.inf  # hit or gone within its first tick: the hit term scores it
-        enemies = match.alive & self.foe[tank]
-        if not enemies.any():
+        alive, rows = match.alive.tolist(), w.tank_rows()
+        enemies = [rows[j][:2] for j in self._foes[tank] if alive[j]]
+        if not enemies:
             return math.inf
-        x, y = match.bullet_xy[b]
-        vx, vy = match.bullet_vel[b]
-        left = (w.bullet_expire[b] - w.substep) * w.step_len
+        x, y, _, vx, vy, _ = w.bullet_state[b].tolist()
+        left = (int(w.bullet_expire[b]) - w.substep) * w.step_len
         path = predict_path(w, x, y, math.atan2(vy, vx), max_distance=left,
                             max_bounces=self.game.bullet_max_bounces - int(w.bullet_bounces[b]))
-        return path_min_distance(path, match.tank_xy[enemies])
+        return path_min_distance(path, enemies)
 
     def _progress(self, sl: slice, batch: StateBatch, terms: np.ndarray) -> None:
         """bullet_close / bullet_away: each live bullet of a rewarded seat closer to /
@@ -470,7 +472,6 @@ class RewardTracker:
 
     def _aimed(self, match: Match) -> np.ndarray:
         """Per tank: does a bullet fired now have a predicted path through an enemy?"""
-        from alphatank.sim.ballistics import predict_path
         out = np.zeros(self.n, dtype=bool)
         w = match.world
         for i in np.flatnonzero(match.alive & self.rewarded):
@@ -478,5 +479,5 @@ class RewardTracker:
             if enemies.any():
                 mx, my = w.muzzle(int(i))
                 path = predict_path(w, mx, my, float(match.tank_angle[i]))
-                out[i] = path_min_distance(path, match.tank_xy[enemies]) <= self.radius
+                out[i] = path_min_distance(path, match.tank_xy[enemies].tolist()) <= self.radius
         return out
