@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 
 import numpy as np
 
-from alphatank.bots.kernels import evade_choice
+from alphatank.bots.kernels import evade_choice, threat_slots
 from alphatank.sim.ballistics import path_hits, predict_path
 from alphatank.sim.navigation import NavGrid, nav_grid
 from alphatank.sim.policy import ACTIONS, NOOP
@@ -349,51 +349,28 @@ class Evader:
         can_hit = match.world.can_hit[:, seat].copy()
         can_hit[seat] = False
         self.shooters = [int(k) for k in np.flatnonzero(can_hit)]
-        # Runs (lo, hi) of the bullet slots of those tanks (slot owners are fixed for a
-        # world's lifetime).
-        slots = np.flatnonzero(can_hit[match.bullet_owner])
-        cuts = np.flatnonzero(np.diff(slots) != 1) + 1
-        self._runs = [(int(r[0]), int(r[-1]) + 1) for r in np.split(slots, cuts) if r.size]
+        # Their bullet slots (slot owners are fixed for a world's lifetime).
+        self._slots = np.flatnonzero(can_hit[match.bullet_owner]).astype(np.int64)
+        self._slots.setflags(write=False)
+        self._found = np.zeros(len(self._slots), dtype=np.int64)  # threats()'s output
         self._soon = float(self.times[-1] * 2)
         self._danger2 = self.danger ** 2
 
     def threats(self, match: Match, seat: int) -> list[int]:
         """Indices (ascending) of bullets that can hit ``seat`` and pass within danger
-        soon. Plain Python over the few live bullets: a handful of numpy calls on arrays
-        this small cost several times more."""
+        soon (:func:`~alphatank.bots.kernels.threat_slots`, called only while one of the
+        shooters has a bullet in play)."""
         counts = match.bullets_alive.tolist()
         for k in self.shooters:
             if counts[k]:
                 break
         else:
             return []
-        active = match.bullet_active.tolist()
-        x = y = None
-        soon, danger2 = self._soon, self._danger2
-        out = []
-        for lo, hi in self._runs:
-            live = active[lo:hi]
-            if True not in live:
-                continue
-            if x is None:
-                x, y = match.world.tank_rows()[seat][:2]
-            # Slots fill lowest first, so the run is read up to its last live slot only.
-            end = len(live) - live[::-1].index(True)
-            rows = match.world.bullet_state[lo:lo + end].tolist()  # x, y, angle, vx, vy, w
-            for j in range(end):  # (enumerate(zip(...)) costs several times more)
-                if not live[j]:
-                    continue
-                bx, by, _, vx, vy, _ = rows[j]
-                rx, ry = bx - x, by - y
-                closing = -(rx * vx + ry * vy)
-                if closing <= 0.0:  # moving away or past: t <= 0
-                    continue
-                v2 = vx * vx + vy * vy
-                t = closing / (1e-9 if v2 < 1e-9 else v2)  # np.maximum
-                mx, my = rx + vx * t, ry + vy * t
-                if 0 < t < soon and mx * mx + my * my < danger2:
-                    out.append(lo + j)
-        return out
+        x, y = match.world.tank_rows()[seat][:2]
+        found = self._found
+        k = threat_slots(match.world.bullet_state, match.bullet_active, self._slots, x, y,
+                         self._soon, self._danger2, found)
+        return found[:k].tolist()
 
     def evade(self, match: Match, seat: int, threats: list[int],
               aim_err: float = 0.0) -> tuple[int, int]:

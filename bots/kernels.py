@@ -68,3 +68,30 @@ def evade_choice(x: float, y: float, c: float, s: float, fwd: np.ndarray, side: 
         if v > score[best]:
             best = i
     return best
+
+
+@njit(_I8(_F8_2, types.Array(types.boolean, 1, "C"), types.Array(_I8, 1, "C", readonly=True),
+          _F8, _F8, _F8, _F8, types.Array(_I8, 1, "C")), cache=True)
+def threat_slots(bullet_state: np.ndarray, active: np.ndarray, slots: np.ndarray, x: float,
+                 y: float, soon: float, danger2: float, out: np.ndarray) -> int:
+    """:meth:`bots.base.Evader.threats`: of the ``active`` bullet ``slots`` (ascending),
+    those whose straight flight (rows of ``bullet_state``: x, y, angle, vx, vy, w) passes
+    within ``danger2`` (squared) of (x, y) at a time in (0, ``soon``) seconds. Into
+    ``out``, in slot order; returns how many."""
+    k = 0
+    for i in range(slots.shape[0]):
+        b = slots[i]
+        if not active[b]:
+            continue
+        rx, ry = bullet_state[b, 0] - x, bullet_state[b, 1] - y
+        vx, vy = bullet_state[b, 3], bullet_state[b, 4]
+        closing = -(rx * vx + ry * vy)
+        if closing <= 0.0:  # moving away or past: t <= 0
+            continue
+        v2 = vx * vx + vy * vy
+        t = closing / (1e-9 if v2 < 1e-9 else v2)
+        mx, my = rx + vx * t, ry + vy * t
+        if 0 < t < soon and mx * mx + my * my < danger2:
+            out[k] = b
+            k += 1
+    return k

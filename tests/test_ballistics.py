@@ -128,3 +128,41 @@ def test_bank_angles_are_real_one_bounce_shots():
             if len(path) >= 3 and path_distances(path[:3], t[None])[0] < 1e-6:
                 found += 1  # the mirror solution is exact when no wall is in the way
     assert found >= 20
+
+
+def test_quick_trace_is_the_flight_pymunks_space_query_finds():
+    """World.quick_trace (one Chipmunk call a leg) flies what trace_flight flies with
+    pymunk's public space queries, starts that overlap a wall (skipped while leaving it)
+    included."""
+    from alphatank.sim.world import WALLS_ONLY, trace_flight
+
+    spec = load_map("maze")
+    cfg = GameConfig()
+    world = World(cfg, spec, np.array([(100.0, 100.0, 0.0)]))
+    space = world.space
+
+    def public(r):
+        def hit(x0, y0, x1, y1, skip):
+            if not skip:
+                return space.segment_query_first((x0, y0), (x1, y1), r, WALLS_ONLY)
+            best = None
+            for q in space.segment_query((x0, y0), (x1, y1), r, WALLS_ONLY):
+                if q.shape not in skip and (best is None or q.alpha < best.alpha):
+                    best = q
+            return best
+        return hit
+
+    rng = np.random.default_rng(5)
+    overlapped = bounced = 0
+    for _ in range(300):
+        r = float(rng.choice([cfg.bullet_radius, 0.0, 6.0]))
+        x, y = rng.uniform(0, spec.width), rng.uniform(0, spec.height)
+        a = rng.uniform(-math.pi, math.pi)
+        dx, dy = math.cos(a), math.sin(a)
+        got = world.quick_trace(x, y, dx, dy, 900.0, 4, r)
+        want = trace_flight(public(r), x, y, dx, dy, 900.0, 4)
+        assert got == want
+        q = space.point_query_nearest((x, y), r, WALLS_ONLY)
+        overlapped += q is not None and q.distance < r
+        bounced += len(got.ricochets) > 1
+    assert overlapped and bounced

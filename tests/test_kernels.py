@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from alphatank.bots.kernels import evade_choice
+from alphatank.bots.kernels import evade_choice, threat_slots
 from alphatank.game.kernels import progress_counts
 from alphatank.game.observe import ObservationBuilder, StateBatch, slot_counts
 from alphatank.sim.config import game_config
@@ -189,3 +189,49 @@ def test_evade_choice_compares_the_raster_in_float32(evader):
         got = kernel_evade(ev, x, 300.0, 0.3, state, [0], 1, raster, margin)
         assert got[0] == want[0] and got[1].tobytes() == want[1].tobytes()
     assert float(np.float32(margin)) < margin  # the case the float64 comparison gets wrong
+
+
+def python_threats(state, active, slots, x, y, soon, danger2):
+    """Evader.threats as plain Python computed it before the kernel."""
+    out = []
+    for b in slots:
+        if not active[b]:
+            continue
+        bx, by, _, vx, vy, _ = state[b].tolist()
+        rx, ry = bx - x, by - y
+        closing = -(rx * vx + ry * vy)
+        if closing <= 0.0:
+            continue
+        v2 = vx * vx + vy * vy
+        t = closing / (1e-9 if v2 < 1e-9 else v2)
+        mx, my = rx + vx * t, ry + vy * t
+        if 0 < t < soon and mx * mx + my * my < danger2:
+            out.append(b)
+    return out
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_threat_slots_equal_the_python_scan(evader, seed):
+    """Bullets around a tank, some aimed at it, some passing by or moving away, some at
+    rest (the 1e-9 floor), some inactive; a run of slots with a gap."""
+    ev, rng = evader, np.random.default_rng(seed)
+    slots = np.array([2, 3, 4, 5, 8, 9, 10, 11], dtype=np.int64)
+    slots.setflags(write=False)
+    found_any = 0
+    for trial in range(300):
+        x, y = rng.uniform(100, 500, 2)
+        state = np.zeros((12, 6))
+        ang = rng.uniform(-math.pi, math.pi, 12)
+        dist = rng.uniform(0, 150, 12)
+        state[:, 0], state[:, 1] = x + dist * np.cos(ang), y + dist * np.sin(ang)
+        speed = rng.uniform(0, 400, 12)
+        speed[rng.random(12) < 0.1] = 0.0
+        aim = ang + math.pi + rng.normal(0, 0.4, 12)
+        state[:, 3], state[:, 4] = speed * np.cos(aim), speed * np.sin(aim)
+        active = rng.random(12) < 0.7
+        out = np.full(len(slots), -1, dtype=np.int64)
+        k = threat_slots(state, active, slots, x, y, ev._soon, ev._danger2, out)
+        want = python_threats(state, active, slots.tolist(), x, y, ev._soon, ev._danger2)
+        assert out[:k].tolist() == want, trial
+        found_any += bool(want) and len(want) < int(active[slots].sum())
+    assert found_any > 20, "some bullets threaten and some do not"

@@ -1,6 +1,6 @@
 """Ricochet predictor: where a bullet fired from a pose goes, bounces included.
 
-:func:`predict_path` runs :func:`alphatank.sim.world.trace`, the very routine the physics uses
+:func:`predict_path` runs :meth:`alphatank.sim.world.World.trace`, the very routine the physics uses
 to move bullets through walls (continuous thick segment queries against walls only,
 elastic reflection about the surface normal), over the bullet's whole range at once. So
 the predicted bounce points are the ones a real bullet records.
@@ -12,12 +12,10 @@ geometry on the polyline a prediction returns (no physics), cheap enough per tic
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 
 import numpy as np
-import pymunk
 
-from alphatank.sim.world import WALLS_ONLY, World, trace
+from alphatank.sim.world import WALLS_ONLY, World
 
 
 def predict_path(world: World, x: float, y: float, angle: float,
@@ -49,10 +47,9 @@ def predict_path(world: World, x: float, y: float, angle: float,
     dx, dy = math.cos(angle), math.sin(angle)
     if exact:
         f = world.trace(x, y, dx, dy, length, bounces, radius=r)
-        ex, ey, points = f.ex, f.ey, [(q.x, q.y) for q in f.ricochets]
     else:
-        ex, ey, _, _, points, _ = trace(world.space, x, y, dx, dy, length, r, bounces,
-                                        quick_wall_hit)
+        f = world.quick_trace(x, y, dx, dy, length, bounces, r)
+    ex, ey, points = f.ex, f.ey, [(q.x, q.y) for q in f.ricochets]
     out = np.empty((len(points) + 2, 2), dtype=np.float64)
     out[0] = (x, y)
     if points:
@@ -125,21 +122,6 @@ def segment_distances(z: np.ndarray, w: np.ndarray
     len2 = np.maximum(d.real * d.real + d.imag * d.imag, 1e-300)  # zero legs: t = 0
     t = np.minimum(np.maximum((rel * d.conj()).real / len2, 0.0), 1.0)
     return np.abs(rel - t * d), t, d
-
-
-def quick_wall_hit(space: pymunk.Space, x0: float, y0: float, x1: float, y1: float,
-                   radius: float, skip: Sequence[pymunk.Shape] = ()
-                   ) -> pymunk.SegmentQueryInfo | None:
-    """:func:`alphatank.sim.world.first_wall_hit` through pymunk's space-level query:
-    cheaper, but it can miss a wall corner grazed only by the circle's rim."""
-    if not skip:  # the nearest hit, found without a Python callback per shape
-        q = space.segment_query_first((x0, y0), (x1, y1), radius, WALLS_ONLY)
-        return q if q is not None and q.shape is not None else None
-    best = None
-    for q in space.segment_query((x0, y0), (x1, y1), radius, WALLS_ONLY):
-        if q.shape not in skip and (best is None or q.alpha < best.alpha):
-            best = q
-    return best
 
 
 def wall_faces(rects: np.ndarray, width: float, height: float) -> np.ndarray:

@@ -142,6 +142,7 @@ class World:
         self.bullet_walls = pymunk.Space()
         self._add_walls()
         self._first_bullet_hit = cp.FirstHit(self.bullet_walls, 0.0, _ANY)
+        self._quick: dict[float, cp.FirstHit] = {}  # quick_trace's queries, per radius
         self.tank_bodies: list[pymunk.Body] = []
         self.tank_shapes: list[pymunk.Poly] = []  # collision envelopes
         self.hitboxes: list[pymunk.Poly] = []  # exact boxes that bullets hit
@@ -481,6 +482,28 @@ class World:
                                                         skip),
             x, y, dx, dy, length, bounces_left)
 
+    def quick_trace(self, x: float, y: float, dx: float, dy: float, length: float,
+                    bounces_left: int, radius: float) -> Flight:
+        """:meth:`trace` with the space-level thick segment query (one C call a leg, the
+        query pymunk's ``space.segment_query_first`` makes): cheaper, but it can miss a
+        wall corner grazed only by the circle's rim."""
+        first = self._quick.get(radius)
+        if first is None:
+            first = self._quick[radius] = cp.FirstHit(self.space, radius, WALLS_ONLY)
+
+        def hit(x0: float, y0: float, x1: float, y1: float,
+                skip: Sequence[object]) -> cp.Hit | None:
+            if not skip:
+                return first(x0, y0, x1, y1)
+            best = None
+            for q in self.space.segment_query((x0, y0), (x1, y1), radius, WALLS_ONLY):
+                key = cp.handle(q.shape)
+                if key not in skip and (best is None or q.alpha < best.alpha):
+                    best = cp.Hit(key, tuple(q.normal), q.alpha)
+            return best
+
+        return trace_flight(hit, x, y, dx, dy, length, bounces_left)
+
     def _bullet_hit(self, x0: float, y0: float, x1: float, y1: float,
                     skip: Sequence[object]) -> cp.Hit | None:
         """:meth:`wall_hit` at the bullet radius, one C call; walls come as handles."""
@@ -556,23 +579,6 @@ def trace_flight(hit: WallHit, x: float, y: float, dx: float, dy: float, length:
         x, y = x + nx * SKIN, y + ny * SKIN
         ricochets.append(Ricochet(s, cx, cy, x, y, dx, dy))
         leaving.clear()
-
-
-WallQuery = Callable[[pymunk.Space, float, float, float, float, float, Sequence[pymunk.Shape]],
-                     pymunk.SegmentQueryInfo | None]
-
-
-def trace(space: pymunk.Space, x: float, y: float, dx: float, dy: float, length: float,
-          radius: float, bounces_left: int, query: WallQuery = first_wall_hit
-          ) -> tuple[float, float, float, float, list[tuple[float, float]], bool]:
-    """:func:`trace_flight` with ``query(space, x0, y0, x1, y1, radius, skip)``.
-
-    Returns the end position and direction, the centre at each ricochet, and whether the
-    bullet died on a wall contact with no bounces left (it then ends at that contact).
-    """
-    f = trace_flight(lambda x0, y0, x1, y1, skip: query(space, x0, y0, x1, y1, radius, skip),
-                     x, y, dx, dy, length, bounces_left)
-    return f.ex, f.ey, f.edx, f.edy, [(r.x, r.y) for r in f.ricochets], f.died
 
 
 def _bullet_tank(arbiter: pymunk.Arbiter, space: pymunk.Space, world: World) -> None:
