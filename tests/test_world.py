@@ -7,7 +7,7 @@ import pytest
 
 from alphatank.sim.config import PRESETS, game_config, replace
 from alphatank.sim.mapspec import load_map, parse_map, shipped_maps
-from alphatank.sim.world import World, first_wall_hit, substeps_for
+from alphatank.sim.world import WALLS_ONLY, World, first_wall_hit, substeps_for
 
 
 def _world(spec, cfg, poses):
@@ -319,6 +319,14 @@ def test_direct_chipmunk_calls_match_pymunk():
         assert (fast is None) == (slow is None)
         if slow is not None:
             assert fast == (cp.handle(slow.shape), tuple(slow.normal), slow.alpha)
+    near, found = cp.NearestDistance(w.space, WALLS_ONLY), 0
+    for _ in range(500):
+        x, y = rng.uniform(-10, spec.width + 10, size=2)
+        r = float(rng.choice([0.0, 4.0, 30.0]))
+        slow = w.space.point_query_nearest((x, y), r, WALLS_ONLY)
+        assert near(x, y, r) == (None if slow is None else slow.distance)
+        found += slow is not None
+    assert found
     body = w.controls[0]
     cp.set_position(body, 1.5, -2.5)
     cp.set_velocity(body, 3.25, 4.0)

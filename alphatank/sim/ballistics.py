@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from alphatank.sim.world import WALLS_ONLY, World
+from alphatank.sim.world import World
 
 
 def predict_path(world: World, x: float, y: float, angle: float,
@@ -41,8 +41,8 @@ def predict_path(world: World, x: float, y: float, angle: float,
     bounces = cfg.bullet_max_bounces if max_bounces is None else int(max_bounces)
     r = cfg.bullet_radius if radius is None else float(radius)
     x, y = float(x), float(y)
-    inside = world.space.point_query_nearest((x, y), r, WALLS_ONLY)
-    if inside is not None and inside.distance < r - 1e-9:
+    inside = world.wall_distance(x, y, r)
+    if inside is not None and inside < r - 1e-9:
         return np.array([(x, y), (x, y)], dtype=np.float64)
     dx, dy = math.cos(angle), math.sin(angle)
     if exact:

@@ -124,6 +124,21 @@ class FirstHit:
         return Hit(shape, (info.normal.x, info.normal.y), info.alpha)
 
 
+class NearestDistance:
+    """``space.point_query_nearest(point, max_distance, shape_filter)``'s ``distance``, or
+    None when it finds no shape, with one result struct allocated once."""
+
+    def __init__(self, space: pymunk.Space, shape_filter: pymunk.ShapeFilter):
+        self._space, self._filter = space._space, shape_filter
+        self._info = ffi.new("cpPointQueryInfo *")
+
+    def __call__(self, x: float, y: float, max_distance: float) -> float | None:
+        info = self._info
+        shape = lib.cpSpacePointQueryNearest(self._space, (x, y), max_distance, self._filter,
+                                             info)
+        return None if shape == ffi.NULL else info.distance
+
+
 class BodyReader:
     """``pymunk.batch.get_space_bodies(space, fields, buffer)`` with its call data built
     once. The first read sizes the buffer; later reads rewrite it in place (the space's

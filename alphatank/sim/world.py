@@ -143,6 +143,7 @@ class World:
         self._add_walls()
         self._first_bullet_hit = cp.FirstHit(self.bullet_walls, 0.0, _ANY)
         self._quick: dict[float, cp.FirstHit] = {}  # quick_trace's queries, per radius
+        self._wall_distance = cp.NearestDistance(self.space, WALLS_ONLY)
         self.tank_bodies: list[pymunk.Body] = []
         self.tank_shapes: list[pymunk.Poly] = []  # collision envelopes
         self.hitboxes: list[pymunk.Poly] = []  # exact boxes that bullets hit
@@ -465,6 +466,11 @@ class World:
             if q.shape not in skip and (best is None or q.alpha < best.alpha):
                 best = q
         return best
+
+    def wall_distance(self, x: float, y: float, max_distance: float) -> float | None:
+        """Distance from (x, y) to the nearest wall within ``max_distance`` (negative
+        inside one), or None: ``space.point_query_nearest`` against the walls."""
+        return self._wall_distance(x, y, max_distance)
 
     def ray(self, start: tuple[float, float], end: tuple[float, float],
             radius: float = 0.0) -> pymunk.SegmentQueryInfo | None:
