@@ -29,6 +29,8 @@ BACK, STOP, FORWARD = 0, 1, 2
 MOVE_CONE = math.radians(35.0)  # drive only while the heading error is below this
 REVERSE_CONE = math.radians(110.0)  # reverse instead of turning round beyond this
 DRIVE_RADIUS = 16.0  # clearance used for straight driving legs (tank half-length + 1)
+AWAY_CLEARANCE = DRIVE_RADIUS + 4.0  # away_point's (float32-exact: the raster is float32)
+_AWAY_TURNS = tuple(t * math.pi for t in (0.0, 0.25, -0.25, 0.5, -0.5))
 ARRIVE_PX = 6.0
 
 
@@ -174,12 +176,15 @@ class Bot:
         """A point ``reach`` px from (x, y) away from (fx, fy), turned by up to 90 degrees
         if needed to keep clear of walls."""
         base = math.atan2(y - fy, x - fx)
-        turns = np.array([0.0, 0.25, -0.25, 0.5, -0.5]) * math.pi
-        ang = base + turns
-        pts = np.stack([x + reach * np.cos(ang), y + reach * np.sin(ang)], axis=1)
-        ok = self.nav.clearance(pts) > DRIVE_RADIUS + 4.0
-        i = int(np.argmax(ok)) if ok.any() else 0
-        return float(pts[i, 0]), float(pts[i, 1])
+        first = None
+        for turn in _AWAY_TURNS:  # plain Python: np.cos and math.cos give the same bits
+            a = base + turn
+            px, py = x + reach * math.cos(a), y + reach * math.sin(a)
+            if first is None:
+                first = (px, py)
+            if self.nav.clearance_at(px, py) > AWAY_CLEARANCE:
+                return px, py
+        return first
 
     def route(self, match: Match, x: float, y: float, me: int, goal: int
               ) -> tuple[float, float]:

@@ -5,8 +5,6 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
-import numpy as np
-
 from alphatank.bots.base import BACK, DRIVE_RADIUS, FORWARD, NONE, STOP, Bot, Evader, wrap
 
 if TYPE_CHECKING:
@@ -58,9 +56,9 @@ class DodgeBot(Bot):
         if abs(err) > math.pi / 2:
             err = wrap(err + math.pi)
         ahead = self._dir * 30.0
-        probe = self.nav.clearance(np.array([x + ahead * math.cos(heading),
-                                             y + ahead * math.sin(heading)]))
-        if probe < DRIVE_RADIUS:
+        probe = self.nav.clearance_at(x + ahead * math.cos(heading),
+                                      y + ahead * math.sin(heading))
+        if probe < DRIVE_RADIUS:  # float32-exact, so compared as numpy compared it
             self._dir = -self._dir
             self._flip_at = t + int(self.rng.integers(15, 46))
         return self.steer(err), FORWARD if self._dir > 0 else BACK

@@ -440,6 +440,36 @@ def test_bot_node_of_answers_like_the_nav_grid(map_name):
     assert len(set(got)) > nav.n_floor // 2  # the pixels cover most of the floor
 
 
+@pytest.mark.parametrize("map_name", ["maze", "battlefield"])
+def test_plain_python_clearance_and_away_point_answer_as_numpy(map_name):
+    """``clearance_at`` gives ``clearance``'s float32 value for points inside, on the
+    edges of and off the raster; ``away_point`` picks the point the numpy version picked
+    (np.cos and math.cos give the same bits; the raster is compared in float32)."""
+    from alphatank.bots.base import AWAY_CLEARANCE
+
+    m = Match(GameConfig(), load_map(map_name), ["A", "B"], seed=0)
+    bot = make_bot("defensive", seed=0)
+    bot.reset(m, 0, 0)
+    nav, spec = bot.nav, m.spec
+    rng = np.random.default_rng(6)
+    pts = rng.uniform(-20, [spec.width + 20, spec.height + 20], size=(3000, 2))
+    edges = [(0.0, 0.0), (spec.width, spec.height), (-1e-9, 5.0), (spec.width - 1e-9, 4.999)]
+    for x, y in pts.tolist() + edges:
+        want = nav.clearance(np.array([x, y]))
+        assert nav.clearance_at(x, y) == float(want)
+    assert np.float32(AWAY_CLEARANCE) == AWAY_CLEARANCE
+    turns = np.array([0.0, 0.25, -0.25, 0.5, -0.5]) * math.pi
+    moved = 0
+    for (x, y), (fx, fy) in zip(pts[:1500].tolist(), pts[1500:].tolist(), strict=True):
+        ang = math.atan2(y - fy, x - fx) + turns
+        cand = np.stack([x + 50.0 * np.cos(ang), y + 50.0 * np.sin(ang)], axis=1)
+        ok = nav.clearance(cand) > AWAY_CLEARANCE
+        i = int(np.argmax(ok)) if ok.any() else 0
+        assert bot.away_point(x, y, fx, fy) == (float(cand[i, 0]), float(cand[i, 1]))
+        moved += i > 0
+    assert moved > 50  # walls turned the point away often
+
+
 def test_bots_pickle_after_reset_without_their_wall_queries():
     import pickle
 

@@ -31,6 +31,7 @@ cell size), so every bot, reward and overlay on the same map shares one.
 
 from __future__ import annotations
 
+import math
 from collections import OrderedDict
 
 import numpy as np
@@ -78,6 +79,7 @@ class NavGrid:
         self._visible: dict[tuple[int, float], np.ndarray] = {}
         self._waypoints: dict[float, np.ndarray] = {}
         self._clearance: dict[float, np.ndarray] = {}
+        self._clearance_rows: dict[float, list[list[float]]] = {}  # the same, as lists
 
     # ---- construction ---------------------------------------------------------------
 
@@ -239,6 +241,17 @@ class NavGrid:
         inside = (r >= 0) & (r < h) & (c >= 0) & (c < w)
         return np.where(inside, grid[np.minimum(np.maximum(r, 0), h - 1),
                                      np.minimum(np.maximum(c, 0), w - 1)], 0.0)
+
+    def clearance_at(self, x: float, y: float, res: float = 5.0) -> float:
+        """:meth:`clearance` of one point in plain Python: the raster's float32 value as a
+        float (compare it with a float32-exact bound to compare as numpy would)."""
+        rows = self._clearance_rows.get(float(res))
+        if rows is None:
+            rows = self._clearance_rows[float(res)] = self.clearance_map(res).tolist()
+        r, c = math.floor(y / res), math.floor(x / res)
+        if 0 <= r < len(rows) and 0 <= c < len(rows[0]):
+            return rows[r][c]
+        return 0.0
 
     def waypoint_idx(self, i: int, j: int, radius: float) -> int:
         """Farthest cell on the BFS path from ``i`` to ``j`` that a disc of ``radius`` reaches
