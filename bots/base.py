@@ -322,9 +322,8 @@ class Bot:
             self._stuck_since, self._stuck_pose = t, (x, y, a)
             return rot, move
         if t - self._stuck_since >= 20:
-            probe = np.array([[x + 30 * math.cos(a), y + 30 * math.sin(a)],
-                              [x - 30 * math.cos(a), y - 30 * math.sin(a)]])
-            ahead, behind = self.nav.clearance(probe)
+            ahead = self.nav.clearance_at(x + 30 * math.cos(a), y + 30 * math.sin(a))
+            behind = self.nav.clearance_at(x - 30 * math.cos(a), y - 30 * math.sin(a))
             self._unstick_move = FORWARD if ahead > behind else BACK
             self._unstick_until = t + 12
             self._stuck_since = -1
