@@ -421,6 +421,34 @@ def test_wall_sight_answers_like_the_world(map_name):
     assert hits > 300 and 3000 - hits > 100 and agree < 3000  # both answers; tests differ
 
 
+def test_wall_sight_ray_clear_at_grazing_distances():
+    """Segments passing a wall corner or running along a wall at the query radius, a
+    hair nearer and a hair farther: the rounded-walls query answers as first_wall_hit."""
+    from alphatank.sim.sight import wall_sight
+    from alphatank.sim.world import first_wall_hit
+
+    spec = load_map("maze")
+    m = Match(GameConfig(), spec, ["A", "B"], seed=1)
+    sight = wall_sight(m.world)
+    rng = np.random.default_rng(8)
+    both = set()
+    for x0, y0, x1, y1 in spec.wall_rects:
+        for cx, cy in ((x0, y0), (x1, y0), (x0, y1), (x1, y1)):
+            for r in (3.0, 14.0):
+                for delta in (-1e-6, -1e-12, 0.0, 1e-12, 1e-6):
+                    a = rng.uniform(0, 2 * math.pi)
+                    ux, uy, vx, vy = math.cos(a), math.sin(a), -math.sin(a), math.cos(a)
+                    off = r + delta
+                    for px, py, qx, qy in (
+                            (cx + vx * off - ux * 60, cy + vy * off - uy * 60,
+                             cx + vx * off + ux * 60, cy + vy * off + uy * 60),
+                            (x0 - 20, y0 - off, x1 + 20, y0 - off)):  # along the top face
+                        want = first_wall_hit(m.world.space, px, py, qx, qy, r) is None
+                        assert sight.ray_clear(px, py, qx, qy, r) == want
+                        both.add(want)
+    assert both == {True, False}
+
+
 @pytest.mark.parametrize("map_name", ["maze", "battlefield"])
 def test_bot_node_of_answers_like_the_nav_grid(map_name):
     """The bots' plain-Python ``node_of`` (clamped without min/max) gives the nav grid's
