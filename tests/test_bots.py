@@ -447,6 +447,9 @@ def test_wall_sight_ray_clear_at_grazing_distances():
                         assert sight.ray_clear(px, py, qx, qy, r) == want
                         both.add(want)
     assert both == {True, False}
+    # Worlds on one map share the rounded walls (built once per map and radius).
+    other = wall_sight(Match(GameConfig(), load_map("maze"), ["A", "B"], seed=2).world)
+    assert other._walls_rounded(14.0) == sight._walls_rounded(14.0)
 
 
 @pytest.mark.parametrize("map_name", ["maze", "battlefield"])

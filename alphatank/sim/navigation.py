@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import math
 from collections import OrderedDict
+from typing import Any
 
 import numpy as np
 
@@ -80,6 +81,9 @@ class NavGrid:
         self._waypoints: dict[float, np.ndarray] = {}
         self._clearance: dict[float, np.ndarray] = {}
         self._clearance_rows: dict[float, list[list[float]]] = {}  # the same, as lists
+        # Query-only pymunk spaces of the map's walls rounded per radius, shared by every
+        # world on the map (filled by alphatank.sim.sight; lock-free queries only).
+        self.rounded_walls: dict[float, Any] = {}
 
     # ---- construction ---------------------------------------------------------------
 

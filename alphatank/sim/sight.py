@@ -2,7 +2,8 @@
 queries make, without pymunk's Python wrappers: 3-5x cheaper, bit-identical answers.
 
 ``WallSight(world)`` holds the world's chipmunk space and, per radius asked, a query-only
-space of the world's walls rounded by that radius; then
+space of the map's walls rounded by that radius (one per map and radius, kept on its
+``NavGrid``); then
 
 * :meth:`WallSight.clear` is ``space.segment_query_first(a, b, r, WALLS_ONLY) is None``
   (one ``cpSpaceSegmentQueryFirst``: the bots' quick aiming test);
@@ -26,9 +27,8 @@ from typing import Any
 import pymunk
 from pymunk._chipmunk import ffi, lib
 
-from alphatank.sim.world import WALLS_ONLY, World
-
-_EVERYWHERE = pymunk.BB(-1e300, -1e300, 1e300, 1e300)
+from alphatank.sim.navigation import nav_grid
+from alphatank.sim.world import WALLS_ONLY, World, rounded_walls
 
 
 def wall_sight(world: World) -> WallSight:
@@ -54,12 +54,15 @@ class WallSight:
         self._null = ffi.NULL
 
     def _walls_rounded(self, radius: float) -> Any:
-        """Chipmunk pointer of the query-only space of the walls rounded by ``radius``."""
+        """Chipmunk pointer of the walls rounded by ``radius``: one query-only space per
+        map and radius, kept on the map's NavGrid and shared by every world on it (the
+        sight keeps its own reference, so the space outlives it while the world lives)."""
         got = self._rounded.get(radius)
         if got is None:
-            space = pymunk.Space()
-            for shape in self.world.space.bb_query(_EVERYWHERE, WALLS_ONLY):
-                space.add(pymunk.Poly(space.static_body, shape.get_vertices(), radius=radius))
+            shared = nav_grid(self.world.spec).rounded_walls
+            space = shared.get(radius)
+            if space is None:
+                space = shared[radius] = rounded_walls(self.world.spec, radius)
             got = self._rounded[radius] = (space, space._space)
         return got[1]
 

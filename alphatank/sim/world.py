@@ -247,14 +247,9 @@ class World:
     def _add_walls(self) -> None:
         """Merged wall boxes plus a closed boundary outside the grid (and their rounded
         twins in ``bullet_walls``)."""
-        spec, static = self.spec, self.space.static_body
-        t = spec.cell
-        W, H = spec.width, spec.height
-        rects = list(spec.wall_rects) + [
-            (-t, -t, W + t, 0.0), (-t, H, W + t, H + t), (-t, 0.0, 0.0, H), (W, 0.0, W + t, H)]
+        static = self.space.static_body
         r = self.cfg.bullet_radius
-        for x0, y0, x1, y1 in rects:
-            corners = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
+        for corners in wall_corners(self.spec):
             shape = pymunk.Poly(static, corners)
             shape.collision_type, shape.filter = WALL, WALL_FILTER
             shape.friction, shape.elasticity = 0.0, 1.0
@@ -521,6 +516,25 @@ class World:
             if key not in skip and (best is None or q.alpha < best.alpha):
                 best = cp.Hit(key, tuple(q.normal), q.alpha)
         return best
+
+
+def wall_corners(spec: MapSpec) -> list[list[tuple[float, float]]]:
+    """Corners of every wall box of a world on ``spec``: the map's merged wall rectangles
+    plus a closed boundary one cell thick outside the grid."""
+    t, W, H = spec.cell, spec.width, spec.height
+    rects = list(spec.wall_rects) + [
+        (-t, -t, W + t, 0.0), (-t, H, W + t, H + t), (-t, 0.0, 0.0, H), (W, 0.0, W + t, H)]
+    return [[(x0, y0), (x1, y0), (x1, y1), (x0, y1)] for x0, y0, x1, y1 in rects]
+
+
+def rounded_walls(spec: MapSpec, radius: float) -> pymunk.Space:
+    """A query-only space of the walls of a world on ``spec`` rounded by ``radius``: a thin
+    segment query against it answers as a circle of ``radius`` swept against the sharp
+    walls (Chipmunk adds a poly's and a query's radii)."""
+    space = pymunk.Space()
+    for corners in wall_corners(spec):
+        space.add(pymunk.Poly(space.static_body, corners, radius=radius))
+    return space
 
 
 def first_wall_hit(space: pymunk.Space, x0: float, y0: float, x1: float, y1: float,
