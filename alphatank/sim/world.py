@@ -138,8 +138,8 @@ class World:
         # Query-only twin of the walls, rounded by the bullet radius: one C-level thin
         # segment query against it is a swept-bullet query (chipmunk adds the shape's and
         # the query's radii, so alpha and normal are bit-identical to a radius-r query
-        # against the sharp walls).
-        self.bullet_walls = pymunk.Space()
+        # against the sharp walls). Its own (its queries may lock it).
+        self.bullet_walls = rounded_walls(spec, cfg.bullet_radius)
         self._add_walls()
         self._first_bullet_hit = cp.FirstHit(self.bullet_walls, 0.0, _ANY)
         self._quick: dict[float, cp.FirstHit] = {}  # quick_trace's queries, per radius
@@ -245,16 +245,13 @@ class World:
         return 0 if self.cfg.self_hit else tank + 1
 
     def _add_walls(self) -> None:
-        """Merged wall boxes plus a closed boundary outside the grid (and their rounded
-        twins in ``bullet_walls``)."""
+        """Merged wall boxes plus a closed boundary outside the grid (:func:`wall_corners`)."""
         static = self.space.static_body
-        r = self.cfg.bullet_radius
         for corners in wall_corners(self.spec):
             shape = pymunk.Poly(static, corners)
             shape.collision_type, shape.filter = WALL, WALL_FILTER
             shape.friction, shape.elasticity = 0.0, 1.0
             self.space.add(shape)
-            self.bullet_walls.add(pymunk.Poly(self.bullet_walls.static_body, corners, radius=r))
 
     # ---- commands -------------------------------------------------------------------
 
