@@ -80,7 +80,6 @@ class NavGrid:
         self._visible: dict[tuple[int, float], np.ndarray] = {}
         self._waypoints: dict[float, np.ndarray] = {}
         self._clearance: dict[float, np.ndarray] = {}
-        self._clearance_rows: dict[float, list[list[float]]] = {}  # the same, as lists
         # Query-only pymunk spaces of the map's walls rounded per radius, shared by every
         # world on the map (filled by alphatank.sim.sight; lock-free queries only).
         self.rounded_walls: dict[float, Any] = {}
@@ -247,15 +246,12 @@ class NavGrid:
                                      np.minimum(np.maximum(c, 0), w - 1)], 0.0)
 
     def clearance_at(self, x: float, y: float, res: float = 5.0) -> float:
-        """:meth:`clearance` of one point in plain Python: the raster's float32 value as a
-        float (compare it with a float32-exact bound to compare as numpy would)."""
-        rows = self._clearance_rows.get(float(res))
-        if rows is None:
-            rows = self._clearance_rows[float(res)] = self.clearance_map(res).tolist()
+        """:meth:`clearance` of one point, without array work: the raster's float32 value
+        as a float (compare it with a float32-exact bound to compare as numpy would)."""
+        grid = self.clearance_map(res)
         r, c = math.floor(y / res), math.floor(x / res)
-        if 0 <= r < len(rows) and 0 <= c < len(rows[0]):
-            return rows[r][c]
-        return 0.0
+        h, w = grid.shape
+        return float(grid[r, c]) if 0 <= r < h and 0 <= c < w else 0.0
 
     def waypoint_idx(self, i: int, j: int, radius: float) -> int:
         """Farthest cell on the BFS path from ``i`` to ``j`` that a disc of ``radius`` reaches
