@@ -84,6 +84,10 @@ class NavGrid:
         # world on the map (filled by alphatank.sim.sight; lock-free queries only).
         self.rounded_walls: dict[float, Any] = {}
 
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickled without the rounded-wall spaces (pymunk objects; rebuilt on demand)."""
+        return {**self.__dict__, "rounded_walls": {}}
+
     # ---- construction ---------------------------------------------------------------
 
     def _nearest_floor(self) -> np.ndarray:
