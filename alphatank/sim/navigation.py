@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import math
 from collections import OrderedDict
-from typing import Any
 
 import numpy as np
 
@@ -80,13 +79,6 @@ class NavGrid:
         self._visible: dict[tuple[int, float], np.ndarray] = {}
         self._waypoints: dict[float, np.ndarray] = {}
         self._clearance: dict[float, np.ndarray] = {}
-        # Query-only pymunk spaces of the map's walls rounded per radius, shared by every
-        # world on the map (filled by alphatank.sim.sight; lock-free queries only).
-        self.rounded_walls: dict[float, Any] = {}
-
-    def __getstate__(self) -> dict[str, Any]:
-        """Pickled without the rounded-wall spaces (pymunk objects; rebuilt on demand)."""
-        return {**self.__dict__, "rounded_walls": {}}
 
     # ---- construction ---------------------------------------------------------------
 

@@ -2,8 +2,7 @@
 queries make, without pymunk's Python wrappers: 3-5x cheaper, bit-identical answers.
 
 ``WallSight(world)`` holds the world's chipmunk space and, per radius asked, a query-only
-space of the map's walls rounded by that radius (one per map and radius, kept on its
-``NavGrid``); then
+space of the map's walls rounded by that radius (one per map and radius); then
 
 * :meth:`WallSight.clear` is ``space.segment_query_first(a, b, r, WALLS_ONLY) is None``
   (one ``cpSpaceSegmentQueryFirst``: the bots' quick aiming test);
@@ -22,13 +21,22 @@ segments, corners grazed included.
 
 from __future__ import annotations
 
+import atexit
+import weakref
 from typing import Any
 
 import pymunk
 from pymunk._chipmunk import ffi, lib
 
-from alphatank.sim.navigation import nav_grid
+from alphatank.sim.navigation import NavGrid, nav_grid
 from alphatank.sim.world import WALLS_ONLY, World, rounded_walls
+
+# The walls of each map rounded per radius (query-only spaces, read by lock-free queries
+# only), shared by every world on the map: keyed weakly by the map's NavGrid, which they
+# do not refer to, so they go with it. Freed at exit while pymunk can still free them.
+_ROUNDED: weakref.WeakKeyDictionary[NavGrid, dict[float, pymunk.Space]] = (
+    weakref.WeakKeyDictionary())
+atexit.register(_ROUNDED.clear)
 
 
 def wall_sight(world: World) -> WallSight:
@@ -55,11 +63,11 @@ class WallSight:
 
     def _walls_rounded(self, radius: float) -> Any:
         """Chipmunk pointer of the walls rounded by ``radius``: one query-only space per
-        map and radius, kept on the map's NavGrid and shared by every world on it (the
-        sight keeps its own reference, so the space outlives it while the world lives)."""
+        map and radius, shared by every world on the map (the sight keeps its own
+        reference, so the space lives as long as the world)."""
         got = self._rounded.get(radius)
         if got is None:
-            shared = nav_grid(self.world.spec).rounded_walls
+            shared = _ROUNDED.setdefault(nav_grid(self.world.spec), {})
             space = shared.get(radius)
             if space is None:
                 space = shared[radius] = rounded_walls(self.world.spec, radius)
