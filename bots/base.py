@@ -383,7 +383,7 @@ class Evader:
         x, y, h = match.world.tank_rows()[seat][:3]
         best = evade_choice(x, y, math.cos(h), math.sin(h), self.fwd, self.side, self.times,
                             match.world.bullet_state, np.array(threats, dtype=np.int64),
-                            len(threats), self.raster, 1 / self.res,
+                            self.raster, 1 / self.res,
                             4 * self.danger * self.danger, self.wall_margin,
                             2 * self.danger, 0.5, self.bot.steer(aim_err), self._score)
         return best // 3, best % 3

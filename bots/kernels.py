@@ -19,22 +19,21 @@ _TIMES = types.Array(_F8, 1, "C", readonly=True)
 _RASTER = types.Array(types.float32, 2, "C", readonly=True)
 
 
-@njit(_I8(_F8, _F8, _F8, _F8, _PATHS, _PATHS, _TIMES, _F8_2, types.Array(_I8, 1, "C"), _I8,
+@njit(_I8(_F8, _F8, _F8, _F8, _PATHS, _PATHS, _TIMES, _F8_2, types.Array(_I8, 1, "C"),
           _RASTER, _F8, _F8, _F8, _F8, _F8, _I8, _F8_1), cache=True)
 def evade_choice(x: float, y: float, c: float, s: float, fwd: np.ndarray, side: np.ndarray,
-                 times: np.ndarray, bullet_state: np.ndarray, threats: np.ndarray, n: int,
+                 times: np.ndarray, bullet_state: np.ndarray, threats: np.ndarray,
                  raster: np.ndarray, inv_res: float, cap2: float, wall_margin: float,
                  penalty: float, bonus: float, turn: int, score: np.ndarray) -> int:
     """:meth:`bots.base.Evader.evade`'s choice: the candidate (3 rotate + move) whose
     path (``fwd``, ``side`` (9, K) in the tank's frame at (x, y), heading cos ``c``, sin
-    ``s``) keeps farthest from the ``n`` bullets ``threats`` (rows of ``bullet_state``:
+    ``s``) keeps farthest from the bullets ``threats`` (rows of ``bullet_state``:
     x, y, angle, vx, vy, w) flying straight over ``times`` (K,): the smallest squared gap,
     capped at ``cap2``, square-rooted; ``penalty`` off when a path point's ``raster``
     clearance (float32; rows y, columns x, cells ``1 / inv_res`` px) is under
     ``wall_margin`` (rounded to float32 and compared there, as numpy compares the raster
-    with a Python float);
-    ``bonus`` to the three candidates of rotate ``turn``. Scores into ``score`` (9,);
-    returns the first best."""
+    with a Python float); ``bonus`` to the three candidates of rotate ``turn``. Scores
+    into ``score`` (9,); returns the first best."""
     K = times.shape[0]
     last_col, last_row = raster.shape[1] - 1, raster.shape[0] - 1
     margin = np.float32(wall_margin)
@@ -46,7 +45,7 @@ def evade_choice(x: float, y: float, c: float, s: float, fwd: np.ndarray, side: 
             # (x + c fwd) + (-s) side and (y + s fwd) + c side, as evade's arrays add.
             px = (x + c * fwd[i, k]) + (-s) * side[i, k]
             py = (y + s * fwd[i, k]) + c * side[i, k]
-            for t in range(n):
+            for t in range(threats.shape[0]):
                 b = threats[t]
                 dx = px - (bullet_state[b, 0] + bullet_state[b, 3] * times[k])
                 dy = py - (bullet_state[b, 1] + bullet_state[b, 4] * times[k])

@@ -122,7 +122,7 @@ def numpy_evade(ev, x, y, h, bullet_xy, bullet_vel, turn, raster, margin):
 def kernel_evade(ev, x, y, h, state, threats, turn, raster, margin):
     score = np.full(9, np.nan)
     best = evade_choice(x, y, math.cos(h), math.sin(h), ev.fwd, ev.side, ev.times, state,
-                        np.array(threats, dtype=np.int64), len(threats), raster, 1 / ev.res,
+                        np.array(threats, dtype=np.int64), raster, 1 / ev.res,
                         4 * ev.danger * ev.danger, margin, 2 * ev.danger, 0.5,
                         turn, score)
     return best, score
