@@ -10,6 +10,7 @@ internals (``pymunk._chipmunk_cffi``, ``Body._body``, ``Space._space``, the
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import pymunk
@@ -109,13 +110,24 @@ def handle(shape: pymunk.Shape) -> object:
 
 class FirstHit:
     """``space.segment_query_first(start, end, radius, shape_filter)`` as a :class:`Hit`
-    or None, with one result struct allocated once."""
+    or None, with one result struct allocated once; shapes in ``skip`` (handles) are
+    passed over (then through pymunk's all-hits query, rarely needed)."""
 
     def __init__(self, space: pymunk.Space, radius: float, shape_filter: pymunk.ShapeFilter):
-        self._space, self._radius, self._filter = space._space, radius, shape_filter
+        self._pm_space, self._space = space, space._space
+        self._radius, self._filter = radius, shape_filter
         self._info = ffi.new("cpSegmentQueryInfo *")
 
-    def __call__(self, x0: float, y0: float, x1: float, y1: float) -> Hit | None:
+    def __call__(self, x0: float, y0: float, x1: float, y1: float,
+                 skip: Sequence[object] = ()) -> Hit | None:
+        if skip:
+            best = None
+            for q in self._pm_space.segment_query((x0, y0), (x1, y1), self._radius,
+                                                  self._filter):
+                key = handle(q.shape)
+                if key not in skip and (best is None or q.alpha < best.alpha):
+                    best = Hit(key, tuple(q.normal), q.alpha)
+            return best
         info = self._info
         shape = lib.cpSpaceSegmentQueryFirst(self._space, (x0, y0), (x1, y1), self._radius,
                                              self._filter, info)

@@ -474,7 +474,7 @@ class World:
         """The flight of a circle (default: a bullet) from (x, y) along unit (dx, dy) over
         ``length`` px with ``bounces_left`` ricochets: what the physics flies."""
         if radius is None or radius == self.cfg.bullet_radius:
-            return trace_flight(self._bullet_hit, x, y, dx, dy, length, bounces_left)
+            return trace_flight(self._first_bullet_hit, x, y, dx, dy, length, bounces_left)
         return trace_flight(
             lambda x0, y0, x1, y1, skip: first_wall_hit(self.space, x0, y0, x1, y1, radius,
                                                         skip),
@@ -488,31 +488,7 @@ class World:
         first = self._quick.get(radius)
         if first is None:
             first = self._quick[radius] = cp.FirstHit(self.space, radius, WALLS_ONLY)
-
-        def hit(x0: float, y0: float, x1: float, y1: float,
-                skip: Sequence[object]) -> cp.Hit | None:
-            if not skip:
-                return first(x0, y0, x1, y1)
-            best = None
-            for q in self.space.segment_query((x0, y0), (x1, y1), radius, WALLS_ONLY):
-                key = cp.handle(q.shape)
-                if key not in skip and (best is None or q.alpha < best.alpha):
-                    best = cp.Hit(key, tuple(q.normal), q.alpha)
-            return best
-
-        return trace_flight(hit, x, y, dx, dy, length, bounces_left)
-
-    def _bullet_hit(self, x0: float, y0: float, x1: float, y1: float,
-                    skip: Sequence[object]) -> cp.Hit | None:
-        """:meth:`wall_hit` at the bullet radius, one C call; walls come as handles."""
-        if not skip:
-            return self._first_bullet_hit(x0, y0, x1, y1)
-        best = None
-        for q in self.bullet_walls.segment_query((x0, y0), (x1, y1), 0.0, _ANY):
-            key = cp.handle(q.shape)
-            if key not in skip and (best is None or q.alpha < best.alpha):
-                best = cp.Hit(key, tuple(q.normal), q.alpha)
-        return best
+        return trace_flight(first, x, y, dx, dy, length, bounces_left)
 
 
 def wall_corners(spec: MapSpec) -> list[list[tuple[float, float]]]:
