@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from alphatank.bots.kernels import evade_choice, threat_slots
-from alphatank.game.kernels import progress_counts
+from alphatank.game.kernels import nearest_threat, progress_counts, wall_rays
 from alphatank.game.observe import ObservationBuilder, StateBatch, slot_counts
 from alphatank.sim.config import game_config
 from alphatank.sim.mapspec import load_map
@@ -61,6 +61,100 @@ def test_progress_counts_leave_the_terms_alone_while_no_bullet_flies():
                     np.array([1.0, -1.0]), out)
     assert np.isnan(prev).all()
     assert (out == 3.0).all()
+
+
+def numpy_rays(xy, dx, dy, rects, length):
+    """ObservationBuilder.ray_distances' slab test as numpy computed it before the kernel."""
+    ix = (1.0 / np.where(np.abs(dx) < 1e-12, 1e-12, dx))[..., None]
+    iy = (1.0 / np.where(np.abs(dy) < 1e-12, 1e-12, dy))[..., None]
+    rr = rects[:, None, None, :, :]
+    ox, oy = xy[..., 0][..., None, None], xy[..., 1][..., None, None]
+    tx0, tx1 = (rr[..., 0] - ox) * ix, (rr[..., 2] - ox) * ix
+    ty0, ty1 = (rr[..., 1] - oy) * iy, (rr[..., 3] - oy) * iy
+    near = np.maximum(np.maximum(np.minimum(tx0, tx1), np.minimum(ty0, ty1)), 0.0)
+    far = np.minimum(np.maximum(tx0, tx1), np.maximum(ty0, ty1))
+    near = np.where(far < near, np.inf, near)
+    return np.minimum(near.min(axis=-1), length)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_wall_rays_equal_the_numpy_slab_test_bit_for_bit(seed):
+    rng = np.random.default_rng(seed)
+    E, L, R, W = 3, 2, 8, 9
+    lo = rng.uniform(0, 500, (E, W, 2))
+    rects = np.concatenate([lo, lo + rng.uniform(5, 120, (E, W, 2))], axis=-1)
+    xy = rng.uniform(0, 600, (E, L, 2))
+    xy[0, 0] = rects[0, 0, :2]  # on a corner: zero distances, -0.0 in the slab terms
+    xy[0, 1, 0] = rects[0, 1, 2]  # on a right edge
+    xy[1, 0] = (rects[1, 2, :2] + rects[1, 2, 2:]) / 2  # inside a wall
+    rects[2, -1] = rects[2, -2]  # a duplicate wall: a tie for the nearest
+    a = rng.uniform(-math.pi, math.pi, (E, L, 1)) + np.arange(R) * (2 * math.pi / R)
+    dx, dy = np.cos(a), np.sin(a)
+    dx[1, 1, :4], dy[1, 1, 4:] = 0.0, -0.0  # axis-parallel rays: nudged directions
+    dx[2, 0, 0], dy[2, 0, 0] = 1.0, 1e-13
+    # Nudged rays grazing a wall's edge 1e-10 px off (away from the random walls): the
+    # nudge decides where they enter.
+    rects[2, 0] = (1050.0, 1000.0, 1150.0, 1040.0)
+    rects[2, 1] = (1000.0 + 1e-10, 1100.0, 1040.0, 1150.0)
+    xy[2, 1] = (1000.0, 1000.0 - 1e-10)
+    dx[2, 1, 0], dy[2, 1, 0] = 1.0, 1e-13
+    dx[2, 1, 2], dy[2, 1, 2] = 1e-13, 1.0
+    length = 300.0
+    want = numpy_rays(xy, dx, dy, rects, length)
+    got = np.full((E, L, R), 7.0)
+    wall_rays(xy, dx, dy, rects, length, got)
+    assert got.tobytes() == want.tobytes()
+    assert (got == 0.0).any() and (got == length).any() and ((got > 0) & (got < length)).any()
+
+
+def numpy_threat(rel, vel, mask, c, s, alive, scale, horizon):
+    """ObservationBuilder._build_threat as numpy computed it before the kernel."""
+    v2 = np.maximum((vel * vel).sum(axis=-1), 1e-9)
+    t = -(rel * vel).sum(axis=-1) / v2
+    m = rel + vel * t[..., None]
+    miss = np.hypot(m[..., 0], m[..., 1])
+    ok = (mask > 0) & (t > 0) & (t < horizon)
+    k = np.where(ok, miss, np.inf).argmin(axis=-1)[..., None]
+    hit = np.take_along_axis(ok, k, axis=-1)[..., 0]
+    miss = np.take_along_axis(miss, k, axis=-1)[..., 0]
+    vt = np.zeros(mask.shape[:2] + (4,))
+    vt[..., 0] = np.where(hit, np.maximum(1.0 - miss / scale, 0.0), 0.0)
+    vt[..., 1] = np.where(hit, 1.0 - np.take_along_axis(t, k, axis=-1)[..., 0] / horizon, 0.0)
+    mx = np.take_along_axis(m[..., 0], k, axis=-1)[..., 0]
+    my = np.take_along_axis(m[..., 1], k, axis=-1)[..., 0]
+    inv = np.where(hit, 1.0 / np.maximum(miss, 1e-6), 0.0)
+    vt[..., 2] = (mx * c + my * s) * inv
+    vt[..., 3] = (my * c - mx * s) * inv
+    vt *= alive[..., None]
+    return vt
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_nearest_threat_equals_the_numpy_block_bit_for_bit(seed):
+    rng = np.random.default_rng(seed)
+    E, L, K = 6, 2, 5
+    rel = rng.uniform(-200, 200, (E, L, K, 2))
+    vel = rng.uniform(-300, 300, (E, L, K, 2))
+    vel[0, 0, 1] = 0.0  # a parked bullet (v2 floored)
+    rel[1, 0, 2], vel[1, 0, 2] = (-30.0, 0.0), (300.0, 0.0)  # dead on: miss 0
+    rel[1, 0, 3], vel[1, 0, 3] = (-60.0, 0.0), (300.0, 0.0)  # the same line, later
+    rel[2, 1, 1], vel[2, 1, 1] = rel[2, 1, 4], vel[2, 1, 4]  # a tie: the first one wins
+    mask = rng.random((E, L, K)) < 0.8
+    mask[1, 0, 2:4] = True
+    mask[2, 1, [1, 4]] = True
+    mask[3, 0] = False  # nothing in play
+    rel[4, 0, 0], vel[4, 0, 0] = (-1e-6, 0.0), (1e-5, 0.0)  # crawling: v2 floored to 1e-9
+    mask[4, 0] = [True, False, False, False, False]
+    ang = rng.uniform(-math.pi, math.pi, (E, L))
+    alive = rng.random((E, L)) < 0.8
+    alive[1, 0] = alive[2, 1] = alive[4, 0] = True
+    scale, horizon = 40.0, 1.0
+    want = numpy_threat(rel, vel, mask, np.cos(ang), np.sin(ang), alive, scale, horizon)
+    got = np.full((E, L, 4), 7.0)
+    nearest_threat(rel, vel, mask, np.cos(ang), np.sin(ang), alive, scale, horizon, got)
+    assert got.tobytes() == want.tobytes()  # -0.0 included
+    assert got[1, 0, 0] == 1.0 and (got[..., 0] == 0).any() and ((got[..., 0] > 0)
+                                                                  & (got[..., 0] < 1)).any()
 
 
 def test_paper_observation_sorts_other_bullets_nearest_first_ties_in_slot_order():

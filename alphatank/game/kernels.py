@@ -179,3 +179,80 @@ def paper_observation(raw: np.ndarray, n: int, inv: np.ndarray, scale: np.ndarra
             flat_out[i] = 1.0
         elif v < -1.0:
             flat_out[i] = -1.0
+
+
+@njit(cache=True)
+def wall_rays(xy: np.ndarray, dx: np.ndarray, dy: np.ndarray, rects: np.ndarray,
+              length: float, out: np.ndarray) -> None:
+    """:meth:`~alphatank.game.observe.ObservationBuilder.ray_distances`' slab test.
+
+    ``xy`` (E, L, 2): the observers; ``dx``, ``dy`` (E, L, R): the rays' unit directions
+    (numpy's cos and sin); ``rects`` (E, W, 4): x0, y0, x1, y1 of every wall. Into ``out``
+    (E, L, R): px to the nearest rectangle along each ray, capped at ``length``. An
+    axis-parallel ray's zero direction is nudged to 1e-12 (no division by zero); every
+    min and max keeps numpy's ``minimum`` / ``maximum`` order, and the distances never
+    come out as -0."""
+    E, L, R = dx.shape
+    W = rects.shape[1]
+    for e in range(E):
+        for i in range(L):
+            ox, oy = xy[e, i, 0], xy[e, i, 1]
+            for r in range(R):
+                ux, uy = dx[e, i, r], dy[e, i, r]
+                ix = 1.0 / (1e-12 if abs(ux) < 1e-12 else ux)
+                iy = 1.0 / (1e-12 if abs(uy) < 1e-12 else uy)
+                d = np.inf
+                for w in range(W):
+                    tx0 = (rects[e, w, 0] - ox) * ix
+                    tx1 = (rects[e, w, 2] - ox) * ix
+                    ty0 = (rects[e, w, 1] - oy) * iy
+                    ty1 = (rects[e, w, 3] - oy) * iy
+                    t_in = max(min(tx0, tx1), min(ty0, ty1))
+                    t_out = min(max(tx0, tx1), max(ty0, ty1))
+                    near = t_in if t_in > 0.0 else 0.0
+                    if t_out < near:  # the ray misses this rectangle
+                        near = np.inf
+                    if near <= d:
+                        d = near
+                out[e, i, r] = d if d < length else length
+
+
+@njit(cache=True)
+def nearest_threat(rel: np.ndarray, vel: np.ndarray, mask: np.ndarray, cos: np.ndarray,
+                   sin: np.ndarray, alive: np.ndarray, scale: float, horizon: float,
+                   out: np.ndarray) -> None:
+    """The ``threat`` block of :meth:`~alphatank.game.observe.ObservationBuilder.
+    _build_threat` with numpy's operations in numpy's order.
+
+    ``rel``, ``vel`` (E, L, K, 2): other tanks' bullets relative to each observer and their
+    velocities; ``mask`` (E, L, K): slot in play; ``cos``, ``sin`` (E, L): the observers'
+    headings; ``alive`` (E, L). Of the bullets closing in within ``horizon`` s, the one
+    that will pass closest (the first on ties): into ``out`` (E, L, 4) ``near`` (1 -
+    miss / ``scale``, at least 0), ``eta`` (1 - t / ``horizon``) and the closest point's
+    unit direction in the own frame; zeros without one, and times 0 while dead."""
+    E, L, K = mask.shape
+    for e in range(E):
+        for i in range(L):
+            best, hit = np.inf, False
+            t_k = mx_k = my_k = 0.0
+            for q in range(K):
+                rx, ry = rel[e, i, q, 0], rel[e, i, q, 1]
+                vx, vy = vel[e, i, q, 0], vel[e, i, q, 1]
+                v2 = vx * vx + vy * vy
+                if not v2 > 1e-9:
+                    v2 = 1e-9
+                t = -(rx * vx + ry * vy) / v2
+                mx, my = rx + vx * t, ry + vy * t
+                miss = np.hypot(mx, my)
+                ok = mask[e, i, q] > 0 and t > 0 and t < horizon
+                key = miss if ok else np.inf
+                if q == 0 or key < best:
+                    best, hit, t_k, mx_k, my_k = key, ok, t, mx, my
+            a = 1.0 if alive[e, i] else 0.0
+            near = 1.0 - best / scale
+            out[e, i, 0] = ((near if near > 0.0 else 0.0) if hit else 0.0) * a
+            out[e, i, 1] = ((1.0 - t_k / horizon) if hit else 0.0) * a
+            inv = 1.0 / (best if best > 1e-6 else 1e-6) if hit else 0.0
+            c, s = cos[e, i], sin[e, i]
+            out[e, i, 2] = ((mx_k * c + my_k * s) * inv) * a
+            out[e, i, 3] = ((my_k * c - mx_k * s) * inv) * a

@@ -62,7 +62,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from alphatank.game.kernels import paper_observation
+from alphatank.game.kernels import nearest_threat, paper_observation, wall_rays
 from alphatank.game.seats import Seat, make_controller
 from alphatank.sim.ballistics import predict_path, segment_distances
 from alphatank.sim.config import GameConfig, hit_radius
@@ -550,8 +550,7 @@ class ObservationBuilder:
         self._bt = np.zeros((E, batch.n_bullets, len(BULLET_FIELDS)))
         self._count_scale = np.array([1.0 / self.cfg.cooldown_ticks, 1.0 / cap])
         self._ray_angles = np.arange(rays) * (2 * math.pi / rays)
-        self._ray_work: np.ndarray | None = None  # ray_distances' work arrays
-        self._ray_far: np.ndarray | None = None
+        self._ray_out: np.ndarray | None = None  # ray_distances' output
         # Reads of other tanks' bullets: a view when the seat pattern allows (a 1v1),
         # else fancy indexing each step.
         self._other_act = pick(batch.bullet_active, self.other_bidx)  # (E, L, K)
@@ -963,31 +962,15 @@ class ObservationBuilder:
         line (walls ignored, like the bots' dodging), the one that will pass closest
         within ``THREAT_HORIZON_S``: how close (``near``), how soon (``eta``) and where
         its closest point lies (unit direction, own frame: dodge the other way); zeros
-        while I am dead."""
+        while I am dead (:func:`~alphatank.game.kernels.nearest_threat`)."""
         vt = self.v_threat
         if bullets is None:
             vt[...] = 0.0
             return
         rel, vel, mask = bullets  # (E, L, K, 2), (E, L, K, 2), (E, L, K)
-        v2 = np.maximum((vel * vel).sum(axis=-1), 1e-9)
-        t = -(rel * vel).sum(axis=-1) / v2
-        m = rel + vel * t[..., None]
-        miss = np.hypot(m[..., 0], m[..., 1])
-        ok = (mask > 0) & (t > 0) & (t < THREAT_HORIZON_S)
-        k = np.where(ok, miss, np.inf).argmin(axis=-1)[..., None]
-        hit = np.take_along_axis(ok, k, axis=-1)[..., 0]
-        miss = np.take_along_axis(miss, k, axis=-1)[..., 0]
-        scale = 4.0 * self._hit_radius
-        vt[..., 0] = np.where(hit, np.maximum(1.0 - miss / scale, 0.0), 0.0)
-        vt[..., 1] = np.where(hit, 1.0 - np.take_along_axis(t, k, axis=-1)[..., 0]
-                              / THREAT_HORIZON_S, 0.0)
-        mx = np.take_along_axis(m[..., 0], k, axis=-1)[..., 0]
-        my = np.take_along_axis(m[..., 1], k, axis=-1)[..., 0]
-        inv = np.where(hit, 1.0 / np.maximum(miss, 1e-6), 0.0)
-        c, s = c3[..., 0], s3[..., 0]
-        vt[..., 2] = (mx * c + my * s) * inv
-        vt[..., 3] = (my * c - mx * s) * inv
-        vt *= self.batch.alive[:, self.observers][..., None]
+        nearest_threat(rel, vel, mask, c3[..., 0], s3[..., 0],
+                       self.batch.alive[:, self.observers], 4.0 * self._hit_radius,
+                       THREAT_HORIZON_S, vt)
 
     def _order_nearest(self) -> None:
         """Reorder each observer's other-tank slots nearest first within teammates and
@@ -1029,38 +1012,15 @@ class ObservationBuilder:
     def ray_distances(self, xy: np.ndarray, angle: np.ndarray) -> np.ndarray:
         """(E, L, R) px to the nearest wall rectangle along ``rays`` directions from each
         observer (heading first, then clockwise on screen), by exact slab intersection;
-        capped at ``ray_length``. ``xy``: (E, L, 2), ``angle``: (E, L). The (E, L, R, W)
-        work arrays are kept between calls of the same shape."""
-        b = self.batch
+        capped at ``ray_length`` (:func:`~alphatank.game.kernels.wall_rays`). ``xy``:
+        (E, L, 2), ``angle``: (E, L). The result is a buffer reused by the next call of
+        the same shape."""
         a = angle[..., None] + self._ray_angles  # (E, L, R)
-        dx, dy = np.cos(a), np.sin(a)
-        # 1 / direction, with axis-parallel rays nudged off zero (no division by zero).
-        ix = (1.0 / np.where(np.abs(dx) < 1e-12, 1e-12, dx))[..., None]
-        iy = (1.0 / np.where(np.abs(dy) < 1e-12, 1e-12, dy))[..., None]
-        rr = b.ray_rects[:, None, None, :, :]  # (E, 1, 1, W, 4)
-        ox = xy[..., 0][..., None, None]
-        oy = xy[..., 1][..., None, None]
-        shape = a.shape + rr.shape[-2:-1]
-        if self._ray_work is None or self._ray_work.shape[1:] != shape:
-            self._ray_work = np.empty((5,) + shape)
-            self._ray_far = np.empty(shape, dtype=bool)
-        tx0, tx1, ty0, ty1, tmp = self._ray_work
-        np.multiply(rr[..., 0] - ox, ix, out=tx0)
-        np.multiply(rr[..., 2] - ox, ix, out=tx1)
-        np.multiply(rr[..., 1] - oy, iy, out=ty0)
-        np.multiply(rr[..., 3] - oy, iy, out=ty1)
-        # tmin = max(min(tx0, tx1), min(ty0, ty1)) -> tmp; tmax = min(max.., max..) -> tx1
-        np.minimum(tx0, tx1, out=tmp)
-        np.maximum(tx0, tx1, out=tx1)
-        np.minimum(ty0, ty1, out=tx0)
-        np.maximum(tmp, tx0, out=tmp)
-        np.maximum(ty0, ty1, out=ty0)
-        np.minimum(tx1, ty0, out=tx1)
-        near = np.maximum(tmp, 0.0, out=tmp)
-        np.less(tx1, near, out=self._ray_far)
-        np.copyto(near, np.inf, where=self._ray_far)  # the ray misses this rectangle
-        d = near.min(axis=-1)
-        return np.minimum(d, self.ray_length, out=d)
+        out = self._ray_out
+        if out is None or out.shape != a.shape:
+            out = self._ray_out = np.empty(a.shape)
+        wall_rays(xy, np.cos(a), np.sin(a), self.batch.ray_rects, self.ray_length, out)
+        return out
 
 
 TANK_COLS = ("sin", "cos", "c0x", "c0y", "c1x", "c1y", "c2x", "c2y", "c3x", "c3y")  # per tank,
