@@ -248,3 +248,31 @@ def test_named_opponent_fills_every_non_learner_seat():
     bots = [c for seat, c in enumerate(env.core.controllers[0]) if seat not in env.core.driven]
     assert len(bots) == 2 and all("DodgeBot" in repr(b) for b in bots)
     assert bots[0] is not bots[1]  # one controller per seat (their own seeds)
+
+
+class CountingBatchPolicy(NoopPolicy):
+    """A batch policy that counts how it is asked to act."""
+
+    def __init__(self):
+        self.single = self.batched = self.calls = 0
+
+    def act(self, match, seat):
+        self.single += 1
+        return super().act(match, seat)
+
+    def act_batch(self, pairs, observe=None):
+        self.batched += len(pairs)
+        self.calls += 1
+        return np.ones((len(pairs), 3), dtype=np.int64)
+
+
+def test_batch_policies_act_in_batches_and_the_others_one_by_one():
+    from alphatank.sim.policy import BatchPolicy, is_batch_policy
+
+    batch, plain = CountingBatchPolicy(), NoopPolicy()
+    assert is_batch_policy(batch) and isinstance(batch, BatchPolicy)
+    assert not is_batch_policy(plain) and not isinstance(plain, BatchPolicy)
+    assert is_batch_policy(CountingBatchPolicy())  # the class's answer, asked again
+    env = VectorMatchEnv("vs_smart", 3, seed=0, seat_policies={1: batch})
+    rollout(env, 5)
+    assert (batch.single, batch.batched, batch.calls) == (0, 15, 5)  # 3 matches a call

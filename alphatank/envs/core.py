@@ -43,7 +43,7 @@ from alphatank.game.seats import make_controller
 from alphatank.sim.config import ACTION_REPEAT_MAX, check_value
 from alphatank.sim.episode import episode_match, episode_seeds, reset_controllers
 from alphatank.sim.match import Match, TickEvents
-from alphatank.sim.policy import NOOP, BatchPolicy, Policy
+from alphatank.sim.policy import NOOP, BatchPolicy, Policy, is_batch_policy
 
 ACTION_NVEC = np.array([3, 3, 2], dtype=np.int64)
 _NVEC_U = ACTION_NVEC.astype(np.uint64)
@@ -309,7 +309,7 @@ class MatchSet:
         if cached is not None and cached[0] == key:
             return cached[1]
         pol = self._shared.get(key) or make_controller(spec, seed)
-        if isinstance(pol, BatchPolicy):  # keeps its state per match and seat
+        if is_batch_policy(pol):  # keeps its state per match and seat
             self._shared[key] = pol
         self._bots[e][seat] = (key, pol)
         return pol
@@ -334,8 +334,10 @@ class MatchSet:
         reset_controllers(m, ctrls, seeds)
         self.episode_label[e] = self.describe_opponents(e)
         played = self._played[e] = [(seat, c) for seat, c in enumerate(ctrls) if c is not None]
-        self._single[e] = [(s, c) for s, c in played if not isinstance(c, BatchPolicy)]
-        self._batched[e] = [(s, c) for s, c in played if isinstance(c, BatchPolicy)]
+        single, batched = [], []
+        for pair in played:
+            (batched if is_batch_policy(pair[1]) else single).append(pair)
+        self._single[e], self._batched[e] = single, batched
         self.joint[e] = 1
         self.terminated[e] = self.truncated[e] = False
         b = self.batch

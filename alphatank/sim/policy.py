@@ -45,6 +45,19 @@ class BatchPolicy(Policy, Protocol):
                   observe: Observe | None = None) -> np.ndarray: ...
 
 
+_BATCH_TYPES: dict[type, bool] = {}
+
+
+def is_batch_policy(policy: Policy) -> bool:
+    """``isinstance(policy, BatchPolicy)``, answered once per class: a runtime Protocol
+    check costs tens of microseconds, and an env asks it for every seat at every reset."""
+    kind = type(policy)
+    known = _BATCH_TYPES.get(kind)
+    if known is None:
+        known = _BATCH_TYPES[kind] = isinstance(policy, BatchPolicy)
+    return known
+
+
 def _shared(rotate: int, move: int, fire: int) -> np.ndarray:
     a = np.array((rotate, move, fire), dtype=np.int64)
     a.setflags(write=False)
