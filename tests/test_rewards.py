@@ -53,7 +53,7 @@ def test_path_min_distance_agrees_with_ballistics():
         if k % 10 == 0:
             path[1] = path[0]  # a zero-length leg
         targets = rng.uniform(0, 700, size=(int(rng.integers(1, 6)), 2))
-        assert R.path_min_distance(path, targets.tolist()) == pytest.approx(
+        assert R.path_min_distance(path.tolist(), targets.tolist()) == pytest.approx(
             path_min_distance(path, targets), abs=1e-9)
 
 

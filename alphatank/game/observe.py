@@ -64,7 +64,7 @@ import numpy as np
 
 from alphatank.game.kernels import nearest_threat, paper_observation, wall_rays
 from alphatank.game.seats import Seat, make_controller
-from alphatank.sim.ballistics import predict_path, segment_distances
+from alphatank.sim.ballistics import predict_points, segment_distances
 from alphatank.sim.config import GameConfig, hit_radius
 from alphatank.sim.mapspec import MapSpec
 from alphatank.sim.navigation import NavGrid, nav_grid
@@ -385,19 +385,19 @@ class StateBatch:
 
     def trace_shots(self, e: int, match: Match) -> None:
         """Trace a bullet fired now along the heading of each wanted live seat of match
-        ``e``, like the bots' search (``predict_path(exact=False)``)."""
+        ``e``, like the bots' search (``predict_points(exact=False)``)."""
         w, alive = match.world, match.alive
         for s in self.shot_seats:
             if not alive[s]:
                 self._path_len[e, s] = 0
                 continue
             mx, my = w.muzzle(s)
-            path = predict_path(w, mx, my, float(match.tank_angle[s]), exact=False)
-            z = path.view(np.complex128).ravel()
+            points = predict_points(w, mx, my, float(match.tank_angle[s]), exact=False)
             row = self._paths[e, s]
-            row[:len(z)] = z
-            row[len(z):] = z[-1]
-            self._path_len[e, s] = len(z)
+            for k, (px, py) in enumerate(points):
+                row[k] = complex(px, py)
+            row[len(points):] = complex(px, py)
+            self._path_len[e, s] = len(points)
         self._shots_due = True
 
     def reach_shots(self) -> None:

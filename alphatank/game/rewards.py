@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from alphatank.game.kernels import progress_counts
-from alphatank.sim.ballistics import predict_path
+from alphatank.sim.ballistics import predict_points
 from alphatank.sim.config import ConfigError, GameConfig, RewardConfig, hit_radius
 
 if TYPE_CHECKING:
@@ -112,15 +112,15 @@ def trajectory_far(d: float, cfg: RewardConfig) -> float:
     return cfg.trajectory_far * min(1.0, (d - far) / far)
 
 
-def path_min_distance(path: np.ndarray, targets: Sequence[Sequence[float]]) -> float:
-    """Closest approach of the polyline ``path`` (k, 2) to any of ``targets`` (m rows of
-    x, y).
+def path_min_distance(pts: Sequence[Sequence[float]], targets: Sequence[Sequence[float]]
+                      ) -> float:
+    """Closest approach of the polyline ``pts`` (k points x, y) to any of ``targets`` (m
+    rows of x, y).
 
     Same result as :func:`alphatank.sim.ballistics.path_min_distance`; a scalar loop, because
     a shot's path has a handful of legs and a match a handful of tanks, where this is
     several times cheaper than the array version (it runs on every shot)."""
     best = math.inf
-    pts = path.tolist()
     for (ax, ay), (bx, by) in zip(pts, pts[1:], strict=False):
         dx, dy = bx - ax, by - ay
         len2 = dx * dx + dy * dy
@@ -394,8 +394,8 @@ class RewardTracker:
             return math.inf
         x, y, _, vx, vy, _ = w.bullet_state[b].tolist()
         left = (int(w.bullet_expire[b]) - w.substep) * w.step_len
-        path = predict_path(w, x, y, math.atan2(vy, vx), max_distance=left,
-                            max_bounces=self.game.bullet_max_bounces - int(w.bullet_bounces[b]))
+        path = predict_points(w, x, y, math.atan2(vy, vx), max_distance=left,
+                              max_bounces=self.game.bullet_max_bounces - int(w.bullet_bounces[b]))
         return path_min_distance(path, enemies)
 
     def _progress(self, sl: slice, batch: StateBatch, terms: np.ndarray) -> None:
@@ -478,6 +478,6 @@ class RewardTracker:
             enemies = match.alive & self.foe[i]
             if enemies.any():
                 mx, my = w.muzzle(int(i))
-                path = predict_path(w, mx, my, float(match.tank_angle[i]))
+                path = predict_points(w, mx, my, float(match.tank_angle[i]))
                 out[i] = path_min_distance(path, match.tank_xy[enemies].tolist()) <= self.radius
         return out

@@ -36,6 +36,16 @@ def predict_path(world: World, x: float, y: float, angle: float,
     sharp walls, which can miss a wall corner grazed only by the bullet's rim (bots use it
     to search, then confirm with an exact prediction before firing).
     """
+    return np.array(predict_points(world, x, y, angle, max_distance, max_bounces, radius, exact),
+                    dtype=np.float64)
+
+
+def predict_points(world: World, x: float, y: float, angle: float,
+                   max_distance: float | None = None, max_bounces: int | None = None,
+                   radius: float | None = None, exact: bool = True
+                   ) -> list[tuple[float, float]]:
+    """:func:`predict_path`'s polyline as a list of (x, y) points, the same floats: for
+    callers that copy it into arrays of their own or read it in plain Python."""
     cfg = world.cfg
     length = cfg.bullet_max_distance if max_distance is None else float(max_distance)
     bounces = cfg.bullet_max_bounces if max_bounces is None else int(max_bounces)
@@ -43,19 +53,13 @@ def predict_path(world: World, x: float, y: float, angle: float,
     x, y = float(x), float(y)
     inside = world.wall_distance(x, y, r)
     if inside is not None and inside < r - 1e-9:
-        return np.array([(x, y), (x, y)], dtype=np.float64)
+        return [(x, y), (x, y)]
     dx, dy = math.cos(angle), math.sin(angle)
     if exact:
         f = world.trace(x, y, dx, dy, length, bounces, radius=r)
     else:
         f = world.quick_trace(x, y, dx, dy, length, bounces, r)
-    ex, ey, points = f.ex, f.ey, [(q.x, q.y) for q in f.ricochets]
-    out = np.empty((len(points) + 2, 2), dtype=np.float64)
-    out[0] = (x, y)
-    if points:
-        out[1:-1] = points
-    out[-1] = (ex, ey)
-    return out
+    return [(x, y), *[(q.x, q.y) for q in f.ricochets], (f.ex, f.ey)]
 
 
 def path_distances(path: np.ndarray, targets_xy: np.ndarray) -> np.ndarray:
