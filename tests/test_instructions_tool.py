@@ -63,3 +63,20 @@ def test_tick_child_ticks_a_bare_match(monkeypatch):
                         lambda *a, **k: ticked.append((a, k)) or real(*a, **k))
     tool.child(tool.TICK, 0, 30, None)
     assert ticked == [((30,), {"repeats": 1})]
+
+
+def test_team_scenarios_step_the_engine_and_refuse_one_env(capsys, monkeypatch):
+    """A scenario with several learner seats (no Gymnasium id) runs on the engine, every
+    learner acting; ``--envs 0`` (one ``gymnasium.make`` env) is refused for it."""
+    from alphatank.envs import vector
+
+    stepped = []
+    real = vector.VectorMatchEnv.step
+    monkeypatch.setattr(vector.VectorMatchEnv, "step",
+                        lambda self, a: stepped.append(a.shape) or real(self, a))
+    tool.child("team_vs_bot", 2, 3, None)
+    assert stepped == [(2, 2, 3)] * (tool.WARMUP + 3)
+    with pytest.raises(SystemExit) as exc:
+        tool.main(["--scenario", "team_vs_bot", "--envs", "0"])
+    assert exc.value.code == 2
+    assert "--envs 0" in capsys.readouterr().err

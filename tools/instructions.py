@@ -9,8 +9,10 @@ Runs this file twice under ``valgrind --tool=callgrind`` (no cache simulation), 
 building the env, stepping it 50 warm-up steps and then ``--steps`` or twice that many
 timed steps with random actions drawn in advance (seeded); the difference of the two
 runs' instruction counts, divided by ``--steps x --envs``, is the count per env step
-without the start-up. ``--envs N`` steps N matches together (``gymnasium.make_vec``);
-``--envs 0`` steps one ``gymnasium.make`` env (the issue-14 "one env" figure).
+without the start-up. ``--envs N`` steps N matches together (``gymnasium.make_vec``; a
+scenario with several learner seats, which has no Gymnasium id, steps the engine,
+``VectorMatchEnv``, every learner acting at random); ``--envs 0`` steps one
+``gymnasium.make`` env (the issue-14 "one env" figure).
 ``--objects`` also splits the count per step by the shared object that ran it (the Python
 interpreter, numpy, chipmunk, libm, ...). ``--floor`` also counts a 1v1 tick of the bare
 pymunk prototype (``shared/bench/proto``, driven as ``floor_ratio.py`` drives it) and a
@@ -59,7 +61,7 @@ def child(scenario: str, envs: int, steps: int, observation: str | None) -> None
     import gymnasium as gym
     import numpy as np
 
-    from alphatank.envs import gym_id
+    from alphatank.envs import gym_id, single_learner_scenarios
 
     rng = np.random.default_rng(0)
     kwargs = {} if observation is None else {"observation": observation}
@@ -70,6 +72,15 @@ def child(scenario: str, envs: int, steps: int, observation: str | None) -> None
             _, _, terminated, truncated, _ = env.step(a)
             if terminated or truncated:
                 env.reset()
+        return
+    if scenario not in single_learner_scenarios():  # no Gymnasium id: the engine itself
+        from alphatank.envs.vector import VectorMatchEnv
+
+        engine = VectorMatchEnv(scenario, envs, **kwargs)
+        engine.reset(seed=0)
+        size = (WARMUP + steps, envs, engine.num_learners, 3)
+        for a in rng.integers((3, 3, 2), size=size):
+            engine.step(a)
         return
     venv = gym.make_vec(gym_id(scenario), num_envs=envs,
                         vectorization_mode="vector_entry_point", **kwargs)
@@ -161,7 +172,8 @@ def by_object(out: Path) -> dict[str, int]:
 def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--scenario", default="vs_smart",
-                   help="a scenario with one learner seat (default: vs_smart)")
+                   help="a shipped scenario with learner seats (default: vs_smart); one with "
+                   "several steps the engine, VectorMatchEnv, every learner at random")
     p.add_argument("--envs", type=int, default=16,
                    help="matches stepped together; 0: one gymnasium.make env (default: 16)")
     p.add_argument("--steps", type=int, default=100,
@@ -182,10 +194,15 @@ def main(argv: list[str] | None = None) -> None:
         child(args.scenario, args.envs, args.steps, args.observation)
         return
     from alphatank.envs import single_learner_scenarios
+    from alphatank.game.scenarios import load_scenario, shipped_scenarios
 
-    if args.scenario not in (names := single_learner_scenarios()):
-        p.error(f"--scenario {args.scenario!r}: not a shipped scenario with one learner "
-                f"seat; valid: {', '.join(names)}")
+    names = [n for n in shipped_scenarios() if load_scenario(n).learner_seats]
+    if args.scenario not in names:
+        p.error(f"--scenario {args.scenario!r}: not a shipped scenario with learner seats; "
+                f"valid: {', '.join(names)}")
+    if args.envs == 0 and args.scenario not in single_learner_scenarios():
+        p.error(f"--envs 0 (one gymnasium.make env) needs a scenario with one learner seat; "
+                f"{args.scenario!r} has several: give --envs N")
     if shutil.which("valgrind") is None:
         sys.exit("instructions: valgrind is not on the PATH (apt install valgrind)")
     if args.floor:
