@@ -6,11 +6,12 @@ import numpy as np
 import pytest
 
 from alphatank.bots.kernels import evade_choice, threat_slots
-from alphatank.game.kernels import nearest_threat, progress_counts, wall_rays
+from alphatank.game.kernels import nearest_threat, path_features, progress_counts, wall_rays
 from alphatank.game.observe import ObservationBuilder, StateBatch, slot_counts
 from alphatank.sim.config import game_config
 from alphatank.sim.mapspec import load_map
 from alphatank.sim.match import Match
+from alphatank.sim.navigation import nav_grid
 
 
 def numpy_progress(bullet_xy, tank_xy, alive, active, enemy, prev, cap, weights):
@@ -155,6 +156,61 @@ def test_nearest_threat_equals_the_numpy_block_bit_for_bit(seed):
     assert got.tobytes() == want.tobytes()  # -0.0 included
     assert got[1, 0, 0] == 1.0 and (got[..., 0] == 0).any() and ((got[..., 0] > 0)
                                                                   & (got[..., 0] < 1)).any()
+
+
+def numpy_paths(grid, envs, xy_all, alive_all, obs, oi, c, s):
+    """ObservationBuilder._build_paths as numpy computed it before the kernel: fwd, side
+    and dist, (G, L, O) each."""
+    xy = xy_all[envs]
+    nodes = grid.nodes_of(xy.reshape(-1, 2)).reshape(xy.shape[:2])
+    src = np.broadcast_to(nodes[:, obs][:, :, None], (len(nodes),) + oi.shape)
+    dst = nodes[:, oi]
+    nxt = grid.next_table
+    n1 = nxt[src, dst]
+    n1 = np.where(n1 < 0, src, n1)
+    n2 = nxt[n1, dst]
+    n2 = np.where(n2 < 0, n1, n2)
+    target = np.where((n1 == dst)[..., None], xy[:, oi], grid.centers[n2])
+    d = target - xy[:, obs][:, :, None, :]
+    alive = alive_all[envs][:, oi]
+    k = alive / np.maximum(np.hypot(d[..., 0], d[..., 1]), 1e-9)
+    c, s = c[envs][..., None], s[envs][..., None]
+    steps = grid.dist_table[src, dst]
+    return ((d[..., 0] * c + d[..., 1] * s) * k, (d[..., 1] * c - d[..., 0] * s) * k,
+            np.where(steps >= 0, steps * (1.0 / grid.diameter), 1.0) * alive)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_path_features_equal_the_numpy_paths_bit_for_bit(seed):
+    rng = np.random.default_rng(seed)
+    spec = load_map("maze")
+    grid = nav_grid(spec)
+    E, n = 5, 4
+    xy = rng.uniform(0, [spec.width, spec.height], (E, n, 2))  # walls and floor alike
+    floor = spec.floor_cells()
+    xy[0, 1] = np.add(spec.cell_center(floor[0]), (4.0, -3.0))
+    xy[0, 2] = spec.cell_center(floor[1])  # a neighbour: the path ends at the tank itself
+    xy[0, 3] = xy[0, 0] + (1e-7, 0.0)  # a hair from the observer: the 1e-9 floor
+    xy[2, 3] = xy[2, 0]  # on top of the observer: a zero direction
+    alive = rng.random((E, n)) < 0.75
+    alive[0] = True
+    obs = np.array([0, 2])
+    oi = np.array([[1, 2, 3], [0, 1, 3]])
+    ang = rng.uniform(-math.pi, math.pi, (E, 2))
+    c, s = np.cos(ang), np.sin(ang)
+    envs = np.array([0, 2, 3])  # one map's envs among others
+    cols = np.array([4, 1, 2])
+    out = np.full((E, 2, 3, 5), 7.0)  # float64: every bit (the observation is float32)
+    nodes = grid.nodes_of(xy[envs].reshape(-1, 2)).reshape(len(envs), n)
+    path_features(envs, nodes, xy, alive, obs, oi, grid.next_table, grid.dist_table,
+                  grid.centers, c, s, 1.0 / grid.diameter, cols, out)
+    want = np.full_like(out, 7.0)
+    for col, part in zip(cols, numpy_paths(grid, envs, xy, alive, obs, oi, c, s), strict=True):
+        want[envs, :, :, col] = part
+    assert out.tobytes() == want.tobytes()
+    assert (out[[1, 4], ...] == 7.0).all()  # the other map's envs are left alone
+    got = out[envs][..., cols]
+    assert ((got[..., 0] != 0) & (got[..., 0] != 7)).any()
 
 
 def test_paper_observation_sorts_other_bullets_nearest_first_ties_in_slot_order():

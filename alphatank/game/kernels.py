@@ -256,3 +256,50 @@ def nearest_threat(rel: np.ndarray, vel: np.ndarray, mask: np.ndarray, cos: np.n
             c, s = cos[e, i], sin[e, i]
             out[e, i, 2] = ((mx_k * c + my_k * s) * inv) * a
             out[e, i, 3] = ((my_k * c - mx_k * s) * inv) * a
+
+
+@njit(cache=True)
+def path_features(envs: np.ndarray, nodes: np.ndarray, xy: np.ndarray, alive: np.ndarray,
+                  observers: np.ndarray, others: np.ndarray, next_table: np.ndarray,
+                  dist_table: np.ndarray, centers: np.ndarray, cos: np.ndarray,
+                  sin: np.ndarray, inv_diameter: float, cols: np.ndarray,
+                  out: np.ndarray) -> None:
+    """The ``tank.path_*`` features of :meth:`~alphatank.game.observe.ObservationBuilder.
+    _build_paths` for the envs ``envs`` of one map, with numpy's operations in numpy's
+    order.
+
+    ``nodes`` (G, n): every tank's floor node in those envs; ``xy`` (E, n, 2), ``alive``
+    (E, n); ``observers`` (L,), ``others`` (L, O): seats; the map's ``next_table``,
+    ``dist_table`` and node ``centers``; ``cos``, ``sin`` (E, L): the observers'
+    headings; ``cols``: the fwd, side and dist columns of ``out`` (E, L, O, F). Per
+    observer and other tank: the unit direction, own frame, to the next waypoint on a
+    shortest path (two cells ahead, or the tank itself once it is the next cell), and
+    the path's length over ``1 / inv_diameter`` (1 unreachable); times 0 while the other
+    tank is dead."""
+    L, n_oth = others.shape
+    for g in range(envs.shape[0]):
+        e = envs[g]
+        for i in range(L):
+            src = nodes[g, observers[i]]
+            sx, sy = xy[e, observers[i], 0], xy[e, observers[i], 1]
+            c, s = cos[e, i], sin[e, i]
+            for k in range(n_oth):
+                j = others[i, k]
+                dst = nodes[g, j]
+                n1 = next_table[src, dst]
+                if n1 < 0:
+                    n1 = src
+                n2 = next_table[n1, dst]
+                if n2 < 0:
+                    n2 = n1
+                if n1 == dst:
+                    dx, dy = xy[e, j, 0] - sx, xy[e, j, 1] - sy
+                else:
+                    dx, dy = centers[n2, 0] - sx, centers[n2, 1] - sy
+                a = 1.0 if alive[e, j] else 0.0
+                m = np.hypot(dx, dy)
+                w = a / (m if m > 1e-9 else 1e-9)
+                out[e, i, k, cols[0]] = (dx * c + dy * s) * w
+                out[e, i, k, cols[1]] = (dy * c - dx * s) * w
+                steps = dist_table[src, dst]
+                out[e, i, k, cols[2]] = (steps * inv_diameter if steps >= 0 else 1.0) * a

@@ -62,7 +62,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from alphatank.game.kernels import nearest_threat, paper_observation, wall_rays
+from alphatank.game.kernels import nearest_threat, paper_observation, path_features, wall_rays
 from alphatank.game.seats import Seat, make_controller
 from alphatank.sim.ballistics import predict_points, segment_distances
 from alphatank.sim.config import GameConfig, hit_radius
@@ -558,7 +558,10 @@ class ObservationBuilder:
         # egocentric_path: each env's NavGrid, and the envs grouped by grid (one group
         # when every env plays the same map), set with the statics.
         self._nav: list[NavGrid | None] = [None] * E
-        self._nav_groups: list[tuple[NavGrid, np.ndarray | slice]] = []
+        self._nav_groups: list[tuple[NavGrid, np.ndarray]] = []
+        if kind in PATH_KINDS:  # the tank.path_* columns of v_tank, for path_features
+            self._path_cols = np.array([self.at[f"tank.{f}"]
+                                        for f in ("path_fwd", "path_side", "path_dist")])
         if kind == "paper":
             self._paper_plan()
 
@@ -711,8 +714,7 @@ class ObservationBuilder:
         for i, grid in enumerate(self._nav):
             if grid is not None:
                 groups.setdefault(id(grid), (grid, []))[1].append(i)
-        E = len(self._nav)
-        self._nav_groups = [(grid, slice(None) if len(envs) == E else np.array(envs))
+        self._nav_groups = [(grid, np.array(envs, dtype=np.int64))
                             for grid, envs in groups.values()]
 
     # ---- per step -------------------------------------------------------------------
@@ -934,7 +936,7 @@ class ObservationBuilder:
         self.v_buff[..., at["buff.mask"]] = b.zone_mask[:, None, :b.max_buffs]
         self.v_debuff[..., at["debuff.mask"]] = b.zone_mask[:, None, b.max_buffs:]
         if self._nav_groups:
-            self._build_paths(c3, s3, self_xy)
+            self._build_paths(c3, s3)
         if self.kind in FIRE_KINDS:
             self._build_fire()
 
@@ -983,31 +985,16 @@ class ObservationBuilder:
         order = key.argsort(axis=-1, kind="stable")
         self.v_tank[...] = self.v_tank[self._ge, self._gl, order]
 
-    def _build_paths(self, c3: np.ndarray, s3: np.ndarray, self_xy: np.ndarray) -> None:
+    def _build_paths(self, c3: np.ndarray, s3: np.ndarray) -> None:
         """``tank.path_*`` of every observer and other tank, one group of envs per map:
-        shortest-path next cells from the all-pairs tables, rotated into the own frame."""
-        b, at, vt = self.batch, self.at, self.v_tank
-        obs, oi = self.observers, self.other_idx
+        shortest-path next cells from the all-pairs tables, rotated into the own frame
+        (:func:`~alphatank.game.kernels.path_features`)."""
+        b = self.batch
         for grid, envs in self._nav_groups:
-            xy = b.tank_xy[envs]  # (G, n, 2)
-            nodes = grid.nodes_of(xy.reshape(-1, 2)).reshape(xy.shape[:2])
-            src = np.broadcast_to(nodes[:, obs][:, :, None], (len(nodes),) + oi.shape)
-            dst = nodes[:, oi]  # (G, L, O)
-            nxt = grid.next_table
-            n1 = nxt[src, dst]
-            n1 = np.where(n1 < 0, src, n1)
-            n2 = nxt[n1, dst]
-            n2 = np.where(n2 < 0, n1, n2)
-            target = np.where((n1 == dst)[..., None], xy[:, oi], grid.centers[n2])
-            d = target - self_xy[envs]  # (G, L, O, 2)
-            alive = b.alive[envs][:, oi]
-            k = alive / np.maximum(np.hypot(d[..., 0], d[..., 1]), 1e-9)
-            c, s = c3[envs], s3[envs]
-            vt[envs, :, :, at["tank.path_fwd"]] = (d[..., 0] * c + d[..., 1] * s) * k
-            vt[envs, :, :, at["tank.path_side"]] = (d[..., 1] * c - d[..., 0] * s) * k
-            steps = grid.dist_table[src, dst]
-            vt[envs, :, :, at["tank.path_dist"]] = np.where(
-                steps >= 0, steps * (1.0 / grid.diameter), 1.0) * alive
+            nodes = grid.nodes_of(b.tank_xy[envs].reshape(-1, 2)).reshape(len(envs), b.n)
+            path_features(envs, nodes, b.tank_xy, b.alive, self.observers, self.other_idx,
+                          grid.next_table, grid.dist_table, grid.centers, c3[..., 0],
+                          s3[..., 0], 1.0 / grid.diameter, self._path_cols, self.v_tank)
 
     def ray_distances(self, xy: np.ndarray, angle: np.ndarray) -> np.ndarray:
         """(E, L, R) px to the nearest wall rectangle along ``rays`` directions from each
