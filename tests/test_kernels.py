@@ -6,7 +6,13 @@ import numpy as np
 import pytest
 
 from alphatank.bots.kernels import evade_choice, threat_slots
-from alphatank.game.kernels import nearest_threat, path_features, progress_counts, wall_rays
+from alphatank.game.kernels import (
+    nearest_bullets,
+    nearest_threat,
+    path_features,
+    progress_counts,
+    wall_rays,
+)
 from alphatank.game.observe import ObservationBuilder, StateBatch, slot_counts
 from alphatank.sim.config import game_config
 from alphatank.sim.mapspec import load_map
@@ -211,6 +217,52 @@ def test_path_features_equal_the_numpy_paths_bit_for_bit(seed):
     assert (out[[1, 4], ...] == 7.0).all()  # the other map's envs are left alone
     got = out[envs][..., cols]
     assert ((got[..., 0] != 0) & (got[..., 0] != 7)).any()
+
+
+def numpy_bullets(bullet_xy, bullet_vel, active, bidx, bteam, xy):
+    """ObservationBuilder._other_bullets and its use as numpy did them before the kernel:
+    relative xy, velocity and mask (E, L, K[, 2]) nearest first, and the team flags."""
+    act = active[:, bidx]
+    rel = bullet_xy[:, bidx] - xy[:, :, None, :]
+    dist = np.hypot(rel[..., 0], rel[..., 1])
+    order = np.where(act, dist, np.inf).argsort(axis=-1, kind="stable")
+    ge, gl = np.arange(len(xy))[:, None, None], np.arange(bidx.shape[0])[None, :, None]
+    mask = act[ge, gl, order]
+    team = np.multiply(bteam[gl, order], mask)
+    return rel[ge, gl, order], bullet_vel[ge, bidx[gl, order]], mask, team
+
+
+@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize("team_col", [3, -1])
+def test_nearest_bullets_equal_the_numpy_sort_bit_for_bit(seed, team_col):
+    rng = np.random.default_rng(seed)
+    E, L, nb, K, first = 4, 2, 12, 6, 3
+    bullet_xy = rng.uniform(0, 600, (E, nb, 2))
+    bullet_vel = rng.uniform(-300, 300, (E, nb, 2))
+    active = rng.random((E, nb)) < 0.6
+    bidx = np.array([rng.permutation(nb)[:K] for _ in range(L)])
+    bteam = (rng.random((L, K)) < 0.5).astype(np.float64)
+    xy = rng.uniform(0, 600, (E, L, 2))
+    b0, b1 = bidx[0, 1], bidx[0, 4]
+    bullet_xy[0, b1] = 2 * xy[0, 0] - bullet_xy[0, b0]  # mirrored: a tie in distance
+    active[0, [b0, b1]] = True
+    width = first + K + 2
+    relv, velv = np.full((E, L, width, 2), 7.0), np.full((E, L, width, 2), 7.0)
+    rmask, vmask = np.full((E, L, width), 7.0), np.full((E, L, width), 7.0)
+    block = np.full((E, L, K, 5), 7.0, dtype=np.float32)
+    nearest_bullets(bullet_xy, bullet_vel, active, bidx, bteam, xy, first, relv, velv,
+                    rmask, vmask, block, 1, team_col)
+    rel, vel, mask, team = numpy_bullets(bullet_xy, bullet_vel, active, bidx, bteam, xy)
+    span = slice(first, first + K)
+    assert relv[:, :, span].tobytes() == rel.tobytes()
+    assert velv[:, :, span].tobytes() == vel.tobytes()
+    assert rmask[:, :, span].tobytes() == vmask[:, :, span].tobytes() == mask.astype(
+        np.float64).tobytes()
+    assert block[..., 1].tobytes() == mask.astype(np.float32).tobytes()
+    if team_col >= 0:
+        assert block[..., 3].tobytes() == team.astype(np.float32).tobytes()
+    assert (block[..., [0, 2, 4] if team_col >= 0 else [0, 2, 3, 4]] == 7.0).all()
+    assert (relv[:, :, :first] == 7.0).all() and (relv[:, :, first + K:] == 7.0).all()
 
 
 def test_paper_observation_sorts_other_bullets_nearest_first_ties_in_slot_order():

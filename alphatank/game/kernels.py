@@ -303,3 +303,51 @@ def path_features(envs: np.ndarray, nodes: np.ndarray, xy: np.ndarray, alive: np
                 out[e, i, k, cols[1]] = (dy * c - dx * s) * w
                 steps = dist_table[src, dst]
                 out[e, i, k, cols[2]] = (steps * inv_diameter if steps >= 0 else 1.0) * a
+
+
+@njit(cache=True)
+def nearest_bullets(bullet_xy: np.ndarray, bullet_vel: np.ndarray, active: np.ndarray,
+                    bidx: np.ndarray, bteam: np.ndarray, xy: np.ndarray, first: int,
+                    relv: np.ndarray, velv: np.ndarray, rmask: np.ndarray, vmask: np.ndarray,
+                    block: np.ndarray, mask_col: int, team_col: int) -> None:
+    """The other tanks' bullets of the egocentric kinds, nearest first (a stable sort,
+    inactive slots last in slot order), as :meth:`~alphatank.game.observe.
+    ObservationBuilder._other_bullets` laid them out with numpy.
+
+    ``bullet_xy``, ``bullet_vel`` (E, nb, 2) and ``active`` (E, nb): every slot;
+    ``bidx`` (L, K): each observer's other bullet slots; ``bteam`` (L, K): 1 for a
+    teammate's; ``xy`` (E, L, 2): the observers. From column ``first`` of ``relv`` /
+    ``velv`` (E, L, ., 2) and ``rmask`` / ``vmask`` (E, L, .): each bullet's position
+    relative to the observer, its velocity and its active flag; into ``block`` (E, L, K,
+    F): the mask column and, when ``team_col`` >= 0, the team flag times the mask."""
+    E = relv.shape[0]
+    L, K = bidx.shape
+    rx, ry = np.empty(K), np.empty(K)
+    key = np.empty(K)
+    order = np.empty(K, dtype=np.int64)
+    for e in range(E):
+        for i in range(L):
+            sx, sy = xy[e, i, 0], xy[e, i, 1]
+            for q in range(K):
+                b = bidx[i, q]
+                rx[q] = bullet_xy[e, b, 0] - sx
+                ry[q] = bullet_xy[e, b, 1] - sy
+                key[q] = np.hypot(rx[q], ry[q]) if active[e, b] else np.inf
+                p = q  # insertion sort: stable, as argsort(kind="stable")
+                while p > 0 and key[order[p - 1]] > key[q]:
+                    order[p] = order[p - 1]
+                    p -= 1
+                order[p] = q
+            for p in range(K):
+                q = order[p]
+                b = bidx[i, q]
+                m = 1.0 if active[e, b] else 0.0
+                relv[e, i, first + p, 0] = rx[q]
+                relv[e, i, first + p, 1] = ry[q]
+                velv[e, i, first + p, 0] = bullet_vel[e, b, 0]
+                velv[e, i, first + p, 1] = bullet_vel[e, b, 1]
+                rmask[e, i, first + p] = m
+                vmask[e, i, first + p] = m
+                block[e, i, p, mask_col] = m
+                if team_col >= 0:
+                    block[e, i, p, team_col] = bteam[i, q] * m

@@ -62,7 +62,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from alphatank.game.kernels import nearest_threat, paper_observation, path_features, wall_rays
+from alphatank.game.kernels import (
+    nearest_bullets,
+    nearest_threat,
+    paper_observation,
+    path_features,
+    wall_rays,
+)
 from alphatank.game.seats import Seat, make_controller
 from alphatank.sim.ballistics import predict_points, segment_distances
 from alphatank.sim.config import GameConfig, hit_radius
@@ -111,7 +117,6 @@ def constant(value: float, dtype: type = np.float64) -> np.ndarray:
     return arr
 
 
-INF = constant(math.inf)
 ONE32, MINUS_ONE32 = constant(1.0, np.float32), constant(-1.0, np.float32)  # obs dtype
 # What each field of a slot means (docs/environments.md's observation tables come from this
 # and the layouts; every field a layout names must be here).
@@ -805,10 +810,12 @@ class ObservationBuilder:
         counts = self.batch.counts[:, :, self.observers]  # (E, 2, L)
         np.multiply(counts.transpose(0, 2, 1), self._count_scale, out=out)
 
-    def _other_bullets(self, self_xy: np.ndarray) -> tuple[np.ndarray, ...] | None:
-        """Other tanks' bullets sorted nearest first: slot indices, relative xy and
-        distance (px), and the active mask; all (E, L, K[, 2]). None (and the block
-        zeroed) when no other bullet flies anywhere in the batch."""
+    def _other_bullets(self, xy: np.ndarray) -> bool:
+        """Other tanks' bullets nearest first, from ``self._seg``'s second end on in
+        ``_relv``, ``_velv`` and the masks, and the ``bullet`` block's mask and team
+        columns (:func:`~alphatank.game.kernels.nearest_bullets`); ``xy`` (E, L, 2): the
+        observers. False (and the block zeroed) when no other bullet flies anywhere in
+        the batch."""
         b, bidx = self.batch, self.other_bidx
         act = self._other_act
         act = b.bullet_active[:, bidx] if act is None else act
@@ -816,18 +823,14 @@ class ObservationBuilder:
             if not self._bullets_zero:
                 self.v_bullet[...] = 0.0
                 self._bullets_zero = True
-            return None
+            return False
         self._bullets_zero = False
-        rel = b.bullet_xy[:, bidx] - self_xy  # (E, L, K, 2)
-        dist = np.hypot(rel[..., 0], rel[..., 1])
-        order = np.where(act, dist, INF).argsort(axis=-1, kind="stable")
-        ge, gl = self._ge, self._gl
-        mask = act[ge, gl, order]
-        vb = self.v_bullet
-        vb[..., self.at["bullet.mask"]] = mask
-        if self.team_flags:
-            np.multiply(self.other_bteam[gl, order], mask, out=vb[..., self.at["bullet.team"]])
-        return bidx[gl, order], rel[ge, gl, order], dist[ge, gl, order], mask
+        at = self.at
+        nearest_bullets(b.bullet_xy, b.bullet_vel, b.bullet_active, bidx, self.other_bteam, xy,
+                        self._seg[1], self._relv, self._velv, self._rmask, self._vmask,
+                        self.v_bullet, at["bullet.mask"],
+                        at["bullet.team"] if self.team_flags else -1)
+        return True
 
     def _build_paper(self) -> None:
         """The ``paper`` kind, clipped (see :meth:`_paper_plan`); the same values as
@@ -908,20 +911,13 @@ class ObservationBuilder:
         rm[:, :, o:oc] = act
         vm[:, :, o:oc] = act
         rm[:, :, ock:] = b.zone_mask[:, None, :]
-        others = self._other_bullets(self_xy)
-        if others is None:
+        flying = self._other_bullets(xy)
+        if not flying:
             rm[:, :, oc:ock] = 0.0
             vm[:, :, oc:ock] = 0.0
-        else:
-            sel, brel, _, mask = others
-            relv[:, :, oc:ock] = brel
-            velv[:, :, oc:ock] = b.bullet_vel[self._ge, sel]
-            rm[:, :, oc:ock] = mask
-            vm[:, :, oc:ock] = mask
         if self.kind in THREAT_KINDS:
-            self._build_threat(None if others is None else (relv[:, :, oc:ock],
-                                                            velv[:, :, oc:ock], others[3]),
-                               c3, s3)
+            self._build_threat((relv[:, :, oc:ock], velv[:, :, oc:ock], rm[:, :, oc:ock])
+                               if flying else None, c3, s3)
         out = self.out
         fc, sc_, dc = self._rel_cols
         k = rm * b.scale
