@@ -16,6 +16,17 @@ from numba import njit
 
 
 @njit(cache=True)
+def _insert(key: np.ndarray, order: np.ndarray, q: int) -> None:
+    """One step of an insertion sort: ``order[:q]`` holds indices sorted by ``key``;
+    put ``q`` among them after its equals (stable, as ``argsort(kind="stable")``)."""
+    p = q
+    while p > 0 and key[order[p - 1]] > key[q]:
+        order[p] = order[p - 1]
+        p -= 1
+    order[p] = q
+
+
+@njit(cache=True)
 def progress_counts(bullet_xy: np.ndarray, tank_xy: np.ndarray, alive: np.ndarray,
                     active: np.ndarray, enemy: np.ndarray, prev: np.ndarray, cap: int,
                     weights: np.ndarray, out: np.ndarray) -> None:
@@ -154,11 +165,7 @@ def paper_observation(raw: np.ndarray, n: int, inv: np.ndarray, scale: np.ndarra
                 rel[q, 0], rel[q, 1] = rx, ry
                 dist[q] = np.hypot(rx, ry)
                 key[q] = dist[q] if active[e, slot] else np.inf
-                p = q  # insertion sort: stable, as argsort(kind="stable")
-                while p > 0 and key[order[p - 1]] > key[q]:
-                    order[p] = order[p - 1]
-                    p -= 1
-                order[p] = q
+                _insert(key, order, q)
             for p in range(K):
                 q = order[p]
                 slot = other_bidx[i, q]
@@ -333,11 +340,7 @@ def nearest_bullets(bullet_xy: np.ndarray, bullet_vel: np.ndarray, active: np.nd
                 rx[q] = bullet_xy[e, b, 0] - sx
                 ry[q] = bullet_xy[e, b, 1] - sy
                 key[q] = np.hypot(rx[q], ry[q]) if active[e, b] else np.inf
-                p = q  # insertion sort: stable, as argsort(kind="stable")
-                while p > 0 and key[order[p - 1]] > key[q]:
-                    order[p] = order[p - 1]
-                    p -= 1
-                order[p] = q
+                _insert(key, order, q)
             for p in range(K):
                 q = order[p]
                 b = bidx[i, q]
