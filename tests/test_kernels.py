@@ -11,9 +11,11 @@ from alphatank.game.kernels import (
     nearest_threat,
     path_features,
     progress_counts,
+    shot_reach,
     wall_rays,
 )
 from alphatank.game.observe import ObservationBuilder, StateBatch, slot_counts
+from alphatank.sim.ballistics import segment_distances
 from alphatank.sim.config import game_config
 from alphatank.sim.mapspec import load_map
 from alphatank.sim.match import Match
@@ -263,6 +265,65 @@ def test_nearest_bullets_equal_the_numpy_sort_bit_for_bit(seed, team_col):
         assert block[..., 3].tobytes() == team.astype(np.float32).tobytes()
     assert (block[..., [0, 2, 4] if team_col >= 0 else [0, 2, 3, 4]] == 7.0).all()
     assert (relv[:, :, :first] == 7.0).all() and (relv[:, :, first + K:] == 7.0).all()
+
+
+def numpy_reach(dist, t, d, alive, seats, length, team, r, max_distance):
+    """StateBatch.reach_shots' array part as numpy did it before the kernel: first,
+    passing (E, S[, n]) and the shot block (E, S, 3)."""
+    n = dist.shape[-1]
+    target = alive[:, None, :] & (np.arange(n) != seats[:, None])
+    dist[~np.broadcast_to(target[:, :, None], dist.shape)] = np.inf
+    near = (dist <= r).any(axis=-1)
+    seg = near.argmax(axis=-1)[..., None, None]
+    hit = np.take_along_axis(near, seg[..., 0], axis=-1)[..., 0]
+    d_seg = np.take_along_axis(dist, seg, axis=2)[:, :, 0]
+    along = np.take_along_axis(t, seg, axis=2)[:, :, 0] * np.abs(
+        np.take_along_axis(d, seg, axis=2)[:, :, 0])
+    chord = np.sqrt(np.maximum(r * r - np.minimum(d_seg, r) ** 2, 0.0))
+    first = np.where(d_seg <= r, along - chord, np.inf).argmin(axis=-1)
+    passing = dist.min(axis=2)
+    mine = team[:, seats]
+    mate = np.take_along_axis(team, first, axis=1) == mine
+    out = np.empty(mine.shape + (3,))
+    out[..., 0] = hit & ~mate
+    out[..., 1] = hit & mate
+    foe = target & (team[:, None, :] != mine[..., None])
+    out[..., 2] = np.minimum(np.where(foe, passing, np.inf).min(axis=-1) / max_distance, 1.0)
+    out[length == 0] = 0.0
+    return np.where(hit & (length > 0), first, -1), passing, out
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_shot_reach_equals_the_numpy_shots_bit_for_bit(seed):
+    rng = np.random.default_rng(seed)
+    E, n, P, r, max_distance = 6, 4, 4, 12.0, 700.0
+    seats = np.array([0, 2, 3])
+    xy = rng.uniform(0, 400, (E, n, 2))
+    paths = rng.uniform(0, 400, (E, len(seats), P, 2))
+    xy[0] = [(50.0, 50.0), (200.0, 50.0), (350.0, 50.0), (200.0, 300.0)]
+    paths[0, 0] = [(70.0, 50.0), (200.0, 50.0), (350.0, 50.0), (350.0, 200.0)]  # friend first
+    xy[1, 3] = xy[1, 1]  # two tanks in one spot: a tie for the first reached
+    paths[1, 1, 1] = xy[1, 1] + (3.0, 0.0)
+    paths[2, 0, 1:] = paths[2, 0, 0]  # a shot that goes nowhere (zero legs)
+    alive = rng.random((E, n)) < 0.8
+    alive[:2] = True
+    team = np.array([0, 0, 1, 1])[None].repeat(E, 0)
+    length = np.full((E, len(seats)), P)
+    length[3, 1] = 0  # a dead shooter's stale row
+    z = paths.view(np.complex128)[..., 0]
+    w = (xy[..., 0] + 1j * xy[..., 1])[:, None, :]
+    dist, t, d = segment_distances(z, w)
+    want = numpy_reach(dist.copy(), t, d, alive, seats, length, team, r, max_distance)
+    first, passing = np.full((E, n), 9), np.full((E, n, n), 9.0)
+    shots = np.full((E, n, 3), 9.0)
+    shot_reach(dist, t, np.abs(d[..., 0]), alive, seats, length, team, r, max_distance,
+               first, passing, shots)
+    assert first[:, seats].tobytes() == want[0].tobytes()
+    assert passing[:, seats].tobytes() == want[1].tobytes()
+    assert shots[:, seats].tobytes() == want[2].tobytes()
+    assert (first[:, 1] == 9).all() and (shots[:, 1] == 9.0).all()  # not a shooter
+    assert first[0, 0] == 1 and shots[0, 0, 1] == 1.0  # the friend in the way
+    assert (shots[:, seats, 2] < 1.0).any()
 
 
 def test_paper_observation_sorts_other_bullets_nearest_first_ties_in_slot_order():

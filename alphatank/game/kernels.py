@@ -354,3 +354,63 @@ def nearest_bullets(bullet_xy: np.ndarray, bullet_vel: np.ndarray, active: np.nd
                 block[e, i, p, mask_col] = m
                 if team_col >= 0:
                     block[e, i, p, team_col] = bteam[i, q] * m
+
+
+@njit(cache=True)
+def shot_reach(dist: np.ndarray, t: np.ndarray, leg: np.ndarray, alive: np.ndarray,
+               seats: np.ndarray, length: np.ndarray, team: np.ndarray, radius: float,
+               max_distance: float, first: np.ndarray, passing: np.ndarray,
+               shots: np.ndarray) -> None:
+    """What :meth:`~alphatank.game.observe.StateBatch.reach_shots` makes of the traced
+    shots, with numpy's operations in numpy's order.
+
+    ``dist`` (E, S, P-1, n) and ``t`` (E, S, P-1, n): each shot leg's closest approach to
+    every tank and where along the leg; ``leg`` (E, S, P-1): each leg's length; ``alive``
+    (E, n); ``seats`` (S,): the shooters; ``length`` (E, S): points of each path (0: no
+    shot); ``team`` (E, n). Into ``first`` (E, n): the live tank other than the shooter
+    that the shot reaches first (-1: none), ``passing`` (E, n, n): its closest approach
+    to each of them (inf for the others), and ``shots`` (E, n, 3): enemy reached first,
+    friend reached first, closest enemy approach over ``max_distance`` (at most 1). ``dist``
+    is overwritten with inf where a tank is no target."""
+    E, S, P1, n = dist.shape
+    r2 = radius * radius
+    for e in range(E):
+        for i in range(S):
+            s = seats[i]
+            for k in range(P1):
+                for j in range(n):
+                    if not alive[e, j] or j == s:
+                        dist[e, i, k, j] = np.inf
+            seg, hit = 0, False
+            for k in range(P1):
+                for j in range(n):
+                    if dist[e, i, k, j] <= radius:
+                        seg, hit = k, True
+                        break
+                if hit:
+                    break
+            best, near = np.inf, 0
+            for j in range(n):
+                d = dist[e, i, seg, j]
+                m = d if d < radius else radius
+                c = r2 - m * m  # numpy squares with ** 2
+                chord = np.sqrt(c if c > 0.0 else 0.0)
+                entry = t[e, i, seg, j] * leg[e, i, seg] - chord if d <= radius else np.inf
+                if j == 0 or entry < best:
+                    best, near = entry, j
+            shot = length[e, i] > 0
+            first[e, s] = near if hit and shot else -1
+            mate = team[e, near] == team[e, s]
+            closest = np.inf
+            for j in range(n):
+                p = dist[e, i, 0, j]
+                for k in range(1, P1):
+                    if dist[e, i, k, j] < p:
+                        p = dist[e, i, k, j]
+                passing[e, s, j] = p
+                if alive[e, j] and j != s and team[e, j] != team[e, s] and p < closest:
+                    closest = p
+            miss = closest / max_distance
+            shots[e, s, 0] = 1.0 if shot and hit and not mate else 0.0
+            shots[e, s, 1] = 1.0 if shot and hit and mate else 0.0
+            shots[e, s, 2] = (miss if miss < 1.0 else 1.0) if shot else 0.0

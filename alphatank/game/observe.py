@@ -67,6 +67,7 @@ from alphatank.game.kernels import (
     nearest_threat,
     paper_observation,
     path_features,
+    shot_reach,
     wall_rays,
 )
 from alphatank.game.seats import Seat, make_controller
@@ -407,9 +408,10 @@ class StateBatch:
 
     def reach_shots(self) -> None:
         """Fill ``shots`` of every env from the paths traced since the last call, against
-        the live tanks in one set of array operations: the first tank each path reaches
-        (:func:`alphatank.sim.ballistics.path_hits`) and its closest approach to an enemy
-        (:func:`alphatank.sim.ballistics.path_distances`)."""
+        the live tanks: the first tank each path reaches (as
+        :func:`alphatank.sim.ballistics.path_hits`) and its closest approach to an enemy
+        (as :func:`alphatank.sim.ballistics.path_distances`); every leg's distances in
+        numpy, the rest compiled (:func:`~alphatank.game.kernels.shot_reach`)."""
         if not self._shots_due:
             return
         self._shots_due = False
@@ -424,34 +426,9 @@ class StateBatch:
         w = self._tank_z
         w.real, w.imag = self.tank_xy[..., 0], self.tank_xy[..., 1]
         dist, t, d = segment_distances(self._paths[:, seats, :P], w[:, None, :])  # (E, S, P-1, n)
-        n = self.n
-        target = self.alive[:, None, :] & (np.arange(n) != seats[:, None])  # (E, S, n)
-        dist[~np.broadcast_to(target[:, :, None], dist.shape)] = np.inf
-        r = self._shot_radius
-        close = dist <= r
-        near = close.any(axis=-1)  # (E, S, P-1)
-        seg = near.argmax(axis=-1)[..., None, None]  # the first leg near anyone
-        hit = np.take_along_axis(near, seg[..., 0], axis=-1)[..., 0]
-        d_seg = np.take_along_axis(dist, seg, axis=2)[:, :, 0]  # (E, S, n)
-        along = np.take_along_axis(t, seg, axis=2)[:, :, 0] * np.abs(
-            np.take_along_axis(d, seg, axis=2)[:, :, 0])
-        chord = np.sqrt(np.maximum(r * r - np.minimum(d_seg, r) ** 2, 0.0))
-        entry = np.where(d_seg <= r, along - chord, np.inf)  # where each enters the leg
-        first = entry.argmin(axis=-1)  # (E, S)
-        self.shot_first[:, seats] = np.where(hit & (length > 0), first, -1)
-        passing = dist.min(axis=2)  # (E, S, n)
-        self.shot_pass[:, seats] = passing
-        team = self.team
-        mine = team[:, seats]
-        mate = np.take_along_axis(team, first, axis=1) == mine
-        out = np.empty(mine.shape + (len(SHOT_FIELDS),))
-        out[..., 0] = hit & ~mate
-        out[..., 1] = hit & mate
-        foe = target & (team[:, None, :] != mine[..., None])
-        closest = np.where(foe, passing, np.inf).min(axis=-1)
-        out[..., 2] = np.minimum(closest / self.cfg.bullet_max_distance, 1.0)
-        out[length == 0] = 0.0
-        self.shots[:, seats] = out
+        shot_reach(dist, t, np.abs(d[..., 0]), self.alive, seats, length, self.team,
+                   self._shot_radius, self.cfg.bullet_max_distance, self.shot_first,
+                   self.shot_pass, self.shots)
 
     def set_static(self, e: int, match: Match) -> None:
         """Map size, wall rectangles and zone centres of match ``e``'s episode."""
