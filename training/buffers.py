@@ -108,7 +108,8 @@ class RolloutBuffer:
 class OnPolicyPlumbing:
     """The Learner protocol's run plumbing shared by the fixed-rollout learners (PPO,
     MAPPO): they hold ``cfg.num_steps``, a :class:`RolloutBuffer` ``buffer``, a return
-    normaliser ``ret_norm`` and ``total_updates``, and keep all their state in
+    normaliser ``ret_norm``, an ``optimizer``, a torch ``generator`` and a numpy
+    ``np_rng``, ``updates`` and ``total_updates``, and keep all their state in
     ``state_dict``."""
 
     @property
@@ -123,8 +124,31 @@ class OnPolicyPlumbing:
         """Fresh episodes everywhere: restart the discounted returns of reward scaling."""
         self.ret_norm.returns[:] = 0.0
 
+    @property
+    def ready(self) -> bool:
+        return self.buffer.full
+
     def anchor(self) -> None:
         """No anchor (MAPPO; PPO overrides this)."""
+
+    def anneal_lr(self, *base_rates: float) -> None:
+        """With ``anneal_lr``, set the optimiser's param groups to their ``base_rates``
+        scaled down linearly to 0 over the planned updates."""
+        if self.cfg.anneal_lr and self.total_updates > 0:
+            frac = max(0.0, 1.0 - self.updates / self.total_updates)
+            for group, rate in zip(self.optimizer.param_groups, base_rates, strict=True):
+                group["lr"] = frac * rate
+
+    def record_outcome(self, rewards: np.ndarray, terminated: np.ndarray,
+                       truncated: np.ndarray, active: Any) -> None:
+        """Write what followed the last act into the rollout's current row (rewards
+        scaled); the caller adds the bootstrap values and advances the row."""
+        buf = self.buffer
+        row, t = buf.np, buf.step
+        row["rewards"][t] = self.ret_norm(rewards, np.logical_or(terminated, truncated))
+        row["terminated"][t] = terminated
+        row["truncated"][t] = truncated
+        row["active"][t] = active
 
     def drop_rollout(self) -> None:
         """Forget the unfinished rollout (its matches were lost)."""
@@ -142,12 +166,25 @@ class OnPolicyPlumbing:
         row["actions"][s] = actions
         row["logprobs"][s] = logprobs
         row["values"][s] = values
-        row["rewards"][s] = self.ret_norm(rewards, terminated | truncated)
-        row["terminated"][s] = terminated
-        row["truncated"][s] = truncated
+        self.record_outcome(rewards, terminated, truncated, active)
         row["bootstrap"][s] = bootstrap
-        row["active"][s] = active
         buf.step += 1
+
+    def training_state(self) -> dict[str, Any]:
+        """The ``state_dict`` entries that only resuming needs (inference does not): the
+        optimiser, reward scaling, both random generators and the update count."""
+        return {"optimizer": self.optimizer.state_dict(), "ret_norm": self.ret_norm.state_dict(),
+                "generator": self.generator.get_state(),
+                "np_rng": self.np_rng.bit_generator.state,
+                "updates": torch.tensor(self.updates)}
+
+    def load_training_state(self, state: dict[str, Any]) -> None:
+        """Restore what :meth:`training_state` wrote."""
+        self.optimizer.load_state_dict(state["optimizer"])
+        self.ret_norm.load_state_dict(state["ret_norm"])
+        self.generator.set_state(state["generator"])
+        self.np_rng.bit_generator.state = state["np_rng"]
+        self.updates = int(state["updates"])
 
     def arrays(self) -> dict[str, np.ndarray]:
         return {}

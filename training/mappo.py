@@ -46,6 +46,7 @@ from alphatank.training.ppo import (
     Fold,
     NumpyMLP,
     Tanh,
+    clipped_surrogate,
     evaluate_actions,
     fold_constant,
     mlp,
@@ -314,14 +315,8 @@ class MAPPO(OnPolicyPlumbing, MAPPOActing):
         ``state`` / ``alive`` (of ``next_obs``) are read at the next :meth:`act`."""
         del next_obs, state, alive
         buf, cfg = self.buffer, self.cfg
-        t = buf.step
-        row = buf.np
-        ended = np.logical_or(terminated, truncated)
-        row["rewards"][t] = self.ret_norm(rewards, ended)
-        row["terminated"][t] = terminated
-        row["truncated"][t] = truncated
         act = self._alive_now if active is None else np.asarray(active, dtype=bool)
-        row["active"][t] = act
+        self.record_outcome(rewards, terminated, truncated, act)
         boot = np.logical_and(truncated, np.logical_not(terminated))
         if cfg.bootstrap_timeouts and boot.any():
             if final_obs is None or (self.state_dim and final_state is None):
@@ -330,12 +325,8 @@ class MAPPO(OnPolicyPlumbing, MAPPOActing):
             live = self._alive(final_obs, final_alive)
             values = self._team_values(self._values(final_state, final_obs),
                                        act if live is None else live)
-            row["bootstrap"][t] = np.where(boot, values, 0.0)
+            buf.np["bootstrap"][buf.step] = np.where(boot, values, 0.0)
         buf.step += 1
-
-    @property
-    def ready(self) -> bool:
-        return self.buffer.full
 
     # ---- rollouts acted elsewhere (fragments) ------------------------------------------
 
@@ -380,10 +371,7 @@ class MAPPO(OnPolicyPlumbing, MAPPOActing):
         cfg, buf, net = self.cfg, self.buffer, self.net
         if not buf.full:
             raise RuntimeError(f"rollout has {buf.step}/{buf.num_steps} steps; update when ready")
-        if cfg.anneal_lr and self.total_updates > 0:
-            frac = max(0.0, 1.0 - self.updates / self.total_updates)
-            self.optimizer.param_groups[0]["lr"] = frac * cfg.learning_rate
-            self.optimizer.param_groups[1]["lr"] = frac * cfg.critic_learning_rate
+        self.anneal_lr(cfg.learning_rate, cfg.critic_learning_rate)
         advantages, returns, values = self.advantages(next_obs, state=state, alive=alive)
         n = buf.num_steps * buf.num_streams
         b_active = buf.active.reshape(n)
@@ -423,15 +411,9 @@ class MAPPO(OnPolicyPlumbing, MAPPOActing):
                 logprob, entropy = evaluate_actions(
                     net.logits(b_x.index_select(0, idx), mask, x_fold),
                     b_actions.index_select(0, idx), self.nvec)
-                log_ratio = logprob - b_logprobs.index_select(0, idx)
-                ratio = log_ratio.exp()
-                with torch.no_grad():
-                    approx_kl = (((ratio - 1) - log_ratio) * w).sum() / n_w
-                    clipfrac = (((ratio - 1.0).abs() > cfg.clip_coef).float() * w).sum() / n_w
-                adv = b_adv.index_select(0, idx)
-                pg = torch.max(-adv * ratio,
-                               -adv * torch.clamp(ratio, 1 - cfg.clip_coef, 1 + cfg.clip_coef))
-                pg_loss = (pg * w).sum() / n_w
+                pg_loss, approx_kl, clipfrac = clipped_surrogate(
+                    logprob, b_logprobs.index_select(0, idx), b_adv.index_select(0, idx), w,
+                    n_w, cfg.clip_coef)
                 ent = (entropy * w).sum() / n_w
                 loss = cfg.vf_coef * v_loss
                 if not warmup:
@@ -528,16 +510,11 @@ class MAPPO(OnPolicyPlumbing, MAPPOActing):
         return np_sample(logits, self.nvec, rng or self.np_rng, deterministic)[0]
 
     def state_dict(self) -> dict[str, Any]:
-        return {"net": self.net.state_dict(), "optimizer": self.optimizer.state_dict(),
-                "obs_norm": self.obs_norm.state_dict(),
+        return {"net": self.net.state_dict(), "obs_norm": self.obs_norm.state_dict(),
                 "state_norm": self.state_norm.state_dict(),
                 "value_norm": self.value_norm.state_dict(),
-                "ret_norm": self.ret_norm.state_dict(),
-                "generator": self.generator.get_state(),
-                "np_rng": self.np_rng.bit_generator.state,
-                "updates": torch.tensor(self.updates),
                 "num_seats": torch.tensor(self.num_seats),
-                "state_dim": torch.tensor(self.state_dim)}
+                "state_dim": torch.tensor(self.state_dim), **self.training_state()}
 
     def load_state_dict(self, state: dict[str, Any], weights_only: bool = False) -> None:
         """Restore a learner; ``weights_only`` restores just what inference needs."""
@@ -552,8 +529,4 @@ class MAPPO(OnPolicyPlumbing, MAPPOActing):
         self.value_norm.load_state_dict(state["value_norm"])
         if weights_only:
             return
-        self.optimizer.load_state_dict(state["optimizer"])
-        self.ret_norm.load_state_dict(state["ret_norm"])
-        self.generator.set_state(state["generator"])
-        self.np_rng.bit_generator.state = state["np_rng"]
-        self.updates = int(state["updates"])
+        self.load_training_state(state)

@@ -151,6 +151,21 @@ def evaluate_actions(logits: torch.Tensor, actions: torch.Tensor, nvec: tuple[in
     return logprob, entropy
 
 
+def clipped_surrogate(logprob: torch.Tensor, old_logprob: torch.Tensor, adv: torch.Tensor,
+                      w: torch.Tensor, n_w: torch.Tensor, clip: float
+                      ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """PPO's clipped policy loss over the rows of a minibatch weighted by ``w`` (0: left
+    out, e.g. a dead seat's; ``n_w`` their count), with the approximate KL and the share
+    of clipped ratios (both without gradient)."""
+    log_ratio = logprob - old_logprob
+    ratio = log_ratio.exp()
+    with torch.no_grad():
+        approx_kl = (((ratio - 1) - log_ratio) * w).sum() / n_w
+        clipfrac = (((ratio - 1.0).abs() > clip).float() * w).sum() / n_w
+    pg = torch.max(-adv * ratio, -adv * torch.clamp(ratio, 1 - clip, 1 + clip))
+    return (pg * w).sum() / n_w, approx_kl, clipfrac
+
+
 class NumpyActorCritic:
     """Float32 numpy copy of an :class:`ActorCritic` for rollout and play inference: a
     handful of BLAS calls instead of dozens of small torch ops (the hot path). The first
@@ -324,23 +339,14 @@ class PPO(OnPolicyPlumbing):
         unused (PPO reads it at the next :meth:`act`); it keeps one learner interface."""
         del next_obs
         buf = self.buffer
-        t = buf.step
-        row = buf.np
-        ended = np.logical_or(terminated, truncated)
-        row["rewards"][t] = self.ret_norm(rewards, ended)
-        row["terminated"][t] = terminated
-        row["truncated"][t] = truncated
-        row["active"][t] = True if active is None else active
+        self.record_outcome(rewards, terminated, truncated, True if active is None else active)
         boot = np.flatnonzero(np.logical_and(truncated, np.logical_not(terminated)))
         if boot.size:
             if final_obs is None:
                 raise ValueError("truncated streams need final_obs to bootstrap from")
-            row["bootstrap"][t, boot] = self.mirror.forward(self.obs_norm(final_obs[boot]))[1]
+            buf.np["bootstrap"][buf.step, boot] = self.mirror.forward(
+                self.obs_norm(final_obs[boot]))[1]
         buf.step += 1
-
-    @property
-    def ready(self) -> bool:
-        return self.buffer.full
 
     # ---- rollouts acted elsewhere (fragments) ------------------------------------------
 
@@ -374,9 +380,7 @@ class PPO(OnPolicyPlumbing):
         cfg, buf, net = self.cfg, self.buffer, self.net
         if not buf.full:
             raise RuntimeError(f"rollout has {buf.step}/{buf.num_steps} steps; update when ready")
-        if cfg.anneal_lr and self.total_updates > 0:
-            frac = max(0.0, 1.0 - self.updates / self.total_updates)
-            self.optimizer.param_groups[0]["lr"] = frac * cfg.learning_rate
+        self.anneal_lr(cfg.learning_rate)
         with torch.no_grad():
             last_values = torch.from_numpy(self.mirror.forward(self.obs_norm(next_obs))[1])
             advantages, returns = compute_gae(buf.rewards, buf.values, buf.terminated,
@@ -411,19 +415,13 @@ class PPO(OnPolicyPlumbing):
                 value = net.value(obs, fold)
                 act_w = b_active.index_select(0, idx)
                 n_act = act_w.sum().clamp(min=1.0)
-                log_ratio = logprob - b_logprobs.index_select(0, idx)
-                ratio = log_ratio.exp()
-                with torch.no_grad():
-                    approx_kl = (((ratio - 1) - log_ratio) * act_w).sum() / n_act
-                    clipfrac = (((ratio - 1.0).abs() > cfg.clip_coef).float() * act_w).sum() / n_act
                 adv = b_adv.index_select(0, idx)
                 if cfg.norm_adv:
                     mean = (adv * act_w).sum() / n_act
                     std = (((adv - mean) ** 2 * act_w).sum() / n_act).sqrt()
                     adv = (adv - mean) / (std + 1e-8)
-                pg = torch.max(-adv * ratio,
-                               -adv * torch.clamp(ratio, 1 - cfg.clip_coef, 1 + cfg.clip_coef))
-                pg_loss = (pg * act_w).sum() / n_act
+                pg_loss, approx_kl, clipfrac = clipped_surrogate(
+                    logprob, b_logprobs.index_select(0, idx), adv, act_w, n_act, cfg.clip_coef)
                 old_v, ret = b_values.index_select(0, idx), b_ret.index_select(0, idx)
                 if cfg.clip_vloss:
                     v_clipped = old_v + torch.clamp(value - old_v, -cfg.clip_coef,
@@ -478,11 +476,8 @@ class PPO(OnPolicyPlumbing):
         return np_sample(logits, self.nvec, rng or self.np_rng, deterministic)[0]
 
     def state_dict(self) -> dict[str, Any]:
-        state = {"net": self.net.state_dict(), "optimizer": self.optimizer.state_dict(),
-                 "obs_norm": self.obs_norm.state_dict(), "ret_norm": self.ret_norm.state_dict(),
-                 "generator": self.generator.get_state(),
-                 "np_rng": self.np_rng.bit_generator.state,
-                 "updates": torch.tensor(self.updates)}
+        state = {"net": self.net.state_dict(), "obs_norm": self.obs_norm.state_dict(),
+                 **self.training_state()}
         if self.anchor_actor is not None:
             state["anchor"] = {"actor": self.anchor_actor.state_dict(),
                                "obs_norm": self.anchor_norm.state_dict()}
@@ -495,11 +490,7 @@ class PPO(OnPolicyPlumbing):
         self.obs_norm.load_state_dict(state["obs_norm"])
         if weights_only:
             return
-        self.optimizer.load_state_dict(state["optimizer"])
-        self.ret_norm.load_state_dict(state["ret_norm"])
-        self.generator.set_state(state["generator"])
-        self.np_rng.bit_generator.state = state["np_rng"]
-        self.updates = int(state["updates"])
+        self.load_training_state(state)
         if "anchor" in state:
             self.anchor_actor = copy.deepcopy(self.net.actor).requires_grad_(False)
             self.anchor_actor.load_state_dict(state["anchor"]["actor"])
