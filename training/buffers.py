@@ -131,7 +131,7 @@ class OnPolicyPlumbing:
     def anchor(self) -> None:
         """No anchor (MAPPO; PPO overrides this)."""
 
-    def anneal_lr(self, *base_rates: float) -> None:
+    def anneal_learning_rates(self, *base_rates: float) -> None:
         """With ``anneal_lr``, set the optimiser's param groups to their ``base_rates``
         scaled down linearly to 0 over the planned updates."""
         if self.cfg.anneal_lr and self.total_updates > 0:

@@ -371,7 +371,7 @@ class MAPPO(OnPolicyPlumbing, MAPPOActing):
         cfg, buf, net = self.cfg, self.buffer, self.net
         if not buf.full:
             raise RuntimeError(f"rollout has {buf.step}/{buf.num_steps} steps; update when ready")
-        self.anneal_lr(cfg.learning_rate, cfg.critic_learning_rate)
+        self.anneal_learning_rates(cfg.learning_rate, cfg.critic_learning_rate)
         advantages, returns, values = self.advantages(next_obs, state=state, alive=alive)
         n = buf.num_steps * buf.num_streams
         b_active = buf.active.reshape(n)

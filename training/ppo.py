@@ -380,7 +380,7 @@ class PPO(OnPolicyPlumbing):
         cfg, buf, net = self.cfg, self.buffer, self.net
         if not buf.full:
             raise RuntimeError(f"rollout has {buf.step}/{buf.num_steps} steps; update when ready")
-        self.anneal_lr(cfg.learning_rate)
+        self.anneal_learning_rates(cfg.learning_rate)
         with torch.no_grad():
             last_values = torch.from_numpy(self.mirror.forward(self.obs_norm(next_obs))[1])
             advantages, returns = compute_gae(buf.rewards, buf.values, buf.terminated,
