@@ -13,6 +13,7 @@ from alphatank.training.ppo import (
     NumpyActorCritic,
     PPOConfig,
     Tanh,
+    clipped_surrogate,
     evaluate_actions,
     fold_constant,
     mlp,
@@ -174,6 +175,24 @@ def test_evaluate_actions_matches_per_head_categoricals():
     want_ent = sum(d.entropy() for d in dists)
     assert torch.allclose(logprob, want_lp, atol=1e-5)
     assert torch.allclose(entropy, want_ent, atol=1e-5)
+
+
+def test_clipped_surrogate_clips_ratios_and_leaves_out_zero_weight_rows():
+    old = torch.zeros(4)
+    new = torch.log(torch.tensor([1.5, 0.5, 1.1, 3.0]))  # ratios 1.5, 0.5, 1.1, 3.0
+    adv = torch.tensor([1.0, -1.0, 2.0, 5.0])
+    w = torch.tensor([1.0, 1.0, 1.0, 0.0])  # the last row is a dead seat's
+    loss, kl, clipfrac = clipped_surrogate(new, old, adv, w, w.sum(), 0.2)
+    # per row max(-A r, -A clip(r)): -1.2 (clipped), 0.8 (clipped), -2.2 (inside the range)
+    assert loss.item() == pytest.approx((-1.2 + 0.8 - 2.2) / 3)
+    assert clipfrac.item() == pytest.approx(2 / 3)  # the dead row's ratio 3.0 not counted
+    r = torch.tensor([1.5, 0.5, 1.1])
+    assert kl.item() == pytest.approx(((r - 1) - torch.log(r)).mean().item())
+    new.requires_grad_(True)
+    loss, _, _ = clipped_surrogate(new, old, adv, w, w.sum(), 0.2)
+    loss.backward()
+    # only the unclipped live row moves the policy: d(-A r)/d(log r) = -A r
+    assert new.grad.tolist() == pytest.approx([0.0, 0.0, -2.0 * 1.1 / 3, 0.0])
 
 
 def test_sampling_matches_categorical_probabilities():
