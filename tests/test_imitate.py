@@ -24,7 +24,7 @@ from alphatank.training.imitate import (
 from alphatank.training.mappo import MAPPO
 from alphatank.training.ppo import PPO, PPOConfig
 from alphatank.training.presets import LearnerSpec, TrainConfig
-from alphatank.training.runner import Trainer
+from alphatank.training.runner import Trainer, resume_trainer
 
 torch.set_num_threads(1)
 
@@ -189,6 +189,28 @@ def test_the_time_limit_cuts_the_demonstrations(tmp_path):
     out = tr.train()
     assert out["stopped"]["reason"] == "time limit" and out["elapsed_s"] < 10
     assert (tmp_path / "cut" / "latest").exists()
+
+
+def test_a_run_stopped_while_cloning_clones_again_on_resume_as_if_never_stopped(tmp_path):
+    table = {"bot": "aggressive", "steps": 16, "epochs": 2}
+    whole = Trainer(run_config("whole", imitate=table), tmp_path / "whole", progress=False)
+    whole.train()
+    # 10,000 epochs outlast the 1 s budget: the stop comes while the clone is being fitted
+    cut = Trainer(run_config("cut", imitate={**table, "epochs": 10_000}, time_limit_s=1.0),
+                  tmp_path / "cut", progress=False)
+    out = cut.train()
+    assert out["stopped"]["clone_pending"] and out["global_step"] == 0
+    assert not (tmp_path / "cut" / "metrics.jsonl").read_text().strip()  # nothing logged
+    resumed = resume_trainer(tmp_path / "cut", progress=False, imitate=table, time_limit_s=0.0)
+    assert resumed.imitation is not None
+    resumed.train()
+    assert resumed.global_step == whole.global_step == 128
+    for a, b in zip(weights(resumed), weights(whole), strict=True):
+        np.testing.assert_array_equal(a, b)
+    rows = (tmp_path / "cut" / "metrics.jsonl").read_text().splitlines()
+    assert sum('"imitate/bot_win_rate"' in row for row in rows) == 1
+    # once cloned, a later resume goes on with PPO and does not clone again
+    assert resume_trainer(tmp_path / "cut", progress=False, total_steps=256).imitation is None
 
 
 @pytest.mark.parametrize("table, fragment", [

@@ -259,6 +259,8 @@ def fit(learner: Clonable, data: Samples, cfg: ImitateConfig, seed: int,
     uniform = (torch.arange(max(net.nvec))[None, :] < k) / k
     stats: dict[str, float] = {}
     for _ in range(epochs or cfg.epochs):
+        if stop():
+            break
         order = torch.randperm(n, generator=gen)
         for lo in range(0, n, cfg.minibatch):
             if stop():
@@ -285,7 +287,8 @@ def fit(learner: Clonable, data: Samples, cfg: ImitateConfig, seed: int,
             if fit_critic:
                 stats["value_loss"] = value_loss.item()
     learner.sync_mirror()
-    stats["action_accuracy"] = agreement(learner, data)
+    if not stop():  # a stopped run clones again on resume: no need to measure this clone
+        stats["action_accuracy"] = agreement(learner, data)
     return stats
 
 

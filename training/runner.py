@@ -24,7 +24,10 @@ run resumes from:
   learners keep everything (each gradient step is whole; owed steps are done after
   resuming), fixed-rollout learners in the same run drop their unfinished rollout. The
   resumed run restarts every match (seeds from ``(seed, iteration, cut)``) and starts a
-  full iteration there; it is deterministic, but its iterations are shifted.
+  full iteration there; it is deterministic, but its iterations are shifted;
+* the behaviour cloning of a fresh run (``imitate``) is still going: the learners as they
+  were before it are saved, and the resumed run clones from the start, as the
+  uninterrupted run did.
 """
 
 from __future__ import annotations
@@ -264,6 +267,7 @@ class Trainer:
         self.lengths: deque[int] = deque(maxlen=WINDOW)
         self.by_opponent: dict[str, dict[str, deque[float]]] = {n: {} for n in self.learners}
         self.cut = 0  # vector steps of a stopped iteration inside global_step (0: none)
+        self.clone_pending = False  # resumed from a save made before the cloning ended
         self.lost_rollouts = 0  # iterations collected again after an env runner died
         self.notes: list[str] = []  # what happened to the run (lost rollouts), in words
         self.saved_step = -1  # global_step of the newest checkpoint written or resumed from
@@ -276,7 +280,9 @@ class Trainer:
             self.saved_step = self.global_step
         elif cfg.init_from:
             self._warm_start(cfg.init_from)
-        self.imitation = None if resume is not None else imitate_config(cfg.imitate)
+        # the cloning to do first: a fresh run's, or one a stop cut short (restarted whole)
+        self.imitation = (imitate_config(cfg.imitate)
+                          if resume is None or self.clone_pending else None)
         if resume is None and self.imitation is None:  # with imitate: after the cloning
             for lr in self.learners.values():
                 lr.anchor()
@@ -358,6 +364,7 @@ class Trainer:
         self.global_step, self.iteration = int(prog["global_step"]), int(prog["iteration"])
         self.episodes, self.elapsed = int(prog["episodes"]), float(prog["elapsed"])
         self.cut = int(prog.get("cut", 0))
+        self.clone_pending = prog.get("clone_pending") is True
         self.schedule.load_state_dict(ckpt.meta.get("schedule", {}))
         for name, outs in ckpt.meta.get("windows", {}).get("outcomes", {}).items():
             self.outcomes[name].extend(outs)
@@ -379,7 +386,8 @@ class Trainer:
                                              for c in self.cols[spec.name]]}
                          for spec in self.specs],
             "progress": {"global_step": self.global_step, "iteration": self.iteration,
-                         "episodes": self.episodes, "elapsed": self.elapsed, "cut": self.cut},
+                         "episodes": self.episodes, "elapsed": self.elapsed, "cut": self.cut,
+                         "clone_pending": self.imitation is not None},
             "schedule": self.schedule.state_dict(),
             "windows": {"outcomes": {n: list(d) for n, d in self.outcomes.items()},
                         "returns": {n: [float(x) for x in d] for n, d in self.returns.items()}},
@@ -634,8 +642,16 @@ class Trainer:
     def _run(self, bar: Any, start: float) -> None:
         """The iterations of :meth:`train` (``start``: the perf_counter of elapsed 0)."""
         cfg = self.cfg
-        if self.imitation is not None:  # a fresh run's first call (None on resume)
+        if self.imitation is not None:  # the first call of a fresh run
+            fresh = {n: copy.deepcopy(lr.state_dict()) for n, lr in self.learners.items()}
             metrics = imitate(self, self.imitation)
+            if self.stop():  # cut short: save the fresh learners, the cloning restarts whole
+                for name, state in fresh.items():
+                    self.learners[name].load_state_dict(state)
+                self.stopped = {"clone_pending": True}
+                self.elapsed = time.perf_counter() - start
+                self.save()
+                return
             self.imitation = None
             for lr in self.learners.values():
                 lr.anchor()
