@@ -642,7 +642,7 @@ class Trainer:
     def _run(self, bar: Any, start: float) -> None:
         """The iterations of :meth:`train` (``start``: the perf_counter of elapsed 0)."""
         cfg = self.cfg
-        if self.imitation is not None:  # the first call of a fresh run
+        if self.imitation is not None:  # a fresh run, or one stopped before its cloning ended
             fresh = {n: copy.deepcopy(lr.state_dict()) for n, lr in self.learners.items()}
             metrics = imitate(self, self.imitation)
             if self.stop():  # cut short: save the fresh learners, the cloning restarts whole
