@@ -267,7 +267,6 @@ class Trainer:
         self.lengths: deque[int] = deque(maxlen=WINDOW)
         self.by_opponent: dict[str, dict[str, deque[float]]] = {n: {} for n in self.learners}
         self.cut = 0  # vector steps of a stopped iteration inside global_step (0: none)
-        self.clone_pending = False  # resumed from a save made before the cloning ended
         self.lost_rollouts = 0  # iterations collected again after an env runner died
         self.notes: list[str] = []  # what happened to the run (lost rollouts), in words
         self.saved_step = -1  # global_step of the newest checkpoint written or resumed from
@@ -281,8 +280,8 @@ class Trainer:
         elif cfg.init_from:
             self._warm_start(cfg.init_from)
         # the cloning to do first: a fresh run's, or one a stop cut short (restarted whole)
-        self.imitation = (imitate_config(cfg.imitate)
-                          if resume is None or self.clone_pending else None)
+        self.imitation = (imitate_config(cfg.imitate) if resume is None
+                          or resume.meta["progress"].get("clone_pending") is True else None)
         if resume is None and self.imitation is None:  # with imitate: after the cloning
             for lr in self.learners.values():
                 lr.anchor()
@@ -364,7 +363,6 @@ class Trainer:
         self.global_step, self.iteration = int(prog["global_step"]), int(prog["iteration"])
         self.episodes, self.elapsed = int(prog["episodes"]), float(prog["elapsed"])
         self.cut = int(prog.get("cut", 0))
-        self.clone_pending = prog.get("clone_pending") is True
         self.schedule.load_state_dict(ckpt.meta.get("schedule", {}))
         for name, outs in ckpt.meta.get("windows", {}).get("outcomes", {}).items():
             self.outcomes[name].extend(outs)
