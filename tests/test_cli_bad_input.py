@@ -76,6 +76,13 @@ def files(tmp_path_factory) -> dict[str, str]:
     put("runsteps.toml", 'scenario = "vs_random"\ntotal_steps = "many"\n')
     put("rungamma.toml", 'scenario = "vs_random"\n[[learners]]\nname = "p"\n'
                          '[learners.config]\ngamma = 3\n')
+    run = 'scenario = "vs_random"\n'
+    put("runscenario.toml", 'scenario = "vs_nobody"\n')
+    put("runmap.toml", run + 'map = "nowhere"\n')
+    put("runinit.toml", run + 'init_from = "agent:nobody"\n')
+    put("runobs.toml", run + 'observation = "egocentric_fulll"\n')
+    put("runimitate.toml", run + 'imitate = { bot = "smrt" }\n')
+    put("runimitatekey.toml", run + 'imitate = { bot = "smart", stepz = 10 }\n')
     put("empty.npz", b"")
     put("binary.npz", bytes(range(256)) * 8)
     (d / "emptydir").mkdir()
@@ -325,6 +332,21 @@ CASES = [
      ["{runsteps_toml}", "total_steps", "'many'"]),
     ("train-config-hp", ["train", "--config", "{rungamma_toml}"],
      ["{rungamma_toml}", "learners[0].config.gamma", "[0, 1]"]),
+    # the run file's own settings: the error names the file, then the field
+    ("train-config-scenario-name", ["train", "--config", "{runscenario_toml}"],
+     ["{runscenario_toml}: scenario: unknown scenario 'vs_nobody'", "vs_random"]),
+    ("train-config-map", ["train", "--config", "{runmap_toml}"],
+     ["{runmap_toml}: map:", "unknown map 'nowhere'", "battlefield"]),
+    ("train-config-init-from", ["train", "--config", "{runinit_toml}"],
+     ["{runinit_toml}: init_from: unknown agent 'nobody'", "ppo_vs_smart"]),
+    ("train-config-observation", ["train", "--config", "{runobs_toml}"],
+     ["{runobs_toml}: observation: 'egocentric_fulll'", "egocentric_full'"]),
+    ("train-config-imitate-bot", ["train", "--config", "{runimitate_toml}"],
+     ["{runimitate_toml}: imitate.bot 'smrt'", "smart"]),
+    ("train-config-imitate-key", ["train", "--config", "{runimitatekey_toml}"],
+     ["{runimitatekey_toml}: imitate.stepz: unknown key", "steps"]),
+    ("train-config-scenario-flag", ["train", "--config", "{runscenario_toml}", "--scenario",
+                                    "vs_nobody_either"], ["--scenario: unknown scenario"]),
     ("train-hp-algo", ["train", "--hp", "nosuch.x=1"], ["--hp nosuch.x", "unknown algorithm"]),
     ("train-hp-field", ["train", "--hp", "ppo.nosuch=1"], ["ppo.nosuch", "valid"]),
     ("train-hp-range", ["train", "--hp", "ppo.gamma=2"], ["--hp ppo.gamma", "[0, 1]"]),

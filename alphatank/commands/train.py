@@ -217,19 +217,49 @@ def _schedule(cfg: TrainConfig, args: argparse.Namespace) -> dict[str, Any]:
     return current
 
 
+def _check_init_from(spec: str, label: str) -> None:
+    """ValueError ``label: problem`` unless ``spec`` names a checkpoint to warm-start from."""
+    from alphatank.game.seats import checkpoint_source
+    from alphatank.training.checkpoint import CheckpointError, resolve_checkpoint_dir
+    try:
+        resolve_checkpoint_dir(checkpoint_source(spec))
+    except (CheckpointError, ValueError) as exc:
+        raise ValueError(f"{label}: {exc}") from None
+
+
+def _check_file_fields(cfg: TrainConfig, source: str) -> None:
+    """The observation and imitate settings of a run file or preset (no flag replaces
+    them), checked before the run starts; errors name ``source`` and the field."""
+    from alphatank.game.observe import OBS_KINDS
+    from alphatank.training.imitate import imitate_config
+
+    if cfg.observation is not None and cfg.observation not in OBS_KINDS:
+        raise ValueError(f"{source}: observation: {cfg.observation!r} is not one of "
+                         f"{list(OBS_KINDS)}")
+    try:
+        imitate_config(cfg.imitate)
+    except ValueError as exc:
+        raise ValueError(f"{source}: {exc}") from None
+
+
 def build_run(args: argparse.Namespace) -> TrainConfig:
     """The TrainConfig a new run's flags describe; ValueError (one line) on bad input."""
     if args.config and args.preset:
         raise ValueError("--config and --preset: give one")
+    # where the run's own settings come from, for errors in the ones no flag replaces
+    source = str(Path(args.config)) if args.config else \
+        f"presets/{args.preset or DEFAULT_PRESET}.toml"
     cfg = load_run(args.config) if args.config else get_preset(args.preset or DEFAULT_PRESET)
     cfg = _with_run_settings(cfg, args, args.name)
-    if args.scenario is not None:
-        from alphatank.game.scenarios import load_scenario
-        try:
-            load_scenario(args.scenario)
-        except ValueError as exc:
-            raise ValueError(f"--scenario: {exc}") from None
-        cfg = dataclasses.replace(cfg, scenario=args.scenario)
+    from alphatank.game.scenarios import load_scenario
+    scenario, label = (args.scenario, "--scenario") if args.scenario is not None else \
+        (cfg.scenario, f"{source}: scenario")
+    try:
+        load_scenario(scenario)
+    except ValueError as exc:
+        raise ValueError(f"{label}: {exc}") from None
+    cfg = dataclasses.replace(cfg, scenario=scenario)
+    _check_file_fields(cfg, source)
     if args.map is not None:
         cfg = dataclasses.replace(cfg, map=args.map)
     if args.action_repeat is not None:
@@ -238,17 +268,15 @@ def build_run(args: argparse.Namespace) -> TrainConfig:
         except FieldError as exc:
             raise ValueError(f"--action-repeat: {exc.problem}") from None
     if args.init_from is not None:
-        from alphatank.game.seats import checkpoint_source
-        from alphatank.training.checkpoint import CheckpointError, resolve_checkpoint_dir
-        try:
-            resolve_checkpoint_dir(checkpoint_source(args.init_from))
-        except (CheckpointError, ValueError) as exc:
-            raise ValueError(f"--init-from: {exc}") from None
+        _check_init_from(args.init_from, "--init-from")
         cfg = dataclasses.replace(cfg, init_from=args.init_from)
+    elif cfg.init_from:
+        _check_init_from(cfg.init_from, f"{source}: init_from")
     try:
         sc = run_scenario(cfg)
     except ValueError as exc:
-        raise ValueError(f"{'--map: ' if args.map is not None else ''}{exc}") from None
+        where = "--map: " if args.map is not None else f"{source}: map: " if cfg.map else ""
+        raise ValueError(f"{where}{exc}") from None
     n = len(sc.learner_seats)
     if not learners_fit(run_learners(cfg, n), n, selfplay=bool(cfg.selfplay)):
         if args.scenario is None or cfg.selfplay:
