@@ -81,6 +81,10 @@ def run(args: argparse.Namespace) -> int:
     if args.weakness is not None and not 0.0 <= args.weakness <= 1.0:
         raise InputError(f"--weakness must be in [0, 1], got {args.weakness}")
     opponents = [b.strip() for b in args.vs.split(",") if b.strip()] or [None]
+    from alphatank.bots.registry import BOT_NAMES
+    unknown = [b for b in opponents if b is not None and b not in BOT_NAMES]
+    if unknown:
+        raise InputError(f"--vs: unknown bot {unknown[0]!r}; valid bots: {list(BOT_NAMES)}")
     results = []
     try:
         game = parse_game("--game", args.game)
