@@ -375,3 +375,21 @@ def test_a_worker_whose_command_has_ended_starts_no_job(tmp_path):
         stopping._orphaned.clear()
     assert error == "not started: the command that ran it has ended"
     assert not Path(plan.jobs[0].run_dir).exists()
+
+
+def test_a_run_whose_budget_ends_while_it_clones_is_reported_as_cut(tmp_path, capsys):
+    table = tmp_path / "exp" / "tiny"
+    table.mkdir(parents=True)
+    (table / "_table.toml").write_text(TABLE)
+    (table / "a_random.toml").write_text(
+        'title = "Random Bot"\norder = 1\npaper = { random = 50 }\n'
+        + RUN.format(extra='imitate = { bot = "smart", steps = 100000, epochs = 50 }'))
+    out = tmp_path / "out"
+    rc = cli("tiny", "--experiments-dir", str(tmp_path / "exp"), "--out", str(out), "--games",
+             "2", "--budget", "0.02", "--no-progress")  # 1.2 s: within the cloning
+    said = capsys.readouterr().out
+    assert rc == 0
+    assert "a_random seed 0: done, but its budget ended while it cloned its bot" in said
+    assert "cloning cut" in (out / "tiny.md").read_text()
+    run = json.loads((out / "tiny.json").read_text())["rows"][0]["runs"][0]
+    assert run["cloning_cut"] is True and run["steps"] == 0 and run["stopped_by"] == "time"

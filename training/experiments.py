@@ -596,6 +596,12 @@ def read_json(path: Path) -> Any:
     return json.loads(Path(path).read_text(encoding="utf-8"))
 
 
+def clone_cut(summary: dict[str, Any]) -> bool:
+    """True when a run's budget ended during its behaviour cloning (``Trainer.train``'s
+    summary): its checkpoint holds the untrained learners."""
+    return bool((summary.get("stopped") or {}).get("clone_pending"))
+
+
 class RunInterrupted(RuntimeError):
     """A row's training was stopped by a signal: it has no done.json and no evaluation."""
 

@@ -36,6 +36,7 @@ from alphatank.training.experiments import (
     Plan,
     Row,
     Table,
+    clone_cut,
     read_json,
 )
 
@@ -177,10 +178,17 @@ def _opponent_kind(results: list[RowResult]) -> str:
 
 
 def _steps(rr: RowResult) -> str:
-    steps = [rr.runs[s]["summary"]["global_step"] for s in sorted(rr.runs)]
-    if not steps:
+    """Env steps of each seed's run; "cloning cut" for a run whose budget ended while it
+    cloned its bot (it was evaluated untrained)."""
+    if not rr.runs:
         return "-"
-    return "/".join(f"{st / 1e6:.2f}M" if st >= 1e5 else f"{st:,}" for st in steps)
+    out = []
+    for s in sorted(rr.runs):
+        summary = rr.runs[s]["summary"]
+        st = summary["global_step"]
+        out.append("cloning cut" if clone_cut(summary) else
+                   f"{st / 1e6:.2f}M" if st >= 1e5 else f"{st:,}")
+    return "/".join(out)
 
 
 def counts_table(results: list[RowResult], seeds: int) -> str:
@@ -261,6 +269,8 @@ def runs_table(results: list[RowResult]) -> str:
             steps = f"{run['summary']['global_step']:,}" if run else "-"
             minutes = f"{run['wall_s'] / 60:.1f}" if run else "-"
             stopped = run["stopped_by"] if run else ("failed" if s in rr.errors else "-")
+            if run and clone_cut(run["summary"]):
+                stopped += " (cloning cut)"
             for c in rr.columns:
                 e = rr.evals.get(c.name, {}).get(s)
                 if e is None:
@@ -542,6 +552,8 @@ def _json(plan: Plan, table: Table, results: list[RowResult], checks: list[dict]
                                else None,
                                "train_s": rr.runs[s]["wall_s"] if s in rr.runs else None,
                                "stopped_by": rr.runs[s]["stopped_by"] if s in rr.runs else None,
+                               "cloning_cut": clone_cut(rr.runs[s]["summary"]) if s in rr.runs
+                               else None,
                                "error": rr.errors.get(s)} for s in sorted(rr.run_dirs)]})
     return {"table": table.name, "title": table.title, "command": command,
             "generated": time.strftime("%Y-%m-%d %H:%M:%S"), "budget_min": plan.budget_min,

@@ -63,10 +63,12 @@ def run(args: argparse.Namespace) -> int:
     from alphatank.training.experiments import (
         BUSY,
         ExperimentError,
+        clone_cut,
         estimate_minutes,
         execute,
         load_tables,
         make_plan,
+        read_json,
         table_names,
     )
 
@@ -123,6 +125,9 @@ def run(args: argparse.Namespace) -> int:
 
         def on_done(job, error, seconds):  # noqa: ANN001, ANN202
             status = "FAILED " + error if error else "done"
+            if not error and clone_cut(read_json(job.done_file)["summary"]):
+                status += (", but its budget ended while it cloned its bot: evaluated "
+                           "untrained (give it a larger --budget)")
             from tqdm import tqdm
             tqdm.write(f"  {', '.join(job.rows)} seed {job.seed}: {status} "
                        f"({seconds / 60:.1f} min)")
