@@ -442,10 +442,10 @@ def report(summary: dict[str, Any]) -> int:
     stopped = summary.get("stopped")
     if stopped:
         done = stopped["checkpoint_step"]
-        how = (f"dropped the unfinished iteration ({stopped['dropped_steps']:,} steps, "
-               f"collected again on resume)" if "dropped_steps" in stopped else
-               f"cut the iteration after {stopped['cut_steps']:,} steps (matches restart on "
-               f"resume)" if "cut_steps" in stopped else
+        how = (f"dropped the unfinished iteration of {stopped['dropped_steps']:,} steps, "
+               f"collected again on resume" if "dropped_steps" in stopped else
+               f"cut the iteration after {stopped['cut_steps']:,} steps; its matches restart on "
+               f"resume" if "cut_steps" in stopped else
                "before the cloning ended, which starts again on resume"
                if "clone_pending" in stopped else "at an iteration end")
         print(f"stopped by {stopped['reason']}: saved step {done:,} ({how}); continue with "
