@@ -47,19 +47,23 @@ EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE, what a shell reports for a program kill
 class Parser(argparse.ArgumentParser):
     """An ArgumentParser whose errors are one line: what is wrong and where to look."""
 
+    verbs: dict[str, Parser]  # the top parser's subcommand parsers, by verb
+
     def error(self, message: str) -> NoReturn:
         self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser() -> Parser:
     parser = Parser(prog="alphatank", description=__doc__.split("\n\n")[0],
                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="version", version=f"alphatank {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="VERB",
                                 parser_class=Parser)
+    parser.verbs = {}
     for verb, help_text in COMMANDS.items():
         # help strings are %-formatted by argparse, descriptions are printed as they are
-        p = sub.add_parser(verb, help=help_text.replace("%", "%%"), description=help_text)
+        p = parser.verbs[verb] = sub.add_parser(verb, help=help_text.replace("%", "%%"),
+                                                description=help_text)
         try:
             module = importlib.import_module(f"alphatank.commands.{verb}")
         except MissingExtraError as exc:  # the verb exists; running it says what to install
@@ -80,7 +84,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args, unknown = parser.parse_known_args(argv)
     if unknown and not getattr(args, "_any_args", False):
-        parser.error(f"unrecognized arguments: {' '.join(unknown)}")
+        parser.verbs[args.command].error(f"unrecognized arguments: {' '.join(unknown)}")
     try:
         return int(args._run(args) or 0)
     except BrokenPipeError:

@@ -303,6 +303,8 @@ CASES = [
     ("eval-vs", ["eval", "{run}", "--vs", "smart,genius", "--games", "1"],
      ["--vs: unknown bot 'genius'", "dodge"]),
     ("eval-seed", ["eval", "{run}", "--seed", "x"], ["--seed", "'x'"]),
+    ("eval-unknown-flag", ["eval", "{run}", "--bogus"],
+     ["alphatank eval: error: unrecognized arguments: --bogus", "see alphatank eval --help"]),
     ("eval-scenario", ["eval", "{run}", "--scenario", "{binary_toml}"], ["UTF-8"]),
     ("eval-agent", ["eval", "agent:nosuch"], ["unknown agent 'nosuch'"]),
     ("eval-agent-scenario", ["eval", "agent:ppo_vs_smart", "--scenario", "team_vs_bot"],
