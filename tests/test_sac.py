@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 import torch
+from torch import nn
 
 from alphatank.envs.gym import TankBattleEnv
 from alphatank.envs.vector import VectorMatchEnv
@@ -113,18 +114,60 @@ def test_twin_critics_targets_and_entropy_tuning():
         sac.act(rng.normal(size=(4, 3)).astype(np.float32))
         sac.observe(rng.normal(size=(4, 3)).astype(np.float32), rng.normal(size=4),
                     np.zeros(4, bool), np.zeros(4, bool))
-    assert not torch.equal(sac.q1.net[0].weight, sac.q2.net[0].weight)  # two critics
-    q1_before = [p.detach().clone() for p in sac.q1.parameters()]
-    t1_before = [p.detach().clone() for p in sac.q1_target.parameters()]
-    assert all(torch.equal(a, b) for a, b in zip(q1_before, t1_before, strict=True))
+    assert not torch.equal(sac.q.w1[0], sac.q.w1[1])  # two critics
+    q_before = [p.detach().clone() for p in sac.q.parameters()]
+    t_before = [p.detach().clone() for p in sac.q_target.parameters()]
+    assert all(torch.equal(a, b) for a, b in zip(q_before, t_before, strict=True))
     alpha0 = sac.alpha
     sac._gradient_step()
-    for p, t_old, t_new in zip(sac.q1.parameters(), t1_before, sac.q1_target.parameters(),
+    for p, t_old, t_new in zip(sac.q.parameters(), t_before, sac.q_target.parameters(),
                                strict=True):
         assert torch.allclose(t_new, 0.9 * t_old + 0.1 * p, atol=1e-6)  # Polyak average
     # the initial policy's entropy (~0 for std 1 before the sigmoid) exceeds the target
     # (-3), so automatic tuning lowers alpha
     assert sac.alpha < alpha0
+
+
+def test_the_twin_critics_are_two_networks_and_load_a_checkpoint_of_two(tmp_path):
+    """A state saved with two ``nn.Sequential`` critics (before the twin) loads into the
+    twin: the same Q-values, and the same weights after one more Adam step."""
+    torch.manual_seed(0)
+    obs_dim, hidden = 5, 8
+    pair = [nn.Sequential(nn.Linear(obs_dim + 3, hidden), nn.ReLU(), nn.Linear(hidden, hidden),
+                          nn.ReLU(), nn.Linear(hidden, 1)) for _ in range(2)]
+    params = [p for net in pair for p in net.parameters()]
+    opt = torch.optim.Adam(params, lr=0.01, fused=True)
+    obs, act = torch.randn(16, obs_dim), torch.rand(16, 3)
+
+    def loss_pair() -> torch.Tensor:
+        x = torch.cat([obs, act], -1)
+        return sum((net(x).squeeze(-1) ** 2).mean() for net in pair)
+
+    for _ in range(3):  # moments that are not zero
+        opt.zero_grad()
+        loss_pair().backward()
+        opt.step()
+    sac = SAC(obs_dim, 2, SACConfig(hidden=hidden, q_lr=0.01), seed=1)
+    state = {k: v for k, v in sac.state_dict().items() if k not in ("q", "q_target")}
+    q1, q2 = ({f"net.{k}": v for k, v in net.state_dict().items()} for net in pair)
+    old = {"q1": q1, "q2": q2, "q1_target": q1, "q2_target": q2,
+           "q_optimizer": opt.state_dict()}
+    sac.load_state_dict({**state, **old})
+    x = torch.cat([obs, act], -1)
+    with torch.no_grad():
+        want = torch.stack([net(x).squeeze(-1) for net in pair])
+        assert torch.allclose(sac.q(obs, act), want, atol=1e-6)
+        assert torch.allclose(sac.q_target(obs, act), want, atol=1e-6)
+    opt.zero_grad()
+    loss_pair().backward()
+    opt.step()
+    sac.q_optimizer.zero_grad()
+    (sac.q(obs, act) ** 2).mean(1).sum().backward()
+    sac.q_optimizer.step()
+    with torch.no_grad():
+        want = torch.stack([net(x).squeeze(-1) for net in pair])
+        assert torch.allclose(sac.q(obs, act), want, atol=1e-5)
+        assert not torch.allclose(sac.q_target(obs, act), want, atol=1e-5)  # moved: Adam
 
 
 def test_each_sac_learner_keeps_its_own_replay_buffer(tmp_path):

@@ -56,16 +56,41 @@ class ContinuousToDiscreteWrapper(gym.ActionWrapper):
         return continuous_to_discrete(action, self.nvec)
 
 
-class QNetwork(nn.Module):
-    """Table 8: Linear(obs+act, 256) ReLU, Linear(256, 256) ReLU, Linear(256, 1)."""
+class TwinQNetwork(nn.Module):
+    """Table 8's twin critics, each Linear(obs+act, 256) ReLU, Linear(256, 256) ReLU,
+    Linear(256, 1), stacked on a leading axis of 2 so that both run as one batched
+    matrix product per layer (half the torch calls of two networks). Each layer starts as
+    ``nn.Linear`` does: weights and biases uniform in +-1/sqrt(fan_in)."""
+
+    LAYERS = ("1", "2", "3")
 
     def __init__(self, obs_dim: int, act_dim: int, hidden: int):
         super().__init__()
-        self.net = nn.Sequential(nn.Linear(obs_dim + act_dim, hidden), nn.ReLU(),
-                                 nn.Linear(hidden, hidden), nn.ReLU(), nn.Linear(hidden, 1))
+        sizes = ((obs_dim + act_dim, hidden), (hidden, hidden), (hidden, 1))
+        for name, (fan_in, out) in zip(self.LAYERS, sizes, strict=True):
+            bound = 1.0 / math.sqrt(fan_in)
+            self.register_parameter(f"w{name}", nn.Parameter(
+                torch.empty(2, fan_in, out).uniform_(-bound, bound)))
+            self.register_parameter(f"b{name}", nn.Parameter(
+                torch.empty(2, 1, out).uniform_(-bound, bound)))
 
     def forward(self, obs: torch.Tensor, act: torch.Tensor) -> torch.Tensor:
-        return self.net(torch.cat([obs, act], dim=-1)).squeeze(-1)
+        """Q-values (2, B) of both critics."""
+        x = torch.cat([obs, act], dim=-1).expand(2, -1, -1)
+        x = torch.baddbmm(self.b1, x, self.w1).relu()
+        x = torch.baddbmm(self.b2, x, self.w2).relu()
+        return torch.baddbmm(self.b3, x, self.w3).squeeze(-1)
+
+    @staticmethod
+    def from_pair(q1: dict[str, torch.Tensor], q2: dict[str, torch.Tensor]
+                  ) -> dict[str, torch.Tensor]:
+        """The state of a twin from two ``nn.Sequential`` critics' states (checkpoints
+        saved before the twin: ``net.0/2/4.weight`` (out, in) and ``.bias``)."""
+        out = {}
+        for name, index in zip(TwinQNetwork.LAYERS, ("0", "2", "4"), strict=True):
+            out[f"w{name}"] = torch.stack([q[f"net.{index}.weight"].T for q in (q1, q2)])
+            out[f"b{name}"] = torch.stack([q[f"net.{index}.bias"][None] for q in (q1, q2)])
+        return out
 
 
 class SquashedGaussianActor(nn.Module):
@@ -166,14 +191,11 @@ class SAC:
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(seed)
             self.actor = SquashedGaussianActor(obs_dim, act_dim, cfg.hidden)
-            self.q1 = QNetwork(obs_dim, act_dim, cfg.hidden)
-            self.q2 = QNetwork(obs_dim, act_dim, cfg.hidden)
-            self.q1_target = QNetwork(obs_dim, act_dim, cfg.hidden)
-            self.q2_target = QNetwork(obs_dim, act_dim, cfg.hidden)
-        self.q1_target.load_state_dict(self.q1.state_dict())
-        self.q2_target.load_state_dict(self.q2.state_dict())
-        self._q_params = [*self.q1.parameters(), *self.q2.parameters()]
-        self._target_params = [*self.q1_target.parameters(), *self.q2_target.parameters()]
+            self.q = TwinQNetwork(obs_dim, act_dim, cfg.hidden)
+            self.q_target = TwinQNetwork(obs_dim, act_dim, cfg.hidden)
+        self.q_target.load_state_dict(self.q.state_dict())
+        self._q_params = list(self.q.parameters())
+        self._target_params = list(self.q_target.parameters())
         self._actor_params = list(self.actor.parameters())
         # fused: one kernel per optimiser step instead of a dozen ops per parameter
         self.q_optimizer = torch.optim.Adam(self._q_params, lr=cfg.q_lr, fused=True)
@@ -317,16 +339,16 @@ class SAC:
         alpha = self.log_alpha.detach().exp()
         with torch.no_grad():
             next_act, next_logp = self.actor.sample(nxt, self.generator)
-            q_next = torch.min(self.q1_target(nxt, next_act), self.q2_target(nxt, next_act))
+            q_next = self.q_target(nxt, next_act).amin(0)
             target = rew + cfg.gamma * (1.0 - done) * (q_next - alpha * next_logp)
-        q1, q2 = self.q1(obs, act), self.q2(obs, act)
-        qf_loss = F.mse_loss(q1, target) + F.mse_loss(q2, target)
+        q = self.q(obs, act)
+        qf_loss = 2.0 * F.mse_loss(q, target.expand(2, -1))  # the sum of the two critics'
         self.q_optimizer.zero_grad(set_to_none=True)
         qf_loss.backward()
         self.q_optimizer.step()
 
         pi, logp = self.actor.sample(obs, self.generator)
-        q_pi = torch.min(self.q1(obs, pi), self.q2(obs, pi))
+        q_pi = self.q(obs, pi).amin(0)
         actor_loss = (alpha * logp - q_pi).mean()
         # gradients for the actor only: the critics' weight gradients are not computed
         grads = torch.autograd.grad(actor_loss, self._actor_params)
@@ -346,7 +368,7 @@ class SAC:
             torch._foreach_lerp_(self._target_params, self._q_params, cfg.tau)
         self.grad_steps += 1
         return torch.stack([qf_loss.detach() / 2, actor_loss.detach(), alpha_loss.detach(),
-                            q1.detach().mean(), -logp.mean()])
+                            q[0].detach().mean(), -logp.mean()])
 
     # ---- inference and persistence ------------------------------------------------------
 
@@ -359,9 +381,8 @@ class SAC:
                                       self.nvec)
 
     def state_dict(self) -> dict[str, Any]:
-        state = {"actor": self.actor.state_dict(), "q1": self.q1.state_dict(),
-                 "q2": self.q2.state_dict(), "q1_target": self.q1_target.state_dict(),
-                 "q2_target": self.q2_target.state_dict(),
+        state = {"actor": self.actor.state_dict(), "q": self.q.state_dict(),
+                 "q_target": self.q_target.state_dict(),
                  "q_optimizer": self.q_optimizer.state_dict(),
                  "actor_optimizer": self.actor_optimizer.state_dict(),
                  "log_alpha": self.log_alpha.detach().clone(),
@@ -380,7 +401,12 @@ class SAC:
         self.obs_norm.load_state_dict(state["obs_norm"])
         if weights_only:
             return
-        for key in ("q1", "q2", "q1_target", "q2_target", "q_optimizer", "actor_optimizer"):
+        if "q1" in state:  # saved with two critic networks: stack them into the twin
+            state = {**state, "q": TwinQNetwork.from_pair(state["q1"], state["q2"]),
+                     "q_target": TwinQNetwork.from_pair(state["q1_target"],
+                                                        state["q2_target"]),
+                     "q_optimizer": _twin_optimizer_state(state["q_optimizer"])}
+        for key in ("q", "q_target", "q_optimizer", "actor_optimizer"):
             getattr(self, key).load_state_dict(state[key])
         with torch.no_grad():
             self.log_alpha.copy_(state["log_alpha"])
@@ -391,3 +417,19 @@ class SAC:
         self.transitions, self.since_update, self.updates, self.grad_steps = (
             int(v) for v in state["counters"])
         self.owed = float(state.get("owed", 0.0))
+
+
+def _twin_optimizer_state(old: dict[str, Any]) -> dict[str, Any]:
+    """The critics' Adam state saved for two ``nn.Sequential`` critics (12 parameters:
+    the first's 6 then the second's, weights (out, in)) as the twin's 6 parameters."""
+    per = old["state"]
+    state = {}
+    for k in range(6) if per else ():  # empty before the first gradient step
+        a, b = per[k], per[k + 6]
+        state[k] = {"step": torch.tensor(float(a["step"]))}
+        for key in ("exp_avg", "exp_avg_sq"):
+            x, y = (a[key].T, b[key].T) if k % 2 == 0 else (a[key][None], b[key][None])
+            state[k][key] = torch.stack([x, y])
+    groups = [{**g, "params": list(range(6))} for g in old["param_groups"]]
+    return {"state": state, "param_groups": groups}
+

@@ -53,15 +53,13 @@ def sac_floor_step(obs_dim: int, hidden: int = 256, batch: int = 256, seed: int 
     Adam step."""
     import torch
 
-    from alphatank.training.sac import QNetwork, SquashedGaussianActor
+    from alphatank.training.sac import SquashedGaussianActor, TwinQNetwork
 
     torch.manual_seed(seed)
     act_dim = 3
     actor = SquashedGaussianActor(obs_dim, act_dim, hidden)
-    q1, q2 = QNetwork(obs_dim, act_dim, hidden), QNetwork(obs_dim, act_dim, hidden)
-    t1, t2 = QNetwork(obs_dim, act_dim, hidden), QNetwork(obs_dim, act_dim, hidden)
-    q_params = [*q1.parameters(), *q2.parameters()]
-    q_opt = torch.optim.Adam(q_params, lr=3e-4, fused=True)
+    q, target_q = TwinQNetwork(obs_dim, act_dim, hidden), TwinQNetwork(obs_dim, act_dim, hidden)
+    q_opt = torch.optim.Adam(q.parameters(), lr=3e-4, fused=True)
     a_params = list(actor.parameters())
     a_opt = torch.optim.Adam(a_params, lr=3e-4, fused=True)
     obs, nxt = torch.randn(batch, obs_dim), torch.randn(batch, obs_dim)
@@ -72,13 +70,13 @@ def sac_floor_step(obs_dim: int, hidden: int = 256, batch: int = 256, seed: int 
     def step() -> None:
         with torch.no_grad():
             a2, logp2 = actor.sample(nxt, gen)
-            target = rew + 0.99 * (torch.min(t1(nxt, a2), t2(nxt, a2)) - 0.2 * logp2)
-        loss = ((q1(obs, act) - target) ** 2).mean() + ((q2(obs, act) - target) ** 2).mean()
+            target = rew + 0.99 * (target_q(nxt, a2).amin(0) - 0.2 * logp2)
+        loss = ((q(obs, act) - target) ** 2).mean(1).sum()
         q_opt.zero_grad(set_to_none=True)
         loss.backward()
         q_opt.step()
         pi, logp = actor.sample(obs, gen)
-        a_loss = (0.2 * logp - torch.min(q1(obs, pi), q2(obs, pi))).mean()
+        a_loss = (0.2 * logp - q(obs, pi).amin(0)).mean()
         for p, g in zip(a_params, torch.autograd.grad(a_loss, a_params), strict=True):
             p.grad = g
         a_opt.step()
