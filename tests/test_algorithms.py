@@ -182,7 +182,8 @@ def test_table_names_configs_and_lazy_learner_classes():
 def test_listing_and_validating_runs_never_imports_torch():
     code = ("import sys\nfrom alphatank.cli import main\n"
             "for argv in (['train', '--list'], ['train', '--print-config', '--preset', "
-            "'sac_vs_ppo', '--hp', 'ppo.clip_coef=0.3']):\n"
+            "'sac_vs_ppo', '--hp', 'ppo.clip_coef=0.3'], "
+            "['train', '--print-config', '--preset', 'team_vs_four_bots']):\n"
             "    assert main(argv) == 0\n"
             "assert 'torch' not in sys.modules, 'torch imported'\n")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)

@@ -10,15 +10,13 @@ import torch
 
 from alphatank.game.scenarios import load_scenario
 from alphatank.training.fields import FieldError
-from alphatank.training.hparams import MAPPOConfig
+from alphatank.training.hparams import ImitateConfig, MAPPOConfig, imitate_config
 from alphatank.training.imitate import (
-    ImitateConfig,
     agreement,
     collect,
     discounted_returns,
     fit,
     gather,
-    imitate_config,
     samples,
 )
 from alphatank.training.mappo import MAPPO

@@ -42,50 +42,12 @@ from alphatank.envs.core import MatchSet
 from alphatank.game.scenarios import Scenario
 from alphatank.sim.episode import episode_seeds, reset_controllers
 from alphatank.sim.policy import NOOP, BatchPolicy
-from alphatank.training.fields import FieldError, build, hp, validate
+from alphatank.training.fields import FieldError
+from alphatank.training.hparams import ImitateConfig
 from alphatank.training.mappo import MAPPO
 from alphatank.training.ppo import PPO, evaluate_actions, head_log_probs
 
 Clonable = PPO | MAPPO
-
-
-@dataclass(frozen=True)
-class ImitateConfig:
-    """The ``imitate`` table of a run file (empty: no warm start)."""
-
-    bot: str = hp("smart", "seat spec of the bot to copy (e.g. smart, smart@0.8)")
-    steps: int = hp(4096, "vector steps of demonstration games (each steps every env)", gt=0)
-    epochs: int = hp(8, "passes over the demonstrations", gt=0)
-    minibatch: int = hp(2048, "samples per gradient step", gt=0)
-    learning_rate: float = hp(1e-3, "Adam learning rate of the cloning", gt=0)
-    label_smoothing: float = hp(0.0, "share of each head's target spread evenly over its "
-                                     "choices (a clone that keeps exploring)", ge=0, lt=1)
-    dagger: int = hp(0, "DAgger rounds after the first fit: the learners play, the bot "
-                        "labels their states, the fit is redone on all the data", ge=0)
-    dagger_steps: int = hp(2048, "vector steps of each DAgger round", gt=0)
-    dagger_epochs: int = hp(4, "passes over all the data in each DAgger round's refit", gt=0)
-    teachers: dict[str, str] = hp({}, "per scenario of the run, the seat spec copied there "
-                                      "instead of bot (e.g. { vs_smart = "
-                                      "\"checkpoint:runs/smart\" }: distil specialists)")
-
-    def __post_init__(self) -> None:
-        validate(self)
-
-
-def imitate_config(data: dict[str, Any]) -> ImitateConfig | None:
-    """The config of a run's ``imitate`` table (its bot checked); None when it is empty."""
-    if not data:
-        return None
-    from alphatank.game.lineup import spec_seat
-
-    cfg = build(ImitateConfig, data, "imitate.")
-    spec_seat(cfg.bot, where=f"imitate.bot {cfg.bot!r}")
-    for name, spec in cfg.teachers.items():
-        if not isinstance(spec, str):
-            raise FieldError("imitate", f"teachers.{name}", "must be a seat spec string "
-                             f"(smart, checkpoint:PATH, agent:NAME), got {spec!r}")
-        spec_seat(spec, where=f"imitate.teachers.{name} {spec!r}")
-    return cfg
 
 
 def teacher(cfg: ImitateConfig, scenario: str, scenarios: list[str]) -> str:

@@ -68,7 +68,8 @@ from alphatank.training.fragments import (
     ingest_fragment,
     stream_rows,
 )
-from alphatank.training.imitate import imitate, imitate_config
+from alphatank.training.hparams import imitate_config
+from alphatank.training.imitate import imitate
 from alphatank.training.learners import learner_class, make_learner
 from alphatank.training.logging import RunLogger
 from alphatank.training.presets import (

@@ -231,7 +231,7 @@ def _check_file_fields(cfg: TrainConfig, source: str) -> None:
     """The observation and imitate settings of a run file or preset (no flag replaces
     them), checked before the run starts; errors name ``source`` and the field."""
     from alphatank.game.observe import OBS_KINDS
-    from alphatank.training.imitate import imitate_config
+    from alphatank.training.hparams import imitate_config
 
     if cfg.observation is not None and cfg.observation not in OBS_KINDS:
         raise ValueError(f"{source}: observation: {cfg.observation!r} is not one of "
