@@ -1,6 +1,7 @@
-"""Hyperparameter dataclasses of the learners, one line of help and the allowed range per
-field (no torch import: presets, ``alphatank train --list`` and the CLI list and validate
-them cheaply). An algorithm's config class is named in its registry line
+"""Hyperparameter dataclasses of the learners and of a run's behaviour cloning
+(``imitate``), one line of help and the allowed range per field (no torch import:
+presets, ``alphatank train --list`` and the CLI list and validate them cheaply). An
+algorithm's config class is named in its registry line
 (:mod:`alphatank.training.algorithms`)."""
 
 from __future__ import annotations
