@@ -132,6 +132,15 @@ def test_replay_command_records_video(recorded, tmp_path):
     assert frames == load_replay(recorded["replay"]).ticks + 1
 
 
+def test_replay_command_writes_a_gif_alone(recorded, tmp_path, capsys):
+    out = tmp_path / "again.gif"
+    assert replay.run(_args(replay, str(recorded["replay"]), "--gif", str(out))) == 0
+    assert capsys.readouterr().out.splitlines()[-1] == f"wrote {out}"
+    ticks = load_replay(recorded["replay"]).ticks
+    assert len(iio.imread(out)) == (ticks + 2) // 2  # every other of the ticks + 1 frames
+    assert not list(tmp_path.glob("*.mp4"))
+
+
 def test_replay_command_renders_in_a_window(recorded):
     args = _args(replay, str(recorded["replay"]), "--render", "--headless-test",
                  "--speed", "1000", "--max-frames", "5")

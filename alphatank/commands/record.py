@@ -17,7 +17,7 @@ from alphatank.errors import one_line
 from alphatank.sim.episode import EpisodeHook
 from alphatank.ui.render import parse_overlays
 from alphatank.ui.replay import ReplayRecorder
-from alphatank.ui.video import VideoRecorder, record_episode
+from alphatank.ui.video import VideoRecorder, check_outputs, record_episode
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -36,12 +36,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     try:
+        check_outputs(args.out, args.gif, ("--out", "--gif"))
         lineup = lineup_from_args(args, interactive=False)
         video = VideoRecorder(mp4=Path(args.out), gif=args.gif, fps=args.fps,
                               every=args.every, hold_s=args.hold,
                               overlays=parse_overlays(args.overlays), labels=lineup.labels,
                               scale=args.scale)
-    except ValueError as exc:  # overlays; other bad input goes to alphatank.cli's one line
+    except ValueError as exc:  # outputs, overlays; other bad input goes to alphatank.cli's one line
         print(f"alphatank record: error: {one_line(exc)}", file=sys.stderr)
         return 2
     for note in lineup.notes:

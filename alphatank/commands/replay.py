@@ -1,7 +1,7 @@
 """``alphatank replay FILE``: re-simulate a saved match bit-identically.
 
 Without options it re-runs the match headless and checks the final state hash against the
-recording. ``--record OUT.mp4`` (and ``--gif``) renders it to video; ``--render`` plays it
+recording. ``--record OUT.mp4`` and/or ``--gif OUT.gif`` render it to video; ``--render`` plays it
 in a window at real-time speed (same keys as ``alphatank play``: P/Esc pause, R restart,
 V/T/B overlays).
 """
@@ -25,14 +25,15 @@ from alphatank.ui.replay import (
     simulate,
 )
 from alphatank.ui.session import NO_DISPLAY_HELP, PlaySession
-from alphatank.ui.video import VideoRecorder, record_episode
+from alphatank.ui.video import VideoRecorder, check_outputs, record_episode
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("file", help="replay file (.npz) from `play --save-replay` or "
                                 "`record --replay`")
     p.add_argument("--record", metavar="OUT.mp4", help="render the replay to an MP4")
-    p.add_argument("--gif", metavar="FILE", help="also write a GIF")
+    p.add_argument("--gif", metavar="FILE", help="render the replay to a GIF (with --record: "
+                                                 "as well as the MP4)")
     p.add_argument("--render", action="store_true", help="play it back in a window")
     p.add_argument("--speed", type=positive_float, default=1.0, help="playback speed for --render")
     p.add_argument("--overlays", default=",".join(DEFAULT_OVERLAYS),
@@ -44,6 +45,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     try:
+        check_outputs(args.record, args.gif, ("--record", "--gif"))
         replay = load_replay(args.file)
         overlays = parse_overlays(args.overlays)
     except (ReplayError, ValueError) as exc:
@@ -54,17 +56,17 @@ def run(args: argparse.Namespace) -> int:
           f"{replay.ticks} ticks, seats [{who}], recorded result: "
           f"{'team ' + replay.winner + ' wins' if replay.winner else 'no winner'}")
     try:
-        if args.record:
+        if args.record or args.gif:
             video = VideoRecorder(mp4=args.record, gif=args.gif, overlays=overlays,
                                   labels=replay.labels or None)
             episode = replay_episode(replay, [video])
             rec = record_episode(episode, video)
             check_replayed(replay, episode.match)
-            print(f"wrote {rec.mp4} ({rec.frames} frames)" + (f" and {rec.gif}" if rec.gif
-                                                              else ""))
+            wrote = [f"{rec.mp4} ({rec.frames} frames)"] if rec.mp4 is not None else []
+            print("wrote " + " and ".join(wrote + ([str(rec.gif)] if rec.gif else [])))
         if args.render:
             return _render(replay, args, overlays)
-        if not args.record:
+        if not (args.record or args.gif):
             t0 = time.perf_counter()
             match = simulate(replay)
             print(f"re-simulated {match.tick} ticks in {time.perf_counter() - t0:.2f}s: "

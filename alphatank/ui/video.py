@@ -42,6 +42,19 @@ class Recording:
     kept: np.ndarray | None = None  # (frames, H, W, 3) uint8 when keep_frames=True
 
 
+VIDEO_SUFFIXES = (".mp4", ".mkv", ".mov", ".avi")  # containers that hold H.264
+
+
+def check_outputs(mp4: str | Path | None, gif: str | Path | None,
+                  names: tuple[str, str] = ("mp4", "gif")) -> None:
+    """ValueError naming the setting (``names``: what the caller calls the MP4 and the GIF)
+    unless the MP4 path ends in a video suffix and the GIF path in ``.gif``."""
+    for path, name, suffixes in ((mp4, names[0], VIDEO_SUFFIXES), (gif, names[1], (".gif",))):
+        if path is not None and Path(path).suffix.lower() not in suffixes:
+            ends = " or ".join(filter(None, (", ".join(suffixes[:-1]), suffixes[-1])))
+            raise ValueError(f"{name}: {str(path)!r} must end in {ends}")
+
+
 class _Mp4:
     """Stream RGB frames to an H.264 MP4 (even sizes for yuv420p), written atomically."""
 
@@ -91,6 +104,7 @@ class VideoRecorder(EpisodeHook):
                  renderer: Renderer | None = None):
         if every < 1 or gif_every < 1:
             raise ValueError(f"every and gif_every must be >= 1, got {every}, {gif_every}")
+        check_outputs(mp4, gif)
         self.mp4, self.gif, self.fps, self.every, self.hold_s = mp4, gif, fps, every, hold_s
         self.gif_scale, self.gif_every, self.keep_frames = gif_scale, gif_every, keep_frames
         self.renderer = renderer or Renderer(None, overlays=overlays, labels=labels,
