@@ -84,3 +84,30 @@ def test_export_strips_training_state_and_lists(tmp_path, capsys):
     assert all(name in out for name in shipped_agents()) or "no shipped agents" in out
     cycle = next(line for line in out.splitlines() if line.startswith("ppo_cycle_full"))
     assert all(f"vs {bot} " in cycle for bot in ("random", "aggressive", "defensive", "dodge"))
+
+
+def test_export_replaces_only_an_agent_folder(tmp_path, capsys):
+    """An agent exported from a shipped one (``agent:NAME``) replaces an earlier export;
+    a folder or file that is not an agent is refused and left as it was."""
+    keep = tmp_path / "keep"
+    keep.mkdir()
+    (keep / "notes.txt").write_text("precious")
+    name = shipped_agents()[0]
+    assert main(["agents", "export", f"agent:{name}", str(keep)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("alphatank agents: error: ") and "not an agent folder" in err
+    assert [p.name for p in keep.iterdir()] == ["notes.txt"]
+    assert main(["agents", "export", f"agent:{name}", str(keep / "notes.txt")]) == 2
+    assert (keep / "notes.txt").read_text() == "precious"
+    dest = tmp_path / "agent"
+    for text in ("first", "second"):
+        assert main(["agents", "export", f"agent:{name}", str(dest), "--description", text,
+                     "--command", f"made {text}"]) == 0
+    record = load_checkpoint(dest).meta["agent"]
+    assert record["description"] == "second" and record["commands"] == ["made second"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["agent", "keep"]  # no leftovers
+    (tmp_path / "e.json").write_text("{bad")
+    assert main(["agents", "export", f"agent:{name}", str(dest), "--eval",
+                 str(tmp_path / "e.json")]) == 2
+    assert "alphatank agents: error: --eval: " in capsys.readouterr().err
+    assert load_checkpoint(dest).meta["agent"]["description"] == "second"

@@ -20,6 +20,7 @@ from typing import Any
 
 import torch
 
+from alphatank.errors import InputError
 from alphatank.training.checkpoint import _sha256, load_checkpoint
 
 # What a learner's state_dict holds only to continue training.
@@ -29,10 +30,14 @@ TRAINING_ONLY = ("optimizer", "generator", "np_rng", "ret_norm")
 def export_agent(source: str | Path, dest: str | Path, record: dict[str, Any] | None = None
                  ) -> Path:
     """Write the checkpoint at ``source`` (a checkpoint or run folder) as an agent folder
-    ``dest`` (replaced atomically if it exists); ``record`` (description, evaluation,
-    commands, ...) is stored as ``meta["agent"]`` beside the source's progress."""
+    ``dest``; ``record`` (description, evaluation, commands, ...) is stored as
+    ``meta["agent"]`` beside the source's progress. An existing ``dest`` is replaced only
+    if it is an agent folder (InputError otherwise: nothing else is ever deleted)."""
     ckpt = load_checkpoint(source)
     dest = Path(dest)
+    if dest.exists() and not _is_agent_folder(dest):
+        raise InputError(f"{dest}: exists and is not an agent folder (no meta.json with an "
+                         f"'agent' record); give a new folder or an agent folder to replace")
     tmp = dest.with_name(f".{dest.name}.tmp-{os.getpid()}")
     if tmp.exists():
         shutil.rmtree(tmp)
@@ -47,10 +52,21 @@ def export_agent(source: str | Path, dest: str | Path, record: dict[str, Any] | 
                      **(record or {})}
     meta["files"] = files
     (tmp / "meta.json").write_text(json.dumps(meta, indent=1) + "\n", encoding="utf-8")
+    old = dest.with_name(f".{dest.name}.old-{os.getpid()}")
     if dest.exists():
-        shutil.rmtree(dest)
+        os.replace(dest, old)  # kept until the new folder is in place
     os.replace(tmp, dest)
+    shutil.rmtree(old, ignore_errors=True)
     return dest
+
+
+def _is_agent_folder(path: Path) -> bool:
+    """Whether ``path`` is a folder that :func:`export_agent` wrote."""
+    try:
+        meta = json.loads((path / "meta.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return isinstance(meta, dict) and isinstance(meta.get("agent"), dict)
 
 
 def agent_summary(path: str | Path) -> dict[str, Any]:

@@ -7,6 +7,8 @@ import argparse
 import json
 from pathlib import Path
 
+from alphatank.errors import InputError
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest="action")
@@ -17,23 +19,22 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     ex.add_argument("--description", default="", help="one line about the agent")
     ex.add_argument("--eval", metavar="FILE.json",
                     help="an `alphatank eval --json` file to record with the agent")
-    ex.add_argument("--command", action="append", default=[], metavar="TEXT",
+    ex.add_argument("--command", dest="commands", action="append", default=[], metavar="TEXT",
                     help="a command that made or evaluated it (repeatable)")
 
 
 def run(args: argparse.Namespace) -> int:
-    from alphatank.training.checkpoint import CheckpointError
-
+    """Bad input raises InputError or OSError, reported by :func:`alphatank.cli.main`."""
     if args.action == "export":
+        from alphatank.game.seats import checkpoint_source
         from alphatank.training.agents import export_agent
-        record = {"description": args.description, "commands": list(args.command)}
-        try:
-            if args.eval:
+        record = {"description": args.description, "commands": list(args.commands)}
+        if args.eval:
+            try:
                 record["eval"] = json.loads(Path(args.eval).read_text(encoding="utf-8"))
-            dest = export_agent(args.checkpoint, args.dest, record)
-        except (CheckpointError, OSError, json.JSONDecodeError) as exc:
-            print(f"error: {exc}")
-            return 2
+            except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+                raise InputError(f"--eval: {args.eval}: {exc}") from None
+        dest = export_agent(checkpoint_source(args.checkpoint), args.dest, record)
         size = sum(f.stat().st_size for f in dest.iterdir())
         print(f"agent {dest.name}: {dest} ({size / 1e6:.2f} MB)")
         return 0
