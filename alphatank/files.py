@@ -17,7 +17,7 @@ import warnings
 from pathlib import Path
 from typing import IO, Any
 
-from alphatank.errors import BusyError
+from alphatank.errors import BusyError, InputError
 
 
 def read_text(path: str | Path) -> str:
@@ -57,6 +57,19 @@ def write_text_atomic(path: str | Path, text: str, newline: str | None = None) -
         tmp.unlink(missing_ok=True)
         raise
     return path
+
+
+def check_writable(path: str | Path, label: str) -> None:
+    """InputError ``label: path: why`` unless a file can be written at ``path`` (missing
+    folders are made when it is): asked before a long job whose result would be lost."""
+    p = Path(path)
+    if p.is_dir():
+        raise InputError(f"{label}: {path}: is a folder; give a file name in it")
+    folder = next(q for q in p.absolute().parents if q.exists())
+    if not folder.is_dir():
+        raise InputError(f"{label}: {path}: {folder} is a file, not a folder")
+    if not os.access(folder, os.W_OK):
+        raise InputError(f"{label}: {path}: {folder} is not writable")
 
 
 def replace_into(tmp: str | Path, path: str | Path) -> None:

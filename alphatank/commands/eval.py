@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 
 from alphatank.commands.argtypes import positive_int, seed
 from alphatank.errors import InputError, as_input_error
-from alphatank.files import write_text_atomic
+from alphatank.files import check_writable, write_text_atomic
 
 if TYPE_CHECKING:
     from alphatank.training.evaluate import EvalResult
@@ -85,6 +85,9 @@ def run(args: argparse.Namespace) -> int:
     unknown = [b for b in opponents if b is not None and b not in BOT_NAMES]
     if unknown:
         raise InputError(f"--vs: unknown bot {unknown[0]!r}; valid bots: {list(BOT_NAMES)}")
+    for label, path in (("--csv", args.csv), ("--json", args.json)):
+        if path:
+            check_writable(path, label)
     results = []
     try:
         game = parse_game("--game", args.game)

@@ -14,6 +14,7 @@ from pathlib import Path
 from alphatank.commands.argtypes import non_negative_float, positive_float, positive_int
 from alphatank.commands.lineup_options import add_lineup_arguments, lineup_from_args
 from alphatank.errors import one_line
+from alphatank.files import check_writable
 from alphatank.sim.episode import EpisodeHook
 from alphatank.ui.render import parse_overlays
 from alphatank.ui.replay import ReplayRecorder
@@ -37,12 +38,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     try:
         check_outputs(args.out, args.gif, ("--out", "--gif"))
+        if args.replay:
+            check_writable(args.replay, "--replay")
         lineup = lineup_from_args(args, interactive=False)
         video = VideoRecorder(mp4=Path(args.out), gif=args.gif, fps=args.fps,
                               every=args.every, hold_s=args.hold,
                               overlays=parse_overlays(args.overlays), labels=lineup.labels,
                               scale=args.scale)
-    except ValueError as exc:  # outputs, overlays; other bad input goes to alphatank.cli's one line
+    except ValueError as exc:  # overlays; other bad input goes to alphatank.cli's one line
         print(f"alphatank record: error: {one_line(exc)}", file=sys.stderr)
         return 2
     for note in lineup.notes:

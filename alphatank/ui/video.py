@@ -17,8 +17,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from alphatank.errors import InputError
 from alphatank.extras import require
-from alphatank.files import replace_into
+from alphatank.files import check_writable, replace_into
 from alphatank.sim.episode import Episode, EpisodeHook
 from alphatank.ui.render import DEFAULT_OVERLAYS, Renderer, surface_to_array
 
@@ -47,12 +48,16 @@ VIDEO_SUFFIXES = (".mp4", ".mkv", ".mov", ".avi")  # containers that hold H.264
 
 def check_outputs(mp4: str | Path | None, gif: str | Path | None,
                   names: tuple[str, str] = ("mp4", "gif")) -> None:
-    """ValueError naming the setting (``names``: what the caller calls the MP4 and the GIF)
-    unless the MP4 path ends in a video suffix and the GIF path in ``.gif``."""
+    """InputError naming the setting (``names``: what the caller calls the MP4 and the GIF)
+    unless the MP4 path ends in a video suffix, the GIF path in ``.gif``, and both can be
+    written."""
     for path, name, suffixes in ((mp4, names[0], VIDEO_SUFFIXES), (gif, names[1], (".gif",))):
-        if path is not None and Path(path).suffix.lower() not in suffixes:
+        if path is None:
+            continue
+        if Path(path).suffix.lower() not in suffixes:
             ends = " or ".join(filter(None, (", ".join(suffixes[:-1]), suffixes[-1])))
-            raise ValueError(f"{name}: {str(path)!r} must end in {ends}")
+            raise InputError(f"{name}: {str(path)!r} must end in {ends}")
+        check_writable(path, name)
 
 
 class _Mp4:
