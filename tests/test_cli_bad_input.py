@@ -184,6 +184,7 @@ CASES = [
     ("maps-wrong-kind", ["maps", "{good_npz}"], ["{good_npz}", "UTF-8"]),
     # bench
     ("bench-map", ["bench", "--map", "{missing}"], ["{missing}", "no such map file"]),
+    ("bench-json-folder", ["bench", "--json", "{dir}"], ["--json", "is a folder"]),
     ("bench-ticks", ["bench", "--ticks", "many"], ["--ticks", "integer >= 1", "'many'"]),
     ("bench-preset", ["bench", "--preset", "fast"], ["unknown preset 'fast'", "long_range"]),
     ("bench-soak-scn", ["bench", "--soak", "--scenarios", "nosuch"],
@@ -278,6 +279,8 @@ CASES = [
     ("record-checkpoint-agent", ["record", "--checkpoint", "agent:nosuch", "--seats",
                                  "learner,smart"], ["unknown agent 'nosuch'"]),
     # play (under the dummy video driver: --headless-test lets it get to the real checks)
+    ("play-replay-folder", ["play", "--headless-test", "--save-replay", "{dir}"],
+     ["--save-replay", "is a folder"]),
     ("play-scenario", ["play", "--headless-test", "--scenario", "{ff_toml}"],
      ["[game].friendly_fire"]),
     ("play-ckpt-seats", ["play", "--headless-test", "--checkpoint", "{run}", "--seats",

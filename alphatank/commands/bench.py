@@ -18,7 +18,7 @@ import numpy as np
 from alphatank.commands.argtypes import positive_int
 from alphatank.commands.benchfloor import find_floor, floor_us_per_tick
 from alphatank.commands.benchsoak import DEFAULT_SOAK_SCENARIOS, soak
-from alphatank.files import write_text_atomic
+from alphatank.files import check_writable, write_text_atomic
 from alphatank.game.scenarios import ScenarioError
 from alphatank.sim.config import game_config
 from alphatank.sim.mapspec import load_map
@@ -96,6 +96,8 @@ def match_ticks_per_second(map_name: str, teams: list[str], ticks: int, seed: in
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.json:
+        check_writable(args.json, "--json")
     if args.soak:
         return _soak(args)
     floor = find_floor(args.floor)  # a wrong --floor: one line from alphatank.cli

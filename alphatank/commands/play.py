@@ -16,6 +16,7 @@ import sys
 from alphatank.commands.argtypes import positive_float, positive_int
 from alphatank.commands.lineup_options import add_lineup_arguments, lineup_from_args
 from alphatank.errors import one_line
+from alphatank.files import check_writable
 from alphatank.ui.human import HUMAN_ORDER
 from alphatank.ui.render import DisplayUnavailable, parse_overlays
 from alphatank.ui.session import NO_DISPLAY_HELP, PlaySession
@@ -39,6 +40,8 @@ def run(args: argparse.Namespace) -> int:
         print("alphatank play: " + NO_DISPLAY_HELP.format(why=" (SDL_VIDEODRIVER=dummy)"),
               file=sys.stderr)
         return 2
+    if args.save_replay:
+        check_writable(args.save_replay, "--save-replay")
     try:
         lineup = lineup_from_args(args, interactive=True)
         session = PlaySession(lineup, seed=args.seed, fps=args.fps,
