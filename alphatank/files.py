@@ -62,14 +62,24 @@ def write_text_atomic(path: str | Path, text: str, newline: str | None = None) -
 def check_writable(path: str | Path, label: str) -> None:
     """InputError ``label: path: why`` unless a file can be written at ``path`` (missing
     folders are made when it is): asked before a long job whose result would be lost."""
-    p = Path(path)
-    if p.is_dir():
+    if Path(path).is_dir():
         raise InputError(f"{label}: {path}: is a folder; give a file name in it")
-    folder = next(q for q in p.absolute().parents if q.exists())
-    if not folder.is_dir():
-        raise InputError(f"{label}: {path}: {folder} is a file, not a folder")
-    if not os.access(folder, os.W_OK):
-        raise InputError(f"{label}: {path}: {folder} is not writable")
+    _check_nearest(Path(path).absolute().parent, path, label)
+
+
+def check_folder(path: str | Path, label: str) -> None:
+    """InputError ``label: path: why`` unless ``path`` is a folder, or can be made one,
+    that files can be written in."""
+    _check_nearest(Path(path).absolute(), path, label)
+
+
+def _check_nearest(folder: Path, path: str | Path, label: str) -> None:
+    existing = next(q for q in (folder, *folder.parents) if q.exists())
+    if not existing.is_dir():
+        what = "" if existing == Path(path).absolute() else f"{existing} "
+        raise InputError(f"{label}: {path}: {what}is a file, not a folder")
+    if not os.access(existing, os.W_OK):
+        raise InputError(f"{label}: {path}: {existing} is not writable")
 
 
 def replace_into(tmp: str | Path, path: str | Path) -> None:

@@ -78,6 +78,7 @@ def files(tmp_path_factory) -> dict[str, str]:
                          '[learners.config]\ngamma = 3\n')
     run = 'scenario = "vs_random"\n'
     put("runscenario.toml", 'scenario = "vs_nobody"\n')
+    put("runname.toml", 'name = "../../escaped"\nscenario = "vs_random"\n')
     put("runmap.toml", run + 'map = "nowhere"\n')
     put("runinit.toml", run + 'init_from = "agent:nobody"\n')
     put("runobs.toml", run + 'observation = "egocentric_fulll"\n')
@@ -338,6 +339,11 @@ CASES = [
     ("train-tensorboard", ["train", "--runs", "{dir}/tbruns", "--tensorboard", "--wandb",
                            "disabled", "--total-steps", "32", "--num-envs", "2",
                            "--no-progress"], ["tensorboard"]),
+    ("train-name", ["train", "--runs", "{dir}/runs", "--name", "../../escaped"],
+     ["--name", "'../../escaped'", "letters, digits"]),
+    ("train-config-name", ["train", "--config", "{runname_toml}"],
+     ["{runname_toml}", "name:", "'../../escaped'"]),
+    ("train-runs-file", ["train", "--runs", "{good_txt}"], ["--runs", "is a file"]),
     ("train-seed", ["train", "--seed", "-1"], ["--seed", "[0, 2^63)"]),
     ("train-steps", ["train", "--total-steps", "many"], ["--total-steps", "invalid int"]),
     ("train-config-missing", ["train", "--config", "{dir}/none.toml"],
@@ -382,6 +388,8 @@ CASES = [
      ["--hp apply to new runs"]),
     # demo
     ("demo-minutes", ["demo", "--minutes", "-1"], ["--minutes", "> 0", "'-1'"]),
+    ("demo-name", ["demo", "--runs", "{dir}/runs", "--name", "a/b"], ["--name", "'a/b'"]),
+    ("demo-runs-file", ["demo", "--runs", "{good_txt}/runs"], ["--runs", "{good_txt} is a file"]),
     ("demo-wandb", ["demo", "--wandb", "cloud"], ["--wandb", "invalid choice"]),
 ]
 

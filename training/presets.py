@@ -165,6 +165,10 @@ class TrainConfig:
     def __post_init__(self) -> None:
         object.__setattr__(self, "learners", tuple(self.learners))
         validate_fields(self)
+        if not _NAME.match(self.name):  # it names a folder: no way out of the runs folder
+            raise FieldError("TrainConfig", "name", f"must be letters, digits, '_', '.' or "
+                             f"'-', not starting with '.' (it names the run's folder), got "
+                             f"{self.name!r}")
         for spec in self.learners:
             if not isinstance(spec, LearnerSpec):
                 raise FieldError("TrainConfig", "learners", f"must hold LearnerSpecs, got "

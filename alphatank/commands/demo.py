@@ -11,7 +11,7 @@ from pathlib import Path
 from alphatank.commands.argtypes import positive_float, positive_int
 from alphatank.errors import InputError
 from alphatank.extras import require
-from alphatank.files import write_text_atomic
+from alphatank.files import check_folder, write_text_atomic
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -35,6 +35,7 @@ def run(args: argparse.Namespace) -> int:
         write_csv,
         write_json,
     )
+    from alphatank.training.fields import FieldError
     from alphatank.training.logging import plot_learning_curve
     from alphatank.training.presets import get_preset
     from alphatank.training.runner import Trainer
@@ -42,8 +43,13 @@ def run(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     name = args.name or time.strftime("demo-%Y%m%d-%H%M%S")
-    cfg = get_preset("demo").with_overrides(name=name, time_limit_s=args.minutes * 60,
-                                             num_workers=args.workers, wandb=args.wandb)
+    try:
+        cfg = get_preset("demo").with_overrides(name=name, time_limit_s=args.minutes * 60,
+                                                 num_workers=args.workers, wandb=args.wandb)
+    except FieldError as exc:
+        flag = {"name": "--name", "num_workers": "--workers"}.get(exc.name, exc.name)
+        raise InputError(f"{flag}: {exc.problem}") from None
+    check_folder(args.runs, "--runs")
     run_dir = Path(args.runs) / name
     if (run_dir / "latest").exists():
         raise InputError(f"{run_dir} already holds a run; pick another --name")

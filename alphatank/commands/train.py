@@ -17,6 +17,7 @@ from typing import Any
 from alphatank.cluster import ENV_RUNNER_TIMEOUT_S
 from alphatank.commands.argtypes import seed
 from alphatank.errors import InputError, as_input_error
+from alphatank.files import check_folder
 from alphatank.training.fields import FieldError
 from alphatank.training.presets import (
     BOT_POOL,
@@ -162,7 +163,8 @@ def _with_run_settings(cfg: TrainConfig, args: argparse.Namespace, name: str | N
     try:
         return cfg.with_overrides(name=name, **_overrides(args))
     except FieldError as exc:
-        raise ValueError(f"{RUN_FLAGS.get(exc.name, exc.name)}: {exc.problem}") from None
+        flag = "--name" if exc.name == "name" else RUN_FLAGS.get(exc.name, exc.name)
+        raise ValueError(f"{flag}: {exc.problem}") from None
 
 
 def _learners_label(cfg: TrainConfig) -> str:
@@ -395,6 +397,7 @@ def _run(args: argparse.Namespace, progress: bool, cpus: float = 0.0) -> int:
         if args.print_config:
             print(run_toml(cfg), end="")
             return 0
+        check_folder(args.runs, "--runs")
         run_dir = Path(args.runs) / cfg.name
         if (run_dir / "latest").exists():
             raise InputError(f"{run_dir} already holds a run; continue it with --resume "
