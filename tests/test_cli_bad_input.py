@@ -403,6 +403,13 @@ MAPGEN_CASES = [
     ("mapgen-generate-size", ["generate", "--size", "big"], ["size", "ROWSxCOLS", "'big'"]),
     ("mapgen-generate-alg", ["generate", "--algorithm", "spiral"], ["--algorithm", "maze"]),
     ("mapgen-batch-count", ["batch", "--count", "0", "--out", "{dir}/gen"], ["--count", ">= 1"]),
+    ("mapgen-batch-out-file", ["batch", "--count", "2", "--out", "{good_txt}"],
+     ["mapgen.py batch: error: --out", "is a file"]),
+    ("mapgen-variants-out-file", ["variants", "maze", "--out", "{good_txt}/v"],
+     ["--out", "{good_txt} is a file"]),
+    ("mapgen-generate-out-folder", ["generate", "-o", "{dir}", "--force"],
+     ["--output", "is a folder"]),
+    ("mapgen-preview-png-folder", ["preview", "maze", "--png", "{dir}"], ["--png", "is a folder"]),
     ("mapgen-edit-binary", ["edit", "{binary_txt}"], ["{binary_txt}", "UTF-8"]),
     ("mapgen-no-verb", [], ["required"]),
 ]

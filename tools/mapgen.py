@@ -21,7 +21,7 @@ from pathlib import Path
 
 from alphatank.cli import Parser, broken_pipe_exit
 from alphatank.errors import InputError, one_line
-from alphatank.files import write_text_atomic
+from alphatank.files import check_folder, check_writable, write_text_atomic
 from alphatank.mapgen import (
     ALGORITHMS,
     SYMMETRIES,
@@ -119,6 +119,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
         for w in map_warnings(spec):
             print(w, file=sys.stderr)
         return 0
+    check_writable(args.output, "--output")
     path = Path(args.output)
     _write(spec, path, args.force)
     print(f"wrote {path}: {describe(spec)}")
@@ -130,6 +131,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
 def cmd_batch(args: argparse.Namespace) -> int:
     if args.count < 1:
         raise MapGenError(f"--count must be >= 1, got {args.count}")
+    check_folder(args.out, "--out")
     out = Path(args.out)
     test_share = None
     if args.split is not None:
@@ -152,6 +154,7 @@ def cmd_batch(args: argparse.Namespace) -> int:
 
 
 def cmd_variants(args: argparse.Namespace) -> int:
+    check_folder(args.out, "--out")
     out = Path(args.out)
     written = 0
     for src in _map_sources(args.maps):
@@ -227,6 +230,8 @@ def render_png(spec: MapSpec, path: Path, teams: list[str] | None = None, seed: 
 
 
 def cmd_preview(args: argparse.Namespace) -> int:
+    if args.png and not args.no_png:
+        check_writable(args.png, "--png")
     try:
         spec, warnings = check_map(args.map, args.teams)
     except MapError as err:
@@ -321,7 +326,7 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:
         return broken_pipe_exit()
     except (InputError, OSError, argparse.ArgumentTypeError) as err:
-        print(f"error: {one_line(err)}", file=sys.stderr)
+        print(f"mapgen.py {args.command}: error: {one_line(err)}", file=sys.stderr)
         return 2
 
 
