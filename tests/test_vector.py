@@ -276,3 +276,8 @@ def test_batch_policies_act_in_batches_and_the_others_one_by_one():
     env = VectorMatchEnv("vs_smart", 3, seed=0, seat_policies={1: batch})
     rollout(env, 5)
     assert (batch.single, batch.batched, batch.calls) == (0, 15, 5)  # 3 matches a call
+
+
+def test_a_set_of_more_matches_than_memory_allows_is_refused():
+    with pytest.raises(ValueError, match=r"num_envs must be in 1\.\.4096 .*0\.5 MB.*got 4097"):
+        VectorMatchEnv("vs_random", 4097)

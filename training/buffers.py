@@ -72,6 +72,28 @@ def compute_gae_masked(rewards: torch.Tensor, values: torch.Tensor, terminated: 
     return torch.from_numpy(advantages), torch.from_numpy(returns)
 
 
+def available_memory() -> int | None:
+    """Bytes of memory this machine can still give (Linux's MemAvailable), or None."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def check_memory(nbytes: int, what: str, fix: str) -> None:
+    """ValueError (``what`` needs ..., then ``fix``) before allocating ``nbytes`` when the
+    machine has less memory available (a buffer allocated lazily would fill it hours into
+    the run)."""
+    avail = available_memory()
+    if avail is not None and nbytes > avail:
+        raise ValueError(f"{what} needs {nbytes / 2**30:,.1f} GiB; this machine has "
+                         f"{avail / 2**30:,.1f} GiB available: {fix}")
+
+
 class RolloutBuffer:
     """Preallocated PPO rollout of ``num_steps`` rows for ``num_streams`` (env, seat) streams."""
 
@@ -79,6 +101,9 @@ class RolloutBuffer:
                  logit_dim: int = 0):
         """``logit_dim`` > 0: also ``anchor_logits`` (the anchor policy's logits per row)."""
         t, b = num_steps, num_streams
+        check_memory(t * b * (4 * (obs_dim + logit_dim + 7) + 24 + 1 + mask_dim),
+                     f"a rollout of num_steps = {t:,} x {b:,} streams x {obs_dim} inputs",
+                     "lower num_steps or num_envs")
         self.num_steps, self.num_streams = t, b
         self.obs = torch.zeros((t, b, obs_dim), dtype=torch.float32)
         self.actions = torch.zeros((t, b, 3), dtype=torch.int64)
@@ -200,6 +225,9 @@ class ReplayBuffer:
     def __init__(self, capacity: int, obs_dim: int, act_dim: int):
         if capacity <= 0:
             raise ValueError(f"replay capacity must be > 0, got {capacity}")
+        check_memory(4 * capacity * (2 * obs_dim + act_dim + 2),
+                     f"a replay buffer of buffer_size = {capacity:,} transitions x {obs_dim} "
+                     "inputs", "lower buffer_size")
         self.capacity = int(capacity)
         self.obs = np.zeros((capacity, obs_dim), dtype=np.float32)
         self.next_obs = np.zeros((capacity, obs_dim), dtype=np.float32)

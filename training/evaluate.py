@@ -28,6 +28,7 @@ import numpy as np
 from alphatank.envs.core import MatchSet
 from alphatank.files import write_text_atomic
 from alphatank.game.scenarios import Scenario, Seat, load_scenario
+from alphatank.sim.config import MATCHES_MAX
 from alphatank.sim.policy import Policy
 from alphatank.stats import League, wilson_interval
 from alphatank.training.checkpoint import Checkpoint, load_checkpoint
@@ -266,7 +267,7 @@ def evaluate_learners(learners: dict[str, Any], observation: dict[str, Any],
         seats = opponent_seats(base, team, opp, weakness)
         sc = dataclasses.replace(base, seats=tuple(seats))
         driven = [i for i, s in enumerate(seats) if s.controller == "learner"]
-        n_env = max(1, min(num_envs, games))
+        n_env = max(1, min(num_envs, games, MATCHES_MAX))  # the games are the same
         core = MatchSet(sc, n_env, observation=observation["kind"],
                         game_overrides=game_overrides, reward_overrides=reward_overrides,
                         driven=driven, action_repeat=observation["action_repeat"])
@@ -341,7 +342,7 @@ def evaluate_stand_in(bot: str, scenario: str | Scenario, opponents: Sequence[st
         seats = opponent_seats(base, team, opp, weakness)
         played = [stand if s.team == team and s.controller == "learner" else s for s in seats]
         sc = dataclasses.replace(base, seats=tuple(played))
-        n_env = max(1, min(num_envs, games))
+        n_env = max(1, min(num_envs, games, MATCHES_MAX))  # the games are the same
         core = MatchSet(sc, n_env, driven=[], game_overrides=game)
         ours = [i for i, s in enumerate(played) if s.team == team]
         theirs = [i for i, s in enumerate(played) if s.team != team]

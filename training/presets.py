@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from alphatank.files import read_text
-from alphatank.sim.config import ACTION_REPEAT_MAX
+from alphatank.sim.config import ACTION_REPEAT_MAX, MATCHES_MAX
 from alphatank.training.algorithms import ALGORITHMS, get_algorithm
 from alphatank.training.fields import (
     FieldError,
@@ -125,7 +125,8 @@ class TrainConfig:
                                            "none: one PPO learner per learner seat")
     total_steps: int = hp(2_000_000, "env steps summed over all envs (one match tick each)",
                           gt=0)
-    num_envs: int = hp(16, "matches stepped together", gt=0)
+    num_envs: int = hp(16, "matches stepped together (each holds about 0.5 MB)", gt=0,
+                       le=MATCHES_MAX)
     num_workers: int = hp(1, "env worker processes", gt=0)
     seed: int = hp(0, "run seed (every random stream derives from it)", ge=0)
     observation: str | None = hp(None, "observation kind (none: the scenario's)")

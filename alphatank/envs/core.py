@@ -40,7 +40,7 @@ from alphatank.game.observe import (
 from alphatank.game.rewards import RewardTracker, as_index
 from alphatank.game.scenarios import Scenario, ScenarioError, Seat, load_scenario
 from alphatank.game.seats import make_controller
-from alphatank.sim.config import ACTION_REPEAT_MAX, check_value
+from alphatank.sim.config import ACTION_REPEAT_MAX, MATCHES_MAX, check_value
 from alphatank.sim.episode import episode_match, episode_seeds, reset_controllers
 from alphatank.sim.match import Match, TickEvents
 from alphatank.sim.policy import NOOP, BatchPolicy, Policy, is_batch_policy
@@ -119,8 +119,9 @@ class MatchSet:
                  seat_policies: Mapping[int, Policy] | None = None,
                  env_ids: Sequence[int] | None = None, action_repeat: int = 1):
         sc = self.scenario = load_scenario(scenario)
-        if num_envs < 1:
-            raise ValueError(f"num_envs must be >= 1, got {num_envs}")
+        if not 1 <= num_envs <= MATCHES_MAX:
+            raise ValueError(f"num_envs must be in 1..{MATCHES_MAX} (each match holds about "
+                             f"0.5 MB), got {num_envs}")
         check_action_repeat(action_repeat)
         self.action_repeat = int(action_repeat)
         self.num_envs = E = num_envs

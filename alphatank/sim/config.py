@@ -106,6 +106,9 @@ def check_fields(obj: Any) -> None:
 
 # Most ticks an agent may hold one action for (action_repeat): one second at 30 Hz.
 ACTION_REPEAT_MAX = 30
+# Most matches one set steps together (num_envs): each holds a physics space, its bots'
+# tables and its observation rows, about 0.5 MB, so 4,096 is about 2 GB.
+MATCHES_MAX = 4096
 
 
 @dataclass(frozen=True)
