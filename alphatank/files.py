@@ -62,9 +62,14 @@ def write_text_atomic(path: str | Path, text: str, newline: str | None = None) -
 def check_writable(path: str | Path, label: str) -> None:
     """InputError ``label: path: why`` unless a file can be written at ``path`` (missing
     folders are made when it is): asked before a long job whose result would be lost."""
-    if Path(path).is_dir():
+    p = Path(path)
+    if p.is_dir():
         raise InputError(f"{label}: {path}: is a folder; give a file name in it")
-    _check_nearest(Path(path).absolute().parent, path, label)
+    if p.exists() and not p.is_file():  # a device or pipe (/dev/stdout): written into
+        if not os.access(p, os.W_OK):
+            raise InputError(f"{label}: {path}: is not writable")
+        return
+    _check_nearest(p.absolute().parent, path, label)
 
 
 def check_folder(path: str | Path, label: str) -> None:

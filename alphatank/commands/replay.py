@@ -1,9 +1,9 @@
 """``alphatank replay FILE``: re-simulate a saved match bit-identically.
 
 Without options it re-runs the match headless and checks the final state hash against the
-recording. ``--record OUT.mp4`` and/or ``--gif OUT.gif`` render it to video; ``--render`` plays it
-in a window at real-time speed (same keys as ``alphatank play``: P/Esc pause, R restart,
-V/T/B overlays).
+recording. ``--record OUT.mp4`` and/or ``--gif OUT.gif`` render it to video; ``--render``
+plays it in a window at real-time speed (same keys as ``alphatank play``: P/Esc pause,
+R restart, V/T/B overlays).
 """
 
 from __future__ import annotations
