@@ -12,7 +12,15 @@ import sys
 
 import pytest
 
-from alphatank.files import FolderLock, read_text, replace_into, write_text_atomic
+from alphatank.errors import InputError
+from alphatank.files import (
+    FolderLock,
+    check_folder,
+    check_writable,
+    read_text,
+    replace_into,
+    write_text_atomic,
+)
 from alphatank.training.evaluate import EvalResult, write_csv, write_json
 
 
@@ -63,6 +71,22 @@ def test_atomic_write_to_a_pipe_writes_into_it_and_leaves_it_a_pipe(tmp_path, vi
         os.close(reader)
     assert stat.S_ISFIFO(os.stat(fifo).st_mode) and target.is_symlink() == via_link
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted({"pipe", target.name})
+
+
+def test_output_paths_are_checked_before_the_work(tmp_path):
+    (tmp_path / "f.txt").write_text("x")
+    os.mkfifo(tmp_path / "pipe")
+    check_writable(tmp_path / "new" / "deeper" / "out.json", "--json")  # folders to make
+    check_writable(tmp_path / "f.txt", "--json")  # replaced whole
+    check_writable(tmp_path / "pipe", "--json")  # written into, as /dev/stdout
+    check_folder(tmp_path / "runs" / "more", "--runs")
+    with pytest.raises(InputError, match=r"^--json: .*: is a folder"):
+        check_writable(tmp_path, "--json")
+    with pytest.raises(InputError, match=r"^--csv: .*f\.txt/out\.csv: .*f\.txt is a file"):
+        check_writable(tmp_path / "f.txt" / "out.csv", "--csv")
+    with pytest.raises(InputError, match=r"^--runs: .*f\.txt: is a file, not a folder"):
+        check_folder(tmp_path / "f.txt", "--runs")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["f.txt", "pipe"]  # nothing made
 
 
 def test_replace_into_swaps_a_regular_file_whole(tmp_path):
