@@ -55,7 +55,12 @@ def export_agent(source: str | Path, dest: str | Path, record: dict[str, Any] | 
     old = dest.with_name(f".{dest.name}.old-{os.getpid()}")
     if dest.exists():
         os.replace(dest, old)  # kept until the new folder is in place
-    os.replace(tmp, dest)
+    try:
+        os.replace(tmp, dest)
+    except OSError:
+        if old.exists():
+            os.replace(old, dest)
+        raise
     shutil.rmtree(old, ignore_errors=True)
     return dest
 
