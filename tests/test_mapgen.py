@@ -293,6 +293,11 @@ def test_batch_writes_consecutive_seeds_and_a_held_out_split(tmp_path, capsys):
     assert (tmp_path / "train" / "maze_0100.txt").read_text() == first
     assert cli.main(["batch", "--count", "3", "--out", str(tmp_path / "flat")]) == 0
     assert len(list((tmp_path / "flat").glob("*.txt"))) == 3
+    (tmp_path / "train" / "maze_0100.txt").unlink()  # one missing, the others there:
+    capsys.readouterr()
+    assert cli.main(args) == 2  # refused before writing any, not after the first
+    assert not (tmp_path / "train" / "maze_0100.txt").exists()
+    assert "9 of the batch's files" in capsys.readouterr().err
 
 
 # ---- shipped folders ----------------------------------------------------------------------

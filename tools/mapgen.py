@@ -138,6 +138,7 @@ def cmd_batch(args: argparse.Namespace) -> int:
         if not 0.0 < args.split <= 1.0:
             raise MapGenError(f"--split must be in (0, 1] (the train share), got {args.split}")
         test_share = 1 - Fraction(str(args.split))
+    batch = []
     for i in range(args.count):
         opts = options_from_args(args, i, args.seed + i)
         spec = generate_from(opts)
@@ -145,7 +146,12 @@ def cmd_batch(args: argparse.Namespace) -> int:
         if test_share is not None:  # every k-th map is held out, spread over the batch
             held_out = int((i + 1) * test_share) > int(i * test_share)
             folder = out / ("test" if held_out else "train")
-        path = folder / f"{spec.name}.txt"
+        batch.append((opts, spec, folder / f"{spec.name}.txt"))
+    taken = [str(path) for _, _, path in batch if path.exists()]
+    if taken and not args.force:  # before writing any: no half-written batch
+        raise FileExistsError(f"{taken[0]} exists ({len(taken)} of the batch's files do; use "
+                              f"--force to overwrite)")
+    for opts, spec, path in batch:
         _write(spec, path, args.force)
         n_warn = len(map_warnings(spec))
         print(f"{path}: {opts.algorithm} {opts.rows}x{opts.cols} {opts.symmetry}, "
