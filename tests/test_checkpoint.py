@@ -13,7 +13,12 @@ from alphatank.game.scenarios import load_scenario, parse_scenario
 from alphatank.game.seats import make_controller
 from alphatank.sim.episode import start_episode
 from alphatank.sim.policy import Policy
-from alphatank.training.checkpoint import CheckpointError, load_checkpoint, load_policy
+from alphatank.training.checkpoint import (
+    CheckpointError,
+    load_checkpoint,
+    load_policy,
+    save_checkpoint,
+)
 from alphatank.training.ppo import PPOConfig
 from alphatank.training.presets import LearnerSpec, TrainConfig
 from alphatank.training.runner import Trainer, resume_trainer
@@ -224,6 +229,18 @@ def test_mismatched_checkpoint_gives_a_clear_error(trained, tmp_path):
         load_checkpoint(ck)
 
 
+def test_pruning_removes_only_the_runs_own_older_saves(tmp_path):
+    mine = tmp_path / "checkpoints" / "important"
+    mine.mkdir(parents=True)
+    (mine / "data.txt").write_text("precious")
+    state = {"ppo": {"w": torch.zeros(2)}}
+    for step in (300, 20, 1000):  # out of order on purpose: pruning goes by step
+        save_checkpoint(tmp_path, f"step_{step:010d}", {}, state, keep=2)
+    assert sorted(p.name for p in (tmp_path / "checkpoints").iterdir()) == [
+        "important", f"step_{300:010d}", f"step_{1000:010d}"]
+    assert (mine / "data.txt").read_text() == "precious"
+
+
 def test_train_command_runs_resumes_and_refuses_to_overwrite(tmp_path, capsys):
     import argparse
 
@@ -242,7 +259,7 @@ def test_train_command_runs_resumes_and_refuses_to_overwrite(tmp_path, capsys):
     with pytest.raises(InputError, match="--resume"):  # the run exists: resume it instead
         train_cmd.run(args)
     resume = parser.parse_args(["--resume", str(tmp_path / "cli"), "--total-steps", "128",
-                                *common])
+                                *common[2:]])  # a resumed run keeps its folder: no --runs
     assert train_cmd.run(resume) == 0
     ck = load_checkpoint(tmp_path / "cli")
     assert ck.meta["progress"]["global_step"] == 128

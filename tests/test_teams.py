@@ -52,7 +52,8 @@ ITER = 16 * E
 
 
 def _train(tmp_path, *args: str) -> int:
-    return main(["train", "--runs", str(tmp_path), "--num-envs", str(E), "--wandb", "disabled",
+    where = [] if "--resume" in args else ["--runs", str(tmp_path)]  # a resumed run's own
+    return main(["train", *where, "--num-envs", str(E), "--wandb", "disabled",
                  "--no-progress", "--checkpoint-every", "2", *args])
 
 

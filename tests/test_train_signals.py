@@ -29,7 +29,8 @@ def start(runs, name, args, **env) -> subprocess.Popen:
 
 
 def train(runs, args) -> tuple[int, str]:
-    cmd = [sys.executable, "-m", "alphatank.cli", "train", "--runs", str(runs), *args,
+    where = [] if "--resume" in args else ["--runs", str(runs)]  # a resumed run's own
+    cmd = [sys.executable, "-m", "alphatank.cli", "train", *where, *args,
            "--wandb", "disabled", "--no-progress"]
     res = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     return res.returncode, res.stdout + res.stderr

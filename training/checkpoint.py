@@ -22,6 +22,7 @@ import hashlib
 import json
 import math
 import os
+import re
 import shutil
 import time
 import weakref
@@ -114,14 +115,48 @@ def save_checkpoint(run_dir: str | Path, tag: str, meta: dict[str, Any],
     else:
         os.replace(tmp, final)
     write_text_atomic(Path(run_dir) / "latest", f"checkpoints/{tag}\n")
-    if keep > 0:
-        saves = sorted((p for p in root.iterdir() if p.is_dir() and not p.name.startswith(".")),
-                       key=lambda p: p.stat().st_mtime)
-        for old in saves[:-keep]:
+    if keep > 0:  # only the run's own saves: other folders a user put there stay
+        for old in run_saves(root)[:-keep]:
             if old != final:
                 shutil.rmtree(old, ignore_errors=True)
     _remove_leftovers(root)
     return final
+
+
+_SAVE = re.compile(r"step_(\d+)")  # the name of a save's folder (save_checkpoint's tag)
+_MOVED_SAVE = re.compile(r"\.step_(\d+)\.old-\d+")  # one moved aside while re-saved
+
+
+def run_saves(root: Path) -> list[Path]:
+    """The save folders (``step_<N>``) in a run's ``checkpoints`` folder, oldest step first."""
+    found = [(int(m.group(1)), p) for p in root.iterdir()
+             if (m := _SAVE.fullmatch(p.name)) and p.is_dir()]
+    return [p for _, p in sorted(found)]
+
+
+def resume_dir(ckpt: Checkpoint) -> Path:
+    """The run folder in which resuming ``ckpt`` continues: the run of a save at
+    ``<run>/checkpoints/step_<N>`` (beside ``<run>/latest``) with no later save. Anything
+    else is refused: a resumed run writes, and prunes saves, in that folder."""
+    path = ckpt.path
+    if isinstance(ckpt.meta.get("agent"), dict):
+        raise CheckpointError(f"{path}: an agent folder (weights without their training "
+                              f"state) cannot be resumed; train a new run from it with "
+                              f"--init-from {path}")
+    run = path.parent.parent
+    m = _SAVE.fullmatch(path.name) or _MOVED_SAVE.fullmatch(path.name)
+    if m is None or path.parent.name != "checkpoints" or not (run / "latest").is_file():
+        raise CheckpointError(f"{path}: not a save in a run folder (RUN/checkpoints/step_N "
+                              f"beside RUN/latest), and --resume continues a run in its own "
+                              f"folder; resume the run folder, or train a new run from "
+                              f"these weights with --init-from {path}")
+    later = [p.name for p in run_saves(path.parent) if int(p.name[5:]) > int(m.group(1))]
+    if later:
+        raise CheckpointError(f"{path}: the run has later saves ({', '.join(later)}), and "
+                              f"resuming an earlier one would write a second history into "
+                              f"the same run; resume the run ({run}), or remove the later "
+                              f"saves first")
+    return run
 
 
 def _remove_leftovers(root: Path) -> None:

@@ -59,6 +59,7 @@ from alphatank.training.checkpoint import (
     CheckpointError,
     LivePolicy,
     load_checkpoint,
+    resume_dir,
     save_checkpoint,
     scenario_to_dict,
 )
@@ -784,8 +785,9 @@ def resume_trainer(path: str | Path, progress: bool = True, env: Any = None,
     ``overrides`` change run settings such as ``total_steps``; ``env_runners``,
     ``env_runner_timeout_s``, ``fragments`` and ``overlap``: as for :class:`Trainer`."""
     ckpt = load_checkpoint(path)
+    run_dir = resume_dir(ckpt)
     cfg = ckpt.train_config.with_overrides(**overrides)
-    return Trainer(cfg, ckpt.path.parent.parent, env=env, resume=ckpt, progress=progress,
+    return Trainer(cfg, run_dir, env=env, resume=ckpt, progress=progress,
                    wandb_id=ckpt.meta.get("wandb_id"), scenario=ckpt.scenario,
                    env_runners=env_runners, env_runner_timeout_s=env_runner_timeout_s,
                    fragments=fragments, overlap=overlap)
