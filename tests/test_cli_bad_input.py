@@ -23,6 +23,7 @@ import pytest
 import torch
 
 from alphatank.cli import main
+from alphatank.game.seats import agent_path
 from alphatank.training.ppo import PPOConfig
 from alphatank.training.presets import LearnerSpec, TrainConfig
 from alphatank.training.runner import Trainer
@@ -78,6 +79,8 @@ def files(tmp_path_factory) -> dict[str, str]:
                          '[learners.config]\ngamma = 3\n')
     run = 'scenario = "vs_random"\n'
     put("runscenario.toml", 'scenario = "vs_nobody"\n')
+    put("rungame.toml", 'scenario = "vs_random"\n[game]\nmax_steps = -1\n')
+    put("runseats.toml", 'scenario = "vs_random"\n[[learners]]\nname = "p"\nseats = [5]\n')
     put("runname.toml", 'name = "../../escaped"\nscenario = "vs_random"\n')
     put("runmap.toml", run + 'map = "nowhere"\n')
     put("runinit.toml", run + 'init_from = "agent:nobody"\n')
@@ -152,7 +155,11 @@ def files(tmp_path_factory) -> dict[str, str]:
     bad = ckpt_copy("ckpt_objdim")
     (bad / "meta.json").write_text(json.dumps(
         {**meta, "observation": {**meta["observation"], "obs_dim": "abc"}}))
-    bad = ckpt_copy("ckpt_nan")
+    ckpt_copy("ckpt_loose")  # a good save, copied out of its run
+    bad = d / "nanrun" / "checkpoints" / ckpt.name  # resumable: a save inside a run
+    shutil.copytree(ckpt, bad)
+    (d / "nanrun" / "latest").write_text(f"checkpoints/{ckpt.name}\n")
+    out["ckpt_nan"] = str(bad)
     state = torch.load(bad / "ppo.pt", weights_only=True)
     first = next(k for k, v in state["net"].items() if v.is_floating_point())
     state["net"][first][0] = float("nan")
@@ -164,6 +171,11 @@ def files(tmp_path_factory) -> dict[str, str]:
     out["nan_tensor"] = f"net.{first}"
     (d / "runs_empty").mkdir()
     out["runs_empty"] = str(d / "runs_empty")
+    later = d / "later" / "checkpoints"  # a run with a save after the one resumed
+    shutil.copytree(d / "run", d / "later")
+    shutil.copytree(ckpt, later / "step_0000000099")
+    out["ckpt_earlier"] = str(later / ckpt.name)
+    out["agent_dir"] = agent_path("ppo_vs_smart")
     return out
 
 
@@ -361,6 +373,10 @@ CASES = [
     ("train-config-scenario", ["train", "--config", "{ff_toml}"], ["{ff_toml}", "scenario"]),
     ("train-config-field", ["train", "--config", "{runsteps_toml}"],
      ["{runsteps_toml}", "total_steps", "'many'"]),
+    ("train-config-game", ["train", "--config", "{rungame_toml}"],
+     ["{rungame_toml}: [game].max_steps", "[1, 10000000]", "-1"]),
+    ("train-config-seats", ["train", "--config", "{runseats_toml}"],
+     ["{runseats_toml}: learners", "do not drive scenario 'vs_random'"]),
     ("train-config-hp", ["train", "--config", "{rungamma_toml}"],
      ["{rungamma_toml}", "learners[0].config.gamma", "[0, 1]"]),
     # the run file's own settings: the error names the file, then the field
@@ -391,8 +407,18 @@ CASES = [
     ("train-scenario", ["train", "--scenario", "{binary_toml}"], ["--scenario", "UTF-8"]),
     ("train-config-and-preset", ["train", "--config", "{ff_toml}", "--preset", "demo"],
      ["--config and --preset"]),
-    ("train-resume-new-flags", ["train", "--resume", "{run}", "--hp", "ppo.gamma=0.9"],
-     ["--hp apply to new runs"]),
+    ("train-resume-new-flags", ["train", "--resume", "{run}", "--hp", "ppo.gamma=0.9",
+                                "--init-from", "{run}"], ["--hp, --init-from apply to new runs"]),
+    ("train-resume-name", ["train", "--resume", "{run}", "--name", "branch"],
+     ["--name and --runs name a new run's folder", "copy its folder"]),
+    ("train-resume-num-envs", ["train", "--resume", "{run}", "--num-envs", "3"],
+     ["--num-envs: the run plays 2 matches", "keeps them"]),
+    ("train-resume-loose", ["train", "--resume", "{ckpt_loose}"],
+     ["{ckpt_loose}: not a save in a run folder", "--init-from {ckpt_loose}"]),
+    ("train-resume-earlier", ["train", "--resume", "{ckpt_earlier}"],
+     ["{ckpt_earlier}: the run has later saves (step_0000000099)", "remove the later"]),
+    ("train-resume-agent", ["train", "--resume", "{agent_dir}"],
+     ["{agent_dir}: an agent folder", "cannot be resumed", "--init-from"]),
     # demo
     ("demo-minutes", ["demo", "--minutes", "-1"], ["--minutes", "> 0", "'-1'"]),
     ("demo-name", ["demo", "--runs", "{dir}/runs", "--name", "a/b"], ["--name", "'a/b'"]),

@@ -91,7 +91,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     run = p.add_argument_group("run settings")
     run.add_argument("--name", help="run name; the run lives in <runs>/<name> "
                                     "(default: the preset's or the file's name)")
-    run.add_argument("--runs", default="runs", help="folder of runs (default: runs)")
+    run.add_argument("--runs", help="folder of runs (default: runs)")
     run.add_argument("--resume", metavar="DIR",
                      help="continue the run saved in DIR (a run folder or a checkpoint)")
     run.add_argument("--total-steps", type=int, help="env steps to train in total")
@@ -282,8 +282,9 @@ def build_run(args: argparse.Namespace) -> TrainConfig:
     n = len(sc.learner_seats)
     if not learners_fit(run_learners(cfg, n), n, selfplay=bool(cfg.selfplay)):
         if args.scenario is None or cfg.selfplay:
-            raise ValueError(f"learners {[(s.name, list(s.seats)) for s in cfg.learners]} do "
-                             f"not drive scenario {sc.name!r}'s {n} learner seats exactly once")
+            raise ValueError(f"{source}: learners {[(s.name, list(s.seats)) for s in cfg.learners]}"
+                             f" do not drive scenario {sc.name!r}'s {n} learner seats exactly "
+                             f"once")
         first = cfg.learners[0]
         learners = default_learners(n, first.algo, first.config)
         print(f"note: learners {[(s.name, list(s.seats)) for s in cfg.learners]} do not fit "
@@ -304,8 +305,8 @@ def build_run(args: argparse.Namespace) -> TrainConfig:
         make_schedule(cfg.schedule, cfg.total_steps)
     except ValueError as exc:
         raise ValueError(f"schedule: {exc}") from None
-    sc.game_config(**cfg.game)
-    sc.reward_config(**cfg.rewards)
+    sc.game_config(where=f"{source}: [game]", **cfg.game)
+    sc.reward_config(where=f"{source}: [rewards]", **cfg.rewards)
     hp_items = [("--hp", t) for t in args.hp] + [("--ppo", args.ppo), ("--sac", args.sac)]
     return with_hp(cfg, parse_hp(hp_items), n)
 
@@ -366,14 +367,24 @@ def _env_runners(args: argparse.Namespace, cfg: TrainConfig, cpus: float) -> int
 def _run(args: argparse.Namespace, progress: bool, cpus: float = 0.0) -> int:
     """:func:`run` after the Ray connection (``cpus``: the cluster's) when --ray."""
     if args.resume:
-        given = [f"--{k}" for k in NEW_RUN_ONLY if getattr(args, k) not in (None, "", [])]
+        given = [f"--{k.replace('_', '-')}" for k in NEW_RUN_ONLY
+                 if getattr(args, k) not in (None, "", [])]
         if given:
             raise InputError(f"{', '.join(given)} apply to new runs; a resumed run keeps its "
                              f"settings")
+        if args.name is not None or args.runs is not None:
+            raise InputError("--name and --runs name a new run's folder; a resumed run "
+                             "continues in its own (--resume DIR); to branch a run, copy its "
+                             "folder and resume the copy")
         from alphatank.training.checkpoint import load_checkpoint
         from alphatank.training.runner import resume_trainer
         try:  # a CheckpointError is an InputError already
-            cfg = _with_run_settings(load_checkpoint(args.resume).train_config, args)
+            saved = load_checkpoint(args.resume).train_config
+            if args.num_envs not in (None, saved.num_envs):
+                raise InputError(f"--num-envs: the run plays {saved.num_envs} matches, and a "
+                                 f"resumed run keeps them (its normalisers and rollouts hold "
+                                 f"one stream per match)")
+            cfg = _with_run_settings(saved, args)
             if args.print_config:
                 print(run_toml(cfg), end="")
                 return 0
@@ -397,8 +408,9 @@ def _run(args: argparse.Namespace, progress: bool, cpus: float = 0.0) -> int:
         if args.print_config:
             print(run_toml(cfg), end="")
             return 0
-        check_folder(args.runs, "--runs")
-        run_dir = Path(args.runs) / cfg.name
+        runs = args.runs or "runs"
+        check_folder(runs, "--runs")
+        run_dir = Path(runs) / cfg.name
         if (run_dir / "latest").exists():
             raise InputError(f"{run_dir} already holds a run; continue it with --resume "
                              f"{run_dir} or pick another --name")

@@ -103,18 +103,22 @@ class Scenario:
         """True when some team has more than one tank (observations get team flags)."""
         return len(set(self.teams)) < len(self.seats)
 
-    def game_config(self, **overrides: Any) -> GameConfig:
-        """The preset plus the scenario's [game] table plus ``overrides``."""
+    def game_config(self, where: str = "game_overrides", **overrides: Any) -> GameConfig:
+        """The preset plus the scenario's [game] table plus ``overrides``; an error names
+        the scenario's file, or ``where`` once the overrides are in."""
         try:
-            return game_config(self.preset, where=f"{self.source}: [game]",
-                               **{**self.game, **overrides})
+            cfg = game_config(self.preset, where=f"{self.source}: [game]", **self.game)
+            return game_config(self.preset, where=where, **{**self.game, **overrides}) \
+                if overrides else cfg
         except ConfigError as exc:
             raise ScenarioError(str(exc)) from None
 
-    def reward_config(self, **overrides: Any) -> RewardConfig:
+    def reward_config(self, where: str = "reward_overrides", **overrides: Any) -> RewardConfig:
+        """The scenario's [rewards] table plus ``overrides`` (errors as for game_config)."""
         try:
-            return from_dict(RewardConfig, {**self.rewards, **overrides},
-                             where=f"{self.source}: [rewards]")
+            cfg = from_dict(RewardConfig, self.rewards, where=f"{self.source}: [rewards]")
+            return from_dict(RewardConfig, {**self.rewards, **overrides}, where=where) \
+                if overrides else cfg
         except ConfigError as exc:
             raise ScenarioError(str(exc)) from None
 
