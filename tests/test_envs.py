@@ -117,6 +117,26 @@ def test_gym_learner_seat_validation():
     assert info["seat"] == 1 and obs.shape == env.observation_space.shape
 
 
+def test_the_match_before_the_first_reset_is_a_clear_error():
+    env = TankBattleEnv("vs_random", render_mode="rgb_array")
+    for call in (lambda: env.match, env.render, lambda: env.step([1, 1, 0])):
+        with pytest.raises(RuntimeError, match=r"before reset\(\)"):
+            call()
+    par = parallel.parallel_env(scenario="team", render_mode="rgb_array")
+    for call in (par.render, par.state):
+        with pytest.raises(RuntimeError, match=r"before reset\(\)"):
+            call()
+    par.reset(seed=0)
+    assert par.render().ndim == 3 and par.state().ndim == 1
+
+
+def test_overrides_that_break_a_setting_are_named_as_overrides():
+    with pytest.raises(ScenarioError, match=r"^game_overrides\.max_steps: must be an integer"):
+        TankBattleEnv("vs_smart", game_overrides={"max_steps": "x"})
+    with pytest.raises(ScenarioError, match=r"^reward_overrides\.victory: must be a number"):
+        TankBattleEnv("vs_smart", reward_overrides={"victory": "x"})
+
+
 def test_dead_learner_match_is_played_out_with_its_outcome():
     env = TankBattleEnv("mixed_teams", seat_policies={5: NoopPolicy()})
     env.reset(seed=2)

@@ -511,6 +511,12 @@ class MatchSet:
     def map_name(self, e: int) -> str:
         return self.specs[int(self.map_index[e])].name
 
+    def first_match(self, call: str) -> Match:
+        """Match 0 (a single env's match) for ``call``; RuntimeError before a reset."""
+        if not self.matches:
+            raise RuntimeError(f"{call} before reset() (an unpickled env must be reset)")
+        return self.matches[0]
+
 
 
 class FirstMatchRenderer:
@@ -527,7 +533,8 @@ class FirstMatchRenderer:
             from alphatank.ui.render import Renderer
 
             self._renderer = Renderer(self.mode, fps=self.fps)
-        return self._renderer.render(self.core.matches[0], self.core.controllers[0])
+        return self._renderer.render(self.core.first_match("render()"),
+                                     self.core.controllers[0])
 
     def close(self) -> None:
         if self._renderer is not None:

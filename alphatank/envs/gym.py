@@ -120,7 +120,7 @@ class TankBattleEnv(gym.Env):
     @property
     def match(self) -> Match:
         """The live match (read it, don't step it)."""
-        return self.core.matches[0]
+        return self.core.first_match("match")
 
     def reset(self, *, seed: int | None = None, options: dict | None = None
               ) -> tuple[np.ndarray, dict]:
@@ -133,9 +133,7 @@ class TankBattleEnv(gym.Env):
         return obs, {"map": self._map, "seat": self.seat}
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
-        if not self.core.matches:
-            raise RuntimeError("step() before reset() (an unpickled env must be reset)")
-        m = self.core.matches[0]
+        m = self.core.first_match("step()")
         if m.done:
             raise RuntimeError("step() after the episode ended; call reset()")
         a = check_actions(action, (3,), self._name)

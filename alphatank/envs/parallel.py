@@ -162,6 +162,7 @@ class TankBattleParallelEnv(ParallelEnv):
 
     def state(self) -> np.ndarray:
         """Global state vector (every tank, bullet, zone and the time) for critics."""
+        self.core.first_match("state()")
         return self.core.global_state.build()[0].copy()
 
     def render(self) -> np.ndarray | None:
