@@ -42,6 +42,7 @@ COMMANDS = {
 }
 EXIT_BAD_INPUT = 2
 EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE, what a shell reports for a program killed by it
+EXIT_INTERRUPTED = 130  # 128 + SIGINT: Ctrl-C before a verb installs its own stop handling
 
 
 class Parser(argparse.ArgumentParser):
@@ -89,6 +90,11 @@ def main(argv: list[str] | None = None) -> int:
         return int(args._run(args) or 0)
     except BrokenPipeError:
         return broken_pipe_exit()
+    except KeyboardInterrupt:
+        if os.environ.get("ALPHATANK_TRACEBACK"):
+            raise
+        print(f"alphatank {args.command}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
     except MissingExtraError as exc:  # an ImportError, not bad input: its own message
         if os.environ.get("ALPHATANK_TRACEBACK"):
             raise

@@ -1,6 +1,7 @@
 """The core CLI verbs: maps and bench."""
 
 import json
+import signal
 import subprocess
 import sys
 
@@ -49,3 +50,14 @@ def test_console_script_runs():
     out = subprocess.run([sys.executable, "-m", "alphatank.cli", "--help"], capture_output=True,
                          text=True, check=True)
     assert "bench" in out.stdout and "maps" in out.stdout
+
+
+def test_ctrl_c_in_a_verb_without_its_own_stop_is_one_line_and_status_130():
+    proc = subprocess.Popen([sys.executable, "-m", "alphatank.cli", "arena", "--seats",
+                             "smart,dodge", "--games", "100000"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    assert proc.stdout.readline().startswith("arena: 2 seats")  # playing now
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130
+    assert err == "alphatank arena: interrupted\n"
