@@ -111,3 +111,8 @@ def test_export_replaces_only_an_agent_folder(tmp_path, capsys):
                  str(tmp_path / "e.json")]) == 2
     assert "alphatank agents: error: --eval: " in capsys.readouterr().err
     assert load_checkpoint(dest).meta["agent"]["description"] == "second"
+    (dest / "NOTES.md").write_text("mine")  # an agent folder with a file of the user's
+    assert main(["agents", "export", f"agent:{name}", str(dest)]) == 2
+    assert "NOTES.md, which replacing it would delete" in capsys.readouterr().err
+    assert (dest / "NOTES.md").read_text() == "mine"
+    assert load_checkpoint(dest).meta["agent"]["description"] == "second"

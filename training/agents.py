@@ -32,12 +32,23 @@ def export_agent(source: str | Path, dest: str | Path, record: dict[str, Any] | 
     """Write the checkpoint at ``source`` (a checkpoint or run folder) as an agent folder
     ``dest``; ``record`` (description, evaluation, commands, ...) is stored as
     ``meta["agent"]`` beside the source's progress. An existing ``dest`` is replaced only
-    if it is an agent folder (InputError otherwise: nothing else is ever deleted)."""
+    if it is an agent folder holding nothing but the agent's files (InputError otherwise:
+    nothing else is ever deleted)."""
     ckpt = load_checkpoint(source)
     dest = Path(dest)
-    if dest.exists() and not _is_agent_folder(dest):
-        raise InputError(f"{dest}: exists and is not an agent folder (no meta.json with an "
-                         f"'agent' record); give a new folder or an agent folder to replace")
+    if dest.exists():
+        meta = _agent_meta(dest)
+        if meta is None:
+            raise InputError(f"{dest}: exists and is not an agent folder (no meta.json with "
+                             f"an 'agent' record); give a new folder or an agent folder to "
+                             f"replace")
+        files = meta.get("files")
+        own = {"meta.json", *(files if isinstance(files, dict) else ())}
+        others = sorted(p.name for p in dest.iterdir() if p.name not in own)
+        if others:
+            raise InputError(f"{dest}: an agent folder that also holds {', '.join(others)}, "
+                             f"which replacing it would delete; move them out or give "
+                             f"another folder")
     tmp = dest.with_name(f".{dest.name}.tmp-{os.getpid()}")
     if tmp.exists():
         shutil.rmtree(tmp)
@@ -65,13 +76,13 @@ def export_agent(source: str | Path, dest: str | Path, record: dict[str, Any] | 
     return dest
 
 
-def _is_agent_folder(path: Path) -> bool:
-    """Whether ``path`` is a folder that :func:`export_agent` wrote."""
+def _agent_meta(path: Path) -> dict[str, Any] | None:
+    """The meta.json of ``path`` if it is a folder that :func:`export_agent` wrote."""
     try:
         meta = json.loads((path / "meta.json").read_text(encoding="utf-8"))
     except (OSError, ValueError):
-        return False
-    return isinstance(meta, dict) and isinstance(meta.get("agent"), dict)
+        return None
+    return meta if isinstance(meta, dict) and isinstance(meta.get("agent"), dict) else None
 
 
 def agent_summary(path: str | Path) -> dict[str, Any]:
