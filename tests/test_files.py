@@ -9,6 +9,8 @@ import os
 import stat
 import subprocess
 import sys
+import tempfile
+from pathlib import Path
 
 import pytest
 
@@ -71,6 +73,41 @@ def test_atomic_write_to_a_pipe_writes_into_it_and_leaves_it_a_pipe(tmp_path, vi
         os.close(reader)
     assert stat.S_ISFIFO(os.stat(fifo).st_mode) and target.is_symlink() == via_link
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted({"pipe", target.name})
+
+
+def test_atomic_write_through_a_symlink_keeps_the_link_and_fills_its_target(tmp_path):
+    """``--json link.json``: a rename onto the link would put a file in its place and
+    leave the target as it was (as root, ``/dev/stdout`` itself)."""
+    (tmp_path / "real").mkdir()
+    target = tmp_path / "real" / "target.json"
+    target.write_text("old\n")
+    link = tmp_path / "link.json"
+    link.symlink_to(Path("real") / "target.json")
+    dangling = tmp_path / "new.json"
+    dangling.symlink_to(tmp_path / "real" / "made.json")
+    write_text_atomic(link, "new\n")
+    write_text_atomic(dangling, "made\n")
+    assert link.is_symlink() and target.read_text() == "new\n"
+    assert dangling.is_symlink() and (tmp_path / "real" / "made.json").read_text() == "made\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["link.json", "new.json", "real"]
+    assert sorted(p.name for p in (tmp_path / "real").iterdir()) == ["made.json", "target.json"]
+
+
+def test_atomic_write_through_a_symlink_to_another_file_system(tmp_path):
+    """The temporary file is made beside the link; a target on another file system (here
+    /dev/shm) cannot be renamed onto, so it gets a copy beside it first."""
+    shm = Path("/dev/shm")
+    if not shm.is_dir() or os.stat(shm).st_dev == os.stat(tmp_path).st_dev:
+        pytest.skip("needs /dev/shm on a file system of its own")
+    with tempfile.TemporaryDirectory(dir=shm) as other:
+        target = Path(other) / "target.json"
+        target.write_text("old\n")
+        link = tmp_path / "link.json"
+        link.symlink_to(target)
+        write_text_atomic(link, "new\n")
+        assert link.is_symlink() and target.read_text() == "new\n"
+        assert [p.name for p in Path(other).iterdir()] == ["target.json"]
+    assert [p.name for p in tmp_path.iterdir()] == ["link.json"]
 
 
 def test_output_paths_are_checked_before_the_work(tmp_path):
