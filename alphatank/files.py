@@ -135,8 +135,8 @@ class FolderLock:
     released); the operating system drops it when the process ends, however it ends."""
 
     def __init__(self, folder: str | Path):
-        self.folder = Path(folder)
-        self.path = str((self.folder.parent / f".{self.folder.name}.lock").absolute())
+        self.folder = Path(folder).resolve()  # one lock however the folder is reached
+        self.path = str(self.folder.parent / f".{self.folder.name}.lock")
         self.held = False
 
     def acquire(self) -> FolderLock:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import stat
 import subprocess
 import sys
@@ -14,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from alphatank.errors import InputError
+from alphatank.errors import BusyError, InputError
 from alphatank.files import (
     FolderLock,
     check_folder,
@@ -159,6 +160,28 @@ def test_a_held_folder_lock_keeps_other_processes_out_until_released(tmp_path):
     assert not lock.held
     assert not run.exists()  # the lock is a sibling file, gone once released
     assert list(run.parent.iterdir()) == []
+
+
+def test_a_folder_lock_is_one_lock_however_the_folder_is_named(tmp_path, monkeypatch,
+                                                              held_elsewhere):
+    """``cd runs/mine && alphatank train --resume .``, ``runs/mine/.``, ``../mine`` and a
+    symbolic link to the run all meet the lock of ``runs/mine`` (``.`` made the lock
+    ``./..lock`` inside the run, and a link had a lock of its own)."""
+    run = tmp_path / "runs" / "mine"
+    run.mkdir(parents=True)
+    (tmp_path / "link").symlink_to(run)
+    with held_elsewhere(run) as pid, monkeypatch.context() as inside:
+        inside.chdir(run)
+        for name in (".", f"{run}/.", "../mine", tmp_path / "link"):
+            with pytest.raises(BusyError, match=f"^{re.escape(str(run))}: pid {pid} on "):
+                FolderLock(name).acquire()
+    with monkeypatch.context() as inside:
+        inside.chdir(run)
+        lock = FolderLock(".").acquire()  # taken from inside the run: the same lock
+    assert lock.folder == run
+    assert lock_in_another_process(tmp_path / "link").startswith(f"busy: {run}: ")
+    lock.release()
+    assert list(run.iterdir()) == [] and [p.name for p in run.parent.iterdir()] == ["mine"]
 
 
 def test_a_run_that_another_process_trains_is_refused_in_one_line(tmp_path, capsys,
