@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from alphatank.errors import MissingPackageError
-from alphatank.files import write_text_atomic
+from alphatank.files import read_text, write_text_atomic
 from alphatank.training.presets import WANDB_MODES
 
 
@@ -110,12 +110,29 @@ def rewind_metrics(path: str | Path, step: int) -> int:
 
 
 def read_metrics(run_dir: str | Path) -> list[dict[str, float]]:
-    """Rows of ``metrics.jsonl`` (empty if the run logged nothing yet)."""
+    """Rows of ``metrics.jsonl`` (empty if the run logged nothing yet): those
+    :func:`rewind_metrics` keeps, JSON objects with an int ``step``; a last line cut short
+    by a crash and rows not logged here (no ``step``) are skipped. ValueError naming the
+    file for one that is not UTF-8 text, and the line for one before the last that is not
+    JSON (a damaged file)."""
     path = Path(run_dir) / "metrics.jsonl"
     if not path.is_file():
         return []
-    with open(path, encoding="utf-8") as f:
-        return [json.loads(line) for line in f if line.strip()]
+    lines = read_text(path).split("\n")
+    rows = []
+    for n, line in enumerate(lines, 1):
+        if not line.strip():
+            continue
+        try:
+            row = json.loads(line)
+        except json.JSONDecodeError as exc:
+            if n == len(lines):  # no newline after it: cut short while being written
+                continue
+            raise ValueError(f"{path}, line {n}: not a JSON row ({exc.msg}); a metrics.jsonl "
+                             "holds one JSON object per line") from None
+        if isinstance(row, dict) and isinstance(row.get("step"), int):
+            rows.append(row)
+    return rows
 
 
 def plot_learning_curve(run_dir: str | Path, out: str | Path | None = None,
