@@ -31,7 +31,9 @@ class RunLogger:
                  tensorboard: bool = False, run_id: str | None = None,
                  resume_step: int | None = None):
         """``resume_step``: the step of the checkpoint a resumed run continues from (rows
-        logged after it are rewound; :attr:`rewound` counts them)."""
+        logged after it are rewound; :attr:`rewound` counts them); None for a fresh run,
+        which starts ``metrics.jsonl`` afresh (rows there, of a run killed before its first
+        save, belong to no checkpoint)."""
         if wandb_mode not in WANDB_MODES:
             raise ValueError(f"wandb mode must be one of {WANDB_MODES}, got {wandb_mode!r}")
         if tensorboard:  # before anything is created for the run
@@ -45,7 +47,8 @@ class RunLogger:
         self.run_dir.mkdir(parents=True, exist_ok=True)
         self.rewound = (rewind_metrics(self.run_dir / "metrics.jsonl", resume_step)
                         if resume_step is not None else 0)
-        self._jsonl = open(self.run_dir / "metrics.jsonl", "a", encoding="utf-8")  # noqa: SIM115
+        mode = "w" if resume_step is None else "a"
+        self._jsonl = open(self.run_dir / "metrics.jsonl", mode, encoding="utf-8")  # noqa: SIM115
         self.wandb_run = None
         self.run_id = run_id
         if wandb_mode != "disabled":
