@@ -2,12 +2,14 @@
 (a temporary sibling, then ``os.replace``), so a reader never sees half a file; and an
 exclusive lock on a folder, so two processes never write one run at once.
 
-Every atomic writer finishes with :func:`replace_into`, which never swaps a file in for
-what is not a regular file (``--json /dev/stdout``, ``/dev/null``, a pipe): those get the
-bytes written into them."""
+Every atomic writer finishes with :func:`replace_into`, which writes through a symbolic
+link (its target gets the file, the link stays) and never swaps a file in for what is not a
+regular file (``--json /dev/stdout``, ``/dev/null``, a pipe): those get the bytes written
+into them."""
 
 from __future__ import annotations
 
+import errno
 import fcntl
 import os
 import shutil
@@ -89,16 +91,31 @@ def _check_nearest(folder: Path, path: str | Path, label: str) -> None:
 
 def replace_into(tmp: str | Path, path: str | Path) -> None:
     """Finish an atomic write: ``os.replace`` the complete temporary file ``tmp`` onto
-    ``path``. Where ``path`` (its links followed) is something other than a regular file
-    (a device such as ``/dev/null`` or ``/dev/stdout``, a pipe), a rename would put a file
-    in its place (as root, ``/dev/null`` itself), so the bytes are copied into it instead
-    and ``tmp`` removed."""
+    ``path``, its symbolic links resolved (a rename onto a link would put a file in the
+    link's place and leave its target as it was); a target on another file system gets a
+    copy of ``tmp`` beside it renamed over it. Where ``path`` (its links followed) is
+    something other than a regular file (a device such as ``/dev/null`` or ``/dev/stdout``,
+    a pipe), a rename would put a file in its place (as root, ``/dev/null`` itself), so the
+    bytes are copied into it instead and ``tmp`` removed."""
     try:
         mode = os.stat(path).st_mode
     except (FileNotFoundError, NotADirectoryError):
         mode = None
     if mode is None or stat.S_ISREG(mode):
-        os.replace(tmp, path)
+        real = os.path.realpath(path)
+        try:
+            os.replace(tmp, real)
+        except OSError as exc:
+            if exc.errno != errno.EXDEV:
+                raise
+            near = os.path.join(os.path.dirname(real),
+                                f".{os.path.basename(real)}.tmp-{os.getpid()}")
+            try:
+                shutil.copyfile(tmp, near)
+                os.replace(near, real)
+            finally:
+                Path(near).unlink(missing_ok=True)
+                Path(tmp).unlink(missing_ok=True)
         return
     try:
         with open(tmp, "rb") as src, open(path, "wb") as dst:
@@ -118,8 +135,8 @@ class FolderLock:
     released); the operating system drops it when the process ends, however it ends."""
 
     def __init__(self, folder: str | Path):
-        self.folder = Path(folder)
-        self.path = str((self.folder.parent / f".{self.folder.name}.lock").absolute())
+        self.folder = Path(folder).resolve()  # one lock however the folder is reached
+        self.path = str(self.folder.parent / f".{self.folder.name}.lock")
         self.held = False
 
     def acquire(self) -> FolderLock:

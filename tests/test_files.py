@@ -6,13 +6,16 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import stat
 import subprocess
 import sys
+import tempfile
+from pathlib import Path
 
 import pytest
 
-from alphatank.errors import InputError
+from alphatank.errors import BusyError, InputError
 from alphatank.files import (
     FolderLock,
     check_folder,
@@ -73,6 +76,41 @@ def test_atomic_write_to_a_pipe_writes_into_it_and_leaves_it_a_pipe(tmp_path, vi
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted({"pipe", target.name})
 
 
+def test_atomic_write_through_a_symlink_keeps_the_link_and_fills_its_target(tmp_path):
+    """``--json link.json``: a rename onto the link would put a file in its place and
+    leave the target as it was (as root, ``/dev/stdout`` itself)."""
+    (tmp_path / "real").mkdir()
+    target = tmp_path / "real" / "target.json"
+    target.write_text("old\n")
+    link = tmp_path / "link.json"
+    link.symlink_to(Path("real") / "target.json")
+    dangling = tmp_path / "new.json"
+    dangling.symlink_to(tmp_path / "real" / "made.json")
+    write_text_atomic(link, "new\n")
+    write_text_atomic(dangling, "made\n")
+    assert link.is_symlink() and target.read_text() == "new\n"
+    assert dangling.is_symlink() and (tmp_path / "real" / "made.json").read_text() == "made\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["link.json", "new.json", "real"]
+    assert sorted(p.name for p in (tmp_path / "real").iterdir()) == ["made.json", "target.json"]
+
+
+def test_atomic_write_through_a_symlink_to_another_file_system(tmp_path):
+    """The temporary file is made beside the link; a target on another file system (here
+    /dev/shm) cannot be renamed onto, so it gets a copy beside it first."""
+    shm = Path("/dev/shm")
+    if not shm.is_dir() or os.stat(shm).st_dev == os.stat(tmp_path).st_dev:
+        pytest.skip("needs /dev/shm on a file system of its own")
+    with tempfile.TemporaryDirectory(dir=shm) as other:
+        target = Path(other) / "target.json"
+        target.write_text("old\n")
+        link = tmp_path / "link.json"
+        link.symlink_to(target)
+        write_text_atomic(link, "new\n")
+        assert link.is_symlink() and target.read_text() == "new\n"
+        assert [p.name for p in Path(other).iterdir()] == ["target.json"]
+    assert [p.name for p in tmp_path.iterdir()] == ["link.json"]
+
+
 def test_output_paths_are_checked_before_the_work(tmp_path):
     (tmp_path / "f.txt").write_text("x")
     os.mkfifo(tmp_path / "pipe")
@@ -122,6 +160,28 @@ def test_a_held_folder_lock_keeps_other_processes_out_until_released(tmp_path):
     assert not lock.held
     assert not run.exists()  # the lock is a sibling file, gone once released
     assert list(run.parent.iterdir()) == []
+
+
+def test_a_folder_lock_is_one_lock_however_the_folder_is_named(tmp_path, monkeypatch,
+                                                              held_elsewhere):
+    """``cd runs/mine && alphatank train --resume .``, ``runs/mine/.``, ``../mine`` and a
+    symbolic link to the run all meet the lock of ``runs/mine`` (``.`` made the lock
+    ``./..lock`` inside the run, and a link had a lock of its own)."""
+    run = tmp_path / "runs" / "mine"
+    run.mkdir(parents=True)
+    (tmp_path / "link").symlink_to(run)
+    with held_elsewhere(run) as pid, monkeypatch.context() as inside:
+        inside.chdir(run)
+        for name in (".", f"{run}/.", "../mine", tmp_path / "link"):
+            with pytest.raises(BusyError, match=f"^{re.escape(str(run))}: pid {pid} on "):
+                FolderLock(name).acquire()
+    with monkeypatch.context() as inside:
+        inside.chdir(run)
+        lock = FolderLock(".").acquire()  # taken from inside the run: the same lock
+    assert lock.folder == run
+    assert lock_in_another_process(tmp_path / "link").startswith(f"busy: {run}: ")
+    lock.release()
+    assert list(run.iterdir()) == [] and [p.name for p in run.parent.iterdir()] == ["mine"]
 
 
 def test_a_run_that_another_process_trains_is_refused_in_one_line(tmp_path, capsys,

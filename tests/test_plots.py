@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from alphatank.cli import main
+from alphatank.training.logging import read_metrics
 from alphatank.training.plots import plot_heatmap, plot_row_curves, plot_runs
 
 
@@ -52,6 +53,31 @@ def test_plot_command_writes_a_png(tmp_path, capsys):
     assert "metrics.jsonl" in capsys.readouterr().err
     assert main(["plot", *runs, "-o", str(tmp_path / "c.pdf")]) == 2
     assert main(["plot", *runs, "--labels", "only_one"]) == 2
+
+
+def test_damaged_metrics_skip_a_cut_line_and_foreign_rows_or_fail_in_one_line(tmp_path,
+                                                                            capsys):
+    """A crash can cut the last line short, and rows that are not JSON objects with an int
+    ``step`` were not logged here: both skipped (as ``rewind_metrics`` drops them). A
+    damaged line before the last, or a file that is not text: one line naming the file."""
+    run = fake_run(tmp_path / "run", n=3)
+    with open(run / "metrics.jsonl", "a") as f:
+        f.write('[1, 2]\n{"charts/win_rate": 0.5}\n{"step": "4000"}\n7\n{"step": 4000, "char')
+    assert [r["step"] for r in read_metrics(run)] == [1000, 2000, 3000]
+    out = tmp_path / "c.png"
+    assert main(["plot", str(run), "-o", str(out)]) == 0 and out.is_file()
+    capsys.readouterr()
+    lines = (run / "metrics.jsonl").read_text().splitlines()
+    (run / "metrics.jsonl").write_text("\n".join([lines[0], lines[-1], *lines[1:3]]) + "\n")
+    with pytest.raises(ValueError, match=r"metrics\.jsonl, line 2: not a JSON row "):
+        read_metrics(run)
+    assert main(["plot", str(run), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{run / 'metrics.jsonl'}, line 2: not a JSON row" in err
+    (run / "metrics.jsonl").write_bytes(b'{"step": 1000}\n\xff\xfe\x00\x00\n')
+    assert main(["plot", str(run), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{run / 'metrics.jsonl'}: not a UTF-8 text file" in err
 
 
 def test_row_curves_and_heatmap(tmp_path):

@@ -17,7 +17,7 @@ import torch
 
 from alphatank.envs.vector import VectorMatchEnv
 from alphatank.training.checkpoint import load_checkpoint
-from alphatank.training.logging import rewind_metrics
+from alphatank.training.logging import RunLogger, rewind_metrics
 from alphatank.training.ppo import PPOConfig
 from alphatank.training.presets import LearnerSpec, TrainConfig
 from alphatank.training.runner import RunWarning, Trainer, resume_trainer
@@ -296,6 +296,20 @@ def test_saves_more_often_than_an_episode_lasts_are_warned(tmp_path):
     spec = LearnerSpec("ppo", "ppo", (0,), PPO_TINY)
     with pytest.warns(RunWarning, match=r"checkpoint_every 1 x 16 .* max_steps \(30\).* >= 2"):
         Trainer(config("warn", spec, 1, checkpoint_every=1), tmp_path / "w", progress=False)
+
+
+def test_a_fresh_run_starts_its_metrics_afresh_and_a_resumed_one_appends(tmp_path):
+    """Rows left by a run killed before its first save belong to no checkpoint: a new run
+    in that folder must not plot them as its own; a resumed run keeps its rows."""
+    path = tmp_path / "metrics.jsonl"
+    path.write_text('{"step": 50000, "charts/win_rate": 0.9}\n')
+    rows = []
+    for resume_step, step in ((None, 16), (16, 32)):  # a fresh run saved at 16, resumed
+        logger = RunLogger(tmp_path, {}, "half", wandb_mode="disabled", resume_step=resume_step)
+        logger.log({"charts/win_rate": 0.1}, step)
+        logger.close()
+        rows.append([json.loads(x)["step"] for x in path.read_text().splitlines()])
+    assert rows == [[16], [16, 32]]
 
 
 def test_rewind_metrics_drops_rows_after_the_step_and_a_torn_line(tmp_path):

@@ -4,6 +4,7 @@ win rate counts, whatever ``--num-envs``."""
 from __future__ import annotations
 
 import json
+import os
 
 from alphatank.cli import main
 from alphatank.game.seats import checkpoint_source
@@ -61,3 +62,25 @@ def test_eval_cli_team_stats_of_a_stand_in_bot(tmp_path, capsys):
     assert (stats[0]["wins"], stats[0]["losses"]) == (rows[0]["wins"], rows[0]["losses"])
     assert stats[0]["kills"] >= stats[0]["wins"]  # a win against one bot takes a kill
     assert "every teammate hit an enemy" in capsys.readouterr().out
+
+
+def test_eval_cli_team_stats_through_a_symlink_and_not_beside_a_device(tmp_path, capsys):
+    """``--json`` a link: the rows go to its target, which gets FILE.team.json beside it
+    (as ``/dev/stdout`` sent to a file); a device or pipe has no folder for it: refused
+    before any game, in one line."""
+    (tmp_path / "real").mkdir()
+    link = tmp_path / "link.json"
+    link.symlink_to(tmp_path / "real" / "e.json")
+    assert main(["eval", "agent:team_vs_def", "--games", "2", "--seed", "3",
+                 "--num-envs", "2", "--team-stats", "--json", str(link)]) == 0
+    assert link.is_symlink() and json.loads(link.read_text(encoding="utf-8"))[0]["games"] == 2
+    stats = json.loads((tmp_path / "real" / "e.team.json").read_text(encoding="utf-8"))
+    assert stats[0]["games"] == 2 and sorted(p.name for p in tmp_path.iterdir()) == [
+        "link.json", "real"]
+    capsys.readouterr()
+    os.mkfifo(tmp_path / "pipe")
+    assert main(["eval", "agent:team_vs_def", "--games", "2", "--team-stats",
+                 "--json", str(tmp_path / "pipe")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "--team-stats: --json " in err and "is not a file" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["link.json", "pipe", "real"]

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from alphatank.errors import MissingPackageError
-from alphatank.files import write_text_atomic
+from alphatank.files import read_text, write_text_atomic
 from alphatank.training.presets import WANDB_MODES
 
 
@@ -31,7 +31,9 @@ class RunLogger:
                  tensorboard: bool = False, run_id: str | None = None,
                  resume_step: int | None = None):
         """``resume_step``: the step of the checkpoint a resumed run continues from (rows
-        logged after it are rewound; :attr:`rewound` counts them)."""
+        logged after it are rewound; :attr:`rewound` counts them); None for a fresh run,
+        which starts ``metrics.jsonl`` afresh (rows there, of a run killed before its first
+        save, belong to no checkpoint)."""
         if wandb_mode not in WANDB_MODES:
             raise ValueError(f"wandb mode must be one of {WANDB_MODES}, got {wandb_mode!r}")
         if tensorboard:  # before anything is created for the run
@@ -45,7 +47,8 @@ class RunLogger:
         self.run_dir.mkdir(parents=True, exist_ok=True)
         self.rewound = (rewind_metrics(self.run_dir / "metrics.jsonl", resume_step)
                         if resume_step is not None else 0)
-        self._jsonl = open(self.run_dir / "metrics.jsonl", "a", encoding="utf-8")  # noqa: SIM115
+        mode = "w" if resume_step is None else "a"
+        self._jsonl = open(self.run_dir / "metrics.jsonl", mode, encoding="utf-8")  # noqa: SIM115
         self.wandb_run = None
         self.run_id = run_id
         if wandb_mode != "disabled":
@@ -110,12 +113,29 @@ def rewind_metrics(path: str | Path, step: int) -> int:
 
 
 def read_metrics(run_dir: str | Path) -> list[dict[str, float]]:
-    """Rows of ``metrics.jsonl`` (empty if the run logged nothing yet)."""
+    """Rows of ``metrics.jsonl`` (empty if the run logged nothing yet): those
+    :func:`rewind_metrics` keeps, JSON objects with an int ``step``; a last line cut short
+    by a crash and rows not logged here (no ``step``) are skipped. ValueError naming the
+    file for one that is not UTF-8 text, and the line for one before the last that is not
+    JSON (a damaged file)."""
     path = Path(run_dir) / "metrics.jsonl"
     if not path.is_file():
         return []
-    with open(path, encoding="utf-8") as f:
-        return [json.loads(line) for line in f if line.strip()]
+    lines = read_text(path).split("\n")
+    rows = []
+    for n, line in enumerate(lines, 1):
+        if not line.strip():
+            continue
+        try:
+            row = json.loads(line)
+        except json.JSONDecodeError as exc:
+            if n == len(lines):  # no newline after it: cut short while being written
+                continue
+            raise ValueError(f"{path}, line {n}: not a JSON row ({exc.msg}); a metrics.jsonl "
+                             "holds one JSON object per line") from None
+        if isinstance(row, dict) and isinstance(row.get("step"), int):
+            rows.append(row)
+    return rows
 
 
 def plot_learning_curve(run_dir: str | Path, out: str | Path | None = None,

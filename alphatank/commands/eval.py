@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -89,6 +90,7 @@ def run(args: argparse.Namespace) -> int:
     for label, path in (("--csv", args.csv), ("--json", args.json)):
         if path:
             check_writable(path, label)
+    team_json = team_json_path(args.json) if args.json and args.team_stats else None
     results = []
     try:
         game = parse_game("--game", args.game)
@@ -130,12 +132,25 @@ def run(args: argparse.Namespace) -> int:
             write_csv(results, args.csv)
         if args.json:
             write_json(results, args.json, per_game=True)
-            if stats:
-                write_text_atomic(Path(args.json).with_suffix(".team.json"),
-                                  json.dumps(stats, indent=1) + "\n")
+            if stats and team_json:
+                write_text_atomic(team_json, json.dumps(stats, indent=1) + "\n")
     except OSError as exc:
         raise InputError(f"cannot write {exc.filename}: {exc.strerror}") from None
     return 0
+
+
+def team_json_path(json_path: str) -> Path:
+    """Where ``--team-stats`` writes beside ``--json FILE``: FILE.team.json next to the file
+    the rows land in (a symbolic link's target, so ``/dev/stdout`` sent to a file puts it
+    beside that file); InputError where that is a device or pipe, which has no folder."""
+    path = Path(json_path)
+    if path.exists() and not path.is_file():
+        raise InputError(f"--team-stats: --json {json_path} is not a file (a device or pipe), "
+                         "so FILE.team.json has no place beside it; give --json a file name "
+                         "(the team figures are also printed)")
+    team = Path(os.path.realpath(path)).with_suffix(".team.json")
+    check_writable(team, "--team-stats")
+    return team
 
 
 def print_pooled(results: Sequence[EvalResult]) -> None:
