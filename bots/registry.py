@@ -52,8 +52,8 @@ def options_problem(name: str, options: dict[str, Any]) -> str | None:
     valid = bot_options(name)
     unknown = sorted(set(options) - set(valid), key=str)
     if unknown:
-        return (f"bot {name!r} has no option(s) {unknown}; valid options: "
-                f"{valid + ['weakness', 'seed']}")
+        return (f"bot {name!r} has no option(s) {unknown}; valid options: {valid} "
+                f"(weakness: NAME@W in a spec, the seat's own key in a table)")
     params = inspect.signature(_lookup(name).__init__).parameters
     for key, value in options.items():
         kind = type(params[key].default)

@@ -215,7 +215,7 @@ CASES = [
     ("arena-steps", ["arena", "--max-steps", "0"], ["max_steps", "[1, 10000000]"]),
     ("arena-preset", ["arena", "--preset", "fast"], ["unknown preset 'fast'"]),
     ("arena-seed", ["arena", "--seed", "-1"], ["--seed", "[0, 2^63)", "'-1'"]),
-    ("arena-seats-kind", ["arena", "--seats", "nosuch"], ["'nosuch'", "unknown seat kind",
+    ("arena-seats-kind", ["arena", "--seats", "nosuch"], ["'nosuch'", "neither a seat kind",
                                                           "valid bots"]),
     ("arena-seats-one", ["arena", "--seats", "smart"], ["--seats needs at least 2 seats"]),
     ("arena-seats-agent", ["arena", "--seats", "agent:nosuch,smart"],

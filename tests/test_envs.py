@@ -137,6 +137,18 @@ def test_overrides_that_break_a_setting_are_named_as_overrides():
         TankBattleEnv("vs_smart", reward_overrides={"victory": "x"})
 
 
+@pytest.mark.parametrize("bad, why", [(1.7, "must be an integer"), ("abc", "must be an integer"),
+                                      (0, r"must be in \[1, ")])
+def test_max_cycles_is_checked_by_its_own_name(bad, why):
+    with pytest.raises(ScenarioError, match=f"^max_cycles: {why}"):
+        parallel.parallel_env(scenario="team", max_cycles=bad)
+
+
+def test_a_scenario_of_the_wrong_type_is_named():
+    with pytest.raises(ScenarioError, match="scenario: a shipped scenario's name.*got int 3"):
+        gymnasium.make("AlphaTank/TankBattle-v0", scenario=3)
+
+
 def test_dead_learner_match_is_played_out_with_its_outcome():
     env = TankBattleEnv("mixed_teams", seat_policies={5: NoopPolicy()})
     env.reset(seed=2)

@@ -133,11 +133,14 @@ def test_seat_list_grammar():
 
 
 @pytest.mark.parametrize("text,hint", [
-    ("human,robot", "unknown seat kind 'robot'; valid kinds: ['learner', 'human', "
-                    "'checkpoint', 'agent'], or a bot: unknown bot 'robot'; valid bots"),
+    ("human,robot", "neither a seat kind (learner, human, checkpoint, agent) nor a valid "
+                    "bot spec: unknown bot 'robot'; valid bots"),
+    ("human,smart:=", "nor a valid bot spec: bot spec 'smart:=': option '=' must be "
+                      "KEY=VALUE; valid options of 'smart': ['ricochet', 'evade']"),
     ("human,learner:x", "a 'learner' seat takes no ':' argument"),
     ("human,checkpoint:", "needs the checkpoint folder"),
-    ("human,smart:speed=3", "seats[1].options: bot 'smart' has no option(s) ['speed']"),
+    ("human,smart:speed=3", "seats[1].options: bot 'smart' has no option(s) ['speed']; "
+                            "valid options: ['ricochet', 'evade'] (weakness: NAME@W"),
     ("human,smart@2", "seats[1].weakness: must be a number in [0, 1]"),
     ("human,smart:fast", "must be KEY=VALUE"),
     ("human,human:zqsd", "seats[1].keys: got 'zqsd'; valid: ['wasd', 'arrows', 'ijkl']"),
@@ -256,3 +259,5 @@ def test_learner_seats_take_an_agent(trained, monkeypatch):
     assert ep.over and type(ep.controllers[0]).__name__ == "CheckpointPolicy"
     with pytest.raises(ScenarioError, match="learner seat"):
         build_lineup("vs_aggressive")
+    with pytest.raises(ScenarioError, match="agent:tiny: --seats has no learner seat for it"):
+        build_lineup(seats_scenario("smart,random", "open"), learner="agent:tiny")

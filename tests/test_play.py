@@ -179,7 +179,7 @@ def test_seat_list_parser():
     assert [s.controller for s in sc.seats] == ["human", "bot", "bot", "learner"]
     auto = parse_seats("human,human,smart", "arena4")
     assert auto.teams == ["A", "B", "C"] and [s.keys for s in auto.seats[:2]] == ["wasd", "arrows"]
-    with pytest.raises(ScenarioError, match="unknown seat kind 'robot'.*valid bots"):
+    with pytest.raises(ScenarioError, match="neither a seat kind.*unknown bot 'robot'; valid"):
         parse_seats("human,robot", "open")
     with pytest.raises(ScenarioError, match="valid bots"):
         parse_seats("human,bot:nope", "open")

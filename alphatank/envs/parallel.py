@@ -34,6 +34,7 @@ Version history
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from typing import Any
 
@@ -47,6 +48,7 @@ from alphatank.envs.ids import ENV_VERSION
 from alphatank.game.observe import ObsLayout
 from alphatank.game.rewards import TERMS
 from alphatank.game.scenarios import Scenario, ScenarioError, load_scenario
+from alphatank.sim.config import GameConfig, check_value
 from alphatank.sim.policy import Policy
 from alphatank.ui.modes import RENDER_MODES, check_render_mode
 
@@ -72,7 +74,11 @@ class TankBattleParallelEnv(ParallelEnv):
                                 "`alphatank record --scenario`")
         overrides = dict(game_overrides or {})
         if max_cycles is not None:
-            overrides["max_steps"] = int(max_cycles)
+            steps = next(f for f in dataclasses.fields(GameConfig) if f.name == "max_steps")
+            max_cycles, why = check_value((int,), max_cycles, steps.metadata["range"])
+            if why:
+                raise ScenarioError(f"max_cycles: {why}")
+            overrides["max_steps"] = max_cycles
         self.core = MatchSet(sc, 1, observation=observation, game_overrides=overrides,
                              reward_overrides=reward_overrides, seat_policies=seat_policies)
         self.keep_dead_agents = keep_dead_agents

@@ -97,6 +97,9 @@ def build_lineup(scenario: str | Scenario, *, interactive: bool = False,
     labels, descs, notes = [], [], []
     stand = spec_seat(stand_in, where=f"stand-in {stand_in!r}") if stand_in else None
     fill = spec_seat(learner, where=f"learner seat {learner!r}") if learner else None
+    if fill is not None and not sc.learner_seats:
+        raise ScenarioError(f"{learner}: {sc.source} has no learner seat for it to play; "
+                            f"put it in a seat instead (e.g. --seats \"human,{learner}\")")
     humans: dict[str, int] = {}
     for i, seat in enumerate(sc.seats):
         desc, played = seat.describe(), seat

@@ -159,6 +159,9 @@ def load_scenario(name_or_path: str | Path | Scenario) -> Scenario:
     """A shipped scenario by name (``"vs_smart"``) or any scenario TOML file by path."""
     if isinstance(name_or_path, Scenario):
         return name_or_path
+    if not isinstance(name_or_path, str | Path):
+        raise ScenarioError(f"scenario: a shipped scenario's name, a .toml path or a Scenario, "
+                            f"got {type(name_or_path).__name__} {name_or_path!r}")
     path = Path(name_or_path)
     if path.suffix == ".toml" or path.exists():
         if not path.is_file():

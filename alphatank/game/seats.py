@@ -268,8 +268,8 @@ def parse_seat_spec(text: str, where: str | None = None) -> dict[str, Any]:
             if kind == "bot":
                 raise SeatError(f"{where}: {exc}") from None
             kinds = [k for k in CONTROLLER_KINDS if k != "bot"]
-            raise SeatError(f"{where}: unknown seat kind {kind!r}; valid kinds: {kinds}, "
-                            f"or a bot: {exc}") from None
+            raise SeatError(f"{where}: neither a seat kind ({', '.join(kinds)}) nor a valid "
+                            f"bot spec: {exc}") from None
         return {"controller": "bot", **values}
     seat: dict[str, Any] = {"controller": kind}
     arg = arg.strip()
