@@ -526,3 +526,14 @@ def test_maps_lists_shipped_folders(capsys):
     assert "folder train/" in out and "folder test/" in out
     assert main(["maps", "test"]) == 0
     assert capsys.readouterr().out.count(": ok,") == 4
+
+
+def test_eval_pool_without_shared_opponents_is_refused_before_any_game(files, capsys, tmp_path):
+    """Rows that meet no opponent in common: one error naming what each meets, no table,
+    no --json / --csv written."""
+    rows = [tmp_path / "pool.json", tmp_path / "pool.csv"]
+    rc, out, err = _run_main(main, ["eval", "agent:ppo_vs_smart", files["run"], "--pool",
+                                    "--json", str(rows[0]), "--csv", str(rows[1])], capsys)
+    _check(rc, out, err, ["--pool needs two or more checkpoints against the same opponents",
+                          "agent:ppo_vs_smart: B:smart(w=1)", "B:aggressive(w=1)"])
+    assert out == "" and not any(p.exists() for p in rows)

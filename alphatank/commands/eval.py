@@ -19,6 +19,7 @@ from alphatank.errors import InputError, as_input_error
 from alphatank.files import check_writable, write_text_atomic
 
 if TYPE_CHECKING:
+    from alphatank.training.checkpoint import Checkpoint
     from alphatank.training.evaluate import EvalResult
 
 
@@ -63,7 +64,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from alphatank.game.seats import checkpoint_source
     from alphatank.training.evaluate import (
         evaluate_checkpoint,
         evaluate_stand_in,
@@ -92,11 +92,11 @@ def run(args: argparse.Namespace) -> int:
     results = []
     try:
         game = parse_game("--game", args.game)
-        for arg in args.checkpoints:
-            if arg.startswith("bot:"):
-                if args.scenario is None:
-                    raise InputError(f"{arg}: a bot has no scenario of its own; give "
-                                     "--scenario (its learner seats are played by the bot)")
+        sources = [load_source(arg, args.scenario) for arg in args.checkpoints]
+        if args.pool:
+            check_pool(args, sources, opponents)
+        for arg, ckpt in zip(args.checkpoints, sources, strict=True):
+            if ckpt is None:
                 results += evaluate_stand_in(arg[4:], args.scenario, opponents,
                                              games=args.games, seed=args.seed,
                                              team=args.team, num_envs=args.num_envs,
@@ -104,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
                                              label=arg, team_stats=args.team_stats,
                                              game=game)
                 continue
-            results += evaluate_checkpoint(checkpoint_source(arg), opponents,
+            results += evaluate_checkpoint(ckpt, opponents,
                                            games=args.games, seed=args.seed,
                                            scenario=args.scenario, team=args.team,
                                            deterministic=args.greedy, num_envs=args.num_envs,
@@ -138,16 +138,45 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def load_source(arg: str, scenario: str | None) -> Checkpoint | None:
+    """The checkpoint a CHECKPOINT argument names, or None for a ``bot:NAME`` stand-in
+    (which needs ``--scenario``)."""
+    from alphatank.game.seats import checkpoint_source
+    from alphatank.training.checkpoint import load_checkpoint
+
+    if not arg.startswith("bot:"):
+        return load_checkpoint(checkpoint_source(arg))
+    if scenario is None:
+        raise InputError(f"{arg}: a bot has no scenario of its own; give --scenario (its "
+                         "learner seats are played by the bot)")
+    return None
+
+
+def check_pool(args: argparse.Namespace, sources: Sequence[Checkpoint | None],
+               opponents: Sequence[str | None]) -> None:
+    """``--pool`` before any game: two or more rows must meet the same opponent."""
+    from alphatank.game.scenarios import load_scenario
+    from alphatank.training.evaluate import row_opponents
+
+    given = load_scenario(args.scenario) if args.scenario is not None else None
+    met = {arg: row_opponents(given or ckpt.scenario, opponents, args.team, args.weakness,
+                              stand_in=ckpt is None)
+           for arg, ckpt in zip(args.checkpoints, sources, strict=True)}
+    rows = [opp for opps in met.values() for opp in opps]
+    if len(set(rows)) == len(rows):
+        raise InputError("--pool needs two or more checkpoints against the same opponents "
+                         "(e.g. the seeds of one set-up; --vs sets them); these meet "
+                         + "; ".join(f"{arg}: {', '.join(opps)}" for arg, opps in met.items()))
+
+
 def print_pooled(results: Sequence[EvalResult]) -> None:
-    """One line per opponent met by two or more rows: :func:`pool_runs` of their wins."""
+    """One line per opponent met by two or more rows (:func:`check_pool`):
+    :func:`pool_runs` of their wins."""
     from alphatank.training.aggregate import pool_runs
 
     rows: dict[str, list[EvalResult]] = {}
     for r in results:
         rows.setdefault(r.opponent, []).append(r)
-    if not any(len(rs) > 1 for rs in rows.values()):
-        raise InputError("--pool needs two or more checkpoints against the same opponents "
-                         "(e.g. the seeds of one set-up)")
     for opp, rs in rows.items():
         if len(rs) < 2:
             continue
