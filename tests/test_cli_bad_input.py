@@ -327,6 +327,10 @@ CASES = [
      ["expects 236 observation features", "its training scenario 'vs_smart'",
       "paper observation"]),
     ("eval-checkpoint-empty", ["eval", "checkpoint:"], ["needs the checkpoint folder"]),
+    ("eval-team-bots-only", ["eval", "{run}", "--team", "B", "--vs", "smart"],
+     ["team 'B': scenario 'vs_aggressive' has no learner seat on team B", "learner teams: A"]),
+    ("eval-stand-in-team", ["eval", "bot:smart", "--scenario", "vs_smart", "--team", "B"],
+     ["team 'B'", "no learner seat", "learner teams: A"]),
     # train
     ("train-resume-missing", ["train", "--resume", "{dir}/runs/nosuch"],
      ["nosuch", "no such checkpoint or run directory"]),

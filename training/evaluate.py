@@ -296,13 +296,18 @@ def evaluate_learners(learners: dict[str, Any], observation: dict[str, Any],
 
 
 def learner_team(base: Scenario, team: str | None) -> str:
-    """The evaluated team: ``team``, or that of the scenario's first learner seat."""
+    """The evaluated team: ``team``, or that of the scenario's first learner seat; a team
+    without a learner seat is refused (the learners would not play its games)."""
     if not base.learner_seats:
         raise ValueError(f"{base.source}: no learner seat for the learners to play")
-    team = team or base.seats[base.learner_seats[0]].team
+    ours = list(dict.fromkeys(base.seats[i].team for i in base.learner_seats))
+    team = team or ours[0]
     if team not in base.teams:
         raise ValueError(f"team {team!r} not in scenario {base.name!r}; teams: "
                          f"{sorted(set(base.teams))}")
+    if team not in ours:
+        raise ValueError(f"team {team!r}: scenario {base.name!r} has no learner seat on team "
+                         f"{team} (learner teams: {', '.join(ours)})")
     return team
 
 

@@ -34,7 +34,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "default: the opponents of each checkpoint's scenario")
     p.add_argument("--games", type=positive_int, default=100, help="games per row (default: 100)")
     p.add_argument("--scenario", help="play in this scenario instead of the checkpoint's own")
-    p.add_argument("--team", help="team the checkpoint plays (default: its first learner's)")
+    p.add_argument("--team", help="team the checkpoint plays, one with a learner seat in the "
+                                  "scenario (default: its first learner's)")
     p.add_argument("--map", metavar="NAME|FOLDER",
                    help="play on other maps: a shipped map, a shipped folder such as 'test', "
                         "a .txt file or a folder of maps")
