@@ -84,6 +84,7 @@ def files(tmp_path_factory) -> dict[str, str]:
     put("runobs.toml", run + 'observation = "egocentric_fulll"\n')
     put("runimitate.toml", run + 'imitate = { bot = "smrt" }\n')
     put("runimitatekey.toml", run + 'imitate = { bot = "smart", stepz = 10 }\n')
+    put("runpool.toml", run + '[schedule]\nkind = "cycle"\npool = ["nosuch"]\n')
     put("empty.npz", b"")
     put("binary.npz", bytes(range(256)) * 8)
     (d / "emptydir").mkdir()
@@ -380,6 +381,9 @@ CASES = [
      ["{runimitate_toml}: imitate.bot 'smrt'", "smart"]),
     ("train-config-imitate-key", ["train", "--config", "{runimitatekey_toml}"],
      ["{runimitatekey_toml}: imitate.stepz: unknown key", "steps"]),
+    ("train-config-cycle-pool", ["train", "--config", "{runpool_toml}", "--runs", "{dir}/runs",
+                                 "--wandb", "disabled", "--no-progress"],
+     ["{runpool_toml}: schedule: cycle pool: unknown bot 'nosuch'", "smart"]),
     ("train-config-scenario-flag", ["train", "--config", "{runscenario_toml}", "--scenario",
                                     "vs_nobody_either"], ["--scenario: unknown scenario"]),
     ("train-hp-algo", ["train", "--hp", "nosuch.x=1"], ["--hp nosuch.x", "unknown algorithm"]),
