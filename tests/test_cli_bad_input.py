@@ -389,6 +389,8 @@ CASES = [
     ("train-hp-algo", ["train", "--hp", "nosuch.x=1"], ["--hp nosuch.x", "unknown algorithm"]),
     ("train-hp-field", ["train", "--hp", "ppo.nosuch=1"], ["ppo.nosuch", "valid"]),
     ("train-hp-range", ["train", "--hp", "ppo.gamma=2"], ["--hp ppo.gamma", "[0, 1]"]),
+    ("train-hp-hidden", ["train", "--hp", "ppo.hidden=200000"],
+     ["--hp ppo.hidden", "(0, 4096]", "200000"]),
     ("train-hp-form", ["train", "--ppo", "gamma"], ["--ppo"]),
     ("train-hp-nan", ["train", "--preset", "sac_vs_aggressive", "--hp",
                       "sac.target_entropy=nan"], ["--hp sac.target_entropy", "finite"]),
