@@ -153,6 +153,12 @@ def files(tmp_path_factory) -> dict[str, str]:
     bad = ckpt_copy("ckpt_objdim")
     (bad / "meta.json").write_text(json.dumps(
         {**meta, "observation": {**meta["observation"], "obs_dim": "abc"}}))
+    for name, edit in (("ckpt_windows", {"windows": 5}),
+                       ("ckpt_outcomes", {"windows": {"outcomes": {"nobody": [1.0]}}}),
+                       ("ckpt_progress_cut", {"progress": {**meta["progress"], "cut": "x"}})):
+        (ckpt_copy(name) / "meta.json").write_text(json.dumps({**meta, **edit}))
+    (ckpt_copy("ckpt_noprogress") / "meta.json").write_text(json.dumps(
+        {k: v for k, v in meta.items() if k != "progress"}))
     bad = ckpt_copy("ckpt_nan")
     state = torch.load(bad / "ppo.pt", weights_only=True)
     first = next(k for k, v in state["net"].items() if v.is_floating_point())
@@ -338,6 +344,14 @@ CASES = [
     ("train-resume-empty", ["train", "--resume", "{runs_empty}"],
      ["{runs_empty}", "not a run directory"]),
     ("train-resume-version", ["train", "--resume", "{ckpt_v99}"], ["version 99"]),
+    ("train-resume-windows", ["train", "--resume", "{ckpt_windows}"],
+     ["{ckpt_windows}/meta.json: windows: must be an object, got 5"]),
+    ("train-resume-outcomes", ["train", "--resume", "{ckpt_outcomes}"],
+     ["meta.json: windows.outcomes: must map learner names ['ppo']"]),
+    ("train-resume-cut", ["train", "--resume", "{ckpt_progress_cut}"],
+     ["{ckpt_progress_cut}/meta.json: progress.cut: must be an integer, got 'x'"]),
+    ("train-resume-no-progress", ["train", "--resume", "{ckpt_noprogress}"],
+     ["{ckpt_noprogress}/meta.json: missing field 'progress'"]),
     ("train-resume-nan", ["train", "--resume", "{ckpt_nan}", "--wandb", "disabled",
                           "--no-progress"], ["{nan_tensor}", "NaN"]),
     ("train-preset", ["train", "--preset", "nosuch"], ["nosuch"]),
