@@ -14,7 +14,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from alphatank.commands.argtypes import positive_int, seed
+from alphatank.commands.argtypes import match_count, positive_int, seed
 from alphatank.errors import InputError, as_input_error
 from alphatank.files import check_writable, write_text_atomic
 
@@ -45,7 +45,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "e.g. random_spawns=false,max_steps=600 (keys: docs/rules.md)")
     p.add_argument("--greedy", action="store_true", help="most likely actions, no sampling")
     p.add_argument("--seed", type=seed, default=0, help="seed of the game sequence")
-    p.add_argument("--num-envs", type=positive_int, default=16,
+    p.add_argument("--num-envs", type=match_count, default=16,
                    help="matches played at once (at most 4,096; the games do not change)")
     p.add_argument("--team-stats", action="store_true",
                    help="also measure cooperation in the same games: share of won games in "
