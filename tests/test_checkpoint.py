@@ -216,6 +216,27 @@ def test_truncated_meta_and_missing_files_are_named(trained, tmp_path):
         load_checkpoint(tmp_path)
 
 
+def test_meta_fields_that_resuming_reads_are_checked_at_load(trained, tmp_path):
+    """progress is required and typed; its later fields (cut, clone_pending) get their
+    defaults in an older checkpoint; windows maps learner names to numbers."""
+    ck = _copy(trained, tmp_path)
+    meta = json.loads((ck / "meta.json").read_text())
+    old = {**meta, "progress": {k: v for k, v in meta["progress"].items()
+                                if k not in ("cut", "clone_pending")}}
+    (ck / "meta.json").write_text(json.dumps(old))
+    assert load_checkpoint(ck).meta["progress"] == {**old["progress"], "cut": 0,
+                                                    "clone_pending": False}
+    for edit, error in (({"progress": {**meta["progress"], "elapsed": "long"}},
+                         r"meta\.json: progress\.elapsed: must be a number, got 'long'"),
+                        ({"windows": {"returns": {"ppo": ["x"]}}},
+                         r"meta\.json: windows\.returns: must map learner names \['ppo'\]"),
+                        ({"windows": {"outcomes": []}}, r"windows\.outcomes"),
+                        ({"schedule": [1]}, r"meta\.json: schedule: must be an object")):
+        (ck / "meta.json").write_text(json.dumps({**meta, **edit}))
+        with pytest.raises(CheckpointError, match=error):
+            load_checkpoint(ck)
+
+
 def test_mismatched_checkpoint_gives_a_clear_error(trained, tmp_path):
     ck = _copy(trained, tmp_path)
     meta = json.loads((ck / "meta.json").read_text())

@@ -87,6 +87,7 @@ def files(tmp_path_factory) -> dict[str, str]:
     put("runobs.toml", run + 'observation = "egocentric_fulll"\n')
     put("runimitate.toml", run + 'imitate = { bot = "smrt" }\n')
     put("runimitatekey.toml", run + 'imitate = { bot = "smart", stepz = 10 }\n')
+    put("runpool.toml", run + '[schedule]\nkind = "cycle"\npool = ["nosuch"]\n')
     put("empty.npz", b"")
     put("binary.npz", bytes(range(256)) * 8)
     (d / "emptydir").mkdir()
@@ -155,6 +156,12 @@ def files(tmp_path_factory) -> dict[str, str]:
     bad = ckpt_copy("ckpt_objdim")
     (bad / "meta.json").write_text(json.dumps(
         {**meta, "observation": {**meta["observation"], "obs_dim": "abc"}}))
+    for name, edit in (("ckpt_windows", {"windows": 5}),
+                       ("ckpt_outcomes", {"windows": {"outcomes": {"nobody": [1.0]}}}),
+                       ("ckpt_progress_cut", {"progress": {**meta["progress"], "cut": "x"}})):
+        (ckpt_copy(name) / "meta.json").write_text(json.dumps({**meta, **edit}))
+    (ckpt_copy("ckpt_noprogress") / "meta.json").write_text(json.dumps(
+        {k: v for k, v in meta.items() if k != "progress"}))
     ckpt_copy("ckpt_loose")  # a good save, copied out of its run
     bad = d / "nanrun" / "checkpoints" / ckpt.name  # resumable: a save inside a run
     shutil.copytree(ckpt, bad)
@@ -328,6 +335,9 @@ CASES = [
     ("eval-meta-type", ["eval", "{ckpt_objdim}"], ["observation.obs_dim", "'abc'"]),
     ("eval-nan", ["eval", "{ckpt_nan}"], ["{nan_tensor}", "NaN"]),
     ("eval-games", ["eval", "{run}", "--games", "0"], ["--games", "integer >= 1", "'0'"]),
+    ("eval-num-envs-max", ["eval", "{run}", "--num-envs", "5000"],
+     ["--num-envs", "integer in [1, 4096]", "'5000'"]),
+    ("eval-num-envs-zero", ["eval", "{run}", "--num-envs", "0"], ["--num-envs", "'0'"]),
     ("eval-vs", ["eval", "{run}", "--vs", "smart,genius", "--games", "1"],
      ["--vs: unknown bot 'genius'", "dodge"]),
     ("eval-seed", ["eval", "{run}", "--seed", "x"], ["--seed", "'x'"]),
@@ -339,12 +349,24 @@ CASES = [
      ["expects 236 observation features", "its training scenario 'vs_smart'",
       "paper observation"]),
     ("eval-checkpoint-empty", ["eval", "checkpoint:"], ["needs the checkpoint folder"]),
+    ("eval-team-bots-only", ["eval", "{run}", "--team", "B", "--vs", "smart"],
+     ["team 'B': scenario 'vs_aggressive' has no learner seat on team B", "learner teams: A"]),
+    ("eval-stand-in-team", ["eval", "bot:smart", "--scenario", "vs_smart", "--team", "B"],
+     ["team 'B'", "no learner seat", "learner teams: A"]),
     # train
     ("train-resume-missing", ["train", "--resume", "{dir}/runs/nosuch"],
      ["nosuch", "no such checkpoint or run directory"]),
     ("train-resume-empty", ["train", "--resume", "{runs_empty}"],
      ["{runs_empty}", "not a run directory"]),
     ("train-resume-version", ["train", "--resume", "{ckpt_v99}"], ["version 99"]),
+    ("train-resume-windows", ["train", "--resume", "{ckpt_windows}"],
+     ["{ckpt_windows}/meta.json: windows: must be an object, got 5"]),
+    ("train-resume-outcomes", ["train", "--resume", "{ckpt_outcomes}"],
+     ["meta.json: windows.outcomes: must map learner names ['ppo']"]),
+    ("train-resume-cut", ["train", "--resume", "{ckpt_progress_cut}"],
+     ["{ckpt_progress_cut}/meta.json: progress.cut: must be an integer, got 'x'"]),
+    ("train-resume-no-progress", ["train", "--resume", "{ckpt_noprogress}"],
+     ["{ckpt_noprogress}/meta.json: missing field 'progress'"]),
     ("train-resume-nan", ["train", "--resume", "{ckpt_nan}", "--wandb", "disabled",
                           "--no-progress"], ["{nan_tensor}", "NaN"]),
     ("train-preset", ["train", "--preset", "nosuch"], ["nosuch"]),
@@ -392,11 +414,16 @@ CASES = [
      ["{runimitate_toml}: imitate.bot 'smrt'", "smart"]),
     ("train-config-imitate-key", ["train", "--config", "{runimitatekey_toml}"],
      ["{runimitatekey_toml}: imitate.stepz: unknown key", "steps"]),
+    ("train-config-cycle-pool", ["train", "--config", "{runpool_toml}", "--runs", "{dir}/runs",
+                                 "--wandb", "disabled", "--no-progress"],
+     ["{runpool_toml}: schedule: cycle pool: unknown bot 'nosuch'", "smart"]),
     ("train-config-scenario-flag", ["train", "--config", "{runscenario_toml}", "--scenario",
                                     "vs_nobody_either"], ["--scenario: unknown scenario"]),
     ("train-hp-algo", ["train", "--hp", "nosuch.x=1"], ["--hp nosuch.x", "unknown algorithm"]),
     ("train-hp-field", ["train", "--hp", "ppo.nosuch=1"], ["ppo.nosuch", "valid"]),
     ("train-hp-range", ["train", "--hp", "ppo.gamma=2"], ["--hp ppo.gamma", "[0, 1]"]),
+    ("train-hp-hidden", ["train", "--hp", "ppo.hidden=200000"],
+     ["--hp ppo.hidden", "(0, 4096]", "200000"]),
     ("train-hp-form", ["train", "--ppo", "gamma"], ["--ppo"]),
     ("train-hp-nan", ["train", "--preset", "sac_vs_aggressive", "--hp",
                       "sac.target_entropy=nan"], ["--hp sac.target_entropy", "finite"]),
@@ -552,3 +579,14 @@ def test_maps_lists_shipped_folders(capsys):
     assert "folder train/" in out and "folder test/" in out
     assert main(["maps", "test"]) == 0
     assert capsys.readouterr().out.count(": ok,") == 4
+
+
+def test_eval_pool_without_shared_opponents_is_refused_before_any_game(files, capsys, tmp_path):
+    """Rows that meet no opponent in common: one error naming what each meets, no table,
+    no --json / --csv written."""
+    rows = [tmp_path / "pool.json", tmp_path / "pool.csv"]
+    rc, out, err = _run_main(main, ["eval", "agent:ppo_vs_smart", files["run"], "--pool",
+                                    "--json", str(rows[0]), "--csv", str(rows[1])], capsys)
+    _check(rc, out, err, ["--pool needs two or more checkpoints against the same opponents",
+                          "agent:ppo_vs_smart: B:smart(w=1)", "B:aggressive(w=1)"])
+    assert out == "" and not any(p.exists() for p in rows)

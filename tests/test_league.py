@@ -68,7 +68,7 @@ def test_opponent_names_and_bad_settings():
     with pytest.raises(ValueError, match="weaknesses"):
         LeagueSchedule(weaknesses=[0.0])
     assert isinstance(make_schedule({"kind": "league", "bots": ["dodge"]}, 100), LeagueSchedule)
-    with pytest.raises(ValueError, match="schedule 'league'"):
+    with pytest.raises(ValueError, match="colour: unknown key for kind 'league'"):
         make_schedule({"kind": "league", "colour": "red"}, 100)
 
 

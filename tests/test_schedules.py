@@ -233,8 +233,11 @@ def test_bad_schedule_settings_are_rejected():
         CycleSchedule(["random"], mode="round-robin")
     with pytest.raises(ValueError, match="unknown schedule kind"):
         make_schedule({"kind": "tournament"}, 100)
-    with pytest.raises(ValueError, match="schedule 'curriculum'"):
+    with pytest.raises(ValueError, match=r"speed: unknown key for kind 'curriculum'; valid "
+                                         r"keys: \['kind', 'end', 'shape'"):
         make_schedule({"kind": "curriculum", "speed": 2}, 100)
+    with pytest.raises(ValueError, match="cycle pool: unknown bot 'genius'"):
+        make_schedule({"kind": "cycle", "pool": ["smart", "genius"]}, 100)
 
 
 def test_cycle_training_rotates_the_opponents_and_scales_the_victory_reward(tmp_path):

@@ -340,7 +340,7 @@ def load_checkpoint(path: str | Path) -> Checkpoint:
     if meta.get("version") != VERSION:
         raise CheckpointError(f"{meta_file}: checkpoint version {meta.get('version')!r}, this "
                               f"alphatank reads version {VERSION}")
-    for key in ("train_config", "scenario", "observation", "learners", "files"):
+    for key in ("train_config", "scenario", "observation", "learners", "files", "progress"):
         if key not in meta:
             raise CheckpointError(f"{meta_file}: missing field {key!r}")
     _check_meta(meta, meta_file)
@@ -354,28 +354,30 @@ _OBSERVATION_FIELDS: dict[str, tuple[tuple[type, ...], tuple[Any, Any] | None]] 
     "max_debuffs": ((int,), (0, 10**6)), "team_flags": ((bool,), None),
     "tanks": ((int,), (2, 10**4)), "seat_learner": ((dict,), None),
     "action_repeat": ((int,), (1, ACTION_REPEAT_MAX))}
-_OPTIONAL_OBSERVATION_FIELDS = {"action_repeat": 1}  # added later: older checkpoints lack it
 _PROGRESS_FIELDS = {"global_step": ((int,), (0, None)), "iteration": ((int,), (0, None)),
-                    "episodes": ((int,), (0, None)), "elapsed": ((float,), (0, None))}
+                    "episodes": ((int,), (0, None)), "elapsed": ((float,), (0, None)),
+                    "cut": ((int,), (0, None)), "clone_pending": ((bool,), None)}
+# fields added later, which older checkpoints lack: their defaults
+_OPTIONAL_FIELDS = {"observation": {"action_repeat": 1},
+                    "progress": {"cut": 0, "clone_pending": False}}
 
 
 def _check_meta(meta: dict[str, Any], meta_file: Path) -> None:
-    """Type-check the meta fields that loading reads (CheckpointError names the field)
-    and fill in the optional ones an older checkpoint lacks with their defaults."""
+    """Type-check the meta fields that loading and resuming read (CheckpointError names
+    the field) and fill in the optional ones an older checkpoint lacks with their
+    defaults."""
     def fail(where: str, why: str) -> CheckpointError:
         return CheckpointError(f"{meta_file}: {where}: {why}")
 
     for key, table in (("observation", _OBSERVATION_FIELDS), ("progress", _PROGRESS_FIELDS)):
-        data = meta.get(key, {} if key == "progress" else None)
+        data = meta[key]
         if not isinstance(data, dict):
             raise fail(key, f"must be an object, got {data!r}")
         for name, (kinds, rng) in table.items():
             if name not in data:
-                if key == "progress":
-                    continue
-                if name not in _OPTIONAL_OBSERVATION_FIELDS:
+                if name not in _OPTIONAL_FIELDS[key]:
                     raise fail(f"{key}.{name}", "missing")
-                data[name] = _OPTIONAL_OBSERVATION_FIELDS[name]
+                data[name] = _OPTIONAL_FIELDS[key][name]
                 continue
             _, why = check_value(kinds, data[name], rng)
             if why is not None:
@@ -395,6 +397,20 @@ def _check_meta(meta: dict[str, Any], meta_file: Path) -> None:
             isinstance(k, str) and _file_key(k) and isinstance(v, str) for k, v in files.items()):
         raise fail("files", "must map file names in the checkpoint folder (or extra/NAME) to "
                             "SHA-256 digests")
+    if not isinstance(meta.get("schedule", {}), dict):
+        raise fail("schedule", f"must be an object, got {meta['schedule']!r}")
+    windows = meta.get("windows", {})
+    if not isinstance(windows, dict):
+        raise fail("windows", f"must be an object, got {windows!r}")
+    names = {d["name"] for d in learners}
+    for part in ("outcomes", "returns"):
+        table = windows.get(part, {})
+        if not isinstance(table, dict) or not all(
+                k in names and isinstance(v, list)
+                and all(check_value((float,), x)[1] is None for x in v)
+                for k, v in table.items()):
+            raise fail(f"windows.{part}", f"must map learner names {sorted(names)} to lists "
+                                          f"of numbers")
 
 
 def _file_key(key: str) -> bool:

@@ -263,7 +263,8 @@ def evaluate_learners(learners: dict[str, Any], observation: dict[str, Any],
     first = next(iter(learners))
     team = learner_team(base, team)
     results = []
-    for opp in opponents:
+    for opp, opp_name in zip(opponents, row_opponents(base, opponents, team, weakness),
+                             strict=True):
         seats = opponent_seats(base, team, opp, weakness)
         sc = dataclasses.replace(base, seats=tuple(seats))
         driven = [i for i, s in enumerate(seats) if s.controller == "learner"]
@@ -285,7 +286,7 @@ def evaluate_learners(learners: dict[str, Any], observation: dict[str, Any],
         theirs = [i for i, s in enumerate(seats) if s.team != team]
         res = EvalResult(name=f"{_label(seats, algo_of, ours, True)} vs "
                               f"{_label(seats, algo_of, theirs, False)}",
-                         opponent=opp or core.describe_opponents(0),
+                         opponent=opp_name,
                          sides=("Agent", side_kind(seats, theirs)))
         watch = TeamWatch(team, n_env, list(sc.teams)) if team_stats else None
         results.append(play_games(core, team, games, seed, act, res, watch))
@@ -295,14 +296,32 @@ def evaluate_learners(learners: dict[str, Any], observation: dict[str, Any],
 
 
 def learner_team(base: Scenario, team: str | None) -> str:
-    """The evaluated team: ``team``, or that of the scenario's first learner seat."""
+    """The evaluated team: ``team``, or that of the scenario's first learner seat; a team
+    without a learner seat is refused (the learners would not play its games)."""
     if not base.learner_seats:
         raise ValueError(f"{base.source}: no learner seat for the learners to play")
-    team = team or base.seats[base.learner_seats[0]].team
+    ours = list(dict.fromkeys(base.seats[i].team for i in base.learner_seats))
+    team = team or ours[0]
     if team not in base.teams:
         raise ValueError(f"team {team!r} not in scenario {base.name!r}; teams: "
                          f"{sorted(set(base.teams))}")
+    if team not in ours:
+        raise ValueError(f"team {team!r}: scenario {base.name!r} has no learner seat on team "
+                         f"{team} (learner teams: {', '.join(ours)})")
     return team
+
+
+def row_opponents(base: Scenario, opponents: Sequence[str | None], team: str | None = None,
+                  weakness: float | None = None, stand_in: bool = False) -> list[str]:
+    """The ``opponent`` of each row :func:`evaluate_learners` (``stand_in``:
+    :func:`evaluate_stand_in`) plays in ``base``, known before any game: a bot name, or
+    for None the seats it does not drive (``stand_in``: the other teams' seats) such as
+    ``B:smart(w=1)``."""
+    team = learner_team(base, team)
+    seats = opponent_seats(base, team, None, weakness)
+    own = ", ".join(f"{s.team}:{s.describe()}" for s in seats
+                    if (s.team != team if stand_in else s.controller != "learner"))
+    return [opp or own or "none" for opp in opponents]
 
 
 def opponent_seats(base: Scenario, team: str, opp: str | None,
@@ -338,7 +357,8 @@ def evaluate_stand_in(bot: str, scenario: str | Scenario, opponents: Sequence[st
     team = learner_team(base, team)
     stand = spec_seat(bot, team, where=f"bot:{bot}")
     results = []
-    for opp in opponents:
+    for opp, opp_name in zip(opponents, row_opponents(base, opponents, team, weakness, True),
+                             strict=True):
         seats = opponent_seats(base, team, opp, weakness)
         played = [stand if s.team == team and s.controller == "learner" else s for s in seats]
         sc = dataclasses.replace(base, seats=tuple(played))
@@ -348,8 +368,7 @@ def evaluate_stand_in(bot: str, scenario: str | Scenario, opponents: Sequence[st
         theirs = [i for i, s in enumerate(played) if s.team != team]
         res = EvalResult(name=f"{_label(played, {}, ours, True)} vs "
                               f"{_label(played, {}, theirs, False)}",
-                         opponent=opp or ", ".join(f"{played[i].team}:{played[i].describe()}"
-                                                   for i in theirs),
+                         opponent=opp_name,
                          sides=(side_kind(played, ours), side_kind(played, theirs)),
                          agent=label or f"bot:{bot}")
         watch = TeamWatch(team, n_env, list(sc.teams)) if team_stats else None

@@ -11,6 +11,12 @@ from typing import Any
 
 from alphatank.training.fields import FieldError, build, hp, validate
 
+# Widest hidden layer: 32x the paper's 128. The networks' memory grows with its square
+# (parameters, gradients and two Adam moments: about 16 bytes each), so a wider one would
+# fail in the middle of the set-up on many machines; at 4,096 they take about 0.5 GiB
+# (PPO) to 1.3 GiB (SAC's actor, critics and target critics).
+HIDDEN_MAX = 4096
+
 
 @dataclass(frozen=True)
 class PPOConfig:
@@ -32,7 +38,8 @@ class PPOConfig:
     anneal_lr: bool = hp(False, "decay the learning rate linearly to 0 over the run")
     target_kl: float | None = hp(None, "stop an update's epochs once the approximate KL "
                                  "exceeds this (none: never)", gt=0)
-    hidden: int = hp(128, "units per hidden layer (two tanh layers, actor and critic)", gt=0)
+    hidden: int = hp(128, "units per hidden layer (two tanh layers, actor and critic)",
+                     gt=0, le=HIDDEN_MAX)
     anchor_kl: float = hp(0.0, "weight of KL(start || policy) in the loss, start being the "
                           "policy RL began from (the imitate clone or the init_from "
                           "checkpoint): keeps what the warm start knew; 0: off", ge=0)
@@ -61,7 +68,8 @@ class SACConfig:
     update_after: int = hp(1000, "transitions collected before the first update", ge=0)
     update_every: int = hp(50, "transitions between update rounds", gt=0)
     utd_ratio: float = hp(1.0, "gradient steps per collected transition", gt=0)
-    hidden: int = hp(256, "units per hidden layer (two ReLU layers)", gt=0)
+    hidden: int = hp(256, "units per hidden layer (two ReLU layers)", gt=0,
+                     le=HIDDEN_MAX)
     autotune: bool = hp(True, "tune the entropy coefficient towards target_entropy")
     alpha: float = hp(0.2, "initial (or, without autotune, fixed) entropy coefficient", gt=0)
     target_entropy: float | None = hp(None, "entropy target of autotune (none: -action dims)")
@@ -99,7 +107,8 @@ class MAPPOConfig:
     anneal_lr: bool = hp(False, "decay the learning rates linearly to 0 over the run")
     target_kl: float | None = hp(None, "stop an update's epochs once the approximate KL "
                                  "exceeds this (none: never)", gt=0)
-    hidden: int = hp(128, "units per hidden layer (two tanh layers, actor and critic)", gt=0)
+    hidden: int = hp(128, "units per hidden layer (two tanh layers, actor and critic)",
+                     gt=0, le=HIDDEN_MAX)
     norm_obs: bool = hp(True, "normalise observations by running mean/std (saved)")
     norm_state: bool = hp(True, "normalise the critic's global state by running mean/std")
     norm_reward: bool = hp(False, "scale rewards by the running std of the discounted return "

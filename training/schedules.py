@@ -11,6 +11,7 @@ reward by :meth:`OpponentSchedule.victory_scale`.
 
 from __future__ import annotations
 
+import inspect
 import math
 import re
 from collections import deque
@@ -120,6 +121,12 @@ class CycleSchedule(OpponentSchedule):
                  scale_victory: bool = True, weakness: float | None = None, seed: int = 0):
         if not pool:
             raise ValueError("cycle schedule needs a non-empty bot pool")
+        from alphatank.game.scenarios import bot_names
+
+        unknown = [b for b in pool if b not in bot_names()]
+        if unknown:
+            raise ValueError(f"cycle pool: unknown bot {unknown[0]!r}; valid bots: "
+                             f"{list(bot_names())}")
         if mode not in CYCLE_MODES:
             raise ValueError(f"cycle mode must be one of {CYCLE_MODES}, got {mode!r}")
         if interval <= 0 or window <= 0:
@@ -343,29 +350,30 @@ class LineupCurriculum(_LevelCurriculum):
 
 
 def make_schedule(spec: dict[str, Any], total_steps: int, seed: int = 0) -> OpponentSchedule:
-    """Build a schedule from a preset's ``schedule`` mapping (``kind`` + parameters)."""
+    """Build a schedule from a preset's ``schedule`` mapping (``kind`` + parameters); an
+    unknown or missing key is a ValueError naming it and the kind's valid keys."""
     spec = dict(spec or {})
     kind = spec.pop("kind", "none")
+    classes: dict[str, Any] = {s.kind: s for s in (OpponentSchedule, CurriculumSchedule,
+                                                   CycleSchedule, WinRateCurriculum,
+                                                   LineupCurriculum)}
+    if kind == "league":  # resolved late: the league copies learners (checkpoint layer)
+        from alphatank.game.seats import resolve
+        classes[kind] = resolve("alphatank.training.league:LeagueSchedule")
+    if not isinstance(kind, str) or kind not in classes:
+        raise ValueError(f"unknown schedule kind {kind!r}; valid: none, curriculum, cycle, "
+                         f"winrate, lineup, league")
+    params = inspect.signature(classes[kind]).parameters
+    given = {"steps": total_steps, "seed": seed}
+    spec = {**{k: v for k, v in given.items() if k in params}, **spec}
+    for key in spec:
+        if key not in params:
+            raise ValueError(f"{key}: unknown key for kind {kind!r}; valid keys: "
+                             f"{['kind', *sorted(params)]}")
+    for key, param in params.items():
+        if key not in spec and param.default is param.empty:
+            raise ValueError(f"{key}: required for kind {kind!r}")
     try:
-        if kind == "none":
-            if spec:
-                raise TypeError(f"unexpected keys {sorted(spec)}")
-            return OpponentSchedule()
-        if kind == "curriculum":
-            spec.setdefault("steps", total_steps)
-            return CurriculumSchedule(**spec)
-        if kind == "cycle":
-            spec.setdefault("seed", seed)
-            return CycleSchedule(**spec)
-        if kind == "winrate":
-            return WinRateCurriculum(**spec)
-        if kind == "lineup":
-            return LineupCurriculum(**spec)
-        if kind == "league":  # resolved late: the league copies learners (checkpoint layer)
-            from alphatank.game.seats import resolve
-            spec.setdefault("seed", seed)
-            return resolve("alphatank.training.league:LeagueSchedule")(**spec)
+        return classes[kind](**spec)
     except TypeError as exc:
         raise ValueError(f"schedule {kind!r}: {exc}") from None
-    raise ValueError(f"unknown schedule kind {kind!r}; valid: none, curriculum, cycle, winrate, "
-                     f"lineup, league")

@@ -6,6 +6,8 @@ from __future__ import annotations
 import argparse
 import math
 
+from alphatank.sim.config import MATCHES_MAX
+
 
 def positive_int(text: str) -> int:
     """An integer >= 1."""
@@ -15,6 +17,18 @@ def positive_int(text: str) -> int:
         raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {text!r}") from None
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {text!r}")
+    return value
+
+
+def match_count(text: str) -> int:
+    """A number of matches played at once: an integer in [1, MATCHES_MAX]."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if not 1 <= value <= MATCHES_MAX:
+        raise argparse.ArgumentTypeError(f"must be an integer in [1, {MATCHES_MAX}], got "
+                                         f"{text!r}")
     return value
 
 

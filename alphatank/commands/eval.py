@@ -15,11 +15,12 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from alphatank.commands.argtypes import positive_int, seed
+from alphatank.commands.argtypes import match_count, positive_int, seed
 from alphatank.errors import InputError, as_input_error
 from alphatank.files import check_writable, write_text_atomic
 
 if TYPE_CHECKING:
+    from alphatank.training.checkpoint import Checkpoint
     from alphatank.training.evaluate import EvalResult
 
 
@@ -34,7 +35,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "default: the opponents of each checkpoint's scenario")
     p.add_argument("--games", type=positive_int, default=100, help="games per row (default: 100)")
     p.add_argument("--scenario", help="play in this scenario instead of the checkpoint's own")
-    p.add_argument("--team", help="team the checkpoint plays (default: its first learner's)")
+    p.add_argument("--team", help="team the checkpoint plays, one with a learner seat in the "
+                                  "scenario (default: its first learner's)")
     p.add_argument("--map", metavar="NAME|FOLDER",
                    help="play on other maps: a shipped map, a shipped folder such as 'test', "
                         "a .txt file or a folder of maps")
@@ -44,7 +46,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "e.g. random_spawns=false,max_steps=600 (keys: docs/rules.md)")
     p.add_argument("--greedy", action="store_true", help="most likely actions, no sampling")
     p.add_argument("--seed", type=seed, default=0, help="seed of the game sequence")
-    p.add_argument("--num-envs", type=positive_int, default=16,
+    p.add_argument("--num-envs", type=match_count, default=16,
                    help="matches played at once (at most 4,096; the games do not change)")
     p.add_argument("--team-stats", action="store_true",
                    help="also measure cooperation in the same games: share of won games in "
@@ -64,7 +66,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from alphatank.game.seats import checkpoint_source
     from alphatank.training.evaluate import (
         evaluate_checkpoint,
         evaluate_stand_in,
@@ -94,11 +95,11 @@ def run(args: argparse.Namespace) -> int:
     results = []
     try:
         game = parse_game("--game", args.game)
-        for arg in args.checkpoints:
-            if arg.startswith("bot:"):
-                if args.scenario is None:
-                    raise InputError(f"{arg}: a bot has no scenario of its own; give "
-                                     "--scenario (its learner seats are played by the bot)")
+        sources = [load_source(arg, args.scenario) for arg in args.checkpoints]
+        if args.pool:
+            check_pool(args, sources, opponents)
+        for arg, ckpt in zip(args.checkpoints, sources, strict=True):
+            if ckpt is None:
                 results += evaluate_stand_in(arg[4:], args.scenario, opponents,
                                              games=args.games, seed=args.seed,
                                              team=args.team, num_envs=args.num_envs,
@@ -106,7 +107,7 @@ def run(args: argparse.Namespace) -> int:
                                              label=arg, team_stats=args.team_stats,
                                              game=game)
                 continue
-            results += evaluate_checkpoint(checkpoint_source(arg), opponents,
+            results += evaluate_checkpoint(ckpt, opponents,
                                            games=args.games, seed=args.seed,
                                            scenario=args.scenario, team=args.team,
                                            deterministic=args.greedy, num_envs=args.num_envs,
@@ -153,16 +154,45 @@ def team_json_path(json_path: str) -> Path:
     return team
 
 
+def load_source(arg: str, scenario: str | None) -> Checkpoint | None:
+    """The checkpoint a CHECKPOINT argument names, or None for a ``bot:NAME`` stand-in
+    (which needs ``--scenario``)."""
+    from alphatank.game.seats import checkpoint_source
+    from alphatank.training.checkpoint import load_checkpoint
+
+    if not arg.startswith("bot:"):
+        return load_checkpoint(checkpoint_source(arg))
+    if scenario is None:
+        raise InputError(f"{arg}: a bot has no scenario of its own; give --scenario (its "
+                         "learner seats are played by the bot)")
+    return None
+
+
+def check_pool(args: argparse.Namespace, sources: Sequence[Checkpoint | None],
+               opponents: Sequence[str | None]) -> None:
+    """``--pool`` before any game: two or more rows must meet the same opponent."""
+    from alphatank.game.scenarios import load_scenario
+    from alphatank.training.evaluate import row_opponents
+
+    given = load_scenario(args.scenario) if args.scenario is not None else None
+    met = {arg: row_opponents(given or ckpt.scenario, opponents, args.team, args.weakness,
+                              stand_in=ckpt is None)
+           for arg, ckpt in zip(args.checkpoints, sources, strict=True)}
+    rows = [opp for opps in met.values() for opp in opps]
+    if len(set(rows)) == len(rows):
+        raise InputError("--pool needs two or more checkpoints against the same opponents "
+                         "(e.g. the seeds of one set-up; --vs sets them); these meet "
+                         + "; ".join(f"{arg}: {', '.join(opps)}" for arg, opps in met.items()))
+
+
 def print_pooled(results: Sequence[EvalResult]) -> None:
-    """One line per opponent met by two or more rows: :func:`pool_runs` of their wins."""
+    """One line per opponent met by two or more rows (:func:`check_pool`):
+    :func:`pool_runs` of their wins."""
     from alphatank.training.aggregate import pool_runs
 
     rows: dict[str, list[EvalResult]] = {}
     for r in results:
         rows.setdefault(r.opponent, []).append(r)
-    if not any(len(rs) > 1 for rs in rows.values()):
-        raise InputError("--pool needs two or more checkpoints against the same opponents "
-                         "(e.g. the seeds of one set-up)")
     for opp, rs in rows.items():
         if len(rs) < 2:
             continue
