@@ -410,7 +410,8 @@ def load_run(path: str | Path) -> TrainConfig:
     ``[[learners]]`` tables with a ``[learners.config]`` sub-table."""
     p = Path(path)
     if not p.is_file():
-        raise ValueError(f"{p}: no such run file")
+        raise ValueError(f"{p}: " + ("a folder, not a run file" if p.is_dir() else
+                                     "no such run file"))
     return _parse_text(read_text(p), str(p), p.parent, p.stem)
 
 

@@ -7,6 +7,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from alphatank.files import check_writable
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("runs", nargs="+", metavar="RUN", help="run folder(s) (with metrics.jsonl)")
@@ -31,6 +33,7 @@ def run(args: argparse.Namespace) -> int:
         if not Path(run_dir).is_dir():
             print(f"alphatank plot: error: {run_dir}: no such run folder", file=sys.stderr)
             return 2
+    check_writable(args.out, "-o")  # an InputError: alphatank.cli prints it, exit 2
     try:
         plot_runs(args.runs, args.out, labels)
     except (ValueError, OSError) as exc:

@@ -411,6 +411,7 @@ def _run(args: argparse.Namespace, progress: bool, cpus: float = 0.0) -> int:
         runs = args.runs or "runs"
         check_folder(runs, "--runs")
         run_dir = Path(runs) / cfg.name
+        check_folder(run_dir, "--name" if args.name else "the run's folder")
         if (run_dir / "latest").exists():
             raise InputError(f"{run_dir} already holds a run; continue it with --resume "
                              f"{run_dir} or pick another --name")
