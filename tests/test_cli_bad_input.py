@@ -199,6 +199,8 @@ CASES = [
     ("arena-bot-option", ["arena", "--bots", "smart:ricochet=maybe,random"],
      ["ricochet", "true or false"]),
     ("arena-map", ["arena", "--map", "{binary_txt}"], ["{binary_txt}", "UTF-8"]),
+    ("arena-map-unknown", ["arena", "--map", "nowhere"],
+     ["map: unknown map 'nowhere'", "battlefield", "folder of maps"]),
     ("arena-games", ["arena", "--games", "0"], ["--games", ">= 1"]),
     ("arena-steps", ["arena", "--max-steps", "0"], ["max_steps", "[1, 10000000]"]),
     ("arena-preset", ["arena", "--preset", "fast"], ["unknown preset 'fast'"]),
