@@ -63,6 +63,7 @@ def files(tmp_path_factory) -> dict[str, str]:
     put("cellsmall.txt", "cell: 0.001\n\n#####\n#1.2#\n#####\n")
     put("noroom.txt", "#####\n#1.+#\n###4#\n#####\n")
     put("good.txt", GOOD_MAP)
+    put("small.txt", "#####\n#1.2#\n#####\n")
     put("empty.toml", b"")
     put("binary.toml", bytes(range(256)))
     put("ff.toml", SCENARIO + '[game]\nfriendly_fire = "no"\n')
@@ -185,6 +186,8 @@ CASES = [
     ("maps-wrong-kind", ["maps", "{good_npz}"], ["{good_npz}", "UTF-8"]),
     # bench
     ("bench-map", ["bench", "--map", "{missing}"], ["{missing}", "no such map file"]),
+    ("bench-map-room", ["bench", "--ticks", "10", "--repeats", "1", "--map", "{small_txt}"],
+     ["--map", "'small' has room for 3 tanks", "4v4 (8 tanks)"]),
     ("bench-json-folder", ["bench", "--json", "{dir}"], ["--json", "is a folder"]),
     ("bench-ticks", ["bench", "--ticks", "many"], ["--ticks", "integer >= 1", "'many'"]),
     ("bench-preset", ["bench", "--preset", "fast"], ["unknown preset 'fast'", "long_range"]),
