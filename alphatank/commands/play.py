@@ -13,7 +13,7 @@ import argparse
 import os
 import sys
 
-from alphatank.commands.argtypes import positive_float, positive_int
+from alphatank.commands.argtypes import positive_float, positive_int, scale
 from alphatank.commands.lineup_options import add_lineup_arguments, lineup_from_args
 from alphatank.errors import one_line
 from alphatank.files import check_writable
@@ -26,7 +26,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_lineup_arguments(p)
     p.add_argument("--fps", type=positive_float, default=60.0,
                    help="frames per second (default: 60)")
-    p.add_argument("--scale", type=positive_float, help="window scale (default: fit the screen)")
+    p.add_argument("--scale", type=scale,
+                   help="window scale, 0.1 to 8 times the map's size (default: fit the screen)")
     p.add_argument("--save-replay", metavar="FILE",
                    help="save each match as a replay (FILE, FILE-2, ...)")
     p.add_argument("--headless-test", action="store_true",
