@@ -404,6 +404,16 @@ CASES = [
      ["--config and --preset"]),
     ("train-resume-new-flags", ["train", "--resume", "{run}", "--hp", "ppo.gamma=0.9"],
      ["--hp apply to new runs"]),
+    # experiments
+    ("experiments-budget-inf", ["experiments", "table3", "--list", "--budget", "inf"],
+     ["--budget", "(0, 10080]", "'inf'"]),
+    ("experiments-budget-huge", ["experiments", "table3", "--list", "--budget", "1e300"],
+     ["--budget", "(0, 10080]"]),
+    ("experiments-budget-0", ["experiments", "table3", "--list", "--budget", "0"],
+     ["--budget", "(0, 10080]", "'0'"]),
+    ("experiments-out-under-file", ["experiments", "table3", "--rows", "smart", "--budget",
+                                    "0.2", "--games", "2", "--out", "{good_txt}/x",
+                                    "--no-progress"], ["--out", "{good_txt} is a file"]),
     # demo
     ("demo-minutes", ["demo", "--minutes", "-1"], ["--minutes", "> 0", "'-1'"]),
     ("demo-name", ["demo", "--runs", "{dir}/runs", "--name", "a/b"], ["--name", "'a/b'"]),

@@ -64,3 +64,18 @@ def scale(text: str) -> float:
     if not lo <= value <= hi:
         raise argparse.ArgumentTypeError(f"must be a number in [{lo:g}, {hi:g}], got {text!r}")
     return value
+
+
+BUDGET_MAX_MIN = 7 * 24 * 60  # a week
+
+
+def budget_minutes(text: str) -> float:
+    """A time budget in minutes: a number in (0, BUDGET_MAX_MIN]."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 0 < value <= BUDGET_MAX_MIN:
+        raise argparse.ArgumentTypeError(f"must be a number of minutes in (0, {BUDGET_MAX_MIN}] "
+                                         f"(a week), got {text!r}")
+    return value

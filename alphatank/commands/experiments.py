@@ -10,7 +10,9 @@ from __future__ import annotations
 import argparse
 import shlex
 import sys
-from pathlib import Path
+
+from alphatank.commands.argtypes import budget_minutes
+from alphatank.files import check_folder
 
 CHOICES = ("table3", "table4", "sac", "league", "heldout", "all")
 
@@ -18,8 +20,9 @@ CHOICES = ("table3", "table4", "sac", "league", "heldout", "all")
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("table", metavar="|".join(CHOICES),
                    help="the table to make (all: every table, in this order)")
-    p.add_argument("--budget", type=float, default=15.0, metavar="MINUTES",
-                   help="training time per run in minutes (default: %(default)s)")
+    p.add_argument("--budget", type=budget_minutes, default=15.0, metavar="MINUTES",
+                   help="training time per run in minutes, at most a week (default: "
+                        "%(default)s)")
     p.add_argument("--seeds", type=int, default=1, metavar="N",
                    help="training seeds per row, 0..N-1 (default: %(default)s)")
     p.add_argument("--workers", type=int, default=1, metavar="W",
@@ -77,8 +80,7 @@ def run(args: argparse.Namespace) -> int:
     if args.ray is not None and args.workers != 1:
         return _error("--workers and --ray: give one (with --ray the cluster's CPUs decide "
                       "how many runs train at once)")
-    if Path(args.out).exists() and not Path(args.out).is_dir():
-        return _error(f"--out {args.out}: exists and is not a folder")
+    check_folder(args.out, "--out")
     try:
         names = table_names(args.experiments_dir)
         if args.table == "all":
