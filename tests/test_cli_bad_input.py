@@ -289,6 +289,9 @@ CASES = [
     # play (under the dummy video driver: --headless-test lets it get to the real checks)
     ("play-replay-folder", ["play", "--headless-test", "--save-replay", "{dir}"],
      ["--save-replay", "is a folder"]),
+    ("play-replay-exists", ["play", "--headless-test", "--seats", "smart,random",
+                            "--save-replay", "{good_npz}"],
+     ["--save-replay", "{good_npz}", "exists", "--force"]),
     ("play-scenario", ["play", "--headless-test", "--scenario", "{ff_toml}"],
      ["[game].friendly_fire"]),
     ("play-ckpt-seats", ["play", "--headless-test", "--checkpoint", "{run}", "--seats",
