@@ -3,6 +3,7 @@ stuck watchdog, arena and cost measurement."""
 
 import argparse
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -316,6 +317,16 @@ def test_arena_command_prints_matrix_and_rejects_unknown_bots(capsys):
     rc = main(["arena", "--bots", "smart,terminator"])
     err = capsys.readouterr().err
     assert rc == 2 and "terminator" in err and "'smart'" in err and "'dodge'" in err
+
+
+def test_arena_command_takes_map_folders_like_run_arena(capsys):
+    """--map takes what run_arena takes: a shipped folder or a folder path, not only a map."""
+    folder = Path(__file__).resolve().parents[1] / "maps" / "test"
+    for where in ("test", str(folder)):
+        assert main(["arena", "--seats", "smart,random", "--games", "2", "--map", where,
+                     "--max-steps", "30"]) == 0
+        out = capsys.readouterr().out
+        assert f"on 4 maps of {where!r}" in out and "2 games, 60 ticks" in out
 
 
 def test_bot_costs_reports_every_bot_and_smart_stays_cheap():

@@ -64,6 +64,7 @@ def files(tmp_path_factory) -> dict[str, str]:
     put("cellsmall.txt", "cell: 0.001\n\n#####\n#1.2#\n#####\n")
     put("noroom.txt", "#####\n#1.+#\n###4#\n#####\n")
     put("good.txt", GOOD_MAP)
+    put("small.txt", "#####\n#1.2#\n#####\n")
     put("empty.toml", b"")
     put("binary.toml", bytes(range(256)))
     put("ff.toml", SCENARIO + '[game]\nfriendly_fire = "no"\n')
@@ -204,6 +205,8 @@ CASES = [
     ("maps-wrong-kind", ["maps", "{good_npz}"], ["{good_npz}", "UTF-8"]),
     # bench
     ("bench-map", ["bench", "--map", "{missing}"], ["{missing}", "no such map file"]),
+    ("bench-map-room", ["bench", "--ticks", "10", "--repeats", "1", "--map", "{small_txt}"],
+     ["--map", "'small' has room for 3 tanks", "4v4 (8 tanks)"]),
     ("bench-json-folder", ["bench", "--json", "{dir}"], ["--json", "is a folder"]),
     ("bench-ticks", ["bench", "--ticks", "many"], ["--ticks", "integer >= 1", "'many'"]),
     ("bench-preset", ["bench", "--preset", "fast"], ["unknown preset 'fast'", "long_range"]),
@@ -218,6 +221,8 @@ CASES = [
     ("arena-bot-option", ["arena", "--bots", "smart:ricochet=maybe,random"],
      ["ricochet", "true or false"]),
     ("arena-map", ["arena", "--map", "{binary_txt}"], ["{binary_txt}", "UTF-8"]),
+    ("arena-map-unknown", ["arena", "--map", "nowhere"],
+     ["map: unknown map 'nowhere'", "battlefield", "folder of maps"]),
     ("arena-games", ["arena", "--games", "0"], ["--games", ">= 1"]),
     ("arena-steps", ["arena", "--max-steps", "0"], ["max_steps", "[1, 10000000]"]),
     ("arena-preset", ["arena", "--preset", "fast"], ["unknown preset 'fast'"]),
@@ -287,6 +292,8 @@ CASES = [
                         "-o", "{good_txt}/x.mp4"], ["{good_txt}"]),
     ("record-out-suffix", ["record", "--seats", "smart,random", "-o", "{dir}/m.txt"],
      ["--out", "m.txt", ".mp4, .mkv, .mov or .avi"]),
+    ("record-scale", ["record", "--seats", "smart,random", "--scale", "1e-9"],
+     ["--scale", "[0.1, 8]"]),
     ("record-gif-suffix", ["record", "--seats", "smart,random", "--gif", "{dir}/m.png"],
      ["--gif", "m.png", "must end in .gif"]),
     ("record-replay-folder", ["record", "--seats", "smart,random", "-o", "{dir}/m.mp4",
@@ -301,6 +308,9 @@ CASES = [
     # play (under the dummy video driver: --headless-test lets it get to the real checks)
     ("play-replay-folder", ["play", "--headless-test", "--save-replay", "{dir}"],
      ["--save-replay", "is a folder"]),
+    ("play-replay-exists", ["play", "--headless-test", "--seats", "smart,random",
+                            "--save-replay", "{good_npz}"],
+     ["--save-replay", "{good_npz}", "exists", "--force"]),
     ("play-scenario", ["play", "--headless-test", "--scenario", "{ff_toml}"],
      ["[game].friendly_fire"]),
     ("play-ckpt-seats", ["play", "--headless-test", "--checkpoint", "{run}", "--seats",
@@ -320,6 +330,10 @@ CASES = [
                                "--seats", "human,learner"], ["unknown agent 'nosuch'"]),
     ("play-stand-in", ["play", "--headless-test", "--scenario", "vs_smart", "--stand-in",
                        "genius"], ["stand-in 'genius'", "valid bots"]),
+    ("play-scale-huge", ["play", "--headless-test", "--seats", "smart,random", "--scale", "1e9"],
+     ["--scale", "[0.1, 8]", "'1e9'"]),
+    ("play-scale-tiny", ["play", "--headless-test", "--seats", "smart,random", "--scale",
+                         "1e-9"], ["--scale", "[0.1, 8]", "'1e-9'"]),
     ("play-max-frames", ["play", "--headless-test", "--seats", "smart,random",
                          "--max-frames", "0"], ["--max-frames", ">= 1"]),
     # eval
@@ -451,6 +465,16 @@ CASES = [
      ["{ckpt_earlier}: the run has later saves (step_0000000099)", "remove the later"]),
     ("train-resume-agent", ["train", "--resume", "{agent_dir}"],
      ["{agent_dir}: an agent folder", "cannot be resumed", "--init-from"]),
+    # experiments
+    ("experiments-budget-inf", ["experiments", "table3", "--list", "--budget", "inf"],
+     ["--budget", "(0, 10080]", "'inf'"]),
+    ("experiments-budget-huge", ["experiments", "table3", "--list", "--budget", "1e300"],
+     ["--budget", "(0, 10080]"]),
+    ("experiments-budget-0", ["experiments", "table3", "--list", "--budget", "0"],
+     ["--budget", "(0, 10080]", "'0'"]),
+    ("experiments-out-under-file", ["experiments", "table3", "--rows", "smart", "--budget",
+                                    "0.2", "--games", "2", "--out", "{good_txt}/x",
+                                    "--no-progress"], ["--out", "{good_txt} is a file"]),
     # demo
     ("demo-minutes", ["demo", "--minutes", "-1"], ["--minutes", "> 0", "'-1'"]),
     ("demo-name", ["demo", "--runs", "{dir}/runs", "--name", "a/b"], ["--name", "'a/b'"]),

@@ -144,6 +144,28 @@ def test_resume_redoes_nothing_finished(made, capsys):
     assert gone.is_file()  # only the missing evaluation was played
 
 
+def test_a_report_never_drops_the_results_it_shows(made, tmp_path, capsys):
+    """--rows makes a table of every row with results (same settings), not only those
+    rows; a report that would lack rows with results (other settings) is refused."""
+    root, made_out, _ = made
+    out = tmp_path / "out"
+    shutil.copytree(made_out, out)
+    before = json.loads((out / "tiny.json").read_text())
+    args = ["tiny", "--experiments-dir", str(root), "--out", str(out), "--steps", "512",
+            "--budget", "2", "--no-progress", "--report-only"]
+    assert cli(*args, "--games", "4", "--rows", "a_random") == 0
+    data = json.loads((out / "tiny.json").read_text())
+    assert [r["row"] for r in data["rows"]] == ["a_random", "b_cycle"] and not data["missing"]
+    assert [r["columns"] for r in data["rows"]] == [r["columns"] for r in before["rows"]]
+    assert "--rows a_random,b_cycle" in data["command"]
+    capsys.readouterr()
+    reports = {p.name: p.read_bytes() for p in out.glob("tiny.*")}
+    assert cli(*args, "--games", "6", "--rows", "a_random") == 2  # other evaluations
+    err = capsys.readouterr().err
+    assert "tiny.json reports results of row(s) ['a_random', 'b_cycle']" in err
+    assert {p.name: p.read_bytes() for p in out.glob("tiny.*")} == reports
+
+
 def test_two_seeds_pool_their_games_in_the_report(made, tmp_path):
     root, one_seed, _ = made
     assert "## Seeds pooled" not in (one_seed / "tiny.md").read_text()
@@ -246,7 +268,7 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
     assert cli("tiny", "--experiments-dir", str(root), "--list") == 2
     assert "c_bad.toml" in capsys.readouterr().err
     shutil.rmtree(root / "tiny")
-    for flags in (["--seeds", "0"], ["--budget", "0"], ["--workers", "0"], ["--games", "0"]):
+    for flags in (["--seeds", "0"], ["--workers", "0"], ["--games", "0"]):
         assert cli("table4", *flags, "--list") == 2
         assert capsys.readouterr().err.count("\n") == 1
 

@@ -237,6 +237,18 @@ def test_arena_seats_can_be_checkpoints_and_agents(trained, monkeypatch, capsys)
     assert "shipped agents: tiny" in capsys.readouterr().err
 
 
+def test_arena_fits_every_seat_to_the_map_before_the_first_game():
+    """The shipped agent fits battlefield, not maze: the arena fails before smart-vs-dodge
+    is played (it used to play that pair, then fail, losing its results)."""
+    from alphatank.training.checkpoint import CheckpointError
+
+    played: list[str] = []
+    with pytest.raises(CheckpointError, match="wall rectangles.*map 'maze'"):
+        run_arena(["smart", "dodge", "agent:ppo_vs_smart"], "maze", games=1,
+                  on_game=lambda a, b, ep: played.append(a))
+    assert played == []
+
+
 def test_eval_accepts_checkpoint_and_agent_arguments(trained, monkeypatch, capsys):
     run, agents = trained
     monkeypatch.setattr(seats, "agents_root", lambda: agents)

@@ -18,11 +18,13 @@ import pygame
 import pytest
 
 from alphatank.commands import play
+from alphatank.errors import InputError
 from alphatank.game.lineup import build_lineup as _build_lineup
 from alphatank.game.scenarios import ScenarioError, load_scenario
 from alphatank.game.scenarios import seats_scenario as parse_seats
 from alphatank.ui.human import KeyboardPolicy
 from alphatank.ui.render import OVERLAYS
+from alphatank.ui.replay import load_replay
 from alphatank.ui.session import PlaySession
 
 
@@ -116,6 +118,20 @@ def test_r_resets_to_a_new_match():
     assert s.match.tick == 2  # the new match ran frames 10 and 11
     assert len(s.episodes) == 2 and s.episodes[0].ticks == 10 and not s.episodes[0].done
     assert s.episodes[1].seed == s.episodes[0].seed + 1
+
+
+def test_later_matches_never_overwrite_a_replay_file(tmp_path):
+    """Match k's replay goes to the first free FILE-k, FILE-(k+1), ...: an existing
+    FILE-2 (not named by the user) is kept."""
+    taken = tmp_path / "m-2.npz"
+    taken.write_bytes(b"someone else's")
+    s = session(save_replay=tmp_path / "m.npz")
+    restart = [down(pygame.K_r)]
+    s.run(max_frames=12, event_source=script({4: restart, 8: restart}))
+    assert [e.replay for e in s.episodes] == [tmp_path / "m.npz", tmp_path / "m-3.npz",
+                                              tmp_path / "m-4.npz"]
+    assert all(e.replay.is_file() for e in s.episodes)
+    assert taken.read_bytes() == b"someone else's"
 
 
 @pytest.mark.parametrize("key", [pygame.K_p, pygame.K_ESCAPE])
@@ -231,6 +247,18 @@ def test_play_command_runs_with_headless_test(capsys):
     rc = play.run(_args("--seats", "human,smart", "--headless-test", "--max-frames", "8"))
     assert rc == 0
     assert "player 1 (wasd)" in capsys.readouterr().out
+
+
+def test_play_command_overwrites_a_replay_file_only_with_force(tmp_path):
+    old = tmp_path / "r.npz"
+    old.write_bytes(b"old")
+    args = ("--seats", "smart,random", "--headless-test", "--max-frames", "8",
+            "--save-replay", str(old))
+    with pytest.raises(InputError, match="exists \\(use --force"):
+        play.run(_args(*args))
+    assert old.read_bytes() == b"old"
+    assert play.run(_args(*args, "--force")) == 0
+    assert load_replay(old).ticks > 0
 
 
 def test_play_command_reports_a_failing_window():

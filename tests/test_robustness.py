@@ -12,7 +12,12 @@ import math
 import numpy as np
 import pytest
 
-from alphatank.commands.benchsoak import heap_mb, slope_per_million, soak_scenario
+from alphatank.commands.benchsoak import (
+    SoakResult,
+    heap_mb,
+    slope_per_million,
+    soak_scenario,
+)
 from alphatank.errors import InputError
 from alphatank.game.lineup import build_lineup
 from alphatank.game.scenarios import ScenarioError, load_scenario, parse_scenario, seats_scenario
@@ -344,3 +349,14 @@ def test_short_soak_sees_no_nan():
     assert [s[0] for s in res.samples] == [1000, 2000, 3000]
     assert all(s[1] > 0 for s in res.samples)
     assert slope_per_million([0, 1e6], [1.0, 3.0]) == pytest.approx(2.0)
+
+
+def test_a_short_soak_cannot_fail_on_a_page_of_noise():
+    """One 4 kB page over 50 steps is 78 MB per 10^6 steps: within noise, not a leak; a
+    real leak (2 kB a step) fails a short soak too."""
+    page = 4096 / 2**20
+    noise = SoakResult("s", 100, 0, 1.0, [(50, 175.8, 0.0), (100, 175.8 + page, 0.0)], 20)
+    assert noise.rss_growth > 70 and noise.rss_rise < 0.01 and noise.passed()
+    leak = SoakResult("s", 150_000, 0, 1.0, [(k, 100 + k * 2048 / 2**20, 0.0)
+                                             for k in range(30_000, 150_001, 10_000)], 30_000)
+    assert leak.rss_growth == pytest.approx(1953, rel=1e-3) and not leak.passed()

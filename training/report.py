@@ -149,6 +149,23 @@ def collect(plan: Plan, table: Table) -> list[RowResult]:
     return out
 
 
+def evaluated_rows(plan: Plan, table: Table) -> list[Row]:
+    """``table``'s rows with an evaluation of any seed of ``plan`` on disk."""
+    return [row for row in table.rows
+            if any(job.eval_file(spec).is_file() for s in range(plan.seeds)
+                   for job, specs in [plan.cells[(row.id, s)]] for spec in specs.values())]
+
+
+def reported_rows(path: Path) -> list[str]:
+    """Names of the rows with results in the report ``path`` (``<table>.json``); none when
+    it is missing or unreadable."""
+    try:
+        return [r["row"] for r in read_json(path)["rows"]
+                if any(c["per_seed"] for c in r["columns"].values())]
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return []
+
+
 # ---- formatting -----------------------------------------------------------------------
 
 def pct(x: float) -> str:

@@ -9,12 +9,11 @@ import sys
 import time
 
 from alphatank.commands.argtypes import positive_float, positive_int, seed
-from alphatank.game.arena import run_arena
+from alphatank.game.arena import arena_scenario, run_arena
 from alphatank.game.lineup import spec_seat
 from alphatank.game.scenarios import ScenarioError
 from alphatank.sim.config import game_config
 from alphatank.sim.episode import EpisodeHook
-from alphatank.sim.mapspec import load_map
 
 DEFAULT_SEATS = "smart,aggressive,defensive,dodge,random"
 
@@ -24,7 +23,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="comma-separated seats, each a bot NAME[:KEY=VALUE...][@WEAKNESS], "
                         "checkpoint:PATH or agent:NAME, e.g. 'smart,smart:ricochet=false,"
                         "random@0.5,checkpoint:runs/ppo' (default: %(default)s)")
-    p.add_argument("--map", default="maze", help="shipped map name or .txt path")
+    p.add_argument("--map", default="maze",
+                   help="shipped map or map folder (e.g. test), or a .txt map or folder path; "
+                        "a folder's games draw their map by seed (default: %(default)s)")
     p.add_argument("--games", type=positive_int, default=20,
                    help="games per pair, sides alternating (default: %(default)s)")
     p.add_argument("--seed", type=seed, default=0, help="first episode seed")
@@ -42,7 +43,8 @@ def run(args: argparse.Namespace) -> int:
         spec_seat(s)
     if len(seats) < 2:
         raise ScenarioError(f"--seats needs at least 2 seats, got {args.seats!r}")
-    spec = load_map(args.map)
+    maps = arena_scenario(seats[0], seats[1], args.map, args.preset, overrides).map_specs()
+    where = repr(maps[0].name) if len(maps) == 1 else f"{len(maps)} maps of {args.map!r}"
     cfg = game_config(args.preset, **overrides)
     hooks: list[EpisodeHook] = []
     renderer = None
@@ -55,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
         no_window = (DisplayUnavailable,)
     pairs = len(seats) * (len(seats) - 1) // 2
     print(f"arena: {len(seats)} seats, {pairs} pairs x {args.games} games on "
-          f"{spec.name!r} (preset {args.preset}, max {cfg.max_steps} ticks)", flush=True)
+          f"{where} (preset {args.preset}, max {cfg.max_steps} ticks)", flush=True)
     t0 = time.perf_counter()
     try:
         result = run_arena(seats, args.map, args.games, seed=args.seed, preset=args.preset,

@@ -63,3 +63,33 @@ def seed(text: str) -> int:
     if not 0 <= value < 2**63:
         raise argparse.ArgumentTypeError(f"must be an integer in [0, 2^63), got {text!r}")
     return value
+
+
+SCALE_RANGE = (0.1, 8.0)  # a 770 px map: 77 to 6160 px
+
+
+def scale(text: str) -> float:
+    """A window or video scale (times the map's size in px): a number in SCALE_RANGE."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    lo, hi = SCALE_RANGE
+    if not lo <= value <= hi:
+        raise argparse.ArgumentTypeError(f"must be a number in [{lo:g}, {hi:g}], got {text!r}")
+    return value
+
+
+BUDGET_MAX_MIN = 7 * 24 * 60  # a week
+
+
+def budget_minutes(text: str) -> float:
+    """A time budget in minutes: a number in (0, BUDGET_MAX_MIN]."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 0 < value <= BUDGET_MAX_MIN:
+        raise argparse.ArgumentTypeError(f"must be a number of minutes in (0, {BUDGET_MAX_MIN}] "
+                                         f"(a week), got {text!r}")
+    return value

@@ -21,7 +21,7 @@ from alphatank.commands.benchsoak import DEFAULT_SOAK_SCENARIOS, soak
 from alphatank.files import check_writable, write_text_atomic
 from alphatank.game.scenarios import ScenarioError
 from alphatank.sim.config import game_config
-from alphatank.sim.mapspec import load_map
+from alphatank.sim.mapspec import MapError, load_map
 from alphatank.sim.match import Match
 
 
@@ -101,6 +101,10 @@ def run(args: argparse.Namespace) -> int:
     if args.soak:
         return _soak(args)
     floor = find_floor(args.floor)  # a wrong --floor: one line from alphatank.cli
+    spec = load_map(args.map)
+    if spec.tank_room(8) < 8:
+        raise MapError(f"map {spec.name!r} has room for {spec.tank_room(8)} tanks; the bench "
+                       "plays 1v1 and 4v4 (8 tanks)", f"--map {args.map}")
     results: dict[str, object] = {}
     print(f"bare match on {args.map!r} ({args.preset}), tanks firing constantly, "
           f"{args.ticks} ticks x {args.repeats} runs (median):")

@@ -8,9 +8,12 @@ paper's figures beside ours, plus learning curves (and a heatmap for cross table
 from __future__ import annotations
 
 import argparse
+import functools
 import shlex
 import sys
-from pathlib import Path
+
+from alphatank.commands.argtypes import budget_minutes
+from alphatank.files import check_folder
 
 CHOICES = ("table3", "table4", "sac", "league", "heldout", "all")
 
@@ -18,8 +21,9 @@ CHOICES = ("table3", "table4", "sac", "league", "heldout", "all")
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("table", metavar="|".join(CHOICES),
                    help="the table to make (all: every table, in this order)")
-    p.add_argument("--budget", type=float, default=15.0, metavar="MINUTES",
-                   help="training time per run in minutes (default: %(default)s)")
+    p.add_argument("--budget", type=budget_minutes, default=15.0, metavar="MINUTES",
+                   help="training time per run in minutes, at most a week (default: "
+                        "%(default)s)")
     p.add_argument("--seeds", type=int, default=1, metavar="N",
                    help="training seeds per row, 0..N-1 (default: %(default)s)")
     p.add_argument("--workers", type=int, default=1, metavar="W",
@@ -33,14 +37,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--games", type=int, default=200,
                    help="evaluation games per cell (default: %(default)s)")
     p.add_argument("--rows", default="", metavar="ROW,...",
-                   help="only these rows (names or TABLE/ROW ids)")
+                   help="only these rows (names or TABLE/ROW ids); their tables also show "
+                        "every other row with results in DIR (made with the same settings)")
     p.add_argument("--steps", type=int, metavar="N",
                    help="env steps per run instead of budget x each row's planning rate "
                         "(the budget still caps the time)")
     p.add_argument("--list", action="store_true",
                    help="print the plan (rows, runs, estimated time) and exit")
     p.add_argument("--report-only", action="store_true",
-                   help="write the tables from what DIR holds, training nothing")
+                   help="write the tables from what DIR holds, training nothing (refused "
+                        "where a table in DIR shows results this one would lack: rows made "
+                        "with other settings)")
     p.add_argument("--experiments-dir", metavar="DIR",
                    help="read tables and rows from this folder instead of the shipped ones")
     p.add_argument("--wandb", default="disabled", choices=("disabled", "offline", "online"),
@@ -77,8 +84,7 @@ def run(args: argparse.Namespace) -> int:
     if args.ray is not None and args.workers != 1:
         return _error("--workers and --ray: give one (with --ray the cluster's CPUs decide "
                       "how many runs train at once)")
-    if Path(args.out).exists() and not Path(args.out).is_dir():
-        return _error(f"--out {args.out}: exists and is not a folder")
+    check_folder(args.out, "--out")
     try:
         names = table_names(args.experiments_dir)
         if args.table == "all":
@@ -90,8 +96,10 @@ def run(args: argparse.Namespace) -> int:
                           f"{', '.join([*names, 'all'])}")
         tables = load_tables(wanted, args.experiments_dir)
         rows = [r.strip() for r in args.rows.split(",") if r.strip()]
-        plan = make_plan(tables, args.out, seeds=args.seeds, budget_min=args.budget,
-                         games=args.games, steps=args.steps, wandb=args.wandb, rows=rows)
+        planned = functools.partial(make_plan, tables, args.out, seeds=args.seeds,
+                                    budget_min=args.budget, games=args.games,
+                                    steps=args.steps, wandb=args.wandb)
+        plan = planned(rows=rows)
     except (ExperimentError, ValueError) as exc:
         return _error(str(exc))
     todo = [j for j in plan.jobs if not j.complete()]
@@ -106,6 +114,22 @@ def run(args: argparse.Namespace) -> int:
     from alphatank.extras import require
 
     require("train", "alphatank experiments")
+    from alphatank.training.report import evaluated_rows, reported_rows, write_report
+
+    report = plan  # the reports: --rows, and every other row of their tables with results
+    if rows:
+        full, shown = planned(), {t.name for t in plan.tables}
+        rows += [r.id for t in full.tables if t.name in shown for r in evaluated_rows(full, t)]
+        report = planned(rows=rows)
+        args.rows = ",".join(r.name for t in report.tables for r in t.rows)  # the command
+    for t in report.tables:  # a report never loses results it shows (made otherwise)
+        coming = evaluated_rows(report, t) if args.report_only else t.rows
+        lost = sorted(set(reported_rows(report.out / f"{t.name}.json"))
+                      - {r.name for r in coming})
+        if lost:
+            return _error(f"--out {args.out}: {t.name}.json reports results of row(s) {lost} "
+                          "that this report would lack (made with other settings: see the "
+                          "command in it); give those settings, or another --out")
     command = _command(args)
     failed: dict[str, str] = {}
     if not args.report_only and todo:
@@ -142,17 +166,15 @@ def run(args: argparse.Namespace) -> int:
         finally:
             if connection is not None:
                 connection.close()
-    from alphatank.training.report import write_report
-
-    for table in plan.tables:
+    for table in report.tables:
         try:
-            data = write_report(plan, table, command)
+            data = write_report(report, table, command)
         except OSError as exc:
             return _error(f"cannot write the {table.name} report in {args.out}: {exc}")
         status = ", ".join(f"{c['kind']}: " + {True: "met", False: "not met",
                                                None: "not measurable"}[c["passed"]]
                            for c in data["checks"])
-        print(f"{plan.out / (table.name + '.md')}" + (f"  [{status}]" if status else "")
+        print(f"{report.out / (table.name + '.md')}" + (f"  [{status}]" if status else "")
               + (f"  ({len(data['missing'])} missing)" if data["missing"] else ""))
     if failed:
         print(f"{len(failed)} run(s) failed (their error.txt holds the traceback) or "

@@ -12,10 +12,11 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+from pathlib import Path
 
-from alphatank.commands.argtypes import positive_float, positive_int
+from alphatank.commands.argtypes import positive_float, positive_int, scale
 from alphatank.commands.lineup_options import add_lineup_arguments, lineup_from_args
-from alphatank.errors import one_line
+from alphatank.errors import InputError, one_line
 from alphatank.files import check_writable
 from alphatank.ui.human import HUMAN_ORDER
 from alphatank.ui.render import DisplayUnavailable, parse_overlays
@@ -26,9 +27,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_lineup_arguments(p)
     p.add_argument("--fps", type=positive_float, default=60.0,
                    help="frames per second (default: 60)")
-    p.add_argument("--scale", type=positive_float, help="window scale (default: fit the screen)")
+    p.add_argument("--scale", type=scale,
+                   help="window scale, 0.1 to 8 times the map's size (default: fit the screen)")
     p.add_argument("--save-replay", metavar="FILE",
-                   help="save each match as a replay (FILE, FILE-2, ...)")
+                   help="save each match as a replay: FILE (refused if it exists, unless "
+                        "--force), then FILE-2, FILE-3, ... (an existing one is skipped)")
+    p.add_argument("--force", action="store_true", help="overwrite an existing --save-replay")
     p.add_argument("--headless-test", action="store_true",
                    help="allow SDL_VIDEODRIVER=dummy and run frames unthrottled (automated "
                         "tests only)")
@@ -42,6 +46,9 @@ def run(args: argparse.Namespace) -> int:
         return 2
     if args.save_replay:
         check_writable(args.save_replay, "--save-replay")
+        if Path(args.save_replay).is_file() and not args.force:
+            raise InputError(f"--save-replay: {args.save_replay}: exists (use --force to "
+                             "overwrite)")
     try:
         lineup = lineup_from_args(args, interactive=True)
         session = PlaySession(lineup, seed=args.seed, fps=args.fps,

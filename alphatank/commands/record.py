@@ -11,7 +11,12 @@ import argparse
 import sys
 from pathlib import Path
 
-from alphatank.commands.argtypes import non_negative_float, positive_float, positive_int
+from alphatank.commands.argtypes import (
+    non_negative_float,
+    positive_float,
+    positive_int,
+    scale,
+)
 from alphatank.commands.lineup_options import add_lineup_arguments, lineup_from_args
 from alphatank.errors import one_line
 from alphatank.files import check_writable
@@ -32,7 +37,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--fps", type=positive_float, help="video frame rate (default: real time)")
     p.add_argument("--hold", type=non_negative_float, default=0.0,
                    help="seconds to hold the final frame (default: 0)")
-    p.add_argument("--scale", type=positive_float, default=1.0, help="video scale (default: 1)")
+    p.add_argument("--scale", type=scale, default=1.0,
+                   help="video scale, 0.1 to 8 times the map's size (default: 1)")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -22,6 +22,8 @@ from alphatank.game.lineup import Lineup, seat_label, spec_seat
 from alphatank.game.scenarios import Scenario, parse_scenario
 from alphatank.game.seats import SeatError, make_controller
 from alphatank.sim.episode import Episode, EpisodeHook
+from alphatank.sim.match import Match
+from alphatank.sim.policy import Policy
 from alphatank.stats import League, wilson_interval
 
 
@@ -85,6 +87,18 @@ def arena_scenario(first: str, second: str, map_name: str, preset: str = "paper"
                            "game": dict(game or {}), "seats": seats}, source="arena")
 
 
+def check_fit(scenario: Scenario, ctrls: Sequence[Policy]) -> None:
+    """Reset every controller in both seats of a match on each of ``scenario``'s maps, so
+    one that does not fit a map (a checkpoint trained with fewer wall slots) raises its
+    error before any game is played."""
+    cfg = scenario.game_config()
+    for spec in scenario.map_specs():
+        match = Match(cfg, spec, scenario.teams, seed=0)
+        for ctrl in ctrls:
+            for seat in range(match.n):
+                ctrl.reset(match, seat, 0)
+
+
 def run_arena(seats: Sequence[str], map_name: str = "maze", games: int = 20, seed: int = 0,
               *, preset: str = "paper", game: Mapping[str, Any] | None = None,
               on_game: Callable[[str, str, Episode], None] | None = None,
@@ -103,6 +117,7 @@ def run_arena(seats: Sequence[str], map_name: str = "maze", games: int = 20, see
     if bad:
         raise SeatError(f"arena seats need a controller; {bad} is a learner seat (give a "
                         "bot, checkpoint:PATH or agent:NAME)")
+    check_fit(arena_scenario(seats[0], seats[1], map_name, preset, game), ctrls)
     labels = [seat_label(s) for s in parsed]
     n = len(seats)
     result = ArenaResult(list(seats), np.zeros((n, n, 3), dtype=np.int64), League(list(seats)))

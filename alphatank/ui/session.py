@@ -120,11 +120,15 @@ class PlaySession(EpisodeHook):
     # -- episodes --
 
     def _replay_path(self) -> Path | None:
-        if self.save_path is None:
-            return None
-        k = len(self.episodes) + 1
-        return self.save_path if k == 1 else self.save_path.with_name(
-            f"{self.save_path.stem}-{k}{self.save_path.suffix}")
+        """Match 1's replay goes to ``save_path`` (FILE), match k's to the first of FILE-k,
+        FILE-(k+1), ... that does not exist: files the user did not name are never
+        overwritten."""
+        if self.save_path is None or not self.episodes:
+            return self.save_path
+        p, k = self.save_path, len(self.episodes) + 1
+        while (path := p.with_name(f"{p.stem}-{k}{p.suffix}")).exists():
+            k += 1
+        return path
 
     def start_new(self, seed: int) -> None:
         self.seed = seed
