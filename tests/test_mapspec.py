@@ -5,7 +5,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from alphatank.sim.mapspec import MapError, load_map, map_text, merge_walls, parse_map, shipped_maps
+from alphatank.mapgen.generate import MAX_SIZE, generate
+from alphatank.sim.mapspec import (
+    MAX_FLOOR,
+    MapError,
+    load_map,
+    map_text,
+    merge_walls,
+    parse_map,
+    shipped_maps,
+)
 
 GOOD = """\
 ; a comment line
@@ -103,6 +112,29 @@ def test_malformed_maps_name_file_line_column(text, line, col, fragment):
     assert (err.source, err.line, err.col) == ("bad.txt", line, col)
     assert fragment in err.message
     assert str(err).startswith(f"bad.txt:{line}")
+
+
+def _room(rows: int, cols: int, header: str = "") -> str:
+    """A walled room with ``rows`` x ``cols`` floor cells."""
+    wall, floor = "#" * (cols + 2), "#" + "." * cols + "#"
+    return header + "\n".join([wall, *[floor] * rows, wall]) + "\n"
+
+
+def test_floor_and_world_size_limits_name_the_limit():
+    assert (~parse_map(_room(64, 64), "big.txt").walls).sum() == MAX_FLOOR == 4096
+    with pytest.raises(MapError) as info:
+        parse_map(_room(64, 65), "big.txt")
+    assert str(info.value) == "big.txt:1:1: 4160 floor cells (anything but '#'); at most 4096"
+    assert parse_map(_room(5, 20, "cell: 400\n\n"), "wide.txt").width == 8800
+    with pytest.raises(MapError) as info:
+        parse_map(_room(5, 21, "name: w\ncell: 400\n\n"), "wide.txt")
+    assert str(info.value) == ("wide.txt:2:1: world of 9200 x 2800 px (7 x 23 cells of 400 px);"
+                               " at most 8960 px each way")
+    with pytest.raises(MapError, match=r"big.txt:1:1: grid of 3 x 129 cells; at most 128 each"):
+        parse_map(_room(1, 127), "big.txt")
+    # the map generator's largest size, with no interior walls, loads
+    spec = generate(MAX_SIZE, MAX_SIZE, "open", density=0.0)
+    assert parse_map(map_text(spec)).rows == MAX_SIZE
 
 
 def test_comment_lines_keep_original_line_numbers():

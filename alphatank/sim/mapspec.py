@@ -22,6 +22,8 @@ HEADER_KEYS = ("name", "cell", "description", "zones", "author")
 DEFAULT_CELL = 70.0
 CELL_RANGE = (16.0, 400.0)  # px per cell: tanks (30 x 24 px) need room, worlds stay drawable
 MAX_GRID = 128  # cells each way
+MAX_FLOOR = 64 * 64  # floor cells: navigation keeps (F, F) tables (64 MiB each at most)
+MAX_WORLD = MAX_GRID * DEFAULT_CELL  # px each way: the bots' 5 px clearance raster
 
 
 class MapError(InputError, ValueError):
@@ -186,6 +188,10 @@ def parse_map(text: str, source: str = "<string>", name: str | None = None) -> M
             raise MapError(f"header 'cell' must be a positive number of px in [{lo:g}, "
                            f"{hi:g}], got {header['cell']!r}", source,
                            _header_line(content, "cell"), 1)
+    if max(len(grid), width) * cell > MAX_WORLD:
+        raise MapError(f"world of {width * cell:g} x {len(grid) * cell:g} px ({len(grid)} x "
+                       f"{width} cells of {cell:g} px); at most {MAX_WORLD:g} px each way",
+                       source, _header_line(content, "cell") or grid[0][0], 1)
     zones = header.get("zones", "")
     if zones not in ("", "random", "fixed"):
         raise MapError(f"header 'zones' must be 'random' or 'fixed', got {zones!r}",
@@ -216,6 +222,9 @@ def parse_map(text: str, source: str = "<string>", name: str | None = None) -> M
                 debuffs.append((r, c))
     if walls.all():
         raise MapError("map has no floor cells", source, grid[0][0], 1)
+    if (~walls).sum() > MAX_FLOOR:
+        raise MapError(f"{(~walls).sum()} floor cells (anything but '#'); at most {MAX_FLOOR}",
+                       source, grid[0][0], 1)
 
     if spawns:
         first = min(spawns)
