@@ -137,6 +137,18 @@ def test_floor_and_world_size_limits_name_the_limit():
     assert parse_map(map_text(spec)).rows == MAX_SIZE
 
 
+def test_trailing_comments_on_cell_and_zones_lines_only():
+    readme = (Path(__file__).parents[1] / "README.md").read_text(encoding="utf-8")
+    zones = next(ln for ln in readme.splitlines() if ln.startswith("zones: random "))
+    assert ";" in zones  # the README's example line, as written there
+    spec = parse_map(f"name: a;b\ndescription: walls; spawns\ncell: 50 ; px\n{zones}\n\n"
+                     "####\n#12#\n####\n", "c.txt")
+    assert (spec.name, spec.description, spec.cell, spec.random_zones) == (
+        "a;b", "walls; spawns", 50.0, True)
+    with pytest.raises(MapError, match=r"c.txt:1:1: header 'zones' must be .* got 'often'"):
+        parse_map("zones: often ; random\n\n###\n#1#\n###\n", "c.txt")
+
+
 def test_comment_lines_keep_original_line_numbers():
     with pytest.raises(MapError) as info:
         parse_map("; c1\n; c2\n###\n#?#\n###\n", "c.txt")

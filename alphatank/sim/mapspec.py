@@ -2,7 +2,8 @@
 
 Format (RULES.md): optional ``key: value`` header lines, a blank line, then the grid, one
 character per cell: ``#`` wall, ``.`` floor, ``1``-``8`` spawn of tank slot N, ``+`` buff
-zone, ``-`` debuff zone. Lines starting with ``;`` are comments.
+zone, ``-`` debuff zone. Lines starting with ``;`` are comments, and so is the rest of a
+``cell`` or ``zones`` header line from a ``;`` (in free-text values, ``;`` is text).
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from alphatank.sim.grid import floor_areas, reachable_from
 
 GRID_CHARS = "#.12345678+-"
 HEADER_KEYS = ("name", "cell", "description", "zones", "author")
+COMMENT_KEYS = ("cell", "zones")  # values never hold ';': the rest of the line is a comment
 DEFAULT_CELL = 70.0
 CELL_RANGE = (16.0, 400.0)  # px per cell: tanks (30 x 24 px) need room, worlds stay drawable
 MAX_GRID = 128  # cells each way
@@ -146,6 +148,8 @@ def parse_map(text: str, source: str = "<string>", name: str | None = None) -> M
                 raise MapError("header line must be 'key: value' (end the header with a blank "
                                "line before the grid)", source, lineno, 1)
             key, value = (p.strip() for p in ln.split(":", 1))
+            if key in COMMENT_KEYS:
+                value = value.split(";", 1)[0].rstrip()
             if key not in HEADER_KEYS:
                 raise MapError(f"unknown header key {key!r}; valid keys: {list(HEADER_KEYS)}",
                                source, lineno, 1)
