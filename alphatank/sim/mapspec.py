@@ -22,7 +22,9 @@ GRID_CHARS = "#.12345678+-"
 HEADER_KEYS = ("name", "cell", "description", "zones", "author")
 COMMENT_KEYS = ("cell", "zones")  # values never hold ';': the rest of the line is a comment
 DEFAULT_CELL = 70.0
-CELL_RANGE = (16.0, 400.0)  # px per cell: tanks (30 x 24 px) need room, worlds stay drawable
+# px per cell: the default 30 x 24 px tank turns in one (its diagonal is 38.4 px; a match
+# checks the game's tank size), worlds stay drawable
+CELL_RANGE = (39.0, 400.0)
 MAX_GRID = 128  # cells each way
 MAX_FLOOR = 64 * 64  # floor cells: navigation keeps (F, F) tables (64 MiB each at most)
 MAX_WORLD = MAX_GRID * DEFAULT_CELL  # px each way: the bots' 5 px clearance raster
