@@ -5,6 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from alphatank.cli import main
 from alphatank.mapgen.generate import MAX_SIZE, generate
 from alphatank.sim.mapspec import (
     MAX_FLOOR,
@@ -93,6 +94,8 @@ BAD = [
     # (text, line, col, message fragment)
     ("#####\n#1.2#\n#..#\n#####\n", 3, 5, "ragged row"),
     ("#####\n#1x2#\n#####\n", 2, 3, "unknown character 'x'"),
+    ("#####\n\t#1.2#\n#####\n", 2, 1, "unknown character '\\t'"),  # not a ragged row
+    ("#####\n #1.2\n#####\n", 2, 1, "unknown character ' '"),
     ("#####\n#1.1#\n#####\n", 2, 4, "duplicate spawn 1"),
     ("#####\n#1#2#\n#####\n", 2, 4, "spawn 2 cannot be reached"),
     ("; only a comment\n\n", 2, 0, "empty map"),
@@ -147,6 +150,17 @@ def test_trailing_comments_on_cell_and_zones_lines_only():
         "a;b", "walls; spawns", 50.0, True)
     with pytest.raises(MapError, match=r"c.txt:1:1: header 'zones' must be .* got 'often'"):
         parse_map("zones: often ; random\n\n###\n#1#\n###\n", "c.txt")
+
+
+def test_an_empty_map_path_is_refused_not_the_current_folder(tmp_path, monkeypatch, capsys):
+    (tmp_path / "a.txt").write_text("#####\n#1.2#\n#####\n")
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(MapError, match=r"^'': empty map name or path; give a shipped map's"):
+        load_map("")
+    assert main(["maps", ""]) == 1
+    assert capsys.readouterr().out == ("error: '': empty map name or path; give a shipped map's "
+                                       "name (e.g. 'maze') or a .txt file\n")
+    assert main(["maps", "."]) == 0 and "a.txt: ok" in capsys.readouterr().out
 
 
 def test_comment_lines_keep_original_line_numbers():

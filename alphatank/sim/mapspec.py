@@ -176,6 +176,10 @@ def parse_map(text: str, source: str = "<string>", name: str | None = None) -> M
     for lineno, row in grid:
         if not row:
             raise MapError("blank line inside the grid", source, lineno, 1)
+        for c, ch in enumerate(row):  # before the width: a tab or space is not a cell
+            if ch not in GRID_CHARS:
+                raise MapError(f"unknown character {ch!r}; allowed: '#' wall, '.' floor, "
+                               "'1'-'8' spawn, '+' buff, '-' debuff", source, lineno, c + 1)
         if len(row) != width:
             raise MapError(f"ragged row: {len(row)} cells, expected {width} like the first row",
                            source, lineno, min(len(row), width) + 1)
@@ -209,9 +213,6 @@ def parse_map(text: str, source: str = "<string>", name: str | None = None) -> M
     buffs, debuffs = [], []
     for r, (lineno, row) in enumerate(grid):
         for c, ch in enumerate(row):
-            if ch not in GRID_CHARS:
-                raise MapError(f"unknown character {ch!r}; allowed: '#' wall, '.' floor, "
-                               "'1'-'8' spawn, '+' buff, '-' debuff", source, lineno, c + 1)
             if ch == "#":
                 walls[r, c] = True
             elif ch.isdigit():
@@ -302,6 +303,9 @@ def shipped_map_folders() -> list[str]:
 
 def load_map(name_or_path: str | Path) -> MapSpec:
     """Load a shipped map by name (``"maze"``) or any map file by path."""
+    if not str(name_or_path):  # Path("") is the current folder
+        raise MapError("empty map name or path; give a shipped map's name (e.g. 'maze') or a "
+                       ".txt file", "''")
     path = Path(name_or_path)
     if path.suffix == ".txt" or path.exists():
         if path.is_dir():
