@@ -198,10 +198,11 @@ CASES = [
     ("maps-binary", ["maps", "{binary_txt}"], ["{binary_txt}", "UTF-8"]),
     ("maps-latin1", ["maps", "{latin1_txt}"], ["{latin1_txt}", "UTF-8"]),
     ("maps-utf16", ["maps", "{utf16_txt}"], ["{utf16_txt}", "UTF-16"]),
-    ("maps-cell-inf", ["maps", "{cellinf_txt}"], ["{cellinf_txt}:1", "'cell'", "[16, 400]"]),
+    ("maps-cell-inf", ["maps", "{cellinf_txt}"], ["{cellinf_txt}:1", "'cell'", "[39, 400]"]),
     ("maps-cell-tiny", ["maps", "{cellsmall_txt}"], ["{cellsmall_txt}:1", "'cell'"]),
     ("maps-no-room", ["maps", "{noroom_txt}"], ["{noroom_txt}:3", "only 3 tank(s) fit"]),
     ("maps-folder", ["maps", "{emptydir}"], ["{emptydir}", "folder"]),
+    ("maps-empty-path", ["maps", ""], ["''", "empty map name or path"]),
     ("maps-wrong-kind", ["maps", "{good_npz}"], ["{good_npz}", "UTF-8"]),
     # bench
     ("bench-map", ["bench", "--map", "{missing}"], ["{missing}", "no such map file"]),
@@ -485,7 +486,8 @@ CASES = [
 MAPGEN_CASES = [
     ("mapgen-validate-missing", ["validate", "{missing}"], ["{missing}", "no such map"]),
     ("mapgen-validate-binary", ["validate", "{binary_txt}"], ["{binary_txt}", "UTF-8"]),
-    ("mapgen-validate-cell", ["validate", "{cellinf_txt}"], ["'cell'", "[16, 400]"]),
+    ("mapgen-validate-cell", ["validate", "{cellinf_txt}"], ["'cell'", "[39, 400]"]),
+    ("mapgen-validate-empty-path", ["validate", ""], ["''", "empty map name or path"]),
     ("mapgen-validate-room", ["validate", "{good_txt}", "--teams", "ABCDEFGHIJKL"],
      ["{good_txt}", "room for"]),
     ("mapgen-preview-utf16", ["preview", "{utf16_txt}", "--no-png"], ["UTF-16"]),

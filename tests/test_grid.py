@@ -57,10 +57,6 @@ def test_searches_match_a_reference_bfs(seed):
     for i, first in enumerate(firsts):
         assert ((labels == i) == (reference_distances(walls, [first]) >= 0)).all()
     assert (labels[walls] == -1).all()
-    g = grid.floor_graph(walls)
-    many = grid.bfs_layers(g.neighbors, np.eye(g.size, dtype=bool))
-    for i in rng.integers(g.size, size=3):
-        assert many[int(i)].tolist() == grid.bfs(g, [int(i)])
 
 
 def test_floor_graphs_are_shared_and_read_only():

@@ -5,7 +5,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from alphatank.sim.mapspec import MapError, load_map, map_text, merge_walls, parse_map, shipped_maps
+from alphatank.cli import main
+from alphatank.mapgen.generate import MAX_SIZE, generate
+from alphatank.sim.mapspec import (
+    MAX_FLOOR,
+    MapError,
+    load_map,
+    map_text,
+    merge_walls,
+    parse_map,
+    shipped_maps,
+)
 
 GOOD = """\
 ; a comment line
@@ -84,6 +94,8 @@ BAD = [
     # (text, line, col, message fragment)
     ("#####\n#1.2#\n#..#\n#####\n", 3, 5, "ragged row"),
     ("#####\n#1x2#\n#####\n", 2, 3, "unknown character 'x'"),
+    ("#####\n\t#1.2#\n#####\n", 2, 1, "unknown character '\\t'"),  # not a ragged row
+    ("#####\n #1.2\n#####\n", 2, 1, "unknown character ' '"),
     ("#####\n#1.1#\n#####\n", 2, 4, "duplicate spawn 1"),
     ("#####\n#1#2#\n#####\n", 2, 4, "spawn 2 cannot be reached"),
     ("; only a comment\n\n", 2, 0, "empty map"),
@@ -103,6 +115,52 @@ def test_malformed_maps_name_file_line_column(text, line, col, fragment):
     assert (err.source, err.line, err.col) == ("bad.txt", line, col)
     assert fragment in err.message
     assert str(err).startswith(f"bad.txt:{line}")
+
+
+def _room(rows: int, cols: int, header: str = "") -> str:
+    """A walled room with ``rows`` x ``cols`` floor cells."""
+    wall, floor = "#" * (cols + 2), "#" + "." * cols + "#"
+    return header + "\n".join([wall, *[floor] * rows, wall]) + "\n"
+
+
+def test_floor_and_world_size_limits_name_the_limit():
+    assert (~parse_map(_room(64, 64), "big.txt").walls).sum() == MAX_FLOOR == 4096
+    with pytest.raises(MapError) as info:
+        parse_map(_room(64, 65), "big.txt")
+    assert str(info.value) == "big.txt:1:1: 4160 floor cells (anything but '#'); at most 4096"
+    assert parse_map(_room(5, 20, "cell: 400\n\n"), "wide.txt").width == 8800
+    with pytest.raises(MapError) as info:
+        parse_map(_room(5, 21, "name: w\ncell: 400\n\n"), "wide.txt")
+    assert str(info.value) == ("wide.txt:2:1: world of 9200 x 2800 px (7 x 23 cells of 400 px);"
+                               " at most 8960 px each way")
+    with pytest.raises(MapError, match=r"big.txt:1:1: grid of 3 x 129 cells; at most 128 each"):
+        parse_map(_room(1, 127), "big.txt")
+    # the map generator's largest size, with no interior walls, loads
+    spec = generate(MAX_SIZE, MAX_SIZE, "open", density=0.0)
+    assert parse_map(map_text(spec)).rows == MAX_SIZE
+
+
+def test_trailing_comments_on_cell_and_zones_lines_only():
+    readme = (Path(__file__).parents[1] / "README.md").read_text(encoding="utf-8")
+    zones = next(ln for ln in readme.splitlines() if ln.startswith("zones: random "))
+    assert ";" in zones  # the README's example line, as written there
+    spec = parse_map(f"name: a;b\ndescription: walls; spawns\ncell: 50 ; px\n{zones}\n\n"
+                     "####\n#12#\n####\n", "c.txt")
+    assert (spec.name, spec.description, spec.cell, spec.random_zones) == (
+        "a;b", "walls; spawns", 50.0, True)
+    with pytest.raises(MapError, match=r"c.txt:1:1: header 'zones' must be .* got 'often'"):
+        parse_map("zones: often ; random\n\n###\n#1#\n###\n", "c.txt")
+
+
+def test_an_empty_map_path_is_refused_not_the_current_folder(tmp_path, monkeypatch, capsys):
+    (tmp_path / "a.txt").write_text("#####\n#1.2#\n#####\n")
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(MapError, match=r"^'': empty map name or path; give a shipped map's"):
+        load_map("")
+    assert main(["maps", ""]) == 1
+    assert capsys.readouterr().out == ("error: '': empty map name or path; give a shipped map's "
+                                       "name (e.g. 'maze') or a .txt file\n")
+    assert main(["maps", "."]) == 0 and "a.txt: ok" in capsys.readouterr().out
 
 
 def test_comment_lines_keep_original_line_numbers():

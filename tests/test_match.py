@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from alphatank.sim.config import ConfigError, GameConfig, RewardConfig, from_dict, game_config
-from alphatank.sim.mapspec import load_map, parse_map
+from alphatank.sim.mapspec import MapError, load_map, parse_map
 from alphatank.sim.match import Match
 
 IDLE, FIRE = (1, 1, 0), (1, 1, 1)
@@ -209,6 +209,17 @@ def test_flag_and_count_rows_stay_views_and_wall_follows_contacts():
         assert touched and released
         assert np.array_equal(m.flags, [m.alive, m.wall, m.in_buff, m.in_debuff])
         assert np.array_equal(m.counts, [m.cooldown, m.bullets_alive])
+
+
+def test_tanks_bigger_than_the_cells_are_refused_naming_map_and_sizes():
+    spec = parse_map("cell: 50\n\n#####\n#1.2#\n#####\n", "small.txt")
+    Match(game_config(tank_width=40.0, tank_height=30.0), spec, ["A", "B"], seed=0)  # 50 px
+    with pytest.raises(MapError) as info:
+        Match(game_config(tank_width=40.0, tank_height=40.0), spec, ["A", "B"], seed=0)
+    assert str(info.value) == (
+        "small.txt: cells of 50 px are too small for tanks of 40 x 40 px (tank_width, "
+        "tank_height): a tank spawns and turns in one cell, which needs cells of at least its "
+        "diagonal, 56.6 px")
 
 
 def test_config_rejects_unknown_keys_and_slow_bullets():

@@ -5,9 +5,11 @@ from collections import deque
 import numpy as np
 import pytest
 
+from alphatank.mapgen.generate import generate
 from alphatank.sim.config import GameConfig
+from alphatank.sim.grid import bfs, floor_graph
 from alphatank.sim.mapspec import load_map, parse_map, shipped_maps
-from alphatank.sim.navigation import nav_grid
+from alphatank.sim.navigation import NavGrid, nav_grid
 from alphatank.sim.world import World
 
 
@@ -132,3 +134,32 @@ def test_clearance_map_distances():
     assert clear[3] == 0.0  # inside a wall
     assert g.clearance(np.array([[-50.0, 20.0]]))[0] == 0.0  # off the grid
     assert g.clearance_map() is g.clearance_map()  # computed once
+
+
+@pytest.mark.parametrize("algorithm", ["open", "maze", "scatter"])
+def test_tables_and_rasters_of_a_big_map_match_plain_computations(algorithm):
+    spec = generate(40, 44, algorithm, seed=3)
+    g = NavGrid(spec)
+    assert g.n_floor > 512  # several 256-cell chunks of visibility
+    rng = np.random.default_rng(0)
+    graph = floor_graph(spec.walls)
+    for a in rng.integers(g.n_floor, size=5):
+        assert g.dist_table[a].tolist() == bfs(graph, [int(a)])
+        row = g.visible_row(int(a), 16.0)
+        p = np.broadcast_to(g.centers[a], g.centers.shape)
+        assert (row == g.segments_clear(p, g.centers, 16.0)).all()
+    for a, b in rng.integers(g.n_floor, size=(300, 2)):
+        d = g.dist_table[a, b]
+        closer = [n for n in g.neighbors[a] if n >= 0 and g.dist_table[n, b] == d - 1]
+        assert g.next_table[a, b] == (a if d == 0 else closer[0] if d > 0 else -1)
+    # the clearance raster: every raster point against the border and every wall rectangle
+    for res in (5.0, 3.0):
+        h, w = spec.height, spec.width
+        px, py = np.meshgrid((np.arange(int(np.ceil(w / res))) + 0.5) * res,
+                             (np.arange(int(np.ceil(h / res))) + 0.5) * res)
+        ref = np.minimum(np.minimum(px, w - px), np.minimum(py, h - py))
+        for x0, y0, x1, y1 in g.rects:
+            dx = np.maximum(np.maximum(x0 - px, px - x1), 0.0)
+            dy = np.maximum(np.maximum(y0 - py, py - y1), 0.0)
+            np.minimum(ref, np.hypot(dx, dy), out=ref)
+        assert np.array_equal(g.clearance_map(res), ref.astype(np.float32))

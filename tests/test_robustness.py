@@ -171,9 +171,9 @@ def test_map_encodings(tmp_path):
             load_map(p)
 
 
-@pytest.mark.parametrize("cell", ["inf", "nan", "0.001", "-3", "1e9", "x"])
+@pytest.mark.parametrize("cell", ["inf", "nan", "0.001", "-3", "1e9", "x", "16", "38.9"])
 def test_cell_size_must_be_sane(cell):
-    with pytest.raises(MapError, match=r"'cell' must be a positive number of px in \[16, 400\]"):
+    with pytest.raises(MapError, match=r"'cell' must be a positive number of px in \[39, 400\]"):
         parse_map(f"cell: {cell}\n\n#####\n#1.2#\n#####\n", "c.txt")
 
 

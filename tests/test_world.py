@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from alphatank.sim.config import PRESETS, game_config, replace
-from alphatank.sim.mapspec import load_map, parse_map, shipped_maps
+from alphatank.sim.mapspec import CELL_RANGE, load_map, map_text, parse_map, shipped_maps
 from alphatank.sim.world import WALLS_ONLY, World, first_wall_hit, substeps_for
 
 
@@ -152,6 +152,25 @@ def test_tanks_never_sink_into_walls(seed):
     w = _world(spec, cfg, [(105, 105, 0.3), (665, 665, 2.0)])
     worst = 0.0
     for t in range(2000):
+        if t % 20 == 0:
+            cmds = rng.integers(-1, 2, size=(2, 2))
+        for i in range(2):
+            w.drive(i, int(cmds[i, 0]), 1 if cmds[i, 1] >= 0 else -1)
+        w.step()
+        worst = max(worst, _max_overlap(w, 0), _max_overlap(w, 1))
+    assert worst < 1.0
+
+
+def test_tanks_turn_and_drive_in_corridors_of_the_smallest_cell():
+    smallest = f"name: maze\ncell: {CELL_RANGE[0]:g}\n"  # a corridor maze of 39 px cells
+    text = map_text(load_map("maze")).replace("name: maze\n", smallest)
+    spec = parse_map(text, "small.txt")
+    cfg = game_config()
+    rng = np.random.default_rng(0)
+    a, b = spec.cell_center((1, 1)), spec.cell_center((9, 9))
+    w = _world(spec, cfg, [(*a, math.pi / 4), (*b, 0.9)])  # 0.9 rad: the box's diagonal
+    worst = max(_max_overlap(w, 0), _max_overlap(w, 1))
+    for t in range(600):
         if t % 20 == 0:
             cmds = rng.integers(-1, 2, size=(2, 2))
         for i in range(2):

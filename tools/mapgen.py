@@ -181,7 +181,7 @@ def _map_sources(items: list[str]) -> list[str]:
     out: list[str] = []
     for item in items:
         p = Path(item)
-        if p.is_dir():
+        if item and p.is_dir():  # not '': Path('') is the current folder
             found = sorted(str(f) for f in p.glob("*.txt"))
             out += found or [item]
         else:
@@ -192,7 +192,7 @@ def _map_sources(items: list[str]) -> list[str]:
 def cmd_validate(args: argparse.Namespace) -> int:
     status = 0
     for src in _map_sources(args.maps):
-        if Path(src).is_dir():
+        if src and Path(src).is_dir():
             print(f"{src}: folder holds no .txt maps")
             status = 1
             continue

@@ -26,7 +26,7 @@ def _expand(items: list[str]) -> list[str]:
     out: list[str] = []
     for item in items:
         path = Path(item)
-        if path.is_dir():
+        if item and path.is_dir():  # not '': Path('') is the current folder
             out += sorted(str(f) for f in path.glob("*.txt")) or [item]  # empty: an error
         elif item.strip("/") in shipped_map_folders():
             out += shipped_maps(item.strip("/"))

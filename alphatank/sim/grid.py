@@ -4,10 +4,9 @@ One home for the grid searches that map validation (:mod:`alphatank.sim.mapspec`
 placement (:mod:`alphatank.sim.match`), navigation (:mod:`alphatank.sim.navigation`) and
 map generation (:mod:`alphatank.mapgen`) share. ``walls`` is a (rows, cols) bool array;
 outside the grid counts as wall. The primitive is the :class:`FloorGraph` (floor cells and
-their 4-neighbours, cached per wall grid) with two breadth-first searches over it:
-:func:`bfs` (one search, plain Python lists: fastest for a single distance field) and
-:func:`bfs_layers` (many searches at once, one numpy step per layer: all-pairs distances
-for navigation).
+their 4-neighbours, cached per wall grid) with a breadth-first search over it, :func:`bfs`
+(plain Python lists: fastest for a single distance field; navigation compiles its own
+all-pairs search).
 """
 
 from __future__ import annotations
@@ -102,30 +101,6 @@ def _search(adj: Sequence[Sequence[int]], dist: list[int], starts: Sequence[int]
         reached += nxt
         frontier = nxt
     return reached
-
-
-def bfs_layers(neighbors: np.ndarray, sources: np.ndarray) -> np.ndarray:
-    """Many breadth-first searches at once, one numpy step per layer (all-pairs
-    distances: every cell a source). ``neighbors`` (F, k), -1 padded; ``sources`` (S, F)
-    bool, row s the start cells of search s. Returns (S, F) int32 steps from the nearest
-    start of each search, -1 where unreachable (row s equals :func:`bfs` of its starts).
-    """
-    f = neighbors.shape[0]
-    sources = np.asarray(sources, dtype=bool).reshape(-1, f)
-    dist = np.where(sources, 0, -1).astype(np.int32)
-    nbr = np.where(neighbors >= 0, neighbors, f)  # f: an always-False padding column
-    frontier = np.zeros((len(sources), f + 1), dtype=bool)
-    frontier[:, :f] = sources
-    visited = sources.copy()
-    d = 0
-    while True:
-        d += 1
-        new = frontier[:, nbr].any(axis=2) & ~visited  # new[s, v]: v touches the frontier
-        if not new.any():
-            return dist
-        dist[new] = d
-        visited |= new
-        frontier[:, :f] = new
 
 
 def _on_grid(graph: FloorGraph, values: Sequence[int]) -> np.ndarray:

@@ -2,7 +2,8 @@
 
 Format (RULES.md): optional ``key: value`` header lines, a blank line, then the grid, one
 character per cell: ``#`` wall, ``.`` floor, ``1``-``8`` spawn of tank slot N, ``+`` buff
-zone, ``-`` debuff zone. Lines starting with ``;`` are comments.
+zone, ``-`` debuff zone. Lines starting with ``;`` are comments, and so is the rest of a
+``cell`` or ``zones`` header line from a ``;`` (in free-text values, ``;`` is text).
 """
 
 from __future__ import annotations
@@ -19,9 +20,14 @@ from alphatank.sim.grid import floor_areas, reachable_from
 
 GRID_CHARS = "#.12345678+-"
 HEADER_KEYS = ("name", "cell", "description", "zones", "author")
+COMMENT_KEYS = ("cell", "zones")  # values never hold ';': the rest of the line is a comment
 DEFAULT_CELL = 70.0
-CELL_RANGE = (16.0, 400.0)  # px per cell: tanks (30 x 24 px) need room, worlds stay drawable
+# px per cell: the default 30 x 24 px tank turns in one (its diagonal is 38.4 px; a match
+# checks the game's tank size), worlds stay drawable
+CELL_RANGE = (39.0, 400.0)
 MAX_GRID = 128  # cells each way
+MAX_FLOOR = 64 * 64  # floor cells: navigation keeps (F, F) tables (64 MiB each at most)
+MAX_WORLD = MAX_GRID * DEFAULT_CELL  # px each way: the bots' 5 px clearance raster
 
 
 class MapError(InputError, ValueError):
@@ -144,6 +150,8 @@ def parse_map(text: str, source: str = "<string>", name: str | None = None) -> M
                 raise MapError("header line must be 'key: value' (end the header with a blank "
                                "line before the grid)", source, lineno, 1)
             key, value = (p.strip() for p in ln.split(":", 1))
+            if key in COMMENT_KEYS:
+                value = value.split(";", 1)[0].rstrip()
             if key not in HEADER_KEYS:
                 raise MapError(f"unknown header key {key!r}; valid keys: {list(HEADER_KEYS)}",
                                source, lineno, 1)
@@ -168,6 +176,10 @@ def parse_map(text: str, source: str = "<string>", name: str | None = None) -> M
     for lineno, row in grid:
         if not row:
             raise MapError("blank line inside the grid", source, lineno, 1)
+        for c, ch in enumerate(row):  # before the width: a tab or space is not a cell
+            if ch not in GRID_CHARS:
+                raise MapError(f"unknown character {ch!r}; allowed: '#' wall, '.' floor, "
+                               "'1'-'8' spawn, '+' buff, '-' debuff", source, lineno, c + 1)
         if len(row) != width:
             raise MapError(f"ragged row: {len(row)} cells, expected {width} like the first row",
                            source, lineno, min(len(row), width) + 1)
@@ -186,6 +198,10 @@ def parse_map(text: str, source: str = "<string>", name: str | None = None) -> M
             raise MapError(f"header 'cell' must be a positive number of px in [{lo:g}, "
                            f"{hi:g}], got {header['cell']!r}", source,
                            _header_line(content, "cell"), 1)
+    if max(len(grid), width) * cell > MAX_WORLD:
+        raise MapError(f"world of {width * cell:g} x {len(grid) * cell:g} px ({len(grid)} x "
+                       f"{width} cells of {cell:g} px); at most {MAX_WORLD:g} px each way",
+                       source, _header_line(content, "cell") or grid[0][0], 1)
     zones = header.get("zones", "")
     if zones not in ("", "random", "fixed"):
         raise MapError(f"header 'zones' must be 'random' or 'fixed', got {zones!r}",
@@ -197,9 +213,6 @@ def parse_map(text: str, source: str = "<string>", name: str | None = None) -> M
     buffs, debuffs = [], []
     for r, (lineno, row) in enumerate(grid):
         for c, ch in enumerate(row):
-            if ch not in GRID_CHARS:
-                raise MapError(f"unknown character {ch!r}; allowed: '#' wall, '.' floor, "
-                               "'1'-'8' spawn, '+' buff, '-' debuff", source, lineno, c + 1)
             if ch == "#":
                 walls[r, c] = True
             elif ch.isdigit():
@@ -216,6 +229,9 @@ def parse_map(text: str, source: str = "<string>", name: str | None = None) -> M
                 debuffs.append((r, c))
     if walls.all():
         raise MapError("map has no floor cells", source, grid[0][0], 1)
+    if (~walls).sum() > MAX_FLOOR:
+        raise MapError(f"{(~walls).sum()} floor cells (anything but '#'); at most {MAX_FLOOR}",
+                       source, grid[0][0], 1)
 
     if spawns:
         first = min(spawns)
@@ -287,6 +303,9 @@ def shipped_map_folders() -> list[str]:
 
 def load_map(name_or_path: str | Path) -> MapSpec:
     """Load a shipped map by name (``"maze"``) or any map file by path."""
+    if not str(name_or_path):  # Path("") is the current folder
+        raise MapError("empty map name or path; give a shipped map's name (e.g. 'maze') or a "
+                       ".txt file", "''")
     path = Path(name_or_path)
     if path.suffix == ".txt" or path.exists():
         if path.is_dir():

@@ -17,7 +17,7 @@ import numpy as np
 
 from alphatank.sim.config import GameConfig
 from alphatank.sim.grid import floor_areas, reachable_from
-from alphatank.sim.mapspec import MapSpec
+from alphatank.sim.mapspec import MapError, MapSpec
 from alphatank.sim.world import World
 
 ACTION_HELP = "rotate 0..2 (0 ccw, 1 none, 2 cw), move 0..2 (0 back, 1 stop, 2 forward), fire 0..1"
@@ -110,6 +110,12 @@ class Match:
             raise ValueError(f"a match needs at least 2 tanks, got teams={list(teams)}")
         if len(set(teams)) < 2:
             raise ValueError(f"a match needs at least 2 teams, got teams={list(teams)}")
+        diagonal = math.hypot(cfg.tank_width, cfg.tank_height)
+        if spec.cell < diagonal:
+            raise MapError(f"cells of {spec.cell:g} px are too small for tanks of "
+                           f"{cfg.tank_width:g} x {cfg.tank_height:g} px (tank_width, "
+                           f"tank_height): a tank spawns and turns in one cell, which needs "
+                           f"cells of at least its diagonal, {diagonal:.1f} px", spec.source)
         self.cfg, self.spec = cfg, spec
         self.teams = list(teams)
         self.team_names = sorted(set(teams))

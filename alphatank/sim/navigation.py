@@ -16,6 +16,9 @@ as numpy arrays for bulk use:
 ``rects``       (R, 4) float64: the map's merged wall rectangles (x0, y0, x1, y1) in px.
 ``diameter``    the longest BFS distance between two floor cells (at least 1).
 
+The two (F, F) tables come from compiled loops (numba) in F * F steps; the map loader
+keeps F at most :data:`~alphatank.sim.mapspec.MAX_FLOOR` (4096: 64 MiB a table).
+
 Lazily computed and cached: ``visible_row(i, radius)`` (cells seen from cell ``i``),
 ``waypoint_idx(i, j, radius)`` (string-pulled route target) and ``clearance_map(res)``
 (distance-to-wall raster, read with ``clearance(xy)``).
@@ -35,8 +38,9 @@ import math
 from collections import OrderedDict
 
 import numpy as np
+from numba import njit
 
-from alphatank.sim.grid import bfs_layers, floor_graph
+from alphatank.sim.grid import distance_field, floor_graph, open_sides
 from alphatank.sim.mapspec import MapSpec
 
 Cell = tuple[int, int]
@@ -68,11 +72,11 @@ class NavGrid:
         self.walls = walls
         graph = floor_graph(walls)
         self.cells, self.index, self.neighbors = graph.cells, graph.index, graph.neighbors
-        self.n_floor = f = graph.size
+        self.n_floor = graph.size
         self.centers = (self.cells[:, ::-1].astype(np.float64) + 0.5) * self.cell
         self.node = self._nearest_floor()
-        self.dist_table = bfs_layers(self.neighbors, np.eye(f, dtype=bool))  # all pairs
-        self.next_table = self._next_steps()
+        self.dist_table = _all_pairs_bfs(self.neighbors)
+        self.next_table = _next_steps(self.neighbors, self.dist_table)
         self.diameter = max(int(self.dist_table.max()), 1)  # longest shortest path (cells)
         # Wall rectangles (x0, y0, x1, y1) in px, for exact line-of-sight tests.
         self.rects = np.array(spec.wall_rects, dtype=np.float64).reshape(-1, 4)
@@ -83,24 +87,14 @@ class NavGrid:
     # ---- construction ---------------------------------------------------------------
 
     def _nearest_floor(self) -> np.ndarray:
-        """Floor index of every cell; wall cells take the nearest floor cell's index."""
-        rr, cc = np.mgrid[0:self.rows, 0:self.cols]
-        d2 = ((rr[..., None] - self.cells[:, 0]) ** 2 + (cc[..., None] - self.cells[:, 1]) ** 2)
-        return np.argmin(d2, axis=2).astype(np.int32)
-
-    def _next_steps(self) -> np.ndarray:
-        f = self.n_floor
-        dist = self.dist_table
-        nxt = np.full((f, f), -1, dtype=np.int32)
-        np.fill_diagonal(nxt, np.arange(f, dtype=np.int32))
-        want = dist - 1  # a neighbour one step closer to the target
-        padded = np.vstack([dist, np.full((1, f), -2, dtype=np.int32)])
-        for k in reversed(range(4)):  # first direction in grid.STEPS wins ties
-            nb = self.neighbors[:, k]
-            nb_dist = padded[np.where(nb >= 0, nb, f)]  # (f, f): dist[nb[a], b]
-            step = (nb_dist == want) & (dist > 0)
-            nxt = np.where(step, nb[:, None], nxt)
-        return nxt
+        """Floor index of every cell; wall cells take the nearest floor cell's index (the
+        first in row-major order on ties). One grid row at a time: (cols, F) numbers."""
+        fr, fc = self.cells[:, 0], self.cells[:, 1]
+        cols = np.arange(self.cols)[:, None]
+        node = np.empty((self.rows, self.cols), dtype=np.int32)
+        for r in range(self.rows):
+            node[r] = np.argmin((r - fr) ** 2 + (cols - fc) ** 2, axis=1)
+        return node
 
     # ---- cells and indices ----------------------------------------------------------
 
@@ -204,7 +198,9 @@ class NavGrid:
         row = self._visible.get(key)
         if row is None:
             p = np.broadcast_to(self.centers[i], self.centers.shape)
-            row = self.segments_clear(p, self.centers, radius)
+            chunks = range(0, self.n_floor, 256)  # (256, R) temporaries, whatever the map
+            row = np.concatenate([self.segments_clear(p[k:k + 256], self.centers[k:k + 256],
+                                                      radius) for k in chunks])
             row.setflags(write=False)
             self._visible[key] = row
         return row
@@ -218,12 +214,21 @@ class NavGrid:
             h, w = self.rows * self.cell, self.cols * self.cell
             ys = (np.arange(int(np.ceil(h / res))) + 0.5) * res
             xs = (np.arange(int(np.ceil(w / res))) + 0.5) * res
-            px, py = np.meshgrid(xs, ys)
-            grid = np.minimum(np.minimum(px, w - px), np.minimum(py, h - py))
-            for x0, y0, x1, y1 in self.rects:  # one raster pass per merged wall rectangle
+            grid = np.minimum(np.minimum(xs, w - xs)[None, :], np.minimum(ys, h - ys)[:, None])
+            # No point is farther than (depth + 1) cells from a wall or the outside (depth:
+            # most BFS steps from a floor cell to one beside them), so a wall rectangle can
+            # only lower the points within reach of it: one window per rectangle.
+            edge = ~self.walls & (open_sides(self.walls) < 4)
+            depth = int(distance_field(self.walls, np.argwhere(edge).tolist()).max())
+            reach = (depth + 2) * self.cell
+            for x0, y0, x1, y1 in self.rects:
+                c0, c1 = np.searchsorted(xs, (x0 - reach, x1 + reach))
+                r0, r1 = np.searchsorted(ys, (y0 - reach, y1 + reach))
+                px, py = xs[None, c0:c1], ys[r0:r1, None]
                 dx = np.maximum(np.maximum(x0 - px, px - x1), 0.0)
                 dy = np.maximum(np.maximum(y0 - py, py - y1), 0.0)
-                np.minimum(grid, np.hypot(dx, dy), out=grid)
+                window = grid[r0:r1, c0:c1]
+                np.minimum(window, np.hypot(dx, dy), out=window)
             grid = grid.astype(np.float32)
             grid.setflags(write=False)
             self._clearance[float(res)] = grid
@@ -267,6 +272,50 @@ class NavGrid:
                 w = k
             table[i, j] = w
         return w
+
+
+@njit(cache=True)
+def _all_pairs_bfs(neighbors: np.ndarray) -> np.ndarray:
+    """(F, F) int32 BFS steps between floor cells (-1 unreachable): one queue per source
+    over the (F, 4) -1-padded neighbour table, F * F work in all."""
+    f = neighbors.shape[0]
+    dist = np.full((f, f), -1, dtype=np.int32)
+    queue = np.empty(f, dtype=np.int32)
+    for s in range(f):
+        row = dist[s]
+        row[s] = 0
+        queue[0] = s
+        head, tail = 0, 1
+        while head < tail:
+            v = queue[head]
+            head += 1
+            for k in range(neighbors.shape[1]):
+                u = neighbors[v, k]
+                if u >= 0 and row[u] < 0:
+                    row[u] = row[v] + 1
+                    queue[tail] = u
+                    tail += 1
+    return dist
+
+
+@njit(cache=True)
+def _next_steps(neighbors: np.ndarray, dist: np.ndarray) -> np.ndarray:
+    """(F, F) int32 first step from ``a`` towards ``b``: the first neighbour (in
+    :data:`~alphatank.sim.grid.STEPS` order) one step closer; ``a`` if a == b, -1 if
+    unreachable."""
+    f = neighbors.shape[0]
+    nxt = np.full((f, f), -1, dtype=np.int32)
+    for a in range(f):
+        nxt[a, a] = a
+        for b in range(f):
+            d = dist[a, b]
+            if d > 0:
+                for k in range(neighbors.shape[1]):
+                    nb = neighbors[a, k]
+                    if nb >= 0 and dist[nb, b] == d - 1:
+                        nxt[a, b] = nb
+                        break
+    return nxt
 
 
 def _slab(px, py, dx, dy, x0, y0, x1, y1) -> np.ndarray:
