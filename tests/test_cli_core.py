@@ -19,10 +19,11 @@ def test_maps_lists_shipped_maps(capsys):
 def test_maps_validates_files(tmp_path, capsys):
     bad = tmp_path / "bad.txt"
     bad.write_text("#####\n#1x2#\n#####\n")
-    assert main(["maps", "maze", str(bad)]) == 1
-    out = capsys.readouterr().out
+    assert main(["maps", str(bad), "maze"]) == 2  # every map checked, the bad one named
+    out, err = capsys.readouterr()
     assert "maps/maze.txt: ok" in out
-    assert f"error: {bad}:2:3: unknown character 'x'" in out
+    assert err.startswith(f"alphatank maps: error: {bad}:2:3: unknown character 'x';")
+    assert len(err.splitlines()) == 1
 
 
 def test_bench_reports_match_ticks_and_the_floor_ratio(tmp_path, capsys):

@@ -4,6 +4,7 @@ check and print given ones."""
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from alphatank.sim.mapspec import (
@@ -51,9 +52,9 @@ def run(args: argparse.Namespace) -> int:
     for name in _expand(args.maps):
         try:
             spec = load_map(name)
-        except MapError as err:
-            print(f"error: {err}")
-            status = 1
+        except MapError as err:  # bad input, as everywhere: one line each, exit 2
+            print(f"alphatank maps: error: {err}", file=sys.stderr)
+            status = 2
             continue
         print(f"{spec.source}: ok, {spec.cols}x{spec.rows} cells of {spec.cell:g} px, "
               f"{len(spec.wall_rects)} wall boxes")
