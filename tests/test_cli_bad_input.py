@@ -491,6 +491,7 @@ MAPGEN_CASES = [
     ("mapgen-validate-room", ["validate", "{good_txt}", "--teams", "ABCDEFGHIJKL"],
      ["{good_txt}", "room for"]),
     ("mapgen-preview-utf16", ["preview", "{utf16_txt}", "--no-png"], ["UTF-16"]),
+    ("mapgen-preview-scale", ["preview", "maze", "--scale", "1e9"], ["--scale", "[0.1, 8]"]),
     ("mapgen-generate-size", ["generate", "--size", "big"], ["size", "ROWSxCOLS", "'big'"]),
     ("mapgen-generate-alg", ["generate", "--algorithm", "spiral"], ["--algorithm", "maze"]),
     ("mapgen-batch-count", ["batch", "--count", "0", "--out", "{dir}/gen"], ["--count", ">= 1"]),

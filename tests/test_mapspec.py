@@ -157,9 +157,9 @@ def test_an_empty_map_path_is_refused_not_the_current_folder(tmp_path, monkeypat
     monkeypatch.chdir(tmp_path)
     with pytest.raises(MapError, match=r"^'': empty map name or path; give a shipped map's"):
         load_map("")
-    assert main(["maps", ""]) == 1
-    assert capsys.readouterr().out == ("error: '': empty map name or path; give a shipped map's "
-                                       "name (e.g. 'maze') or a .txt file\n")
+    assert main(["maps", ""]) == 2
+    assert capsys.readouterr().err == ("alphatank maps: error: '': empty map name or path; give "
+                                       "a shipped map's name (e.g. 'maze') or a .txt file\n")
     assert main(["maps", "."]) == 0 and "a.txt: ok" in capsys.readouterr().out
 
 

@@ -20,6 +20,7 @@ from fractions import Fraction
 from pathlib import Path
 
 from alphatank.cli import Parser, broken_pipe_exit
+from alphatank.commands.argtypes import scale
 from alphatank.errors import InputError, one_line
 from alphatank.files import check_folder, check_writable, write_text_atomic
 from alphatank.mapgen import (
@@ -313,7 +314,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fire", action="store_true", help="mark lines of fire between spawns")
     p.add_argument("--teams", help="team of each slot, e.g. AABB (default: halves A and B)")
     p.add_argument("--seed", type=int, default=0, help="match seed (random zones, headings)")
-    p.add_argument("--scale", type=float, default=1.0, help="PNG scale (default 1)")
+    p.add_argument("--scale", type=scale, default=1.0, help="PNG scale (default 1)")
     p.set_defaults(run=cmd_preview)
 
     p = sub.add_parser("edit", help="paint a map in a pygame window")
