@@ -503,6 +503,7 @@ MAPGEN_CASES = [
      ["--output", "is a folder"]),
     ("mapgen-preview-png-folder", ["preview", "maze", "--png", "{dir}"], ["--png", "is a folder"]),
     ("mapgen-edit-binary", ["edit", "{binary_txt}"], ["{binary_txt}", "UTF-8"]),
+    ("mapgen-edit-no-display", ["edit", "{good_txt}"], ["edit needs a display", "dummy"]),
     ("mapgen-no-verb", [], ["required"]),
 ]
 
@@ -547,7 +548,8 @@ def test_cli_bad_input(files, capsys, argv, fragments, monkeypatch, tmp_path):
 
 @pytest.mark.parametrize(("argv", "fragments"), [c[1:] for c in MAPGEN_CASES],
                          ids=[c[0] for c in MAPGEN_CASES])
-def test_mapgen_bad_input(files, capsys, argv, fragments):
+def test_mapgen_bad_input(files, capsys, argv, fragments, monkeypatch):
+    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")  # no window, even on a desktop
     rc, out, err = _run_main(MAPGEN.main, _fill(argv, files), capsys)
     _check(rc, out, err, _fill(fragments, files))
 

@@ -96,6 +96,7 @@ def test_a_stop_inside_an_iteration_saves_its_start_and_resumes_exactly(tmp_path
     assert summary["exit_code"] == 130
     assert summary["stopped"] == {"reason": "SIGINT", "checkpoint_step": 3 * 16 * E,
                                   "dropped_steps": 6 * E}
+    assert summary["saved_step"] == 3 * 16 * E < summary["global_step"]  # what demo reports
     a, b = load_checkpoint(tmp_path / "ref"), load_checkpoint(tmp_path / "stop")
     assert a.path.name == b.path.name == f"step_{3 * 16 * E:010d}"
     assert {k: v for k, v in a.meta["progress"].items() if k != "elapsed"} == \

@@ -258,6 +258,7 @@ def cmd_preview(args: argparse.Namespace) -> int:
 
 def cmd_edit(args: argparse.Namespace) -> int:
     from alphatank.mapgen.editor import MapEditor
+    from alphatank.ui.render import DisplayUnavailable
 
     path = Path(args.map)
     if path.exists():
@@ -265,7 +266,13 @@ def cmd_edit(args: argparse.Namespace) -> int:
     else:
         rows, cols = parse_size(args.size)
         model = EditorModel.blank(rows, cols, name=path.stem)
-    editor = MapEditor(model, path, args.cell_px)
+    if os.environ.get("SDL_VIDEODRIVER") == "dummy":  # no window would ever show: it waited
+        raise InputError("edit needs a display for its window (SDL_VIDEODRIVER=dummy is set); "
+                         "run it on a desktop session, or generate maps with generate/batch")
+    try:
+        editor = MapEditor(model, path, args.cell_px)
+    except DisplayUnavailable as exc:
+        raise InputError(f"edit needs a display for its window ({exc})") from None
     editor.run()
     editor.close()
     if editor.message:

@@ -634,9 +634,10 @@ class Trainer:
             self.stopped = {"reason": self.stop.reason, "checkpoint_step": self.saved_step,
                             **self.stopped}
         return {"run_dir": str(self.run_dir), "global_step": self.global_step,
-                "iterations": self.iteration, "episodes": self.episodes,
-                "elapsed_s": self.elapsed, "stopped": self.stopped or None,
-                "exit_code": self.stop.exit_code, "notes": list(self.notes),
+                "saved_step": self.saved_step, "iterations": self.iteration,
+                "episodes": self.episodes, "elapsed_s": self.elapsed,
+                "stopped": self.stopped or None, "exit_code": self.stop.exit_code,
+                "notes": list(self.notes),
                 **self._window_metrics()}
 
     def _run(self, bar: Any, start: float) -> None:

@@ -61,7 +61,8 @@ def run(args: argparse.Namespace) -> int:
               f"{run_dir} (alphatank train --resume {run_dir} continues it)")
         return summary["exit_code"]
     ckpt = run_dir / (run_dir / "latest").read_text().strip()
-    print(f"[demo] trained {summary['global_step']:,} steps in {summary['elapsed_s']:.0f} s; "
+    steps = summary["saved_step"]  # the checkpoint's (a time limit drops a cut iteration)
+    print(f"[demo] trained {steps:,} steps in {summary['elapsed_s']:.0f} s; "
           f"evaluating over {args.games} games")
     results = evaluate_checkpoint(ckpt, [None], games=args.games, seed=12345)
     table = format_table(results)
@@ -70,14 +71,15 @@ def run(args: argparse.Namespace) -> int:
     write_csv(results, run_dir / "eval.csv")
     write_json(results, run_dir / "eval.json")
     lo, hi = results[0].interval
-    curve = plot_learning_curve(run_dir, evals=[(summary["global_step"], results[0].win_rate,
-                                                 lo, hi)])
+    curve = plot_learning_curve(run_dir, evals=[(steps, results[0].win_rate, lo, hi)])
     from alphatank.training.checkpoint import load_policy
     video = record_policy_match(cfg.scenario, load_policy(ckpt), run_dir / "match.mp4",
                                 seed=7)
     print(f"[demo] done in {(time.perf_counter() - t0) / 60:.1f} min. In {run_dir}:")
-    for label, path in (("checkpoint", ckpt), ("evaluation", run_dir / "eval.md"),
-                        ("learning curve", curve), ("match video", video),
-                        ("wandb offline logs", run_dir / "wandb")):
+    outputs = [("checkpoint", ckpt), ("evaluation", run_dir / "eval.md"),
+               ("learning curve", curve), ("match video", video)]
+    if args.wandb != "disabled":
+        outputs.append((f"wandb {args.wandb} logs", run_dir / "wandb"))
+    for label, path in outputs:
         print(f"  {label:18s} {path}")
     return 0

@@ -33,6 +33,7 @@ from alphatank.ui.render import (  # noqa: E402
     WALL,
     draw_background,
     mix,
+    open_window,
     team_color,
 )
 
@@ -57,10 +58,9 @@ class MapEditor:
         self.grid_w, self.grid_h = cols * self.cell, rows * self.cell
         self.tool_w = max(28, min(48, max(self.grid_w, 12 * 28) // len(TOOLS)))
         width = max(self.grid_w, self.tool_w * len(TOOLS))
-        pygame.display.init()
+        self.screen = open_window((width, BAR_H + self.grid_h + STATUS_H),
+                                  f"AlphaTank map editor - {self.path}")
         pygame.font.init()
-        self.screen = pygame.display.set_mode((width, BAR_H + self.grid_h + STATUS_H))
-        pygame.display.set_caption(f"AlphaTank map editor - {self.path}")
         self.font = pygame.font.Font(None, 20)
         self.tool = "#"
         self.drag: str | None = None  # tool painted while a mouse button is held
