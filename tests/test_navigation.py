@@ -138,7 +138,7 @@ def test_clearance_map_distances():
 
 @pytest.mark.parametrize("algorithm", ["open", "maze", "scatter"])
 def test_tables_and_rasters_of_a_big_map_match_plain_computations(algorithm):
-    spec = generate(40, 44, algorithm, seed=3)
+    spec = generate(32, 32, algorithm, seed=3)
     g = NavGrid(spec)
     assert g.n_floor > 512  # several 256-cell chunks of visibility
     rng = np.random.default_rng(0)
@@ -153,13 +153,12 @@ def test_tables_and_rasters_of_a_big_map_match_plain_computations(algorithm):
         closer = [n for n in g.neighbors[a] if n >= 0 and g.dist_table[n, b] == d - 1]
         assert g.next_table[a, b] == (a if d == 0 else closer[0] if d > 0 else -1)
     # the clearance raster: every raster point against the border and every wall rectangle
-    for res in (5.0, 3.0):
-        h, w = spec.height, spec.width
-        px, py = np.meshgrid((np.arange(int(np.ceil(w / res))) + 0.5) * res,
-                             (np.arange(int(np.ceil(h / res))) + 0.5) * res)
-        ref = np.minimum(np.minimum(px, w - px), np.minimum(py, h - py))
-        for x0, y0, x1, y1 in g.rects:
-            dx = np.maximum(np.maximum(x0 - px, px - x1), 0.0)
-            dy = np.maximum(np.maximum(y0 - py, py - y1), 0.0)
-            np.minimum(ref, np.hypot(dx, dy), out=ref)
-        assert np.array_equal(g.clearance_map(res), ref.astype(np.float32))
+    res, h, w = 5.0, spec.height, spec.width
+    px, py = np.meshgrid((np.arange(int(np.ceil(w / res))) + 0.5) * res,
+                         (np.arange(int(np.ceil(h / res))) + 0.5) * res)
+    ref = np.minimum(np.minimum(px, w - px), np.minimum(py, h - py))
+    for x0, y0, x1, y1 in g.rects:
+        dx = np.maximum(np.maximum(x0 - px, px - x1), 0.0)
+        dy = np.maximum(np.maximum(y0 - py, py - y1), 0.0)
+        np.minimum(ref, np.hypot(dx, dy), out=ref)
+    assert np.array_equal(g.clearance_map(res), ref.astype(np.float32))
