@@ -54,9 +54,12 @@ def test_console_script_runs():
 
 
 def test_ctrl_c_in_a_verb_without_its_own_stop_is_one_line_and_status_130():
+    # as from a terminal: a job started in the background by a script ignores SIGINT, and
+    # its children inherit that (the Python in them then never sees Ctrl-C)
     proc = subprocess.Popen([sys.executable, "-m", "alphatank.cli", "arena", "--seats",
                              "smart,dodge", "--games", "100000"], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     assert proc.stdout.readline().startswith("arena: 2 seats")  # playing now
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=120)
