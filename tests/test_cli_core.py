@@ -60,8 +60,11 @@ def test_ctrl_c_in_a_verb_without_its_own_stop_is_one_line_and_status_130():
                              "smart,dodge", "--games", "100000"], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-    assert proc.stdout.readline().startswith("arena: 2 seats")  # playing now
-    proc.send_signal(signal.SIGINT)
-    out, err = proc.communicate(timeout=120)
+    try:
+        assert proc.stdout.readline().startswith("arena: 2 seats")  # playing now
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()  # no-op once it has ended; a hung one must not outlive the test
     assert proc.returncode == 130
     assert err == "alphatank arena: interrupted\n"
