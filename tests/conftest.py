@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -9,6 +10,11 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
+
+# No display here: SDL's dummy drivers, asked for by name (without them pygame falls back
+# to its offscreen driver, which a human-mode window refuses: alphatank.ui.render).
+os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
+os.environ.setdefault("SDL_AUDIODRIVER", "dummy")
 
 HOLD = ("import sys\nfrom alphatank.files import FolderLock\n"
         "lock = FolderLock(sys.argv[1]).acquire()\nprint('held', flush=True)\nsys.stdin.read()\n")

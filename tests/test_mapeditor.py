@@ -1,10 +1,7 @@
 """The map editor: the model (paint, strokes, undo/redo, save refusal) and the pygame
 window driven by posted mouse and key events under SDL's dummy video driver."""
 
-import os
 
-os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
-os.environ.setdefault("SDL_AUDIODRIVER", "dummy")
 
 import numpy as np
 import pygame

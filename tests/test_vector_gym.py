@@ -150,6 +150,37 @@ def test_errors_name_the_env_and_what_is_allowed():
         vec("AlphaTank/TankBattle-v0", scenario="team_vs_bot")
 
 
+def test_seeds_and_seats_are_checked_by_name_when_the_env_is_made():
+    v = vec(num_envs=2)
+    first, _ = v.reset(seed=np.int64(3))  # numpy integers seed as Python ints do
+    again, _ = v.reset(seed=3)
+    assert first.tobytes() == again.tobytes()
+    with pytest.raises(ValueError, match=r"seed must be in \[0, inf\], got -1"):
+        v.reset(seed=-1)
+    with pytest.raises(ValueError, match=r"seed must be in \[0, inf\], got -5"):
+        envs.make_vector_env("vs_random", 2, seed=-5)
+    engine = envs.make_vector_env("vs_random", 2)
+    with pytest.raises(ValueError, match="seed must be an integer, got 1.5"):
+        engine.reset(1.5)
+    with pytest.raises(ScenarioError, match=r"learner_seats \[1\] are not learner seats; "
+                                            r"its learner seats: \[0\]"):
+        envs.make_vector_env("vs_random", 2, learner_seats=[1])
+    with pytest.raises(TypeError, match="learner_seat must be an int .*got '0'"):
+        gym.make("AlphaTank/VsRandom-v0", learner_seat="0")
+    assert gym.make("AlphaTank/VsRandom-v0", learner_seat=np.int64(0)).unwrapped.seat == 0
+
+
+def test_gymnasium_faces_refuse_reset_options_they_would_ignore():
+    single = gym.make("AlphaTank/VsRandom-v0")
+    single.reset(seed=0, options={})  # empty options are no options
+    with pytest.raises(ValueError, match=r"reset takes no options \(got \['bogus'\]\)"):
+        single.reset(options={"bogus": 1})
+    par = envs.parallel_env(scenario="team")  # PettingZoo's api_test passes options
+    par.reset(seed=0, options={"options": 1})  # that every env must take: ignored
+    with pytest.raises(ValueError, match=r"seed must be in \[0, inf\], got -5"):
+        par.reset(seed=-5)
+
+
 def test_multi_learner_scenario_drives_one_seat_like_the_single_env():
     v = vec("AlphaTank/TankBattle-v0", num_envs=2, scenario="team_vs_bot", learner_seat=1,
             seat_policies={0: NoopPolicy()})
@@ -202,3 +233,11 @@ def test_stable_baselines3_ppo_trains_on_the_batched_env():
     assert {"episode", "outcome", "TimeLimit.truncated"} <= set(infos[i])
     with pytest.raises(ValueError, match="every env"):
         flat.env_method("set_bot_weakness", 0.5, indices=[0])
+    # actions are (num_envs, 3), checked as every face checks them
+    flat.reset()
+    with pytest.raises(ValueError, match=r"must have shape \(8, 3\).*got \(3, 8\)"):
+        flat.step_async(np.ones((3, 8), dtype=np.int64))
+    bad = np.ones((8, 3), dtype=np.int64)
+    bad[5, 0] = 3
+    with pytest.raises(ValueError, match=r"SB3 env 5 \(match 1, learner 1\): action"):
+        flat.step_async(bad)

@@ -54,6 +54,20 @@ def action_space() -> spaces.MultiDiscrete:
     return spaces.MultiDiscrete(ACTION_NVEC)
 
 
+def check_seed(seed: Any) -> int:
+    """``seed`` as a Python int: an integer >= 0 (numpy's too), what SeedSequence takes."""
+    value, why = check_value((int,), seed, (0, None))
+    if why:
+        raise ValueError(f"seed {why}")
+    return value
+
+
+def check_reset_options(options: Mapping[str, Any] | None, why: str = "") -> None:
+    """The envs' ``reset`` takes no options: refuse any rather than ignore them."""
+    if options:
+        raise ValueError(f"reset takes no options (got {sorted(options)}){why}")
+
+
 def check_actions(actions: Any, shape: tuple[int, ...], name_of: Any) -> np.ndarray:
     """Validate an integer action array of ``shape`` (last axis 3); errors name the agent
     (``name_of(index_tuple)``) and the allowed values. Returns an int64 array."""
@@ -522,11 +536,22 @@ class MatchSet:
 class FirstMatchRenderer:
     """Draws match 0 of a :class:`MatchSet` with its controllers' overlays. The pygame
     renderer is made on the first ``render()`` (so ``render_mode=None`` never touches
-    pygame) and is not pickled."""
+    pygame) and is not pickled; ``human`` mode is refused at once where no window can
+    show (DisplayUnavailable), unless ``SDL_VIDEODRIVER`` names a driver that shows
+    nothing (automated tests)."""
 
     def __init__(self, core: MatchSet, mode: str, fps: float):
         self.core, self.mode, self.fps = core, mode, fps
         self._renderer: Any = None
+        if mode == "human":  # refused at once where no window would show
+            from alphatank.ui.render import DisplayUnavailable, init_display
+
+            try:
+                init_display()
+            except DisplayUnavailable as exc:
+                raise DisplayUnavailable(f"render_mode='human' needs a display ({exc}); "
+                                         "render_mode='rgb_array' gives the frames as "
+                                         "arrays") from None
 
     def render(self) -> np.ndarray | None:
         if self._renderer is None:

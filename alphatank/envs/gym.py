@@ -53,7 +53,13 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from alphatank.envs.core import FirstMatchRenderer, MatchSet, action_space, check_actions
+from alphatank.envs.core import (
+    FirstMatchRenderer,
+    MatchSet,
+    action_space,
+    check_actions,
+    check_reset_options,
+)
 from alphatank.game.observe import ObsLayout
 from alphatank.game.rewards import TERMS
 from alphatank.game.scenarios import Scenario, ScenarioError, load_scenario
@@ -73,6 +79,10 @@ def single_learner_seat(sc: Scenario, learner_seat: int | None,
         raise ScenarioError(f"{sc.source}: TankBattle needs a learner seat; this scenario "
                             "has none (watch it with the PettingZoo or vector env)")
     seat = learners[0] if learner_seat is None else learner_seat
+    if isinstance(seat, bool) or not isinstance(seat, int | np.integer):
+        raise TypeError(f"learner_seat must be an int (a seat index), got {seat!r}; "
+                        f"learner seats: {learners}")
+    seat = int(seat)
     if seat not in learners:
         raise ScenarioError(f"{sc.source}: learner_seat {seat} is not a learner seat; "
                             f"learner seats: {learners}")
@@ -124,6 +134,7 @@ class TankBattleEnv(gym.Env):
 
     def reset(self, *, seed: int | None = None, options: dict | None = None
               ) -> tuple[np.ndarray, dict]:
+        check_reset_options(options)
         super().reset(seed=seed)
         self.core.reset_env(0, int(self.np_random.integers(2**63 - 1)))
         obs = self.core.obs.build()[0, 0].copy()

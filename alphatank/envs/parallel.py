@@ -43,7 +43,13 @@ from gymnasium import spaces
 from pettingzoo import AECEnv, ParallelEnv
 from pettingzoo.utils import parallel_to_aec
 
-from alphatank.envs.core import FirstMatchRenderer, MatchSet, action_space, check_actions
+from alphatank.envs.core import (
+    FirstMatchRenderer,
+    MatchSet,
+    action_space,
+    check_actions,
+    check_seed,
+)
 from alphatank.envs.ids import ENV_VERSION
 from alphatank.game.observe import ObsLayout
 from alphatank.game.rewards import TERMS
@@ -114,8 +120,9 @@ class TankBattleParallelEnv(ParallelEnv):
 
     def reset(self, seed: int | None = None, options: dict | None = None
               ) -> tuple[dict[str, np.ndarray], dict[str, dict]]:
+        del options  # none: PettingZoo's api tests pass options any env must take
         if seed is not None:
-            self._rng = np.random.default_rng(seed)
+            self._rng = np.random.default_rng(check_seed(seed))
         self.core.reset_env(0, int(self._rng.integers(2**63 - 1)))
         self.agents = self.possible_agents[:]
         obs = self.core.obs.build()[0]

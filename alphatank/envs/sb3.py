@@ -29,6 +29,7 @@ require("sb3", "alphatank.envs.sb3")
 
 from stable_baselines3.common.vec_env import VecEnv  # noqa: E402
 
+from alphatank.envs.core import check_actions  # noqa: E402
 from alphatank.envs.vector import (  # noqa: E402
     SubprocVectorMatchEnv,
     TankBattleVectorEnv,
@@ -59,7 +60,14 @@ class SB3VecEnv(VecEnv):
         return obs.reshape(self.num_envs, -1)
 
     def step_async(self, actions: np.ndarray) -> None:
-        self._actions = np.asarray(actions).reshape(self.matches, self.learners, -1)
+        """``actions``: (num_envs, 3), one row per SB3 env (errors name the env and the
+        allowed values)."""
+        rows = check_actions(actions, (self.num_envs, 3), self._name)
+        self._actions = rows.reshape(self.matches, self.learners, 3)
+
+    def _name(self, idx: tuple[int, ...]) -> str:
+        e, slot = divmod(idx[0], self.learners)
+        return f"SB3 env {idx[0]} (match {e}, learner {slot})"
 
     def step_wait(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]]]:
         if self._actions is None:

@@ -66,7 +66,14 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from alphatank.envs.core import MatchSet, action_space, check_actions, check_benched
+from alphatank.envs.core import (
+    MatchSet,
+    action_space,
+    check_actions,
+    check_benched,
+    check_reset_options,
+    check_seed,
+)
 from alphatank.envs.fragments import (
     Fragment,
     RolloutPolicy,
@@ -77,7 +84,7 @@ from alphatank.envs.fragments import (
 from alphatank.envs.gym import single_learner_seat
 from alphatank.game.observe import ObsLayout
 from alphatank.game.rewards import TERMS
-from alphatank.game.scenarios import Scenario, load_scenario
+from alphatank.game.scenarios import Scenario, ScenarioError, load_scenario
 from alphatank.sim.policy import Policy
 
 
@@ -105,7 +112,11 @@ class VectorMatchEnv(SplitRollout):
                  learner_seats: Sequence[int] | None = None,
                  env_ids: Sequence[int] | None = None, inputs: Sequence[str] = (),
                  action_repeat: int = 1):
-        self.scenario = load_scenario(scenario)
+        self.scenario = sc = load_scenario(scenario)
+        strays = [s for s in (learner_seats or ()) if s not in sc.learner_seats]
+        if strays:
+            raise ScenarioError(f"{sc.source}: learner_seats {strays} are not learner seats; "
+                                f"its learner seats: {sc.learner_seats}")
         self.core = MatchSet(self.scenario, num_envs, observation=observation,
                              game_overrides=game_overrides, reward_overrides=reward_overrides,
                              driven=learner_seats, seat_policies=seat_policies,
@@ -119,7 +130,7 @@ class VectorMatchEnv(SplitRollout):
         self.observation_space: spaces.Box = core.observation_space()
         self.action_space: spaces.MultiDiscrete = action_space()
         self.obs_dim = core.obs_dim
-        self.seed = int(seed)
+        self.seed = check_seed(seed)
         self.env_ids = list(core.env_ids)
         self._episode = np.zeros(num_envs, dtype=np.int64)
         self._return = np.zeros((num_envs, L))
@@ -226,7 +237,7 @@ class VectorMatchEnv(SplitRollout):
         continues it (fresh episodes). Returns (num_envs, L, obs_dim) float32."""
         self.check_idle("reset")
         if seed is not None:
-            self.seed = int(seed)
+            self.seed = check_seed(seed)
             self._episode[:] = 0
         for e in range(self.num_envs):
             self._reset_env(e)
@@ -444,7 +455,7 @@ class ShardedEnv:
         self.num_envs, self.num_learners = num_envs, probe.num_learners
         self.learner_seats, self.learner_teams = probe.learner_seats, probe.learner_teams
         self.observation_space, self.action_space = probe.observation_space, probe.action_space
-        self.obs_dim, self.layout, self.seed = probe.obs_dim, probe.layout, int(seed)
+        self.obs_dim, self.layout, self.seed = probe.obs_dim, probe.layout, check_seed(seed)
         self.input_shapes = probe.input_shapes
         bounds = np.linspace(0, num_envs, num_shards + 1).round().astype(int)
         self._blocks = list(zip(bounds[:-1].tolist(), bounds[1:].tolist(), strict=True))
@@ -567,7 +578,7 @@ class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
 
     def reset(self, seed: int | None = None) -> np.ndarray:
         if seed is not None:
-            self.seed = int(seed)
+            self.seed = seed = check_seed(seed)
         self._broadcast("reset", seed)
         self._started = True
         self.inputs = self._inputs()
@@ -735,12 +746,13 @@ class TankBattleVectorEnv(VectorEnv):
               ) -> tuple[np.ndarray, dict[str, Any]]:
         """Reset every sub-env. ``seed`` restarts the episode sequence; ``None`` continues
         it (the first reset without a seed draws one from ``np_random``). No options."""
-        if options:
-            raise ValueError(f"reset takes no options (got {sorted(options)}); every ended "
-                             "sub-env is reset inside step (AutoresetMode.SAME_STEP)")
-        if seed is not None and not isinstance(seed, int | np.integer):
-            raise TypeError(f"seed must be an int or None, got {type(seed).__name__} (one "
-                            "seed seeds every sub-env's episode sequence)")
+        check_reset_options(options, "; every ended sub-env is reset inside step "
+                                     "(AutoresetMode.SAME_STEP)")
+        if seed is not None:
+            if isinstance(seed, bool) or not isinstance(seed, int | np.integer):
+                raise TypeError(f"seed must be an int or None, got {type(seed).__name__} "
+                                "(one seed seeds every sub-env's episode sequence)")
+            seed = check_seed(seed)  # a Python int, as Gymnasium's seeding takes
         super().reset(seed=seed)
         if seed is None and not self._started:
             seed = int(self.np_random.integers(2**63 - 1))

@@ -76,7 +76,8 @@ def paper_observation(raw: np.ndarray, n: int, inv: np.ndarray, scale: np.ndarra
                       other_bteam: np.ndarray, tank_cols: np.ndarray, bullet_cols: np.ndarray,
                       out: np.ndarray) -> None:
     """The ``paper`` observation of every env and observer into ``out`` (E, L, D),
-    clipped to [-1, 1] (``ObservationBuilder._paper_plan`` lays out the arguments).
+    clipped to [-1, 1], zeros all +0.0 (``ObservationBuilder._paper_plan`` lays out the
+    arguments).
 
     ``raw`` (E, rows, 6): the batch's world state (tanks, then bullets); ``src`` (E, S):
     one source row per env (positions and velocities of tanks then bullets, 4 each; per
@@ -180,12 +181,14 @@ def paper_observation(raw: np.ndarray, n: int, inv: np.ndarray, scale: np.ndarra
                 row[c + brel] = rel[q, 0] * k
                 row[c + brel + 1] = rel[q, 1] * k
                 row[c + bdist] = dist[q] * (k * ratio)
-    for i in range(flat_out.size):
+    for i in range(flat_out.size):  # clipped; + 0.0 turns -0.0 (0 times a stale value) to 0.0
         v = flat_out[i]
         if v > 1.0:
             flat_out[i] = 1.0
         elif v < -1.0:
             flat_out[i] = -1.0
+        else:
+            flat_out[i] = v + 0.0
 
 
 @njit(cache=True)

@@ -119,6 +119,7 @@ def constant(value: float, dtype: type = np.float64) -> np.ndarray:
 
 
 ONE32, MINUS_ONE32 = constant(1.0, np.float32), constant(-1.0, np.float32)  # obs dtype
+ZERO32 = constant(0.0, np.float32)  # x + 0.0 turns -0.0 into 0.0 and leaves the rest
 # What each field of a slot means (docs/environments.md's observation tables come from this
 # and the layouts; every field a layout names must be here).
 FIELD_HELP = {
@@ -722,6 +723,9 @@ class ObservationBuilder:
         out = self.out
         np.minimum(out, ONE32, out=out)
         np.maximum(out, MINUS_ONE32, out=out)
+        # A masked-out feature is 0 times a stale value, -0.0 when that value was negative:
+        # +0.0 always, so an observation's bits hang on the state alone.
+        np.add(out, ZERO32, out=out)
         return out
 
     def _paper_plan(self) -> None:
@@ -1089,4 +1093,5 @@ class GlobalState:
         self._zone[..., 2:4] = (b.zones * b.inv - 1.0) * zm[..., None]
         self.out[:, -1] = b.tick / b.cfg.max_steps
         np.clip(self.out, -1.0, 1.0, out=self.out)
+        self.out += 0.0  # -0.0 -> 0.0, as in ObservationBuilder.build
         return self.out

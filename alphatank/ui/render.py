@@ -66,10 +66,29 @@ class DisplayUnavailable(RuntimeError):
     """No window can be opened (no display, or SDL's dummy video driver)."""
 
 
-def open_window(size: tuple[int, int], caption: str = "AlphaTank") -> pygame.Surface:
-    """Initialise pygame's display and open a window, or raise DisplayUnavailable."""
+HEADLESS_DRIVERS = ("dummy", "offscreen")  # SDL video drivers whose windows show nothing
+
+
+def init_display() -> None:
+    """Initialise pygame's display, or raise DisplayUnavailable: when it cannot, or when SDL
+    fell back to a video driver that shows nothing and ``SDL_VIDEODRIVER`` did not ask for
+    it (with no display, pygame quietly picks ``offscreen``: a window would never show)."""
     try:
         pygame.display.init()
+    except pygame.error as exc:
+        raise DisplayUnavailable(f"cannot open a window: {exc}") from exc
+    driver = pygame.display.get_driver()
+    if driver in HEADLESS_DRIVERS and os.environ.get("SDL_VIDEODRIVER") != driver:
+        pygame.display.quit()
+        raise DisplayUnavailable(f"no display: SDL fell back to its {driver!r} video "
+                                 "driver, which shows nothing")
+
+
+def open_window(size: tuple[int, int], caption: str = "AlphaTank") -> pygame.Surface:
+    """Initialise pygame's display (:func:`init_display`) and open a window, or raise
+    DisplayUnavailable."""
+    init_display()
+    try:
         screen = pygame.display.set_mode(size)
     except pygame.error as exc:
         raise DisplayUnavailable(f"cannot open a window: {exc}") from exc

@@ -24,8 +24,8 @@ from alphatank.ui.render import (
     DEFAULT_OVERLAYS,
     DIM_TEXT,
     TEXT,
-    DisplayUnavailable,
     Renderer,
+    init_display,
     open_window,
     plural,
     team_color,
@@ -241,10 +241,7 @@ class PlaySession(EpisodeHook):
         import pygame
 
         spec = self.match.spec
-        try:
-            pygame.display.init()
-        except pygame.error as exc:
-            raise DisplayUnavailable(str(exc)) from exc
+        init_display()
         scale = self._scale
         if scale is None:
             info = pygame.display.Info()
