@@ -17,6 +17,7 @@ import argparse
 import importlib
 import os
 import sys
+from collections.abc import Iterable
 from typing import Any, NoReturn
 
 from alphatank import __version__
@@ -54,7 +55,10 @@ class Parser(argparse.ArgumentParser):
         self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
-def build_parser() -> Parser:
+def build_parser(verbs: Iterable[str] = COMMANDS) -> Parser:
+    """The command line's parser; only ``verbs`` get their options (and import their
+    modules): the others are listed, for ``--help``, and refused if given."""
+    verbs = set(verbs)
     parser = Parser(prog="alphatank", description=__doc__.split("\n\n")[0],
                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="version", version=f"alphatank {__version__}")
@@ -65,6 +69,8 @@ def build_parser() -> Parser:
         # help strings are %-formatted by argparse, descriptions are printed as they are
         p = parser.verbs[verb] = sub.add_parser(verb, help=help_text.replace("%", "%%"),
                                                 description=help_text)
+        if verb not in verbs:
+            continue
         try:
             module = importlib.import_module(f"alphatank.commands.{verb}")
         except MissingExtraError as exc:  # the verb exists; running it says what to install
@@ -82,7 +88,10 @@ def _unavailable(exc: MissingExtraError) -> Any:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else argv
+    # The verb comes first (the top level has only --help and --version): build its
+    # options alone, so `alphatank --help` or one verb imports no other verb's modules.
+    parser = build_parser(argv[:1])
     args, unknown = parser.parse_known_args(argv)
     if unknown and not getattr(args, "_any_args", False):
         parser.verbs[args.command].error(f"unrecognized arguments: {' '.join(unknown)}")

@@ -598,6 +598,24 @@ def test_version_and_help(capsys):
     assert "95% intervals" in out and "%%" not in out
 
 
+def test_help_and_one_verb_import_no_other_verbs_modules():
+    """`alphatank --help` lists the verbs from their help lines alone, and a verb imports
+    its own module only: the help and `maps` start without numba or torch."""
+    code = ("import sys\nfrom alphatank.cli import main\n"
+            "try:\n    main(sys.argv[1:])\nexcept SystemExit:\n    pass\n"
+            "print(sorted(m for m in ('numba', 'torch', 'alphatank.commands.play') "
+            "if m in sys.modules))\n")
+    for argv, imported in ((["--help"], "[]"), (["maps"], "[]"),
+                           (["play", "--help"], "['alphatank.commands.play', 'numba']")):
+        proc = subprocess.run([sys.executable, "-c", code, *argv], capture_output=True,
+                              text=True, env=_env(), timeout=120)
+        assert proc.returncode == 0, proc.stderr
+        assert proc.stdout.splitlines()[-1] == imported, (argv, proc.stdout[-300:])
+    proc = subprocess.run([sys.executable, "-m", "alphatank.cli", "--help"],
+                          capture_output=True, text=True, env=_env(), timeout=120)
+    assert all(f"    {verb} " in proc.stdout for verb in ("demo", "train", "agents"))
+
+
 def test_record_accepts_dash_o(files, tmp_path, capsys):
     out = tmp_path / "m.mp4"
     assert main(["record", "--seats", "smart,random", "--map", "open", "--max-steps", "5",
