@@ -385,6 +385,17 @@ CASES = [
     ("train-resume-nan", ["train", "--resume", "{ckpt_nan}", "--wandb", "disabled",
                           "--no-progress"], ["{nan_tensor}", "NaN"]),
     ("train-preset", ["train", "--preset", "nosuch"], ["nosuch"]),
+    ("train-no-learner-seats", ["train", "--runs", "{dir}/nolearner", "--scenario",
+                                "bot_teams", "--wandb", "disabled"],
+     ["--scenario: scenario 'bot_teams' has no learner seats: nothing to train"]),
+    ("train-selfplay-no-pool", ["train", "--runs", "{dir}/runs", "--preset", "team_ppo_vs_ppo",
+                                "--scenario", "team_vs_bot", "--wandb", "disabled"],
+     ["--scenario: self-play learners [('team', [0, 1])]", "leave at least one to the "
+      "snapshot pool"]),
+    ("train-init-from-sac", ["train", "--runs", "{dir}/runs", "--preset", "sac_vs_aggressive",
+                             "--init-from", "agent:ppo_vs_smart", "--wandb", "disabled"],
+     ["--init-from: a warm start fills PPO and MAPPO learners; this run's [('sac', 'sac')] "
+      "take none"]),
     ("train-tensorboard", ["train", "--runs", "{dir}/tbruns", "--tensorboard", "--wandb",
                            "disabled", "--total-steps", "32", "--num-envs", "2",
                            "--no-progress"], ["tensorboard"]),

@@ -13,6 +13,7 @@ from alphatank.training.mappo import MAPPO
 from alphatank.training.ppo import PPO, PPOConfig
 from alphatank.training.presets import LearnerSpec, TrainConfig
 from alphatank.training.runner import Trainer
+from alphatank.training.sac import SAC
 from alphatank.training.warmstart import feature_map, warm_start, warm_start_from_checkpoint
 
 torch.set_num_threads(1)
@@ -168,3 +169,14 @@ def test_warm_start_from_a_1v1_checkpoint(tmp_path):
     with pytest.raises(ValueError, match="same hidden size"):
         warm_start_from_checkpoint(MAPPO(env.obs_dim, 2, MAPPOConfig(hidden=64), num_seats=2),
                                    tmp_path / "duel", env.layout, 1)
+    with pytest.raises(ValueError, match="warm start fills PPO and MAPPO learners, not sac"):
+        warm_start_from_checkpoint(SAC(env.obs_dim, 2), tmp_path / "duel", env.layout, 1)
+    # A run with a SAC and a PPO learner: the PPO one starts from the checkpoint, SAC fresh.
+    mixed = TrainConfig("mixed", "selfplay_1v1", total_steps=2, num_envs=1, wandb="disabled",
+                        checkpoint_every=0, init_from=str(tmp_path / "duel"),
+                        learners=(LearnerSpec("sac", "sac", (0,)),
+                                  LearnerSpec("ppo", "ppo", (1,), config=PPOConfig(num_steps=2))))
+    tr2 = Trainer(mixed, tmp_path / "mixed", progress=False)
+    assert set(tr2.warm_start) == {"ppo"}
+    assert torch.equal(tr2.learners["ppo"].net.actor[2].weight, src_w)
+

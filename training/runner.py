@@ -324,13 +324,14 @@ class Trainer:
         return SelfPlay(pool, make_policy, self.E, learner=name)
 
     def _warm_start(self, source: str) -> None:
-        """Start every PPO/MAPPO learner from the PPO learner of checkpoint ``source``."""
+        """Start every PPO/MAPPO learner from the PPO learner of checkpoint ``source`` (the
+        others start fresh)."""
         from alphatank.game.seats import checkpoint_source
-        from alphatank.training.warmstart import warm_start_from_checkpoint
+        from alphatank.training.warmstart import WARM_STARTED, warm_start_from_checkpoint
 
         try:
             path = checkpoint_source(source)
-            for spec in self.specs:
+            for spec in (s for s in self.specs if s.algo in WARM_STARTED):
                 seat = self.scenario.learner_seats[spec.seats[0]]
                 team = self.scenario.seats[seat].team
                 mates = sum(s.team == team for s in self.scenario.seats) - 1

@@ -115,12 +115,18 @@ def _copy_mlp(dst: torch.nn.Sequential, prefix: str, net: dict[str, torch.Tensor
             dst[k].bias.copy_(net[f"{prefix}.{k}.bias"])
 
 
+WARM_STARTED = ("ppo", "mappo")  # the algorithms a warm start can fill
+
+
 def warm_start(learner: Any, src_state: dict[str, Any], src_layout: ObsLayout,
                dst_layout: ObsLayout, src_mates: int = 0, dst_mates: int = 0
                ) -> dict[str, int]:
     """Load a PPO learner's ``state_dict`` (``src_state``, observations ``src_layout``)
     into ``learner`` (a fresh PPO or MAPPO learner over ``dst_layout``). Returns counts:
     mapped, new and dropped features, and whether the critic was copied."""
+    if getattr(learner, "algo", None) not in WARM_STARTED:
+        raise ValueError(f"warm start fills {' and '.join(a.upper() for a in WARM_STARTED)} "
+                         f"learners, not {getattr(learner, 'algo', type(learner).__name__)}")
     if learner.obs_dim != dst_layout.size:
         raise ValueError(f"learner has obs_dim {learner.obs_dim}, the target layout "
                          f"{dst_layout.size}")

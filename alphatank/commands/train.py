@@ -280,17 +280,32 @@ def build_run(args: argparse.Namespace) -> TrainConfig:
         where = "--map: " if args.map is not None else f"{source}: map: " if cfg.map else ""
         raise ValueError(f"{where}{exc}") from None
     n = len(sc.learner_seats)
+    where = "--scenario" if args.scenario is not None else source
+    if not n:
+        raise ValueError(f"{where}: scenario {sc.name!r} has no learner seats: nothing to "
+                         "train (a scenario for training has controller = \"learner\" seats)")
     if not learners_fit(run_learners(cfg, n), n, selfplay=bool(cfg.selfplay)):
-        if args.scenario is None or cfg.selfplay:
-            raise ValueError(f"{source}: learners {[(s.name, list(s.seats)) for s in cfg.learners]}"
-                             f" do not drive scenario {sc.name!r}'s {n} learner seats exactly "
-                             f"once")
+        drives = [(s.name, list(s.seats)) for s in cfg.learners]
+        if cfg.selfplay:
+            raise ValueError(f"{where}: self-play learners {drives} must drive each of "
+                             f"scenario {sc.name!r}'s {n} learner seats at most once and "
+                             "leave at least one to the snapshot pool")
+        if args.scenario is None:
+            raise ValueError(f"{source}: learners {drives} do not drive scenario "
+                             f"{sc.name!r}'s {n} learner seats exactly once")
         first = cfg.learners[0]
         learners = default_learners(n, first.algo, first.config)
         print(f"note: learners {[(s.name, list(s.seats)) for s in cfg.learners]} do not fit "
               f"scenario {sc.name!r} ({n} learner seats): one {first.algo} learner per seat "
               f"instead", file=sys.stderr)
         cfg = dataclasses.replace(cfg, learners=learners)
+    if cfg.init_from:
+        from alphatank.training.warmstart import WARM_STARTED
+        if not any(s.algo in WARM_STARTED for s in cfg.learners):
+            label = "--init-from" if args.init_from is not None else f"{source}: init_from"
+            raise ValueError(f"{label}: a warm start fills "
+                             f"{' and '.join(a.upper() for a in WARM_STARTED)} learners; this "
+                             f"run's {[(s.name, s.algo) for s in cfg.learners]} take none")
     schedule = _schedule(cfg, args)
     if schedule.get("kind", "none") != "none" and not any(
             s.controller == "bot" for s in sc.seats):
