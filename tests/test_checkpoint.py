@@ -166,6 +166,13 @@ def test_resume_continues_exactly_like_an_uninterrupted_run(tmp_path):
     assert resumed.history[0]["step"] == full.history[2]["step"]
     for key in ("losses/policy_loss/ppo", "losses/value_loss/ppo", "losses/qf_loss/sac"):
         assert resumed.history[0][key] == full.history[2][key], key
+    # and so are the rolling windows: win rates (per opponent too), returns, lengths
+    rolling = [k for k in full.history[2] if k.startswith("charts/")
+               and k not in ("charts/sps", "charts/elapsed_s")]
+    assert {"charts/episode_length", "charts/win_rate/ppo"} <= set(rolling)
+    assert any(k.startswith("charts/win_rate_vs/") for k in rolling), rolling
+    assert {k: resumed.history[0][k] for k in rolling} == {k: full.history[2][k]
+                                                            for k in rolling}
     for name in ("ppo", "sac"):
         a, b = full.learners[name].state_dict(), resumed.learners[name].state_dict()
         net = "net" if name == "ppo" else "actor"

@@ -97,6 +97,25 @@ def test_resume_refuses_new_run_flags(capsys, tmp_path):
                                        "a resumed run keeps its settings\n")
 
 
+def test_resuming_with_more_steps_says_what_the_longer_span_stretches(capsys, tmp_path):
+    """A curriculum ramps over total_steps and annealing decays over them: extending a run
+    stretches both, so the weakness steps back. The resume says so."""
+    common = ["--wandb", "disabled", "--no-progress"]
+    assert main(["train", "--preset", "ppo_curriculum_smart", "--num-envs", "2",
+                 "--total-steps", "128", "--runs", str(tmp_path), "--name", "c",
+                 "--hp", "ppo.num_steps=32,ppo.update_epochs=1,ppo.anneal_lr=true",
+                 *common]) == 0
+    capsys.readouterr()
+    assert main(["train", "--resume", str(tmp_path / "c"), "--total-steps", "256",
+                 *common]) == 0
+    note = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("note:")]
+    assert note == ["note: --total-steps 256 (the run was planned for 128): the curriculum's "
+                    "weakness ramp and the learning-rate annealing are stretched over 256 "
+                    "steps from the run's start, back to where step 128 falls in them"]
+    assert main(["train", "--resume", str(tmp_path / "c"), *common]) == 0  # 256 again: quiet
+    assert "note:" not in capsys.readouterr().err
+
+
 def test_help_and_list_show_every_hyperparameter(capsys):
     with pytest.raises(SystemExit):
         main(["train", "--help"])

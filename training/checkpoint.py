@@ -411,6 +411,19 @@ def _check_meta(meta: dict[str, Any], meta_file: Path) -> None:
                 for k, v in table.items()):
             raise fail(f"windows.{part}", f"must map learner names {sorted(names)} to lists "
                                           f"of numbers")
+    lengths = windows.get("lengths", [])
+    if not isinstance(lengths, list) or not all(
+            check_value((int,), x, (0, None))[1] is None for x in lengths):
+        raise fail("windows.lengths", "must be a list of episode lengths (integers >= 0)")
+    opps = windows.get("by_opponent", {})
+    if not isinstance(opps, dict) or not all(
+            k in names and isinstance(v, dict) and all(
+                isinstance(o, str) and isinstance(xs, list)
+                and all(check_value((float,), x)[1] is None for x in xs)
+                for o, xs in v.items())
+            for k, v in opps.items()):
+        raise fail("windows.by_opponent", f"must map learner names {sorted(names)} to "
+                                          "{opponent: list of numbers}")
 
 
 def _file_key(key: str) -> bool:

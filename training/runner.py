@@ -367,10 +367,15 @@ class Trainer:
         self.episodes, self.elapsed = int(prog["episodes"]), float(prog["elapsed"])
         self.cut = int(prog.get("cut", 0))
         self.schedule.load_state_dict(ckpt.meta.get("schedule", {}))
-        for name, outs in ckpt.meta.get("windows", {}).get("outcomes", {}).items():
+        windows = ckpt.meta.get("windows", {})  # older saves lack lengths, by_opponent
+        for name, outs in windows.get("outcomes", {}).items():
             self.outcomes[name].extend(outs)
-        for name, rets in ckpt.meta.get("windows", {}).get("returns", {}).items():
+        for name, rets in windows.get("returns", {}).items():
             self.returns[name].extend(rets)
+        self.lengths.extend(int(x) for x in windows.get("lengths", []))
+        for name, opps in windows.get("by_opponent", {}).items():
+            for opp, scores in opps.items():
+                self.by_opponent[name][opp] = deque(scores, maxlen=WINDOW)
         if self.selfplay is not None:
             self.selfplay.load_state_dict(ckpt.extra_state("selfplay"))
 
@@ -391,7 +396,10 @@ class Trainer:
                          "clone_pending": self.imitation is not None},
             "schedule": self.schedule.state_dict(),
             "windows": {"outcomes": {n: list(d) for n, d in self.outcomes.items()},
-                        "returns": {n: [float(x) for x in d] for n, d in self.returns.items()}},
+                        "returns": {n: [float(x) for x in d] for n, d in self.returns.items()},
+                        "lengths": list(self.lengths),
+                        "by_opponent": {n: {opp: list(d) for opp, d in opps.items()}
+                                        for n, opps in self.by_opponent.items()}},
             "wandb_id": self.logger.run_id,
             "env": env_id(self.scenario),
         }

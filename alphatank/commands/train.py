@@ -219,6 +219,17 @@ def _schedule(cfg: TrainConfig, args: argparse.Namespace) -> dict[str, Any]:
     return current
 
 
+def _stretched(saved: TrainConfig, cfg: TrainConfig) -> list[str]:
+    """What spans the whole run and moves when a resumed run's ``total_steps`` changes:
+    a curriculum's ramp, learning-rate annealing."""
+    if cfg.total_steps == saved.total_steps:
+        return []
+    out = ["the curriculum's weakness ramp"] if cfg.schedule.get("kind") == "curriculum" else []
+    if any(getattr(s.config, "anneal_lr", False) for s in cfg.learners):
+        out.append("the learning-rate annealing")
+    return out
+
+
 def _check_init_from(spec: str, label: str) -> None:
     """ValueError ``label: problem`` unless ``spec`` names a checkpoint to warm-start from."""
     from alphatank.game.seats import checkpoint_source
@@ -411,6 +422,13 @@ def _run(args: argparse.Namespace, progress: bool, cpus: float = 0.0) -> int:
                                          **_overrides(args))
         except ValueError as exc:
             raise as_input_error(exc) from None
+        stretched = _stretched(saved, trainer.cfg)
+        if stretched:
+            print(f"note: --total-steps {trainer.cfg.total_steps:,} (the run was planned for "
+                  f"{saved.total_steps:,}): {' and '.join(stretched)} "
+                  f"{'is' if len(stretched) == 1 else 'are'} stretched over "
+                  f"{trainer.cfg.total_steps:,} steps from the run's start, back to where "
+                  f"step {trainer.global_step:,} falls in them", file=sys.stderr)
         rewound = trainer.logger.rewound
         print(f"resuming {trainer.run_dir} at step {trainer.global_step:,}"
               + (f" ({rewound} metrics rows logged after that checkpoint dropped)"
