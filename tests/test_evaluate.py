@@ -19,6 +19,7 @@ from alphatank.training.evaluate import (
     evaluate_stand_in,
     format_table,
     rate_games,
+    row_opponents,
     write_csv,
     write_json,
 )
@@ -247,3 +248,11 @@ def test_rate_games_puts_agents_and_bots_in_one_table():
     mu = {name: m for name, m, *_ in league.table()}
     assert set(mu) == {"agent_a", "agent_b", "smart"}
     assert mu["agent_a"] > mu["smart"] > mu["agent_b"]  # 8-2 over smart; smart 8-0 over b
+
+
+def test_a_row_where_the_checkpoint_drives_every_seat_is_against_itself():
+    from alphatank.game.scenarios import load_scenario
+
+    assert row_opponents(load_scenario("team"), [None, "smart"]) == ["itself", "smart"]
+    assert row_opponents(load_scenario("team_vs_bot"), [None]) == ["B:smart(w=1), B:smart(w=1)"]
+

@@ -9,7 +9,7 @@ import os
 from alphatank.cli import main
 from alphatank.game.seats import checkpoint_source
 from alphatank.training.evaluate import evaluate_checkpoint
-from alphatank.training.teamstats import TeamWatch
+from alphatank.training.teamstats import TeamWatch, format_team_stats
 
 
 def test_team_stats_follow_the_evaluated_games_for_any_num_envs():
@@ -36,6 +36,17 @@ def test_team_watch_counts_one_game_per_index():
     s = w.summary()
     assert (s["games"], s["wins"], s["draws"], s["wins_both_scored"]) == (2, 1, 1, 1)
     assert s["hits_per_game_by_seat"] == [1.0, 0.5] and s["kills"] == 1
+    assert s["wins_both_scored_share"] == 1.0 and "in 100% of the wins" in format_team_stats(s)
+
+
+def test_no_wins_give_no_share_and_the_interval_of_nothing_known():
+    w = TeamWatch("A", 1, ["A", "A", "B"])
+    w.start(0)
+    w.end(5, 0, "loss")
+    s = w.summary()
+    assert s["wins"] == 0 and s["wins_both_scored_share"] is None
+    assert s["wins_both_scored_ci95"] == [0.0, 1.0]
+    assert "no wins, so no share of wins" in format_team_stats(s)
 
 
 def test_eval_cli_writes_team_stats_beside_json(tmp_path, capsys):

@@ -316,12 +316,12 @@ def row_opponents(base: Scenario, opponents: Sequence[str | None], team: str | N
     """The ``opponent`` of each row :func:`evaluate_learners` (``stand_in``:
     :func:`evaluate_stand_in`) plays in ``base``, known before any game: a bot name, or
     for None the seats it does not drive (``stand_in``: the other teams' seats) such as
-    ``B:smart(w=1)``."""
+    ``B:smart(w=1)``; ``itself`` where it drives every seat (self-play)."""
     team = learner_team(base, team)
     seats = opponent_seats(base, team, None, weakness)
     own = ", ".join(f"{s.team}:{s.describe()}" for s in seats
                     if (s.team != team if stand_in else s.controller != "learner"))
-    return [opp or own or "none" for opp in opponents]
+    return [opp or own or "itself" for opp in opponents]
 
 
 def opponent_seats(base: Scenario, team: str, opp: str | None,

@@ -87,13 +87,13 @@ class TeamWatch:
         both = sum(all(h > 0 for h in x.hits) for x in wins)
         kills = sum(sum(x.kills) for x in g)
         cross = sum(x.crossfire for x in g)
-        lo, hi = wilson_interval(both, len(wins)) if wins else (0.0, 0.0)
+        lo, hi = wilson_interval(both, len(wins))  # no wins: (0, 1), nothing known
         seats = len(g[0].hits) if g else 0
         return {"team": self.team, "crossfire_px": self.radius,
                 "games": n, "wins": len(wins), "losses": sum(x.outcome < 0 for x in g),
                 "draws": sum(x.outcome == 0 for x in g),
                 "wins_both_scored": both,
-                "wins_both_scored_share": round(both / len(wins), 4) if wins else 0.0,
+                "wins_both_scored_share": round(both / len(wins), 4) if wins else None,
                 "wins_both_scored_ci95": [round(lo, 4), round(hi, 4)],
                 "kills": kills, "crossfire_kills": cross,
                 "crossfire_share": round(cross / kills, 4) if kills else 0.0,
@@ -104,10 +104,12 @@ class TeamWatch:
 def format_team_stats(s: dict[str, Any]) -> str:
     """Two lines for the terminal."""
     lo, hi = s["wins_both_scored_ci95"]
+    share = s["wins_both_scored_share"]
+    both = ("no wins, so no share of wins in which every teammate hit an enemy" if share is None
+            else f"every teammate hit an enemy in {100 * share:.0f}% of the wins "
+                 f"[{100 * lo:.0f}, {100 * hi:.0f}]")
     return (f"team {s['team']}: {s['wins']}/{s['losses']}/{s['draws']} "
-            f"(W/L/D) of {s['games']} games; every teammate hit an enemy in "
-            f"{100 * s['wins_both_scored_share']:.0f}% of the wins [{100 * lo:.0f}, "
-            f"{100 * hi:.0f}]\n"
+            f"(W/L/D) of {s['games']} games; {both}\n"
             f"  kills {s['kills']}, in crossfire (a teammate's bullet within "
             f"{s['crossfire_px']:.0f} px of the victim) {100 * s['crossfire_share']:.0f}%; "
             f"hits per game by seat {s['hits_per_game_by_seat']}")
