@@ -74,6 +74,20 @@ def check_writable(path: str | Path, label: str) -> None:
     _check_nearest(p.absolute().parent, path, label)
 
 
+def check_distinct(paths: dict[str, str | Path | None]) -> None:
+    """InputError when two of ``paths`` (label -> path; None: not given) name one file
+    (relative spellings and links resolved): the later write would destroy the other."""
+    seen: dict[Path, str] = {}
+    for label, path in paths.items():
+        if path is None:
+            continue
+        key = Path(path).resolve()
+        if key in seen:
+            raise InputError(f"{seen[key]} and {label} name the same file ({path}): one "
+                             "would overwrite the other")
+        seen[key] = label
+
+
 def check_folder(path: str | Path, label: str) -> None:
     """InputError ``label: path: why`` unless ``path`` is a folder, or can be made one,
     that files can be written in."""

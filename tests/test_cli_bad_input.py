@@ -105,6 +105,7 @@ def files(tmp_path_factory) -> dict[str, str]:
     assert replay is not None and (replay.routes[..., 0] >= 0).any()
     good = save_replay(replay, d / "good.npz")
     out["good_npz"] = str(good)
+    out["replay_as_gif"] = str(shutil.copy(good, d / "replay.gif"))  # a replay named .gif
     raw = good.read_bytes()
     put("truncated.npz", raw[: len(raw) // 2])
     flipped = bytearray(raw)
@@ -257,6 +258,11 @@ CASES = [
     ("replay-record-suffix", ["replay", "{good_npz}", "--record", "{dir}/again"],
      ["--record", "again", "must end in .mp4"]),
     # record
+    ("record-same-file", ["record", "--seats", "smart,random", "-o", "{dir}/s.mp4",
+                          "--replay", "{dir}/./s.mp4"],
+     ["--out and --replay name the same file ({dir}/./s.mp4): one would overwrite the other"]),
+    ("replay-onto-itself", ["replay", "{replay_as_gif}", "--gif", "{replay_as_gif}"],
+     ["the replay file and --gif name the same file"]),
     ("record-scenario-missing", ["record", "--scenario", "{dir}/none.toml"],
      ["none.toml", "no such scenario file"]),
     ("record-scenario-empty", ["record", "--scenario", "{empty_toml}"],

@@ -19,7 +19,7 @@ from alphatank.commands.argtypes import (
 )
 from alphatank.commands.lineup_options import add_lineup_arguments, lineup_from_args
 from alphatank.errors import one_line
-from alphatank.files import check_writable
+from alphatank.files import check_distinct, check_writable
 from alphatank.sim.episode import EpisodeHook
 from alphatank.ui.render import parse_overlays
 from alphatank.ui.replay import ReplayRecorder
@@ -44,6 +44,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     try:
         check_outputs(args.out, args.gif, ("--out", "--gif"))
+        check_distinct({"--out": args.out, "--gif": args.gif, "--replay": args.replay})
         if args.replay:
             check_writable(args.replay, "--replay")
         lineup = lineup_from_args(args, interactive=False)

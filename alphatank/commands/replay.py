@@ -15,6 +15,7 @@ import time
 
 from alphatank.commands.argtypes import positive_float, positive_int
 from alphatank.errors import one_line
+from alphatank.files import check_distinct
 from alphatank.ui.render import DEFAULT_OVERLAYS, DisplayUnavailable, parse_overlays
 from alphatank.ui.replay import (
     Replay,
@@ -46,6 +47,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     try:
         check_outputs(args.record, args.gif, ("--record", "--gif"))
+        check_distinct({"the replay file": args.file, "--record": args.record,
+                        "--gif": args.gif})
         replay = load_replay(args.file)
         overlays = parse_overlays(args.overlays)
     except (ReplayError, ValueError) as exc:
