@@ -10,6 +10,7 @@ few run as real subprocesses (pipes, exit statuses, the interpreter's own error 
 from __future__ import annotations
 
 import importlib.util
+import io
 import json
 import os
 import shutil
@@ -57,6 +58,9 @@ def files(tmp_path_factory) -> dict[str, str]:
         out[name.replace(".", "_")] = str(p)
 
     put("empty.txt", b"")
+    put("nulteam.toml", 'name = "nul"\nmap = "open"\n[[seats]]\nteam = "A\\u0000"\n'
+                        'controller = "bot"\nbot = "smart"\n[[seats]]\nteam = "B"\n'
+                        'controller = "bot"\nbot = "random"\n')
     put("binary.txt", bytes(range(256)) * 4)
     put("latin1.txt", "name: caf\xe9\n\n#####\n#1.2#\n#####\n".encode("latin-1"))
     put("utf16.txt", "name: x\n\n#####\n#1.2#\n#####\n".encode("utf-16"))
@@ -132,6 +136,18 @@ def files(tmp_path_factory) -> dict[str, str]:
     spoiled("winner.npz", winner="B" if replay.winner != "B" else "A")
     spoiled("fast.npz", config={**replay.config, "bullet_speed": 3e9})
     spoiled("maptext.npz", map_text=replay.map_text + "\n; an edit the simulation ignores\n")
+    spoiled("teamnul.npz", teams=["A\x00", *replay.teams[1:]])
+    spoiled("longlabel.npz", labels=["y" * 5000, "z"])
+    # A 6 TiB array declared in 1 KB: an .npy header's shape, then 100 bytes of data.
+    with zipfile.ZipFile(good) as src, zipfile.ZipFile(d / "bomb.npz", "w") as dst:
+        for item in src.infolist():
+            if item.filename != "actions.npy":
+                dst.writestr(item, src.read(item))
+        head = io.BytesIO()
+        np.lib.format.write_array_header_1_0(
+            head, {"descr": "|i1", "fortran_order": False, "shape": (2**40, 2, 3)})
+        dst.writestr("actions.npy", head.getvalue() + bytes(100))
+    out["bomb_npz"] = str(d / "bomb.npz")
 
     # A real (untrained) checkpoint, then spoiled copies.
     cfg = TrainConfig(name="ck", scenario="vs_aggressive", total_steps=64, num_envs=2,
@@ -261,8 +277,17 @@ CASES = [
     ("record-same-file", ["record", "--seats", "smart,random", "-o", "{dir}/s.mp4",
                           "--replay", "{dir}/./s.mp4"],
      ["--out and --replay name the same file ({dir}/./s.mp4): one would overwrite the other"]),
+    ("replay-team-nul", ["replay", "{teamnul_npz}"],
+     ["meta.teams[0]: must be printable (no control characters), got 'A\\x00'"]),
+    ("replay-long-label", ["replay", "{longlabel_npz}"],
+     ["meta.labels[0]: must be at most 4096 characters, got 5,000"]),
+    ("replay-header-bomb", ["replay", "{bomb_npz}"],
+     ["member 'actions.npy' unpacks to 6,597,069,766,656 bytes; a replay member may hold "
+      "at most 268,435,456"]),
     ("replay-onto-itself", ["replay", "{replay_as_gif}", "--gif", "{replay_as_gif}"],
      ["the replay file and --gif name the same file"]),
+    ("record-team-nul", ["record", "--scenario", "{nulteam_toml}"],
+     ["seats[0].team: must be printable (no control characters), got 'A\\x00'"]),
     ("record-scenario-missing", ["record", "--scenario", "{dir}/none.toml"],
      ["none.toml", "no such scenario file"]),
     ("record-scenario-empty", ["record", "--scenario", "{empty_toml}"],

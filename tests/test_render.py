@@ -245,6 +245,15 @@ def test_without_a_display_human_mode_and_play_are_refused_not_silent(tmp_path):
     assert "'offscreen' video driver" in res.stderr
 
 
+def test_a_long_first_word_is_cut_to_fit_in_a_few_renders():
+    r = Renderer("rgb_array")
+    word = "y" * 20_000
+    img = r._fit(f"{word} (smart)", (255, 255, 255), 200)
+    assert img.get_width() <= 200 and len(r._texts) <= 20  # a binary search, not 20,000
+    short = r._fit("A (smart)", (255, 255, 255), 200)
+    assert short is r.text("A (smart)", (255, 255, 255))  # what fits is left whole
+
+
 def test_render_bench_reports_a_frame_rate():
     """The frame-rate target lives in ``alphatank bench --render``, not in a timed test."""
     fps = render_bench(frames=5)

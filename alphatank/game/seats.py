@@ -33,6 +33,7 @@ from typing import Any
 
 from alphatank.errors import InputError
 from alphatank.extras import MissingExtraError
+from alphatank.sim.config import name_problem
 from alphatank.sim.policy import NoopPolicy, Policy
 
 KEYSETS = ("wasd", "arrows", "ijkl")  # key layouts of players 1, 2, 3
@@ -194,6 +195,9 @@ def parse_seat_table(data: Any, where: str = "seat", *, check: bool = True) -> S
     team = data.get("team")
     if not isinstance(team, str) or not team:
         raise SeatError(f"{where}.team: required, a non-empty string like 'A'")
+    why = name_problem(team)
+    if why:
+        raise SeatError(f"{where}.team: {why}")
     name = data.get("controller")
     if name not in CONTROLLER_KINDS:
         raise SeatError(f"{where}.controller: got {name!r}; valid: {list(CONTROLLER_KINDS)}")

@@ -50,6 +50,21 @@ def _kinds(tp: Any) -> tuple[type, ...]:
     return (tp,) if isinstance(tp, type) else ()
 
 
+TEAM_NAME_MAX = 32  # characters of a team name (drawn in banners and panels)
+
+
+def name_problem(value: Any, max_len: int = TEAM_NAME_MAX) -> str | None:
+    """Why ``value`` cannot be a name shown on screen (a team, a seat's label), else None:
+    a non-empty string of at most ``max_len`` printable characters."""
+    if not isinstance(value, str) or not value:
+        return f"must be a non-empty string, got {value!r}"
+    if len(value) > max_len:
+        return f"must be at most {max_len} characters, got {len(value):,}"
+    if not value.isprintable():
+        return f"must be printable (no control characters), got {value!r}"
+    return None
+
+
 def check_value(kinds: tuple[type, ...], value: Any, rng: tuple[Any, Any] | None = None
                 ) -> tuple[Any, str | None]:
     """(normalised value, None) if ``value`` fits the types ``kinds`` and the range

@@ -243,13 +243,20 @@ class Renderer:
         return out
 
     def _fit(self, s: str, color: Color, width: float) -> pygame.Surface:
-        """Text with its first word shortened until it fits ``width`` px."""
+        """Text with its first word cut to the longest start (one character at least)
+        that fits ``width`` px: a binary search, so a long word costs a few renders."""
         img = self.text(s, color)
         head, _, tail = s.partition(" ")
-        while img.get_width() > width and len(head) > 1:
-            head = head[:-1]
-            img = self.text(f"{head} {tail}", color)
-        return img
+        if img.get_width() <= width or len(head) <= 1:
+            return img
+        lo, hi, keep = 2, len(head) - 1, 1
+        while lo <= hi:
+            mid = (lo + hi) // 2
+            if self.text(f"{head[:mid]} {tail}", color).get_width() <= width:
+                keep, lo = mid, mid + 1
+            else:
+                hi = mid - 1
+        return self.text(f"{head[:keep]} {tail}", color)
 
     def panel(self, surf: pygame.Surface, lines: Sequence[tuple[str, Color]],
               title: tuple[str, Color] | None = None, footer: tuple[str, Color] | None = None,

@@ -21,6 +21,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import math
 import os
 import re
 import tempfile
@@ -35,7 +36,7 @@ import numpy as np
 
 from alphatank.errors import InputError
 from alphatank.files import replace_into
-from alphatank.sim.config import ConfigError, GameConfig, check_value, from_dict
+from alphatank.sim.config import ConfigError, GameConfig, check_value, from_dict, name_problem
 from alphatank.sim.episode import Episode, EpisodeHook, EpisodeSeeds
 from alphatank.sim.mapspec import MapError, MapSpec, map_text, parse_map
 from alphatank.sim.match import Match, TickEvents
@@ -49,6 +50,7 @@ _META_KEYS = ("format", "version", "seed", "match_seed", "scenario", "seats", "m
               "digest")
 MAX_SUBSTEPS = 5_000_000  # physics substeps a re-simulation may take (ticks x substeps)
 MAX_TANKS = 64
+LABEL_MAX = 4096  # characters of a seat's description or label (a checkpoint path)
 MAX_META_BYTES = 8 << 20
 MAX_ARRAY_BYTES = 256 << 20
 _HEX64 = re.compile(r"[0-9a-f]{64}")
@@ -261,16 +263,30 @@ def save_replay(replay: Replay, path: str | Path) -> Path:
     return path
 
 
+def _declared_bytes(zf: zipfile.ZipFile, info: zipfile.ZipInfo) -> int:
+    """The bytes an ``.npy`` member's header says its array holds (``np.load`` allocates
+    them before reading the data, whatever the member's real size); 0 for other members."""
+    if not info.filename.endswith(".npy"):
+        return 0
+    with zf.open(info) as f:
+        major, _ = np.lib.format.read_magic(f)
+        read = (np.lib.format.read_array_header_1_0 if major == 1
+                else np.lib.format.read_array_header_2_0)
+        shape, _, dtype = read(f)
+    return math.prod(shape) * dtype.itemsize
+
+
 def _read_archive(path: Path) -> tuple[dict[str, np.ndarray], Any]:
     """The arrays and the decoded meta of a replay archive; sizes bounded before reading."""
     try:
         with zipfile.ZipFile(path) as zf:
-            sizes = {i.filename: i.file_size for i in zf.infolist()}
-        for name, size in sizes.items():
-            cap = MAX_META_BYTES if name == "meta.npy" else MAX_ARRAY_BYTES
-            if size > cap:
-                raise ReplayError(f"{path}: member {name!r} unpacks to {size:,} bytes; a "
-                                  f"replay member may hold at most {cap:,}")
+            for info in zf.infolist():
+                name = info.filename
+                cap = MAX_META_BYTES if name == "meta.npy" else MAX_ARRAY_BYTES
+                size = max(info.file_size, _declared_bytes(zf, info))
+                if size > cap:
+                    raise ReplayError(f"{path}: member {name!r} unpacks to {size:,} bytes; "
+                                      f"a replay member may hold at most {cap:,}")
         with np.load(path, allow_pickle=False) as z:
             missing = [k for k in ("actions", "meta") if k not in z.files]
             if missing:
@@ -327,6 +343,9 @@ def load_replay(path: str | Path) -> Replay:
             or not all(isinstance(t, str) and t for t in teams)):
         raise fail("meta.teams", f"must be a list of 2 to {MAX_TANKS} team names, got "
                    f"{teams!r}"[:300])
+    for k, t in enumerate(teams):
+        if why := name_problem(t):
+            raise fail(f"meta.teams[{k}]", why[:300])
     if len(set(teams)) < 2:
         raise fail("meta.teams", f"need at least 2 different teams, got {teams!r}")
     n = len(teams)
@@ -336,6 +355,9 @@ def load_replay(path: str | Path) -> Replay:
                 or not all(isinstance(v, str) for v in val)):
             raise fail(f"meta.{key}", f"must be a list of {n} strings (one per seat) or "
                        "empty")
+        for k, v in enumerate(val):
+            if v and (why := name_problem(v, LABEL_MAX)):
+                raise fail(f"meta.{key}[{k}]", why[:300])
     if meta["winner"] is not None and meta["winner"] not in teams:
         raise fail("meta.winner", f"must be one of the teams {sorted(set(teams))} or null, "
                    f"got {meta['winner']!r}")
