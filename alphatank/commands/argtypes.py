@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from collections.abc import Callable
 
 from alphatank.sim.config import MATCHES_MAX
 
@@ -65,19 +66,26 @@ def seed(text: str) -> int:
     return value
 
 
+def in_range(lo: float, hi: float) -> Callable[[str], float]:
+    """An argparse type: a number in [lo, hi] (bounds that keep a window, a video or a
+    frame loop sane: a frame rate of 1e-9 sleeps for years)."""
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"must be a number in [{lo:g}, {hi:g}], got "
+                                             f"{text!r}")
+        return value
+    return parse
+
+
 SCALE_RANGE = (0.1, 8.0)  # a 770 px map: 77 to 6160 px
-
-
-def scale(text: str) -> float:
-    """A window or video scale (times the map's size in px): a number in SCALE_RANGE."""
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    lo, hi = SCALE_RANGE
-    if not lo <= value <= hi:
-        raise argparse.ArgumentTypeError(f"must be a number in [{lo:g}, {hi:g}], got {text!r}")
-    return value
+scale = in_range(*SCALE_RANGE)  # a window or video scale (times the map's size in px)
+window_fps = in_range(1.0, 1000.0)  # a window's frames per second (play)
+video_fps = in_range(0.01, 1000.0)  # a video's frames per second (record)
+replay_speed = in_range(0.05, 50.0)  # times real time (replay --render)
 
 
 BUDGET_MAX_MIN = 7 * 24 * 60  # a week

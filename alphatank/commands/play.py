@@ -14,7 +14,7 @@ import os
 import sys
 from pathlib import Path
 
-from alphatank.commands.argtypes import positive_float, positive_int, scale
+from alphatank.commands.argtypes import positive_int, scale, window_fps
 from alphatank.commands.lineup_options import add_lineup_arguments, lineup_from_args
 from alphatank.errors import InputError, one_line
 from alphatank.files import check_writable
@@ -25,8 +25,8 @@ from alphatank.ui.session import NO_DISPLAY_HELP, PlaySession
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_lineup_arguments(p)
-    p.add_argument("--fps", type=positive_float, default=60.0,
-                   help="frames per second (default: 60)")
+    p.add_argument("--fps", type=window_fps, default=60.0,
+                   help="frames per second, 1 to 1000 (default: 60)")
     p.add_argument("--scale", type=scale,
                    help="window scale, 0.1 to 8 times the map's size (default: fit the screen)")
     p.add_argument("--save-replay", metavar="FILE",

@@ -13,9 +13,9 @@ from pathlib import Path
 
 from alphatank.commands.argtypes import (
     non_negative_float,
-    positive_float,
     positive_int,
     scale,
+    video_fps,
 )
 from alphatank.commands.lineup_options import add_lineup_arguments, lineup_from_args
 from alphatank.errors import one_line
@@ -34,7 +34,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--replay", metavar="FILE", help="also save the match as a replay file")
     p.add_argument("--every", type=positive_int, default=1,
                    help="draw every N-th tick (default: 1, a frame per tick)")
-    p.add_argument("--fps", type=positive_float, help="video frame rate (default: real time)")
+    p.add_argument("--fps", type=video_fps,
+                   help="video frame rate, 0.01 to 1000 (default: real time)")
     p.add_argument("--hold", type=non_negative_float, default=0.0,
                    help="seconds to hold the final frame (default: 0)")
     p.add_argument("--scale", type=scale, default=1.0,

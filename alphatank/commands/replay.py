@@ -13,7 +13,7 @@ import os
 import sys
 import time
 
-from alphatank.commands.argtypes import positive_float, positive_int
+from alphatank.commands.argtypes import positive_int, replay_speed
 from alphatank.errors import one_line
 from alphatank.files import check_distinct
 from alphatank.ui.render import DEFAULT_OVERLAYS, DisplayUnavailable, parse_overlays
@@ -36,7 +36,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--gif", metavar="FILE", help="render the replay to a GIF (with --record: "
                                                  "as well as the MP4)")
     p.add_argument("--render", action="store_true", help="play it back in a window")
-    p.add_argument("--speed", type=positive_float, default=1.0, help="playback speed for --render")
+    p.add_argument("--speed", type=replay_speed, default=1.0,
+                   help="playback speed for --render, 0.05 to 50 (default: 1, real time)")
     p.add_argument("--overlays", default=",".join(DEFAULT_OVERLAYS),
                    help="aim,trajectory,bfs | all | none (default: aim,bfs)")
     p.add_argument("--headless-test", action="store_true",
