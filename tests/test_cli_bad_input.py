@@ -58,6 +58,10 @@ def files(tmp_path_factory) -> dict[str, str]:
         out[name.replace(".", "_")] = str(p)
 
     put("empty.txt", b"")
+    put("longgame.toml", 'name = "long"\nmap = "battlefield"\n[game]\ntick_hz = 1\n'
+                         'bullet_speed = 10000.0\nmax_steps = 15300\n[[seats]]\nteam = "A"\n'
+                         'controller = "bot"\nbot = "random"\n[[seats]]\nteam = "B"\n'
+                         'controller = "bot"\nbot = "random"\n')
     put("nulteam.toml", 'name = "nul"\nmap = "open"\n[[seats]]\nteam = "A\\u0000"\n'
                         'controller = "bot"\nbot = "smart"\n[[seats]]\nteam = "B"\n'
                         'controller = "bot"\nbot = "random"\n')
@@ -288,6 +292,12 @@ CASES = [
       "at most 268,435,456"]),
     ("replay-onto-itself", ["replay", "{replay_as_gif}", "--gif", "{replay_as_gif}"],
      ["the replay file and --gif name the same file"]),
+    ("record-replay-room", ["record", "--scenario", "{longgame_toml}", "--replay",
+                            "{dir}/long.npz"],
+     ["--replay: a game of up to 15,300 ticks (max_steps) may take 5,033,700 physics "
+      "substeps to re-simulate; a replay may ask for at most 5,000,000"]),
+    ("play-replay-room", ["play", "--headless-test", "--scenario", "{longgame_toml}",
+                          "--save-replay", "{dir}/long.npz"], ["--save-replay: a game of up to"]),
     ("record-team-nul", ["record", "--scenario", "{nulteam_toml}"],
      ["seats[0].team: must be printable (no control characters), got 'A\\x00'"]),
     ("record-scenario-missing", ["record", "--scenario", "{dir}/none.toml"],

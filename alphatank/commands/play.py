@@ -20,6 +20,7 @@ from alphatank.errors import InputError, one_line
 from alphatank.files import check_writable
 from alphatank.ui.human import HUMAN_ORDER
 from alphatank.ui.render import DisplayUnavailable, parse_overlays
+from alphatank.ui.replay import check_replay_room
 from alphatank.ui.session import NO_DISPLAY_HELP, PlaySession
 
 
@@ -51,6 +52,9 @@ def run(args: argparse.Namespace) -> int:
                              "overwrite)")
     try:
         lineup = lineup_from_args(args, interactive=True)
+        if args.save_replay:
+            sc = lineup.scenario
+            check_replay_room(sc.game_config(), sc.map_specs(), "--save-replay")
         session = PlaySession(lineup, seed=args.seed, fps=args.fps,
                               overlays=parse_overlays(args.overlays), scale=args.scale,
                               save_replay=args.save_replay, realtime=not args.headless_test)

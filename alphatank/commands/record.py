@@ -22,7 +22,7 @@ from alphatank.errors import one_line
 from alphatank.files import check_distinct, check_writable
 from alphatank.sim.episode import EpisodeHook
 from alphatank.ui.render import parse_overlays
-from alphatank.ui.replay import ReplayRecorder
+from alphatank.ui.replay import ReplayRecorder, check_replay_room
 from alphatank.ui.video import VideoRecorder, check_outputs, record_episode
 
 
@@ -49,6 +49,9 @@ def run(args: argparse.Namespace) -> int:
         if args.replay:
             check_writable(args.replay, "--replay")
         lineup = lineup_from_args(args, interactive=False)
+        if args.replay:
+            sc = lineup.scenario
+            check_replay_room(sc.game_config(), sc.map_specs(), "--replay")
         video = VideoRecorder(mp4=Path(args.out), gif=args.gif, fps=args.fps,
                               every=args.every, hold_s=args.hold,
                               overlays=parse_overlays(args.overlays), labels=lineup.labels,

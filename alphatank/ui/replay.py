@@ -263,6 +263,17 @@ def save_replay(replay: Replay, path: str | Path) -> Path:
     return path
 
 
+def check_replay_room(cfg: GameConfig, specs: Sequence[MapSpec], flag: str) -> None:
+    """InputError ``flag: why`` when a game of ``cfg`` on one of ``specs`` might make a
+    replay that :func:`load_replay` refuses (its longest game would ask for more than
+    :data:`MAX_SUBSTEPS` of re-simulation): asked before recording one."""
+    work = max(cfg.max_steps * substeps_for(cfg, s.min_wall_thickness()) for s in specs)
+    if work > MAX_SUBSTEPS:
+        raise InputError(f"{flag}: a game of up to {cfg.max_steps:,} ticks (max_steps) may "
+                         f"take {work:,} physics substeps to re-simulate; a replay may ask "
+                         f"for at most {MAX_SUBSTEPS:,} (lower max_steps)")
+
+
 def _declared_bytes(zf: zipfile.ZipFile, info: zipfile.ZipInfo) -> int:
     """The bytes an ``.npy`` member's header says its array holds (``np.load`` allocates
     them before reading the data, whatever the member's real size); 0 for other members."""
