@@ -222,7 +222,9 @@ CASES = [
     ("maps-cell-inf", ["maps", "{cellinf_txt}"], ["{cellinf_txt}:1", "'cell'", "[39, 400]"]),
     ("maps-cell-tiny", ["maps", "{cellsmall_txt}"], ["{cellsmall_txt}:1", "'cell'"]),
     ("maps-no-room", ["maps", "{noroom_txt}"], ["{noroom_txt}:3", "only 3 tank(s) fit"]),
-    ("maps-folder", ["maps", "{emptydir}"], ["{emptydir}", "folder"]),
+    ("arena-max-steps", ["arena", "--seats", "smart,random", "--max-steps", "0"],
+     ["--max-steps", "must be an integer >= 1, got '0'"]),
+    ("maps-folder", ["maps", "{emptydir}"], ["{emptydir}: folder holds no .txt maps"]),
     ("maps-empty-path", ["maps", ""], ["''", "empty map name or path"]),
     ("maps-wrong-kind", ["maps", "{good_npz}"], ["{good_npz}", "UTF-8"]),
     # bench

@@ -143,7 +143,7 @@ def test_replay_command_writes_a_gif_alone(recorded, tmp_path, capsys):
 
 def test_replay_command_renders_in_a_window(recorded):
     args = _args(replay, str(recorded["replay"]), "--render", "--headless-test",
-                 "--speed", "1000", "--max-frames", "5")
+                 "--speed", "50", "--max-frames", "5")
     assert replay.run(args) == 0
     assert replay.run(_args(replay, str(recorded["replay"]), "--render")) == 2  # dummy driver
 
@@ -156,7 +156,9 @@ def test_tampered_replay_is_reported_as_diverged(recorded, tmp_path, capsys):
         simulate(rep)
     path = save_replay(rep, tmp_path / "bad.npz")
     assert replay.run(_args(replay, str(path))) == 1
-    assert "diverged" in capsys.readouterr().err
+    assert f"{path}: replay diverged" in capsys.readouterr().err
+    with pytest.raises(ReplayError, match=r"is a folder, not a replay file \(\.npz\)"):
+        load_replay(tmp_path)
 
 
 def test_corrupt_replay_files_give_clear_errors(recorded, tmp_path):

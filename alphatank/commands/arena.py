@@ -8,7 +8,7 @@ import argparse
 import sys
 import time
 
-from alphatank.commands.argtypes import positive_float, positive_int, seed
+from alphatank.commands.argtypes import positive_int, seed, window_fps
 from alphatank.game.arena import arena_scenario, run_arena
 from alphatank.game.lineup import spec_seat
 from alphatank.game.scenarios import ScenarioError
@@ -30,10 +30,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="games per pair, sides alternating (default: %(default)s)")
     p.add_argument("--seed", type=seed, default=0, help="first episode seed")
     p.add_argument("--preset", default="paper", help="game preset (paper, long_range)")
-    p.add_argument("--max-steps", type=int, default=None,
+    p.add_argument("--max-steps", type=positive_int, default=None,
                    help="ticks before a game is a draw (default: the preset's)")
     p.add_argument("--render", action="store_true", help="show every game in a window")
-    p.add_argument("--fps", type=positive_float, default=60.0, help="frame rate with --render")
+    p.add_argument("--fps", type=window_fps, default=60.0,
+                   help="frame rate with --render, 1 to 1000 (default: 60)")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -28,7 +28,10 @@ def _expand(items: list[str]) -> list[str]:
     for item in items:
         path = Path(item)
         if item and path.is_dir():  # not '': Path('') is the current folder
-            out += sorted(str(f) for f in path.glob("*.txt")) or [item]  # empty: an error
+            found = sorted(str(f) for f in path.glob("*.txt"))
+            if not found:
+                raise MapError("folder holds no .txt maps", item)
+            out += found
         elif item.strip("/") in shipped_map_folders():
             out += shipped_maps(item.strip("/"))
         else:

@@ -80,6 +80,7 @@ class Replay:
     # (ticks, n_tanks, 4) int16: each seat's planned route (start row, col, goal row, col)
     # when its actions of that tick were chosen; -1 where the seat had none.
     routes: np.ndarray | None = None
+    source: str = ""  # the file it was loaded from (named in errors); not stored
 
     @property
     def ticks(self) -> int:
@@ -323,6 +324,8 @@ def load_replay(path: str | Path) -> Replay:
     """Read and check a replay file; ReplayError names the file, the field and what is
     allowed (see the module doc for what is checked)."""
     path = Path(path)
+    if path.is_dir():
+        raise ReplayError(f"{path}: is a folder, not a replay file (.npz)")
     if not path.is_file():
         raise ReplayError(f"{path}: no such replay file")
     arrays, meta = _read_archive(path)
@@ -420,21 +423,22 @@ def load_replay(path: str | Path) -> Replay:
                   map_text=meta["map_text"], config=meta["config"], teams=list(teams),
                   actions=actions, final_hash=meta["final_hash"], winner=meta["winner"],
                   seed=meta["seed"], scenario=meta["scenario"], seats=list(meta["seats"]),
-                  labels=list(meta["labels"]), routes=routes)
+                  labels=list(meta["labels"]), routes=routes, source=str(path))
 
 
 def check_replayed(replay: Replay, match: Match) -> None:
     """ReplayError unless ``match`` (played back from ``replay``) ended as the replay says:
-    the recorded tick count, final state hash and winner."""
+    the recorded tick count, final state hash and winner. Errors name the replay's file."""
+    where = f"{replay.source}: " if replay.source else ""
     if match.tick != replay.ticks:
-        raise ReplayError(f"replay diverged: the match ended at tick {match.tick} but "
+        raise ReplayError(f"{where}replay diverged: the match ended at tick {match.tick} but "
                           f"{replay.ticks} ticks were recorded")
     got = match.state_hash()
     if got != replay.final_hash:
-        raise ReplayError(f"replay diverged: final state hash {got[:16]}... != recorded "
-                          f"{replay.final_hash[:16]}... after {match.tick} ticks")
+        raise ReplayError(f"{where}replay diverged: final state hash {got[:16]}... != "
+                          f"recorded {replay.final_hash[:16]}... after {match.tick} ticks")
     if match.winner != replay.winner:
-        raise ReplayError(f"replay diverged: the re-simulated winner is "
+        raise ReplayError(f"{where}replay diverged: the re-simulated winner is "
                           f"{_result(match.winner)}, the file claims {_result(replay.winner)}")
 
 
