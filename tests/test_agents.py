@@ -69,9 +69,18 @@ def test_export_strips_training_state_and_lists(tmp_path, capsys):
                       wandb="disabled", game={"max_steps": 40}, learners=(LearnerSpec(
                           "ppo", "ppo", (0,), PPOConfig(num_steps=16, update_epochs=1)),))
     Trainer(cfg, tmp_path / "one", progress=False).train()
-    (tmp_path / "e.json").write_text(json.dumps([{"win_rate": 0.5, "games": 2}]))
-    assert main(["agents", "export", str(tmp_path / "one"), str(tmp_path / "agent"),
-                 "--description", "tiny", "--eval", str(tmp_path / "e.json")]) == 0
+    row = {"checkpoint": str(tmp_path / "one"), "win_rate": 0.5, "ci95_low": 0.1,
+           "ci95_high": 0.9, "games": 2}
+    export = ["agents", "export", str(tmp_path / "one"), str(tmp_path / "agent"),
+              "--description", "tiny", "--eval", str(tmp_path / "e.json")]
+    for bad, why in (({**row, "checkpoint": "agent:ppo_vs_smart"},
+                      "row 0 evaluated 'agent:ppo_vs_smart', not the exported checkpoint"),
+                     ({"win_rate": 0.5, "games": 2}, "row 0 is not a row of `alphatank eval")):
+        (tmp_path / "e.json").write_text(json.dumps([bad]))  # another's, or not a row
+        assert main(export) == 2 and why in capsys.readouterr().err
+        assert not (tmp_path / "agent").exists()
+    (tmp_path / "e.json").write_text(json.dumps([row]))
+    assert main(export) == 0
     state = torch.load(tmp_path / "agent" / "ppo.pt", weights_only=True)
     assert set(state) == {"net", "obs_norm", "updates"}
     meta = load_checkpoint(tmp_path / "agent").meta

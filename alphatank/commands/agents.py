@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
+from typing import Any
 
 from alphatank.errors import InputError
 
@@ -18,7 +19,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     ex.add_argument("dest", help="agent folder to write (e.g. alphatank/data/agents/NAME)")
     ex.add_argument("--description", default="", help="one line about the agent")
     ex.add_argument("--eval", metavar="FILE.json",
-                    help="an `alphatank eval --json` file to record with the agent")
+                    help="an `alphatank eval --json` file of this checkpoint, recorded with "
+                         "the agent (its rows are checked)")
     ex.add_argument("--command", dest="commands", action="append", default=[], metavar="TEXT",
                     help="a command that made or evaluated it (repeatable)")
 
@@ -30,10 +32,7 @@ def run(args: argparse.Namespace) -> int:
         from alphatank.training.agents import export_agent
         record = {"description": args.description, "commands": list(args.commands)}
         if args.eval:
-            try:
-                record["eval"] = json.loads(Path(args.eval).read_text(encoding="utf-8"))
-            except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-                raise InputError(f"--eval: {args.eval}: {exc}") from None
+            record["eval"] = _eval_of(args.eval, args.checkpoint)
         dest = export_agent(checkpoint_source(args.checkpoint), args.dest, record)
         size = sum(f.stat().st_size for f in dest.iterdir())
         print(f"agent {dest.name}: {dest} ({size / 1e6:.2f} MB)")
@@ -55,6 +54,40 @@ def run(args: argparse.Namespace) -> int:
                         f"{100 * r['ci95_high']:.0f}] of {r['games']}" for r in rows)
         print(f"{name:20s} {s['scenario']:18s} {s['steps']:>10,d} {s['elapsed_s']:>8.0f}  {win}")
     return 0
+
+
+ROW_NUMBERS = ("win_rate", "ci95_low", "ci95_high", "games")  # what the listing shows
+
+
+def _eval_of(path: str, checkpoint: str) -> Any:
+    """The rows of an ``alphatank eval --json`` file for the agent exported from
+    ``checkpoint``: each an evaluation row of that very checkpoint, else InputError."""
+    from alphatank.game.seats import checkpoint_source
+    from alphatank.training.checkpoint import CheckpointError, resolve_checkpoint_dir
+
+    try:
+        data = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputError(f"--eval: {path}: {exc}") from None
+
+    def folder(spec: str) -> Path:
+        return resolve_checkpoint_dir(checkpoint_source(spec)).resolve()
+
+    exported = folder(checkpoint)
+    for k, row in enumerate(data if isinstance(data, list) else [data]):
+        if not isinstance(row, dict) or not all(
+                type(row.get(f)) in (int, float) for f in ROW_NUMBERS):
+            raise InputError(f"--eval: {path}: row {k} is not a row of `alphatank eval "
+                             f"--json` (numbers {', '.join(ROW_NUMBERS)})")
+        played = row.get("checkpoint")
+        try:
+            same = isinstance(played, str) and folder(played) == exported
+        except (CheckpointError, ValueError):
+            same = False
+        if not same:
+            raise InputError(f"--eval: {path}: row {k} evaluated {played!r}, not the exported "
+                             f"checkpoint {checkpoint!r}")
+    return data
 
 
 def _against(row: dict) -> str:
