@@ -225,6 +225,19 @@ def test_human_mode_opens_a_window_and_close_shuts_it():
     assert not pygame.display.get_init()
 
 
+def test_a_human_mode_env_opens_its_window_on_the_first_render_only():
+    import gymnasium
+
+    import alphatank.envs  # noqa: F401
+
+    env = gymnasium.make("AlphaTank/VsSmart-v0", render_mode="human")  # display checked
+    assert not pygame.display.get_init()
+    env.reset(seed=0)
+    assert pygame.display.get_surface() is not None
+    env.close()
+    assert not pygame.display.get_init()
+
+
 def test_without_a_display_human_mode_and_play_are_refused_not_silent(tmp_path):
     """With no display and no SDL_VIDEODRIVER, pygame quietly falls back to its offscreen
     driver: a human-mode env would crawl at 30 fps showing nothing and `alphatank play`

@@ -544,6 +544,8 @@ class FirstMatchRenderer:
         self.core, self.mode, self.fps = core, mode, fps
         self._renderer: Any = None
         if mode == "human":  # refused at once where no window would show
+            import pygame
+
             from alphatank.ui.render import DisplayUnavailable, init_display
 
             try:
@@ -552,6 +554,7 @@ class FirstMatchRenderer:
                 raise DisplayUnavailable(f"render_mode='human' needs a display ({exc}); "
                                          "render_mode='rgb_array' gives the frames as "
                                          "arrays") from None
+            pygame.display.quit()  # only asked: the window opens on the first render()
 
     def render(self) -> np.ndarray | None:
         if self._renderer is None:
