@@ -3,13 +3,15 @@
 import dataclasses
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
 
+import alphatank.maps
 from alphatank.envs.core import MatchSet
-from alphatank.game.scenarios import load_scenario, parse_scenario
+from alphatank.game.scenarios import ScenarioError, load_scenario, parse_scenario
 from alphatank.game.seats import make_controller
 from alphatank.sim.episode import start_episode
 from alphatank.sim.policy import Policy
@@ -298,3 +300,32 @@ def test_train_command_runs_resumes_and_refuses_to_overwrite(tmp_path, capsys):
         train_cmd.run(bad)
     assert train_cmd.run(parser.parse_args(["--list"])) == 0
     assert "team_ppo_vs_ppo" in capsys.readouterr().out
+
+
+def test_a_run_on_a_map_file_evaluates_and_resumes_after_the_file_is_gone(tmp_path, capsys):
+    """A checkpoint carries the text of maps not shipped with the package (map_texts):
+    moving the run to another machine, or the map away, loses nothing."""
+    from alphatank.cli import main
+
+    (tmp_path / "sc").mkdir()
+    (tmp_path / "sc" / "mine.txt").write_text(
+        (Path(alphatank.maps.__file__).parent / "maze.txt").read_text())
+    (tmp_path / "sc" / "my.toml").write_text(
+        'name = "mine"\nmap = "mine.txt"\n[[seats]]\nteam = "A"\ncontroller = "learner"\n'
+        '[[seats]]\nteam = "B"\ncontroller = "bot"\nbot = "aggressive"\n')
+    common = ["--wandb", "disabled", "--no-progress"]
+    assert main(["train", "--preset", "ppo_vs_aggressive", "--scenario",
+                 str(tmp_path / "sc" / "my.toml"), "--num-envs", "2", "--total-steps", "128",
+                 "--runs", str(tmp_path / "runs"), "--name", "r",
+                 "--hp", "ppo.num_steps=32,ppo.update_epochs=1", *common]) == 0
+    walls = load_checkpoint(tmp_path / "runs" / "r").scenario.map_specs()[0].walls
+    shutil.rmtree(tmp_path / "sc")
+    assert main(["eval", str(tmp_path / "runs" / "r"), "--games", "2", "--seed", "5"]) == 0
+    assert main(["train", "--resume", str(tmp_path / "runs" / "r"), "--total-steps", "256",
+                 *common]) == 0
+    ckpt = load_checkpoint(tmp_path / "runs" / "r")
+    assert ckpt.meta["progress"]["global_step"] == 256
+    assert (ckpt.scenario.map_specs()[0].walls == walls).all()
+    with pytest.raises(ScenarioError, match="map_texts: must be a list of"):
+        parse_scenario({**ckpt.meta["scenario"], "map_texts": [["a\nb", "x"]]})
+

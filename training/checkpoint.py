@@ -39,6 +39,7 @@ from alphatank.files import write_text_atomic
 from alphatank.game.scenarios import Scenario, ScenarioError, parse_scenario
 from alphatank.game.seats import agent_path
 from alphatank.sim.config import ACTION_REPEAT_MAX, check_value
+from alphatank.sim.mapspec import map_text
 from alphatank.sim.policy import NOOP, Observe
 from alphatank.training.learners import make_learner
 from alphatank.training.presets import LearnerSpec, TrainConfig
@@ -56,15 +57,15 @@ class CheckpointError(InputError, RuntimeError):
 
 
 def scenario_to_dict(sc: Scenario) -> dict[str, Any]:
-    """A mapping :func:`parse_scenario` rebuilds ``sc`` from (maps as absolute paths
-    unless shipped)."""
-    if all(m.startswith("pkg:") for m in sc.maps):
-        map_value = sc.map
-    elif len(sc.maps) == 1:
-        map_value = str(Path(sc.maps[0]).resolve())
-    else:
-        map_value = str(Path(sc.maps[0]).resolve().parent)
-    return {**sc.to_dict(), "map": map_value}
+    """A mapping :func:`parse_scenario` rebuilds ``sc`` from. Maps not shipped with the
+    package travel as text (``map_texts``), so the checkpoint needs no map file; ``map``
+    then says where they were read from."""
+    out = sc.to_dict()
+    if all(m.startswith("pkg:") for m in sc.maps) or "map_texts" in out:
+        return out
+    where = Path(sc.maps[0]).resolve()
+    return {**out, "map": str(where if len(sc.maps) == 1 else where.parent),
+            "map_texts": [[spec.name, map_text(spec)] for spec in sc.map_specs()]}
 
 
 def _sha256(path: Path) -> str:

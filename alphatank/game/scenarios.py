@@ -67,7 +67,9 @@ from alphatank.sim.policy import NoopPolicy
 
 __all__ = ["NoopPolicy", "Scenario", "ScenarioError", "Seat", "bot_names", "load_scenario",
            "parse_scenario", "seat_policy", "seats_scenario", "shipped_scenarios"]
-_TOP_KEYS = ("name", "description", "map", "preset", "observation", "game", "rewards", "seats")
+_TOP_KEYS = ("name", "description", "map", "map_texts", "preset", "observation", "game",
+             "rewards", "seats")
+TEXT = "text:"  # a map source holding the map itself: "text:NAME\nTEXT" (map_texts)
 seat_policy = make_controller  # the name earlier releases used
 
 
@@ -77,7 +79,8 @@ class ScenarioError(InputError, ValueError):
 
 @dataclass(frozen=True)
 class Scenario:
-    """A validated scenario. ``maps`` holds one or more map sources (names or paths)."""
+    """A validated scenario. ``maps`` holds one or more map sources: names, paths, or the
+    maps' text (``map_texts``: a scenario stored in a checkpoint carries its own maps)."""
 
     name: str
     map: str
@@ -124,9 +127,12 @@ class Scenario:
 
     def to_dict(self) -> dict[str, Any]:
         """A mapping :func:`parse_scenario` rebuilds this scenario from."""
-        return {"name": self.name, "description": self.description, "map": self.map,
-                "preset": self.preset, "observation": self.observation, "game": dict(self.game),
-                "rewards": dict(self.rewards), "seats": [s.to_dict() for s in self.seats]}
+        out = {"name": self.name, "description": self.description, "map": self.map,
+               "preset": self.preset, "observation": self.observation, "game": dict(self.game),
+               "rewards": dict(self.rewards), "seats": [s.to_dict() for s in self.seats]}
+        if self.maps[0].startswith(TEXT):
+            out["map_texts"] = [m[len(TEXT):].split("\n", 1) for m in self.maps]
+        return out
 
     def map_specs(self) -> list[MapSpec]:
         """Parsed maps, in ``maps`` order (an episode's map is drawn from these)."""
@@ -139,7 +145,10 @@ _MAP_CACHE: dict[str, MapSpec] = {}
 def _load_map_cached(source: str) -> MapSpec:
     spec = _MAP_CACHE.get(source)
     if spec is None:
-        if source.startswith("pkg:"):
+        if source.startswith(TEXT):
+            name, _, text = source[len(TEXT):].partition("\n")
+            spec = parse_map(text, f"<map {name!r} of map_texts>", name=name)
+        elif source.startswith("pkg:"):
             res = resources.files("alphatank.maps").joinpath(source[4:])
             spec = parse_map(decode_text(res.read_bytes(), f"maps/{source[4:]}"),
                              f"maps/{source[4:]}", name=Path(source[4:]).stem)
@@ -226,7 +235,8 @@ def parse_scenario(data: dict[str, Any], source: str = "<dict>",
     except ConfigError as exc:
         raise ScenarioError(str(exc)) from None
 
-    maps = _resolve_maps(data["map"], base, fail)
+    maps = _text_maps(data["map_texts"], fail) if "map_texts" in data else \
+        _resolve_maps(data["map"], base, fail)
     seats_data = data.get("seats")
     if not isinstance(seats_data, list) or len(seats_data) < 2:
         raise fail("seats", "need at least 2 [[seats]] entries")
@@ -247,6 +257,18 @@ def parse_scenario(data: dict[str, Any], source: str = "<dict>",
     return Scenario(name=data["name"], map=data["map"], maps=maps, seats=seats,
                     description=description, preset=preset, observation=observation,
                     game=tables["game"], rewards=tables["rewards"], source=source)
+
+
+def _text_maps(value: Any, fail: Any) -> tuple[str, ...]:
+    """Map sources for a ``map_texts`` value: [name, map text] pairs (``map`` then only
+    says where they came from)."""
+    if not isinstance(value, list) or not value or not all(
+            isinstance(p, list) and len(p) == 2 and all(isinstance(x, str) and x for x in p)
+            and "\n" not in p[0] for p in value):
+        raise fail("map_texts", "must be a list of [name, map text] pairs (a name is one "
+                                "line)")
+    return _checked(tuple(f"{TEXT}{name}\n{text}" for name, text in value), fail,
+                    "map_texts")
 
 
 def _resolve_maps(value: str, base: Path | None, fail: Any) -> tuple[str, ...]:
@@ -279,12 +301,12 @@ def _resolve_maps(value: str, base: Path | None, fail: Any) -> tuple[str, ...]:
                "(or a path to a .txt map or a folder of maps)")
 
 
-def _checked(sources: tuple[str, ...], fail: Any) -> tuple[str, ...]:
+def _checked(sources: tuple[str, ...], fail: Any, key: str = "map") -> tuple[str, ...]:
     for s in sources:
         try:
             _load_map_cached(s)
         except MapError as exc:
-            raise fail("map", str(exc)) from None
+            raise fail(key, str(exc)) from None
     return sources
 
 
