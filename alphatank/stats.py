@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 from alphatank.extras import require
 
@@ -54,6 +55,27 @@ class League:
         ranks = [0, 0] if outcome == 0 else ([0, 1] if outcome > 0 else [1, 0])
         [[a], [b]] = self.model.rate([[self.ratings[i]], [self.ratings[j]]], ranks=ranks)
         self.ratings[i], self.ratings[j] = a, b
+
+    def record_period(self, games: Sequence[tuple[int, int, int]]) -> None:
+        """A rating period: the games ``(i, j, outcome)`` (as for :meth:`record`) all rated
+        from the ratings before the period, each player's changes then added up (mu
+        shifts summed, sigma shrinks multiplied). The result does not depend on the order
+        of the games, as a sequence of :meth:`record` calls does."""
+        before = list(self.ratings)
+        shift: dict[int, float] = {}
+        shrink: dict[int, float] = {}
+        for i, j, outcome in games:
+            if outcome not in (-1, 0, 1):
+                raise ValueError(f"outcome must be -1, 0 or 1, got {outcome!r}")
+            ranks = [0, 0] if outcome == 0 else ([0, 1] if outcome > 0 else [1, 0])
+            [[a], [b]] = self.model.rate([[before[i]], [before[j]]], ranks=ranks)
+            for k, new in ((i, a), (j, b)):
+                shift[k] = shift.get(k, 0.0) + new.mu - before[k].mu
+                shrink[k] = shrink.get(k, 1.0) * new.sigma / before[k].sigma
+        for k in shift:
+            self.ratings[k] = self.model.rating(mu=before[k].mu + shift[k],
+                                                sigma=before[k].sigma * shrink[k],
+                                                name=self.names[k])
 
     def table(self) -> list[tuple[str, float, float, float]]:
         """(name, mu, sigma, ordinal = mu - 3 sigma), best ordinal first."""

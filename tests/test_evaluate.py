@@ -250,6 +250,19 @@ def test_rate_games_puts_agents_and_bots_in_one_table():
     assert mu["agent_a"] > mu["smart"] > mu["agent_b"]  # 8-2 over smart; smart 8-0 over b
 
 
+
+def test_ratings_do_not_depend_on_the_order_of_the_rows():
+    """Three runs with the same results get the same rating, whichever is listed first
+    (rated game by game in row order, the first listed came out lowest)."""
+    same = ["loss"] * 9 + ["draw"]
+    rows = [(name, "smart", same) for name in ("run_a", "run_b", "run_c")]
+    rows.append(("run_d", "defensive", ["win"] * 6))
+    tables = [{n: (round(m, 9), round(s, 9)) for n, m, s, _ in rate_games(order).table()}
+              for order in (rows, rows[::-1], rows[1:] + rows[:1])]
+    assert tables[0] == tables[1] == tables[2]
+    assert tables[0]["run_a"] == tables[0]["run_b"] == tables[0]["run_c"]
+
+
 def test_a_row_where_the_checkpoint_drives_every_seat_is_against_itself():
     from alphatank.game.scenarios import load_scenario
 

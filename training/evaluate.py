@@ -429,16 +429,21 @@ def markdown_table(head: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
 
 def rate_games(games: Iterable[tuple[str, str, Sequence[str]]]) -> League:
     """An openskill (Plackett-Luce) league from ``(player, opponent, outcomes)`` triples
-    (``outcomes``: 'win' / 'loss' / 'draw' of ``player``, rated in order; draws are
-    ties). Agents and bots share one table."""
+    (``outcomes``: 'win' / 'loss' / 'draw' of ``player``; draws are ties). Agents and bots
+    share one table. Game k of every triple makes rating period k
+    (:meth:`~alphatank.stats.League.record_period`), so the table does not depend on the
+    order of the triples: identical results, identical ratings."""
     league = League([])
     index: dict[str, int] = {}
+    rows = []
     for player, opponent, outcomes in games:
         for name in (player, opponent):
             if name not in index:
                 index[name] = league.add(name)
-        for out in outcomes:
-            league.record(index[player], index[opponent], OUTCOME_SCORE[out])
+        rows.append((index[player], index[opponent], list(outcomes)))
+    for k in range(max((len(outs) for *_, outs in rows), default=0)):
+        league.record_period([(i, j, OUTCOME_SCORE[outs[k]]) for i, j, outs in rows
+                              if k < len(outs)])
     return league
 
 
