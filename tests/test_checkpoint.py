@@ -329,3 +329,18 @@ def test_a_run_on_a_map_file_evaluates_and_resumes_after_the_file_is_gone(tmp_pa
     with pytest.raises(ScenarioError, match="map_texts: must be a list of"):
         parse_scenario({**ckpt.meta["scenario"], "map_texts": [["a\nb", "x"]]})
 
+
+def test_a_new_trainer_never_writes_into_a_run_and_a_trainer_trains_once(tmp_path):
+    from alphatank.errors import InputError
+
+    cfg = tiny_config("once", 2)
+    tr = Trainer(cfg, tmp_path / "once", progress=False)
+    tr.train()
+    with pytest.raises(RuntimeError, match="has trained; continue the run with resume_trainer"):
+        tr.train()
+    before = {p.name: p.stat().st_mtime_ns for p in (tmp_path / "once").rglob("*")}
+    with pytest.raises(InputError, match="already holds a run; continue it with resume_trainer"):
+        Trainer(dataclasses.replace(cfg, seed=5), tmp_path / "once", progress=False)
+    assert {p.name: p.stat().st_mtime_ns for p in (tmp_path / "once").rglob("*")} == before
+    resume_trainer(tmp_path / "once", progress=False, total_steps=3 * ITER).train()
+

@@ -50,6 +50,7 @@ from alphatank.envs.core import ACTION_NVEC
 from alphatank.envs.ids import env_id
 from alphatank.envs.ray_vector import RolloutLost
 from alphatank.envs.vector import make_vector_env
+from alphatank.errors import InputError
 from alphatank.extras import require
 from alphatank.files import FolderLock
 from alphatank.game.observe import slot_counts
@@ -155,6 +156,10 @@ class Trainer:
         self.cfg = cfg
         self.action_mask = action_mask
         self.run_dir = Path(run_dir)
+        if resume is None and (self.run_dir / "latest").exists():  # a new run would
+            # overwrite its saves and metrics
+            raise InputError(f"{self.run_dir} already holds a run; continue it with "
+                             f"resume_trainer({str(self.run_dir)!r}) or give another folder")
         # one process at a time writes a run (BusyError otherwise), until train() ends
         self.lock = FolderLock(self.run_dir).acquire()
         self.progress = progress
@@ -272,7 +277,8 @@ class Trainer:
         self.lost_rollouts = 0  # iterations collected again after an env runner died
         self.notes: list[str] = []  # what happened to the run (lost rollouts), in words
         self.saved_step = -1  # global_step of the newest checkpoint written or resumed from
-        self.stop = StopFlag()  # replaced by every train() call
+        self.stop = StopFlag()  # replaced by train()
+        self.trained = False  # train() ran: its env and log are closed
         self.stopped: dict[str, Any] = {}  # how train() stopped early, if it did
         self.selfplay = self._make_selfplay() if cfg.selfplay else None
         self.warm_start: dict[str, dict[str, int]] = {}
@@ -614,7 +620,12 @@ class Trainer:
         """Run until ``total_steps``, the time budget of this call (``time_limit_s``) or
         SIGINT / SIGTERM, always ending with a checkpoint to resume from. Returns a
         summary; ``stopped`` says why it ended early (None: it reached ``total_steps``)
-        and ``exit_code`` is 130 / 143 after SIGINT / SIGTERM, else 0."""
+        and ``exit_code`` is 130 / 143 after SIGINT / SIGTERM, else 0. A Trainer trains
+        once (its env and log close at the end): go on with :func:`resume_trainer`."""
+        if self.trained:
+            raise RuntimeError(f"this Trainer has trained; continue the run with "
+                               f"resume_trainer({str(self.run_dir)!r})")
+        self.trained = True
         cfg = self.cfg
         self.lock.acquire()
         start = time.perf_counter() - self.elapsed  # elapsed counts the whole run
