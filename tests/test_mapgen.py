@@ -317,7 +317,7 @@ def test_shipped_train_and_test_maps_are_valid_and_rebuildable(folder, count):
     assert not train & test
 
 
-def test_variants_turn_and_flip_walls_spawns_and_zones_together(tmp_path):
+def test_variants_turn_and_flip_walls_spawns_and_zones_together(tmp_path, capsys):
     spec = load_map(ROOT / "maps" / "train" / "rooms_0002.txt")
     variants = map_variants(spec)
     assert map_text(variants[0]) == map_text(spec)  # the original first, under its name
@@ -339,6 +339,18 @@ def test_variants_turn_and_flip_walls_spawns_and_zones_together(tmp_path):
                      str(tmp_path)]) == 0
     assert sorted(p.stem for p in tmp_path.glob("*.txt")) == sorted(v.name for v in variants)
     assert cli.main(["variants", "rooms_0002.txt", "--out", str(tmp_path)]) == 1  # no such map
+    # two maps of one name would write the same files: refused before any is written
+    twin = tmp_path / "twin"
+    twin.mkdir()
+    (twin / "other.txt").write_text((ROOT / "maps" / "train" / "rooms_0002.txt").read_text())
+    capsys.readouterr()
+    assert cli.main(["variants", str(ROOT / "maps" / "train" / "rooms_0002.txt"),
+                     str(twin / "other.txt"), "--out", str(tmp_path / "v"), "--force"]) == 2
+    assert "share the name 'rooms_0002'" in capsys.readouterr().err
+    assert not (tmp_path / "v").exists()
+    assert cli.main(["variants", str(ROOT / "maps" / "train" / "rooms_0002.txt"), "--out",
+                     str(tmp_path)]) == 2
+    assert f"exists ({len(variants)} of the variants' files do" in capsys.readouterr().err
 
 
 def test_shipped_train_d8_is_the_variants_of_train():

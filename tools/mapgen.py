@@ -163,7 +163,7 @@ def cmd_batch(args: argparse.Namespace) -> int:
 def cmd_variants(args: argparse.Namespace) -> int:
     check_folder(args.out, "--out")
     out = Path(args.out)
-    written = 0
+    made: dict[Path, tuple[str, MapSpec]] = {}  # every variant first: no half-written run
     for src in _map_sources(args.maps):
         try:
             spec = load_map(src)
@@ -171,9 +171,19 @@ def cmd_variants(args: argparse.Namespace) -> int:
             print(err)
             return 1
         for variant in map_variants(spec):
-            _write(variant, out / f"{variant.name}.txt", args.force)
-            written += 1
-    print(f"wrote {written} maps to {out}")
+            path = out / f"{variant.name}.txt"
+            if path in made:
+                raise MapGenError(f"{src} and {made[path][0]} both make {path} (their maps "
+                                  f"share the name {spec.name!r}); give them different "
+                                  f"name: headers")
+            made[path] = (src, variant)
+    taken = [str(path) for path in made if path.exists()]
+    if taken and not args.force:
+        raise FileExistsError(f"{taken[0]} exists ({len(taken)} of the variants' files do; "
+                              f"use --force to overwrite)")
+    for path, (_, variant) in made.items():
+        _write(variant, path, args.force)
+    print(f"wrote {len(made)} maps to {out}")
     return 0
 
 
