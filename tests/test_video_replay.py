@@ -148,6 +148,17 @@ def test_replay_command_renders_in_a_window(recorded):
     assert replay.run(_args(replay, str(recorded["replay"]), "--render")) == 2  # dummy driver
 
 
+def test_a_replay_that_would_not_load_is_not_saved(recorded, tmp_path):
+    rep = load_replay(recorded["replay"])
+    rep.labels = ["only one"]  # for a two-tank match
+    with pytest.raises(ReplayError, match=r"bad\.npz: not saved, it would not load: "
+                                          r"meta\.labels: must be a list of \d+ strings"):
+        save_replay(rep, tmp_path / "bad.npz")
+    assert list(tmp_path.iterdir()) == []  # nothing left behind
+    rep.labels, rep.match_seed = [], np.int64(rep.match_seed)  # numpy ints are numbers
+    assert load_replay(save_replay(rep, tmp_path / "ok.npz")).match_seed == rep.match_seed
+
+
 def test_tampered_replay_is_reported_as_diverged(recorded, tmp_path, capsys):
     rep = load_replay(recorded["replay"])
     rep.actions = rep.actions.copy()
@@ -181,9 +192,13 @@ def test_corrupt_replay_files_give_clear_errors(recorded, tmp_path):
     rep = load_replay(recorded["replay"])
     rep.actions = rep.actions.copy()
     rep.actions[0, 0, 0] = 7
-    bad = save_replay(rep, tmp_path / "range.npz")
+    with pytest.raises(ReplayError, match=r"range\.npz: not saved, it would not load: "
+                                          r"actions: out of range"):
+        save_replay(rep, tmp_path / "range.npz")  # save_replay reads back what it writes
+    blob = np.frombuffer(json.dumps(rep.meta()).encode(), np.uint8)
+    np.savez_compressed(tmp_path / "range.npz", **rep.arrays(), meta=blob)  # by hand
     with pytest.raises(ReplayError, match="out of range"):
-        load_replay(bad)
+        load_replay(tmp_path / "range.npz")
     with zipfile.ZipFile(recorded["replay"]) as z:
         assert sorted(z.namelist()) == ["actions.npy", "meta.npy", "routes.npy"]
 

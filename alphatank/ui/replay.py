@@ -123,7 +123,8 @@ def content_digest(meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> str:
     (name, dtype, shape, bytes)."""
     h = hashlib.sha256()
     body = {k: v for k, v in meta.items() if k != "digest"}
-    h.update(json.dumps(body, sort_keys=True, separators=(",", ":")).encode("utf-8"))
+    h.update(json.dumps(body, sort_keys=True, separators=(",", ":"), default=_plain)
+             .encode("utf-8"))
     for name in sorted(arrays):
         arr = np.ascontiguousarray(arrays[name])
         h.update(f"|{name}|{arr.dtype.str}|{arr.shape}|".encode())
@@ -246,14 +247,25 @@ class ReplayPolicy:
 
 
 def save_replay(replay: Replay, path: str | Path) -> Path:
-    """Write ``replay`` to ``path`` atomically; returns the path."""
+    """Write ``replay`` to ``path`` atomically; returns the path. What is written is read
+    back with :func:`load_replay` first: a replay that would not load is not saved
+    (ReplayError naming ``path`` and the field)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    blob = np.frombuffer(json.dumps(replay.meta()).encode("utf-8"), dtype=np.uint8)
+    try:
+        text = json.dumps(replay.meta(), default=_plain)
+    except (TypeError, ValueError) as exc:
+        raise ReplayError(f"{path}: not saved: {exc}") from None
+    blob = np.frombuffer(text.encode("utf-8"), dtype=np.uint8)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as f:
             np.savez_compressed(f, **replay.arrays(), meta=blob)
+        try:
+            load_replay(tmp)
+        except ReplayError as exc:
+            raise ReplayError(f"{path}: not saved, it would not load: "
+                              f"{str(exc).removeprefix(f'{tmp}: ')}") from None
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600 files
@@ -262,6 +274,13 @@ def save_replay(replay: Replay, path: str | Path) -> Path:
         Path(tmp).unlink(missing_ok=True)
         raise
     return path
+
+
+def _plain(value: Any) -> Any:
+    """numpy scalars as the JSON numbers they are (``json.dumps``' ``default``)."""
+    if isinstance(value, np.integer | np.floating | np.bool_):
+        return value.item()
+    raise TypeError(f"{type(value).__name__} {value!r} is not a JSON value")
 
 
 def check_replay_room(cfg: GameConfig, specs: Sequence[MapSpec], flag: str) -> None:
