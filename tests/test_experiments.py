@@ -9,6 +9,7 @@ import os
 import shutil
 import signal
 import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -17,6 +18,8 @@ from alphatank.cli import main
 from alphatank.training.aggregate import pool_runs
 from alphatank.training.experiments import (
     EVAL_SEED_BASE,
+    RunInterrupted,
+    execute,
     load_tables,
     make_plan,
     row_config,
@@ -203,10 +206,12 @@ def test_a_failing_row_is_reported_and_the_other_finishes(tmp_path, capsys):
 
 def test_a_row_stopped_by_a_signal_is_not_finished_nor_evaluated(tmp_path):
     """SIGTERM (a killed driver's workers get one) or Ctrl-C cut a row short: it must not
-    be marked done (``--resume`` trains it again) nor evaluated as if finished."""
+    be marked done (``--resume`` trains it again) nor evaluated as if finished, and in this
+    process the signal ends the command: the next row does not start."""
     plan = make_plan(load_tables(["tiny"], write_rows(tmp_path / "exp")), tmp_path / "out",
-                     steps=10**7, games=2, budget_min=2, rows=["a_random"])
-    job = plan.jobs[0]
+                     steps=10**7, games=2, budget_min=2, rows=["a_random", "b_cycle"])
+    job, after = plan.jobs[0], plan.jobs[-1]
+    assert after.rows != job.rows
     metrics = Path(job.run_dir) / "metrics.jsonl"
     over = threading.Event()
 
@@ -218,13 +223,15 @@ def test_a_row_stopped_by_a_signal_is_not_finished_nor_evaluated(tmp_path):
 
     watcher = threading.Thread(target=stop_once_training, daemon=True)
     watcher.start()
+    t0 = time.time()
     try:
-        _, error, seconds = run_job(job)
+        with pytest.raises(RunInterrupted, match="stopped by SIGTERM.*--resume") as info:
+            execute(plan.jobs, workers=1, progress=False)
     finally:
         over.set()
         watcher.join()
-    assert error is not None and "stopped by SIGTERM" in error and "--resume" in error
-    assert seconds < 60
+    assert info.value.exit_code == 143 and time.time() - t0 < 60
+    assert not Path(after.run_dir).exists()  # the next row never started
     run = Path(job.run_dir)
     assert (run / "latest").exists()  # it saved where it stopped
     assert not job.done_file.exists() and not (run / "eval").exists()

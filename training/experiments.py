@@ -603,7 +603,13 @@ def clone_cut(summary: dict[str, Any]) -> bool:
 
 
 class RunInterrupted(RuntimeError):
-    """A row's training was stopped by a signal: it has no done.json and no evaluation."""
+    """A row's training was stopped by a signal: it has no done.json and no evaluation.
+    Run in this process, it ends :func:`execute` (the signal was meant for the command);
+    ``exit_code`` is the run's (130 after SIGINT, 143 after SIGTERM)."""
+
+    def __init__(self, message: str, exit_code: int = 130):
+        super().__init__(message)
+        self.exit_code = exit_code
 
 
 def _train(job: Job) -> dict[str, Any]:
@@ -638,7 +644,8 @@ def _train_locked(job: Job, cfg: TrainConfig, run_dir: Path) -> dict[str, Any]:
     summary = trainer.train()
     if summary["exit_code"]:  # SIGINT / SIGTERM: cut short, not finished
         raise RunInterrupted(f"stopped by {summary['stopped']['reason']} at step "
-                             f"{summary['global_step']:,}; --resume trains it again")
+                             f"{summary['global_step']:,}; --resume trains it again",
+                             summary["exit_code"])
     league = trainer.schedule.table() if hasattr(trainer.schedule, "table") else None
     done = {"summary": summary, "wall_s": time.time() - t0, "total_steps": cfg.total_steps,
             "stopped_by": "steps" if summary["global_step"] >= cfg.total_steps else "time",
@@ -666,13 +673,16 @@ BUSY = f"{BusyError.__name__}: "  # a failure's line when another command holds 
 
 
 def train_step(job: Job) -> Failure | None:
-    """Train ``job`` unless it is finished; a failure is returned, not raised."""
+    """Train ``job`` unless it is finished; a failure is returned, not raised (but for a
+    signal's stop: :class:`RunInterrupted`)."""
     from alphatank.training.threads import limit_threads
 
     limit_threads()
     try:
         if not job.done_file.is_file():
             _train(job)
+    except RunInterrupted:
+        raise
     except Exception as exc:  # a failed row is reported; the others go on
         return _failure(exc)
     return None
@@ -794,6 +804,8 @@ def execute(jobs: Sequence[Job], workers: int = 1, progress: bool = True,
                     job = futures[fut]
                     try:
                         _, error, seconds = fut.result()
+                    except RunInterrupted as exc:  # a signal stopped the worker's run
+                        error, seconds = f"{type(exc).__name__}: {exc}", 0.0
                     except Exception as exc:  # the worker process died
                         error, seconds = f"worker died: {type(exc).__name__}: {exc}", 0.0
                     finish(job, error, seconds)

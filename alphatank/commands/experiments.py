@@ -70,6 +70,7 @@ def run(args: argparse.Namespace) -> int:
     from alphatank.training.experiments import (
         BUSY,
         ExperimentError,
+        RunInterrupted,
         clone_cut,
         estimate_minutes,
         execute,
@@ -159,10 +160,10 @@ def run(args: argparse.Namespace) -> int:
         try:
             failed = execute(todo, args.workers, progress=not args.no_progress,
                              on_done=on_done, runner=runner)
-        except KeyboardInterrupt:
+        except (KeyboardInterrupt, RunInterrupted) as exc:  # Ctrl-C, or a run's signal
             print("interrupted: finished runs and evaluations are kept; --resume finishes "
                   "the rest", file=sys.stderr)
-            return 130
+            return getattr(exc, "exit_code", 130)
         finally:
             if connection is not None:
                 connection.close()
