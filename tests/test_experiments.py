@@ -165,11 +165,11 @@ def test_a_report_never_drops_the_results_it_shows(made, tmp_path, capsys):
     reports = {p.name: p.read_bytes() for p in out.glob("tiny.*")}
     assert cli(*args, "--games", "6", "--rows", "a_random") == 2  # other evaluations
     err = capsys.readouterr().err
-    assert "tiny.json reports results of row(s) ['a_random', 'b_cycle']" in err
+    assert "tiny.json reports results of a_random seed 0, b_cycle seed 0 that" in err
     assert {p.name: p.read_bytes() for p in out.glob("tiny.*")} == reports
 
 
-def test_two_seeds_pool_their_games_in_the_report(made, tmp_path):
+def test_two_seeds_pool_their_games_in_the_report(made, tmp_path, capsys):
     root, one_seed, _ = made
     assert "## Seeds pooled" not in (one_seed / "tiny.md").read_text()
     assert json.loads((one_seed / "tiny.json").read_text())[
@@ -185,6 +185,14 @@ def test_two_seeds_pool_their_games_in_the_report(made, tmp_path):
     md = (tmp_path / "tiny.md").read_text()
     section = md.split("## Seeds pooled")[1].split("\n## ")[0]
     assert "| Random Bot " in section and f"p {pool_runs(wins, [6, 6]).p_text}" in section
+    # a report of fewer seeds would drop seed 1's results: refused, the report kept
+    capsys.readouterr()
+    assert cli("tiny", "--experiments-dir", str(root), "--out", str(tmp_path), "--rows",
+               "a_random", "--seeds", "1", "--steps", "512", "--games", "6", "--budget", "2",
+               "--no-progress", "--report-only") == 2
+    assert "tiny.json reports results of a_random seed 1 that" in capsys.readouterr().err
+    assert json.loads((tmp_path / "tiny.json").read_text())["rows"][0]["columns"][
+        "random"]["pooled"] == pool
 
 
 def test_a_failing_row_is_reported_and_the_other_finishes(tmp_path, capsys):

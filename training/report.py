@@ -156,14 +156,14 @@ def evaluated_rows(plan: Plan, table: Table) -> list[Row]:
                    for job, specs in [plan.cells[(row.id, s)]] for spec in specs.values())]
 
 
-def reported_rows(path: Path) -> list[str]:
-    """Names of the rows with results in the report ``path`` (``<table>.json``); none when
-    it is missing or unreadable."""
+def reported_runs(path: Path) -> set[tuple[str, int]]:
+    """(row name, seed) of every run with results in the report ``path``
+    (``<table>.json``); none when it is missing or unreadable."""
     try:
-        return [r["row"] for r in read_json(path)["rows"]
-                if any(c["per_seed"] for c in r["columns"].values())]
+        return {(r["row"], int(run["seed"])) for r in read_json(path)["rows"]
+                for c in r["columns"].values() for run in c["per_seed"]}
     except (OSError, ValueError, KeyError, TypeError, AttributeError):
-        return []
+        return set()
 
 
 # ---- formatting -----------------------------------------------------------------------

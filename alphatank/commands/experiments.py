@@ -115,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
     from alphatank.extras import require
 
     require("train", "alphatank experiments")
-    from alphatank.training.report import evaluated_rows, reported_rows, write_report
+    from alphatank.training.report import evaluated_rows, reported_runs, write_report
 
     report = plan  # the reports: --rows, and every other row of their tables with results
     if rows:
@@ -125,12 +125,13 @@ def run(args: argparse.Namespace) -> int:
         args.rows = ",".join(r.name for t in report.tables for r in t.rows)  # the command
     for t in report.tables:  # a report never loses results it shows (made otherwise)
         coming = evaluated_rows(report, t) if args.report_only else t.rows
-        lost = sorted(set(reported_rows(report.out / f"{t.name}.json"))
-                      - {r.name for r in coming})
+        lost = sorted(reported_runs(report.out / f"{t.name}.json")
+                      - {(r.name, s) for r in coming for s in range(report.seeds)})
         if lost:
-            return _error(f"--out {args.out}: {t.name}.json reports results of row(s) {lost} "
-                          "that this report would lack (made with other settings: see the "
-                          "command in it); give those settings, or another --out")
+            runs = ", ".join(f"{row} seed {seed}" for row, seed in lost)
+            return _error(f"--out {args.out}: {t.name}.json reports results of {runs} that "
+                          "this report would lack (made with other settings, e.g. --seeds: "
+                          "see the command in it); give those settings, or another --out")
     command = _command(args)
     failed: dict[str, str] = {}
     if not args.report_only and todo:
