@@ -430,3 +430,12 @@ def test_a_run_whose_budget_ends_while_it_clones_is_reported_as_cut(tmp_path, ca
     assert "cloning cut" in (out / "tiny.md").read_text()
     run = json.loads((out / "tiny.json").read_text())["rows"][0]["runs"][0]
     assert run["cloning_cut"] is True and run["steps"] == 0 and run["stopped_by"] == "time"
+
+
+def test_steps_reported_are_those_of_the_evaluated_checkpoint():
+    from alphatank.training.report import trained_steps
+
+    # a time limit ended the run 2,048 steps after its last save, which was evaluated
+    assert trained_steps({"global_step": 36_864, "saved_step": 34_816}) == 34_816
+    assert trained_steps({"global_step": 512}) == 512  # a run from before saved_step
+

@@ -202,10 +202,17 @@ def _steps(rr: RowResult) -> str:
     out = []
     for s in sorted(rr.runs):
         summary = rr.runs[s]["summary"]
-        st = summary["global_step"]
+        st = trained_steps(summary)
         out.append("cloning cut" if clone_cut(summary) else
                    f"{st / 1e6:.2f}M" if st >= 1e5 else f"{st:,}")
     return "/".join(out)
+
+
+def trained_steps(summary: dict[str, Any]) -> int:
+    """Env steps of the checkpoint a run was evaluated from (``saved_step``: a time limit
+    can end a run after steps its last save does not hold; older runs: ``global_step``)."""
+    saved = summary.get("saved_step", -1)
+    return int(saved) if saved is not None and saved >= 0 else int(summary["global_step"])
 
 
 def counts_table(results: list[RowResult], seeds: int) -> str:
@@ -283,7 +290,7 @@ def runs_table(results: list[RowResult]) -> str:
         seeds = sorted(set(rr.run_dirs))
         for s in seeds:
             run = rr.runs.get(s)
-            steps = f"{run['summary']['global_step']:,}" if run else "-"
+            steps = f"{trained_steps(run['summary']):,}" if run else "-"
             minutes = f"{run['wall_s'] / 60:.1f}" if run else "-"
             stopped = run["stopped_by"] if run else ("failed" if s in rr.errors else "-")
             if run and clone_cut(run["summary"]):
@@ -565,7 +572,7 @@ def _json(plan: Plan, table: Table, results: list[RowResult], checks: list[dict]
                      "columns": cols,
                      "average": _agg_json(rr.average(), rr.paper_value("average")),
                      "runs": [{"seed": s, "run_dir": rr.run_dirs[s],
-                               "steps": rr.runs[s]["summary"]["global_step"] if s in rr.runs
+                               "steps": trained_steps(rr.runs[s]["summary"]) if s in rr.runs
                                else None,
                                "train_s": rr.runs[s]["wall_s"] if s in rr.runs else None,
                                "stopped_by": rr.runs[s]["stopped_by"] if s in rr.runs else None,
