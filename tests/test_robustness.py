@@ -360,3 +360,7 @@ def test_a_short_soak_cannot_fail_on_a_page_of_noise():
     leak = SoakResult("s", 150_000, 0, 1.0, [(k, 100 + k * 2048 / 2**20, 0.0)
                                              for k in range(30_000, 150_001, 10_000)], 30_000)
     assert leak.rss_growth == pytest.approx(1953, rel=1e-3) and not leak.passed()
+    # one sample after warm-up fits no growth: not measured, which is not a pass
+    short = SoakResult("s", 10, 0, 1.0, [(10, 175.8, 0.0)], 2)
+    assert not short.measured and not short.passed()
+    assert short.verdict() == "not measured (too few steps)"

@@ -108,9 +108,18 @@ class SoakResult:
     def heap_growth(self) -> float:
         return self.growth(2)
 
+    @property
+    def measured(self) -> bool:
+        """Enough memory samples after warm-up to fit a growth (two at least)."""
+        return math.isfinite(self.rss_growth)
+
     def passed(self, limit_mb: float = LIMIT_MB) -> bool:
-        grew = self.rss_growth >= limit_mb and self.rss_rise >= NOISE_MB  # False on NaN
-        return self.bad_obs == 0 and self.bad_rewards == 0 and not grew
+        grew = self.rss_growth >= limit_mb and self.rss_rise >= NOISE_MB
+        return self.measured and self.bad_obs == 0 and self.bad_rewards == 0 and not grew
+
+    def verdict(self, limit_mb: float = LIMIT_MB) -> str:
+        return ("ok" if self.passed(limit_mb) else "FAIL" if self.measured
+                else "not measured (too few steps)")
 
     def to_dict(self) -> dict[str, Any]:
         return {"steps": self.steps, "episodes": self.episodes,
@@ -209,7 +218,7 @@ def soak(scenarios: Sequence[str] = DEFAULT_SOAK_SCENARIOS, steps: int = 1_000_0
             f"{'NaN rew':>8s}")
         for r in results:
             say(f"  {r.scenario:14s} {r.rss_growth:11.2f} {r.heap_growth:12.3f} "
-                f"{r.bad_obs:8d} {r.bad_rewards:8d}   {'ok' if r.passed(limit_mb) else 'FAIL'}")
+                f"{r.bad_obs:8d} {r.bad_rewards:8d}   {r.verdict(limit_mb)}")
         say(f"soak {'passed' if ok else 'FAILED'} (RSS growth after warm-up < {limit_mb:g} MB "
             f"per 10^6 steps or < {NOISE_MB:g} MB in all, no NaN/inf in observations or "
             "rewards)")
