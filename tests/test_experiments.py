@@ -282,6 +282,18 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
     (root / "tiny" / "c_bad.toml").write_text('preset = "ppo_vs_smart"\n[run]\nnum_envs = 0\n')
     assert cli("tiny", "--experiments-dir", str(root), "--list") == 2
     assert "c_bad.toml" in capsys.readouterr().err
+    (root / "tiny" / "c_bad.toml").unlink()
+    table = (root / "tiny" / "_table.toml").read_text()
+    for check, why in (('kind = "gap"\ncolumns = ["random"]',
+                        "checks[1].columns: must be two column names, got ['random']"),
+                       ('kind = "within"\nrow = "a_random"\npoints = "five"',
+                        "checks[1].points: must be a number >= 0, got 'five'"),
+                       ('kind = "gap"\ncolums = ["random", "dodge"]',
+                        "checks[1].colums: unknown key for kind 'gap'")):
+        # a check's values are checked with the files, not after the training
+        (root / "tiny" / "_table.toml").write_text(f"{table}\n[[checks]]\n{check}\n")
+        assert cli("tiny", "--experiments-dir", str(root), "--list") == 2
+        assert why in capsys.readouterr().err
     shutil.rmtree(root / "tiny")
     for flags in (["--seeds", "0"], ["--workers", "0"], ["--games", "0"]):
         assert cli("table4", *flags, "--list") == 2

@@ -33,6 +33,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import math
 import shutil
 import time
 import tomllib
@@ -63,6 +64,22 @@ DEFAULT_BUDGET_MIN = 15.0
 DEFAULT_STEPS_PER_MINUTE = 36_000  # PPO 1v1 at Table 7 settings on one quiet core (~600/s)
 LAYOUTS = ("counts", "matrix")
 CHECKS = ("beats_paper", "best_average", "within", "gap")
+# each check's keys besides kind and text: a test of its value, and what that test wants
+_NAMES = (lambda v: isinstance(v, list) and all(isinstance(x, str) for x in v),
+          "a list of row names")
+_NUMBER = (lambda v: type(v) in (int, float) and math.isfinite(v) and v >= 0,
+           "a number >= 0")
+CHECK_KEYS: dict[str, dict[str, tuple[Callable[[Any], bool], str]]] = {
+    "beats_paper": {"rows": _NAMES},
+    "best_average": {"rows": _NAMES, "against": _NAMES, "above": _NUMBER},
+    "within": {"row": (lambda v: isinstance(v, str), "a row name"), "points": _NUMBER,
+               "specialists": (lambda v: isinstance(v, dict) and all(
+                   isinstance(k, str) and isinstance(x, str) for k, x in v.items()),
+                   "a table {column: row name}")},
+    "gap": {"columns": (lambda v: isinstance(v, list) and len(v) == 2
+                        and all(isinstance(x, str) for x in v), "two column names"),
+            "points": _NUMBER},
+}
 EVAL_ENVS = 16
 
 
@@ -352,6 +369,20 @@ def load_tables(names: Sequence[str], experiments_dir: str | Path | None = None
             if not isinstance(chk, dict) or chk.get("kind") not in CHECKS:
                 raise ExperimentError(f"{source}: checks[{i}]: needs kind = one of "
                                       f"{list(CHECKS)}")
+            keys = CHECK_KEYS[chk["kind"]]
+            for key, value in chk.items():
+                if key in ("kind", "text"):
+                    if key == "text" and not isinstance(value, str):
+                        raise ExperimentError(f"{source}: checks[{i}].text: must be a string")
+                    continue
+                if key not in keys:
+                    raise ExperimentError(f"{source}: checks[{i}].{key}: unknown key for kind "
+                                          f"{chk['kind']!r}; valid: "
+                                          f"{['kind', 'text', *keys]}")
+                test, wants = keys[key]
+                if not test(value):
+                    raise ExperimentError(f"{source}: checks[{i}].{key}: must be {wants}, "
+                                          f"got {value!r}")
         tables.append(Table(t, _typed(data, "title", str, source, t),
                             _typed(data, "description", str, source, ""), layout, columns,
                             tuple(sorted(rows, key=lambda r: (r.order, r.name))),
