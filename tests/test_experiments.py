@@ -294,6 +294,16 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
         (root / "tiny" / "_table.toml").write_text(f"{table}\n[[checks]]\n{check}\n")
         assert cli("tiny", "--experiments-dir", str(root), "--list") == 2
         assert why in capsys.readouterr().err
+    # a column's map and a row's scenarios are checked with the files too
+    (root / "tiny" / "_table.toml").write_text(
+        table + '[[columns]]\nname = "far"\nlabel = "Far"\nmap = "no_such_map"\n')
+    assert cli("tiny", "--experiments-dir", str(root), "--list") == 2
+    assert "_table.toml: columns[2]: map: unknown map 'no_such_map'" in capsys.readouterr().err
+    (root / "tiny" / "_table.toml").write_text(table)
+    (root / "tiny" / "c_bad.toml").write_text('preset = "ppo_vs_smart"\n'
+                                              'scenarios = ["vs_random", "nosuch"]\n')
+    assert cli("tiny", "--experiments-dir", str(root), "--list") == 2
+    assert "c_bad.toml: scenarios[1]: unknown scenario 'nosuch'" in capsys.readouterr().err
     shutil.rmtree(root / "tiny")
     for flags in (["--seeds", "0"], ["--workers", "0"], ["--games", "0"]):
         assert cli("table4", *flags, "--list") == 2

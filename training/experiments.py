@@ -227,6 +227,14 @@ def _column(data: Any, source: str) -> Column:
             load_scenario(col.scenario)
         except ValueError as exc:
             raise ExperimentError(f"{source}: scenario: {exc}") from None
+    if col.map is not None:  # a map, a shipped folder or a path: one that loads
+        from alphatank.game.scenarios import load_scenario
+        from alphatank.training.evaluate import with_map
+        try:
+            with_map(load_scenario("vs_random"), col.map)
+        except ValueError as exc:
+            raise ExperimentError(f"{source}: map: {str(exc).rpartition(': map: ')[2]}") \
+                from None
     if col.bot is not None:
         from alphatank.game.scenarios import bot_names
         if col.bot not in bot_names():
@@ -303,6 +311,12 @@ def _row(table: str, name: str, data: dict[str, Any], source: str,
     rate = _typed(data, "steps_per_minute", (int, float), source, DEFAULT_STEPS_PER_MINUTE)
     if rate <= 0:
         raise ExperimentError(f"{source}: steps_per_minute: must be > 0, got {rate}")
+    from alphatank.game.scenarios import load_scenario
+    for k, sc in enumerate(scenarios):
+        try:
+            load_scenario(sc if isinstance(sc, str) else "")
+        except ValueError as exc:
+            raise ExperimentError(f"{source}: scenarios[{k}]: {exc}") from None
     cols = _typed(data, "columns", list, source, [])
     eval_game = _typed(data, "eval_game", dict, source, {})
     try:
