@@ -14,12 +14,12 @@ def wilson_interval(successes: float, n: int, z: float = 1.96) -> tuple[float, f
     Returns ``(lo, hi)`` within [0, 1]; ``(0.0, 1.0)`` when ``n == 0`` (nothing known).
     ``successes`` may be fractional (e.g. wins + draws / 2). ``z=1.96`` gives 95 %.
     """
-    if n < 0:
-        raise ValueError(f"wilson_interval: n must be >= 0, got {n}")
+    if not (n >= 0 and math.isfinite(n)):  # NaN fails every comparison
+        raise ValueError(f"wilson_interval: n must be a finite number >= 0, got {n}")
     if not 0 <= successes <= n:
         raise ValueError(f"wilson_interval: successes must be in [0, n={n}], got {successes}")
-    if z <= 0:
-        raise ValueError(f"wilson_interval: z must be > 0, got {z}")
+    if not (z > 0 and math.isfinite(z)):
+        raise ValueError(f"wilson_interval: z must be a finite number > 0, got {z}")
     if n == 0:
         return (0.0, 1.0)
     p = successes / n
@@ -50,11 +50,19 @@ class League:
 
     def record(self, i: int, j: int, outcome: int) -> None:
         """Player i against player j: outcome +1 (i won), 0 (draw) or -1 (j won)."""
-        if outcome not in (-1, 0, 1):
-            raise ValueError(f"outcome must be -1, 0 or 1, got {outcome!r}")
+        self._check(i, j, outcome)
         ranks = [0, 0] if outcome == 0 else ([0, 1] if outcome > 0 else [1, 0])
         [[a], [b]] = self.model.rate([[self.ratings[i]], [self.ratings[j]]], ranks=ranks)
         self.ratings[i], self.ratings[j] = a, b
+
+    def _check(self, i: int, j: int, outcome: int) -> None:
+        """ValueError unless i and j are two players of the table and outcome is one."""
+        n = len(self.ratings)
+        if not (0 <= i < n and 0 <= j < n and i != j):
+            raise ValueError(f"a game needs two different players of the {n}, got {i} and "
+                             f"{j}")
+        if outcome not in (-1, 0, 1):
+            raise ValueError(f"outcome must be -1, 0 or 1, got {outcome!r}")
 
     def record_period(self, games: Sequence[tuple[int, int, int]]) -> None:
         """A rating period: the games ``(i, j, outcome)`` (as for :meth:`record`) all rated
@@ -65,8 +73,7 @@ class League:
         shift: dict[int, float] = {}
         shrink: dict[int, float] = {}
         for i, j, outcome in games:
-            if outcome not in (-1, 0, 1):
-                raise ValueError(f"outcome must be -1, 0 or 1, got {outcome!r}")
+            self._check(i, j, outcome)
             ranks = [0, 0] if outcome == 0 else ([0, 1] if outcome > 0 else [1, 0])
             [[a], [b]] = self.model.rate([[before[i]], [before[j]]], ranks=ranks)
             for k, new in ((i, a), (j, b)):

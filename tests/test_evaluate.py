@@ -4,6 +4,7 @@ import argparse
 import csv
 import json
 
+import numpy as np
 import pytest
 import torch
 
@@ -18,6 +19,7 @@ from alphatank.training.evaluate import (
     evaluate_policies,
     evaluate_stand_in,
     format_table,
+    game_seed,
     rate_games,
     row_opponents,
     write_csv,
@@ -268,4 +270,10 @@ def test_a_row_where_the_checkpoint_drives_every_seat_is_against_itself():
 
     assert row_opponents(load_scenario("team"), [None, "smart"]) == ["itself", "smart"]
     assert row_opponents(load_scenario("team_vs_bot"), [None]) == ["B:smart(w=1), B:smart(w=1)"]
+
+
+def test_an_evaluation_seed_is_checked_by_name():
+    with pytest.raises(ValueError, match="seed must be an integer >= 0, got -1"):
+        game_seed(-1, 0)
+    assert game_seed(np.int64(7), 3) == game_seed(7, 3)
 

@@ -42,7 +42,9 @@ def test_z_widens():
     assert b[0] < a[0] and b[1] > a[1]
 
 
-@pytest.mark.parametrize("s,n,z", [(5, 4, 1.96), (-1, 4, 1.96), (1, -2, 1.96), (1, 4, 0.0)])
+@pytest.mark.parametrize("s,n,z", [(5, 4, 1.96), (-1, 4, 1.96), (1, -2, 1.96), (1, 4, 0.0),
+                                   (5, 10, float("nan")), (5, 10, float("inf")),
+                                   (5, float("inf"), 1.96), (5, float("nan"), 1.96)])
 def test_bad_input(s, n, z):
     with pytest.raises(ValueError, match="wilson_interval"):
         wilson_interval(s, n, z)
@@ -58,6 +60,9 @@ def test_league_ranks_the_player_who_wins():
     assert rows[-1][0] == "weak"
     with pytest.raises(ValueError, match="outcome must be"):
         league.record(0, 1, 2)
+    for i, j in ((0, -1), (0, 3), (1, 1)):  # a negative index would rate the last player
+        with pytest.raises(ValueError, match="a game needs two different players of the 3"):
+            league.record(i, j, 1)
     k = league.add("late", mu=30.0, sigma=2.0)
     assert k == 3 and league.names[k] == "late" and league.ratings[k].mu == 30.0
     league.record(k, 0, -1)

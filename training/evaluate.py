@@ -85,7 +85,9 @@ class EvalResult:
 
 
 def game_seed(seed: int, index: int) -> int:
-    """Match seed of game ``index`` of an evaluation seeded ``seed``."""
+    """Match seed of game ``index`` of an evaluation seeded ``seed`` (an integer >= 0)."""
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
     return int(np.random.SeedSequence([seed, index]).generate_state(1, np.uint64)[0])
 
 
