@@ -119,6 +119,12 @@ def test_density_sets_the_wall_share(algorithm):
 
 
 def test_generator_options_are_checked_with_allowed_values():
+    for bad, why in (({"density": "0.3"}, "density must be a number, got '0.3'"),
+                     ({"rows": 11.5}, "rows must be an integer, got 11.5"),
+                     ({"seed": 1.5}, "seed must be an integer, got 1.5"),
+                     ({"zones": (1, 2, 3)}, r"zones must be two counts .* got \(1, 2, 3\)")):
+        with pytest.raises(MapGenError, match=why):  # not a TypeError deep inside
+            GenOptions(**bad)
     with pytest.raises(MapGenError, match=r"algorithm must be one of \['maze'"):
         generate(algorithm="caves")
     with pytest.raises(MapGenError, match="symmetry must be one of"):

@@ -54,6 +54,18 @@ class GenOptions:
     seed: int = 0
 
     def __post_init__(self) -> None:
+        for name, kinds in (("rows", (int,)), ("cols", (int,)), ("spawns", (int,)),
+                            ("seed", (int,)), ("density", (int, float)),
+                            ("loops", (int, float))):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, kinds) or v != v:  # v != v: NaN
+                what = "an integer" if kinds == (int,) else "a number"
+                raise MapGenError(f"{name} must be {what}, got {v!r}")
+        if self.zones is not None and not (
+                isinstance(self.zones, tuple) and len(self.zones) == 2
+                and all(type(z) is int for z in self.zones)):
+            raise MapGenError(f"zones must be two counts >= 0 (buff, debuff) or None "
+                              f"('zones: random'), got {self.zones!r}")
         if self.algorithm not in ALGORITHMS:
             raise MapGenError(f"algorithm must be one of {list(ALGORITHMS)}, "
                               f"got {self.algorithm!r}")
@@ -70,7 +82,7 @@ class GenOptions:
             raise MapGenError(f"loops must be in [0, 1], got {self.loops}")
         if not 0 <= self.spawns <= MAX_SPAWNS:
             raise MapGenError(f"spawns must be in [0, {MAX_SPAWNS}], got {self.spawns}")
-        if self.zones is not None and (len(self.zones) != 2 or min(self.zones) < 0):
+        if self.zones is not None and min(self.zones) < 0:
             raise MapGenError(f"zones must be two counts >= 0 (buff, debuff) or 'random', "
                               f"got {self.zones!r}")
         if self.seed < 0:
