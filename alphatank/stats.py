@@ -50,19 +50,20 @@ class League:
 
     def record(self, i: int, j: int, outcome: int) -> None:
         """Player i against player j: outcome +1 (i won), 0 (draw) or -1 (j won)."""
-        self._check(i, j, outcome)
-        ranks = [0, 0] if outcome == 0 else ([0, 1] if outcome > 0 else [1, 0])
+        ranks = self._ranks(i, j, outcome)  # checked before any player is read
         [[a], [b]] = self.model.rate([[self.ratings[i]], [self.ratings[j]]], ranks=ranks)
         self.ratings[i], self.ratings[j] = a, b
 
-    def _check(self, i: int, j: int, outcome: int) -> None:
-        """ValueError unless i and j are two players of the table and outcome is one."""
+    def _ranks(self, i: int, j: int, outcome: int) -> list[int]:
+        """openskill's ranks of a game of i against j; ValueError unless i and j are two
+        players of the table and outcome is -1, 0 or 1."""
         n = len(self.ratings)
         if not (0 <= i < n and 0 <= j < n and i != j):
             raise ValueError(f"a game needs two different players of the {n}, got {i} and "
                              f"{j}")
         if outcome not in (-1, 0, 1):
             raise ValueError(f"outcome must be -1, 0 or 1, got {outcome!r}")
+        return [0, 0] if outcome == 0 else ([0, 1] if outcome > 0 else [1, 0])
 
     def record_period(self, games: Sequence[tuple[int, int, int]]) -> None:
         """A rating period: the games ``(i, j, outcome)`` (as for :meth:`record`) all rated
@@ -73,8 +74,7 @@ class League:
         shift: dict[int, float] = {}
         shrink: dict[int, float] = {}
         for i, j, outcome in games:
-            self._check(i, j, outcome)
-            ranks = [0, 0] if outcome == 0 else ([0, 1] if outcome > 0 else [1, 0])
+            ranks = self._ranks(i, j, outcome)
             [[a], [b]] = self.model.rate([[before[i]], [before[j]]], ranks=ranks)
             for k, new in ((i, a), (j, b)):
                 shift[k] = shift.get(k, 0.0) + new.mu - before[k].mu
