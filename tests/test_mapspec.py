@@ -7,6 +7,7 @@ import pytest
 
 from alphatank.cli import main
 from alphatank.mapgen.generate import MAX_SIZE, generate
+from alphatank.sim.grid import reachable_from
 from alphatank.sim.mapspec import (
     MAX_FLOOR,
     MapError,
@@ -167,3 +168,14 @@ def test_comment_lines_keep_original_line_numbers():
     with pytest.raises(MapError) as info:
         parse_map("; c1\n; c2\n###\n#?#\n###\n", "c.txt")
     assert (info.value.line, info.value.col) == (4, 2)
+
+
+def test_floor_cells_and_reachable_areas_match_a_search_of_the_grid():
+    """The per-map floor list and area labels give what a fresh grid search gives, for
+    every floor cell of a map with walled-off pockets."""
+    spec = parse_map("#######\n#12#..#\n#..#..#\n#######\n#.#...#\n#######")
+    assert spec.floor_cells() == tuple(
+        (int(r), int(c)) for r, c in zip(*np.nonzero(~spec.walls), strict=True))
+    for cell in spec.floor_cells():
+        np.testing.assert_array_equal(spec.reachable(cell), reachable_from(spec.walls, cell))
+    assert spec.reachable((1, 1)).sum() == 4 and not spec.reachable((1, 1))[1, 4]

@@ -3,6 +3,7 @@
 import math
 
 import numpy as np
+import pymunk
 import pytest
 
 from alphatank.sim.config import PRESETS, game_config, replace
@@ -432,3 +433,33 @@ def test_pymunk_attribute_hooks_are_dropped_only_when_they_pass_through():
     assert plain_attributes(Busy) is False
     Busy().x = 1
     assert Busy.writes == ["x"]
+
+
+def test_worlds_on_one_map_share_its_rounded_walls_and_answer_as_fresh_ones():
+    """The query-only rounded walls are built once per map and radius: worlds on one map
+    share them (the bots' sight too), another map or radius gets its own, and a shared
+    space answers every swept query exactly as a freshly built one."""
+    from alphatank.sim.sight import wall_sight
+    from alphatank.sim.world import rounded_walls
+
+    cfg, maze = game_config(), load_map("maze")
+    a = _world(maze, cfg, [(105, 105, 0), (665, 665, 0)])
+    for _ in range(3):
+        _world(load_map("open"), cfg, [(105, 105, 0), (300, 300, 0)])
+    b = _world(maze, cfg, [(175, 105, 1.0), (665, 595, 2.0)])
+    assert a.bullet_walls is b.bullet_walls
+    assert _world(load_map("open"), cfg, [(105, 105, 0)]).bullet_walls is not a.bullet_walls
+    sight = wall_sight(b)
+    sight._walls_rounded(cfg.bullet_radius)
+    assert sight._rounded[cfg.bullet_radius][0] is b.bullet_walls
+    assert sight._walls_rounded(9.0) != sight._walls_rounded(cfg.bullet_radius)
+    fresh = rounded_walls(maze, cfg.bullet_radius)
+    rng = np.random.default_rng(5)
+    for _ in range(300):
+        x0, y0, x1, y1 = rng.uniform(-10, maze.width + 10, size=4)
+        got = b.wall_hit(x0, y0, x1, y1, cfg.bullet_radius)
+        want = fresh.segment_query_first((x0, y0), (x1, y1), 0.0, pymunk.ShapeFilter())
+        assert (got is None) == (want is None)
+        if want is not None:
+            assert (tuple(got.point), tuple(got.normal), got.alpha) == (
+                tuple(want.point), tuple(want.normal), want.alpha)

@@ -8,6 +8,7 @@ zone, ``-`` debuff zone. Lines starting with ``;`` are comments, and so is the r
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -16,7 +17,7 @@ import numpy as np
 
 from alphatank.errors import InputError
 from alphatank.files import read_text
-from alphatank.sim.grid import floor_areas, reachable_from
+from alphatank.sim.grid import components, floor_areas, reachable_from
 
 GRID_CHARS = "#.12345678+-"
 HEADER_KEYS = ("name", "cell", "description", "zones", "author")
@@ -78,8 +79,23 @@ class MapSpec:
         r, c = cell
         return ((c + 0.5) * self.cell, (r + 0.5) * self.cell)
 
-    def floor_cells(self) -> list[tuple[int, int]]:
-        return [(int(r), int(c)) for r, c in zip(*np.nonzero(~self.walls), strict=True)]
+    def floor_cells(self) -> tuple[tuple[int, int], ...]:
+        """Every floor cell, row by row (found once per map)."""
+        return self._floor_cells
+
+    @functools.cached_property
+    def _floor_cells(self) -> tuple[tuple[int, int], ...]:
+        return tuple((int(r), int(c)) for r, c in zip(*np.nonzero(~self.walls), strict=True))
+
+    def reachable(self, cell: tuple[int, int]) -> np.ndarray:
+        """(rows, cols) bool: the floor cells reachable from the floor cell ``cell``
+        (:func:`~alphatank.sim.grid.reachable_from`, from areas labelled once per map)."""
+        labels = self._area_labels
+        return labels == labels[cell]
+
+    @functools.cached_property
+    def _area_labels(self) -> np.ndarray:
+        return components(self.walls)[0]
 
     def min_wall_thickness(self) -> float:
         """Thinnest wall dimension in px (a cell, or thinner if a map defines thin walls)."""

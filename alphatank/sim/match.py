@@ -16,7 +16,7 @@ from typing import NamedTuple
 import numpy as np
 
 from alphatank.sim.config import GameConfig
-from alphatank.sim.grid import floor_areas, reachable_from
+from alphatank.sim.grid import floor_areas
 from alphatank.sim.mapspec import MapError, MapSpec
 from alphatank.sim.world import World
 
@@ -131,7 +131,8 @@ class Match:
         self.rng = np.random.default_rng(seed)
         spec, n = self.spec, self.n
         spawn_cells = self._spawn_cells()
-        zone_free = [c for c in spec.floor_cells() if c not in set(spawn_cells)]
+        taken = set(spawn_cells)
+        zone_free = [c for c in spec.floor_cells() if c not in taken]
         if spec.random_zones:
             k = min(len(zone_free), self.cfg.random_buff_zones + self.cfg.random_debuff_zones)
             picks = self.rng.choice(len(zone_free), size=k, replace=False)
@@ -191,17 +192,19 @@ class Match:
             else [spec.spawns.get(i + 1) for i in range(self.n)])
         used = {c for c in cells if c is not None}
         anchor = next((c for c in cells if c is not None), None)
-        floor = spec.floor_cells()
         missing = [i for i, c in enumerate(cells) if c is None]
+        if not missing:
+            return [c for c in cells if c is not None]
+        floor = spec.floor_cells()
         if anchor is None:
             anchor = floor[int(self.rng.integers(len(floor)))]
-            if spec.free_cells_in(reachable_from(spec.walls, anchor)) < len(missing):
+            if spec.free_cells_in(spec.reachable(anchor)) < len(missing):
                 # a pocket too small for the tanks: draw again in a roomy floor area
                 roomy = [c for area in floor_areas(spec.walls)
                          if spec.free_cells_in(area) >= len(missing) for c in floor if area[c]]
                 if roomy:
                     anchor = roomy[int(self.rng.integers(len(roomy)))]
-        reach = reachable_from(spec.walls, anchor)
+        reach = spec.reachable(anchor)
         free = [c for c in floor if reach[c] and c not in used
                 and c not in spec.buffs and c not in spec.debuffs]
         if len(free) < len(missing):

@@ -2,7 +2,8 @@
 queries make, without pymunk's Python wrappers: 3-5x cheaper, bit-identical answers.
 
 ``WallSight(world)`` holds the world's chipmunk space and, per radius asked, a query-only
-space of the map's walls rounded by that radius (one per map and radius); then
+space of the map's walls rounded by that radius (one per map and radius, shared with the
+worlds: :func:`alphatank.sim.world.shared_rounded_walls`); then
 
 * :meth:`WallSight.clear` is ``space.segment_query_first(a, b, r, WALLS_ONLY) is None``
   (one ``cpSpaceSegmentQueryFirst``: the bots' quick aiming test);
@@ -21,22 +22,12 @@ segments, corners grazed included.
 
 from __future__ import annotations
 
-import atexit
-import weakref
 from typing import Any
 
 import pymunk
 from pymunk._chipmunk import ffi, lib
 
-from alphatank.sim.navigation import NavGrid, nav_grid
-from alphatank.sim.world import WALLS_ONLY, World, rounded_walls
-
-# The walls of each map rounded per radius (query-only spaces, read by lock-free queries
-# only), shared by every world on the map: keyed weakly by the map's NavGrid, which they
-# do not refer to, so they go with it. Freed at exit while pymunk can still free them.
-_ROUNDED: weakref.WeakKeyDictionary[NavGrid, dict[float, pymunk.Space]] = (
-    weakref.WeakKeyDictionary())
-atexit.register(_ROUNDED.clear)
+from alphatank.sim.world import WALLS_ONLY, World, shared_rounded_walls
 
 
 def wall_sight(world: World) -> WallSight:
@@ -67,10 +58,7 @@ class WallSight:
         reference, so the space lives as long as the world)."""
         got = self._rounded.get(radius)
         if got is None:
-            shared = _ROUNDED.setdefault(nav_grid(self.world.spec), {})
-            space = shared.get(radius)
-            if space is None:
-                space = shared[radius] = rounded_walls(self.world.spec, radius)
+            space = shared_rounded_walls(self.world.spec, radius)
             got = self._rounded[radius] = (space, space._space)
         return got[1]
 

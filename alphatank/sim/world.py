@@ -20,8 +20,11 @@ Bullet slot ``b`` belongs to tank ``b // capacity``.
 
 from __future__ import annotations
 
+import atexit
+import functools
 import heapq
 import math
+from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from typing import Any, NamedTuple
 
@@ -138,8 +141,8 @@ class World:
         # Query-only twin of the walls, rounded by the bullet radius: one C-level thin
         # segment query against it is a swept-bullet query (chipmunk adds the shape's and
         # the query's radii, so alpha and normal are bit-identical to a radius-r query
-        # against the sharp walls). Its own (its queries may lock it).
-        self.bullet_walls = rounded_walls(spec, cfg.bullet_radius)
+        # against the sharp walls). Shared by every world on the map.
+        self.bullet_walls = shared_rounded_walls(spec, cfg.bullet_radius)
         self._add_walls()
         self._first_bullet_hit = cp.FirstHit(self.bullet_walls, 0.0, _ANY)
         self._quick: dict[float, cp.FirstHit] = {}  # quick_trace's queries, per radius
@@ -491,13 +494,18 @@ class World:
         return trace_flight(first, x, y, dx, dy, length, bounces_left)
 
 
-def wall_corners(spec: MapSpec) -> list[list[tuple[float, float]]]:
+def wall_corners(spec: MapSpec) -> tuple[tuple[tuple[float, float], ...], ...]:
     """Corners of every wall box of a world on ``spec``: the map's merged wall rectangles
-    plus a closed boundary one cell thick outside the grid."""
-    t, W, H = spec.cell, spec.width, spec.height
-    rects = list(spec.wall_rects) + [
+    plus a closed boundary one cell thick outside the grid (computed once per map)."""
+    return _wall_corners(spec.wall_rects, spec.cell, spec.width, spec.height)
+
+
+@functools.lru_cache(maxsize=64)
+def _wall_corners(wall_rects: tuple[tuple[float, float, float, float], ...], t: float,
+                  W: float, H: float) -> tuple[tuple[tuple[float, float], ...], ...]:
+    rects = list(wall_rects) + [
         (-t, -t, W + t, 0.0), (-t, H, W + t, H + t), (-t, 0.0, 0.0, H), (W, 0.0, W + t, H)]
-    return [[(x0, y0), (x1, y0), (x1, y1), (x0, y1)] for x0, y0, x1, y1 in rects]
+    return tuple(((x0, y0), (x1, y0), (x1, y1), (x0, y1)) for x0, y0, x1, y1 in rects)
 
 
 def rounded_walls(spec: MapSpec, radius: float) -> pymunk.Space:
@@ -507,6 +515,27 @@ def rounded_walls(spec: MapSpec, radius: float) -> pymunk.Space:
     space = pymunk.Space()
     for corners in wall_corners(spec):
         space.add(pymunk.Poly(space.static_body, corners, radius=radius))
+    return space
+
+
+# The walls of each map rounded per radius, shared by every world and WallSight on the map:
+# query-only spaces that nothing changes, so a shared one answers as a fresh one would.
+# The most recent maps are kept; freed at exit while pymunk can still free them.
+_ROUNDED: OrderedDict[tuple, pymunk.Space] = OrderedDict()
+_ROUNDED_SIZE = 64
+atexit.register(_ROUNDED.clear)
+
+
+def shared_rounded_walls(spec: MapSpec, radius: float) -> pymunk.Space:
+    """:func:`rounded_walls` of ``spec`` and ``radius``, built once (read by queries only)."""
+    key = (spec.wall_rects, spec.cell, spec.width, spec.height, float(radius))
+    space = _ROUNDED.get(key)
+    if space is None:
+        space = _ROUNDED[key] = rounded_walls(spec, radius)
+        if len(_ROUNDED) > _ROUNDED_SIZE:
+            _ROUNDED.popitem(last=False)
+    else:
+        _ROUNDED.move_to_end(key)
     return space
 
 
