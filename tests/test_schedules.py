@@ -7,7 +7,7 @@ import torch
 from alphatank.envs.vector import VectorMatchEnv
 from alphatank.training.ppo import PPOConfig
 from alphatank.training.presets import LearnerSpec, TrainConfig
-from alphatank.training.runner import Trainer, opponent_key
+from alphatank.training.runner import Trainer, opponent_key, resume_trainer
 from alphatank.training.schedules import (
     CurriculumSchedule,
     CycleSchedule,
@@ -259,3 +259,58 @@ def test_cycle_training_rotates_the_opponents_and_scales_the_victory_reward(tmp_
     tr._record_episode(ep, rewards, scale=0.25)
     assert rewards[2, 0] == pytest.approx(250.0 - 0.75 * 200.0) and rewards[0, 0] == 250.0
     assert opponent_key("B:aggressive(w=1), B:smart(w=0.5,ricochet=False)") == "aggressive+smart"
+
+
+def _cycle_config(total_steps: int, **kw) -> TrainConfig:
+    base = dict(name="cyc", scenario="vs_aggressive", total_steps=total_steps, num_envs=4,
+                wandb="disabled", checkpoint_every=2, game={"max_steps": 12}, seed=5,
+                schedule={"kind": "cycle", "pool": ["random", "dodge"], "mode": "random",
+                          "interval": 96, "mastery_phase": 10**6},
+                learners=(LearnerSpec("ppo", "ppo", (0,),
+                                      config=PPOConfig(num_steps=16, update_epochs=1)),))
+    base.update(kw)
+    return TrainConfig(**base)
+
+
+def test_a_schedule_sets_the_opponents_of_every_first_episode(tmp_path):
+    """The scenario's own bot (aggressive) never plays: the cycle's first opponent is in
+    place before the first episodes start, and a curriculum's first episodes are at its
+    starting weakness."""
+    tr = Trainer(_cycle_config(4 * 64), tmp_path / "cyc", progress=False)
+    tr.train()
+    opps = {k for h in tr.history for k in h if k.startswith("charts/win_rate_vs/")}
+    assert opps and opps <= {"charts/win_rate_vs/random", "charts/win_rate_vs/dodge"}
+    cur = Trainer(_cycle_config(64, schedule={"kind": "curriculum", "start": 0.2, "end": 0.3,
+                                              "steps": 10**6}), tmp_path / "cur",
+                  progress=False)
+    cur.env.reset(seed=0)  # what the run's first reset finds
+    cur._segment_reset()
+    labels = {cur.env.core.describe_opponents(e) for e in range(4)}
+    assert labels == {"B:aggressive(w=0.2)"}, labels
+
+
+def test_a_resumed_scheduled_run_goes_on_as_the_uninterrupted_one(tmp_path):
+    """With a cycle switching opponents at random, the updates after a resume are the
+    uninterrupted run's, and so are the opponents' win-rate windows."""
+    full = Trainer(_cycle_config(6 * 64), tmp_path / "full", progress=False)
+    full.train()
+    Trainer(_cycle_config(2 * 64), tmp_path / "half", progress=False).train()
+    resumed = resume_trainer(tmp_path / "half", progress=False, total_steps=6 * 64)
+    resumed.train()
+    assert [h["step"] for h in resumed.history] == [h["step"] for h in full.history[2:]]
+    for got, want in zip(resumed.history, full.history[2:], strict=True):
+        same = {k: got[k] for k in want if k not in ("charts/sps", "charts/elapsed_s")}
+        assert same == {k: want[k] for k in same}, got["step"]
+
+
+def test_the_logged_return_is_the_one_paid_after_the_victory_scale(tmp_path):
+    """A cycle that scales the victory reward away logs the return the learner got."""
+    tr = Trainer(_cycle_config(64), tmp_path / "ret", progress=False)
+    rewards = np.zeros((4, 1), dtype=np.float32)
+    ep = {"env": 1, "length": 9, "outcome": ["win"], "return": np.array([250.0]),
+          "opponent": "B:random(w=1)"}
+    tr._record_episode(ep, rewards, scale=0.25)
+    assert tr.returns["ppo"][-1] == pytest.approx(250.0 - 0.75 * tr.victory)
+    tr._record_episode({**ep, "outcome": ["loss"], "return": np.array([-40.0])}, rewards,
+                       scale=0.25)
+    assert tr.returns["ppo"][-1] == pytest.approx(-40.0)

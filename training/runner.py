@@ -452,6 +452,9 @@ class Trainer:
         seed = self._segment_seed() if seed is None else seed
         for lr in self.learners.values():
             lr.new_segment()
+        # The schedule's setting for this step first: the env's setters reach each match
+        # from its next episode, and a resumed run's env starts from the scenario's.
+        self.schedule.apply(self.env, self.global_step)
         sp = self.selfplay
         if sp is None:
             return self.env.reset(seed=seed)
@@ -467,11 +470,14 @@ class Trainer:
         label = str(ep.get("opponent", ""))
         bots = "" if label == "none" else label
         outcome = ep["outcome"]
+        unpaid = np.array([(1.0 - scale) * self.victory if out == "win" else 0.0
+                           for out in outcome]) if scale < 1.0 else 0.0
+        got = ep["return"] - unpaid  # the return the learners were paid
         for name, cols in self.cols.items():
             out = outcome[cols[0]]
             score = 1.0 if out == "win" else 0.0
             self.outcomes[name].append(score)
-            self.returns[name].append(float(np.mean(ep["return"][cols])))
+            self.returns[name].append(float(np.mean(got[cols])))
             key = opponent_key(bots, self.rivals[name]) if bots or self.rivals[name] else "none"
             self.by_opponent[name].setdefault(key, deque(maxlen=WINDOW)).append(score)
         self.schedule.record(str(ep.get("opponent", "")), outcome[0])
