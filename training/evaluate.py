@@ -37,6 +37,7 @@ from alphatank.training.teamstats import TeamWatch
 
 SAMPLING_STREAM = 1  # third SeedSequence word of the policy's sampling generator
 OUTCOME_SCORE = {"win": 1, "draw": 0, "loss": -1}
+SELF_PLAY = "itself"  # the opponent of a row whose checkpoint drives every seat
 
 
 @dataclass
@@ -323,7 +324,7 @@ def row_opponents(base: Scenario, opponents: Sequence[str | None], team: str | N
     seats = opponent_seats(base, team, None, weakness)
     own = ", ".join(f"{s.team}:{s.describe()}" for s in seats
                     if (s.team != team if stand_in else s.controller != "learner"))
-    return [opp or own or "itself" for opp in opponents]
+    return [opp or own or SELF_PLAY for opp in opponents]
 
 
 def opponent_seats(base: Scenario, team: str, opp: str | None,
@@ -458,8 +459,10 @@ def rating_table(league: League) -> str:
 
 def results_league(results: Sequence[EvalResult]) -> League:
     """The openskill league of an evaluation: each row's checkpoint (or experiment name)
-    against its opponent, game by game."""
-    return rate_games((r.agent or r.name, r.opponent, r.outcomes) for r in results)
+    against its opponent, game by game. Self-play rows (opponent ``itself``) are left
+    out: a player against itself says nothing of its skill."""
+    return rate_games((r.agent or r.name, r.opponent, r.outcomes) for r in results
+                      if r.opponent != SELF_PLAY)
 
 
 def write_csv(results: Sequence[EvalResult], path: str | Path) -> None:

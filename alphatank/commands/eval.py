@@ -67,6 +67,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from alphatank.training.evaluate import (
+        SELF_PLAY,
         evaluate_checkpoint,
         evaluate_stand_in,
         format_table,
@@ -122,6 +123,9 @@ def run(args: argparse.Namespace) -> int:
     if args.ratings:
         print("\nopenskill (Plackett-Luce) ratings from these games (draws are ties):")
         print(rating_table(results_league(results)))
+        selfplay = [r.agent or r.name for r in results if r.opponent == SELF_PLAY]
+        if selfplay:
+            print(f"(not rated: {', '.join(selfplay)}, playing itself)")
     stats = [{"checkpoint": r.agent, "experiment": r.name, "opponent": r.opponent,
               **r.team_stats} for r in results if r.team_stats is not None]
     if stats:
