@@ -75,6 +75,32 @@ def test_one_scenario_and_seed_is_one_game_everywhere(tmp_path, capsys):
     assert env_game(sc, SEED + 1)[0] != env  # the seed matters
 
 
+def test_the_public_envs_reset_seed_starts_the_game_of_that_seed():
+    """``reset(seed=S)`` of the Gymnasium and PettingZoo envs is the game ``record
+    --seed S`` plays (the first tick's state, random spawns included); later resets
+    without a seed go on from S's generator, and numpy seeds are the same seeds."""
+    import gymnasium
+
+    import alphatank.envs  # noqa: F401  (registers the ids)
+    from alphatank.envs import parallel_env
+
+    for seed in (0, 7, np.int64(123)):
+        want = build_lineup("vs_smart", stand_in="smart").start(int(seed)).match
+        env = gymnasium.make("AlphaTank/VsSmart-v0")
+        env.reset(seed=seed)
+        assert env.unwrapped.match.state_hash() == want.state_hash()
+        team = build_lineup("team_vs_def_smart", stand_in="smart").start(int(seed)).match
+        pz = parallel_env(scenario="team_vs_def_smart")
+        pz.reset(seed=seed)
+        assert pz.core.matches[0].state_hash() == team.state_hash()
+    env.reset()
+    again = gymnasium.make("AlphaTank/VsSmart-v0")
+    again.reset(seed=123)
+    again.reset()
+    assert env.unwrapped.match.state_hash() == again.unwrapped.match.state_hash()
+    assert env.unwrapped.match.state_hash() != want.state_hash()
+
+
 def test_the_map_of_an_episode_comes_from_its_seed():
     sc = seats_scenario(SEATS, "train")  # a folder of maps: one drawn per episode
     core, lineup = MatchSet(sc, 1, driven=[]), build_lineup(sc)

@@ -59,6 +59,7 @@ from alphatank.envs.core import (
     action_space,
     check_actions,
     check_reset_options,
+    check_seed,
 )
 from alphatank.game.observe import ObsLayout
 from alphatank.game.rewards import TERMS
@@ -135,8 +136,13 @@ class TankBattleEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None
               ) -> tuple[np.ndarray, dict]:
         check_reset_options(options)
+        if seed is not None:
+            seed = check_seed(seed)  # a Python int, as Gymnasium's seeding takes
         super().reset(seed=seed)
-        self.core.reset_env(0, int(self.np_random.integers(2**63 - 1)))
+        # reset(seed=S) plays episode S (the game `record --seed S` plays); later resets
+        # without a seed draw theirs from np_random, seeded with S
+        episode = int(self.np_random.integers(2**63 - 1)) if seed is None else seed
+        self.core.reset_env(0, episode)
         obs = self.core.obs.build()[0, 0].copy()
         if self.render_mode == "human":
             self.render()

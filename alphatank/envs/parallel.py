@@ -121,9 +121,11 @@ class TankBattleParallelEnv(ParallelEnv):
     def reset(self, seed: int | None = None, options: dict | None = None
               ) -> tuple[dict[str, np.ndarray], dict[str, dict]]:
         del options  # none: PettingZoo's api tests pass options any env must take
-        if seed is not None:
-            self._rng = np.random.default_rng(check_seed(seed))
-        self.core.reset_env(0, int(self._rng.integers(2**63 - 1)))
+        if seed is not None:  # episode ``seed``, then episodes drawn from a generator of it
+            seed = check_seed(seed)
+            self._rng = np.random.default_rng(seed)
+        episode = int(self._rng.integers(2**63 - 1)) if seed is None else seed
+        self.core.reset_env(0, episode)
         self.agents = self.possible_agents[:]
         obs = self.core.obs.build()[0]
         info = {"map": self.core.map_name(0)}
