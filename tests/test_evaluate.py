@@ -21,6 +21,7 @@ from alphatank.training.evaluate import (
     format_table,
     game_seed,
     rate_games,
+    results_league,
     row_opponents,
     write_csv,
     write_json,
@@ -270,6 +271,16 @@ def test_a_row_where_the_checkpoint_drives_every_seat_is_against_itself():
 
     assert row_opponents(load_scenario("team"), [None, "smart"]) == ["itself", "smart"]
     assert row_opponents(load_scenario("team_vs_bot"), [None]) == ["B:smart(w=1), B:smart(w=1)"]
+
+
+def test_self_play_rows_are_not_rated_against_a_shared_player():
+    """Two self-play checkpoints were both rated against one player 'itself', which
+    linked their ratings; a checkpoint against itself says nothing of its skill."""
+    rows = [EvalResult("a", "itself", wins=4, agent="runs/a", outcomes=["win"] * 4),
+            EvalResult("b", "itself", losses=4, agent="runs/b", outcomes=["loss"] * 4),
+            EvalResult("a", "smart", wins=3, agent="runs/a", outcomes=["win"] * 3)]
+    names = {n for n, *_ in results_league(rows).table()}
+    assert names == {"runs/a", "smart"}
 
 
 def test_an_evaluation_seed_is_checked_by_name():
