@@ -14,13 +14,23 @@ from __future__ import annotations
 import inspect
 import math
 import re
+import types
+import typing
 from collections import deque
 from typing import Any, Protocol
 
 import numpy as np
 
+from alphatank.sim.config import check_value
+
 SHAPES = ("linear", "sigmoid")
 CYCLE_MODES = ("fixed", "random", "adaptive")
+SCALARS = (int, float, bool, str, type(None))  # parameter types make_schedule checks
+RANGES = {"start": (0, 1), "end": (0, 1), "weakness": (0, 1), "target": (0, 1),
+          "threshold": (0, 1), "demote": (0, 1), "floor": (0, 1), "snapshot_share": (0, 1),
+          "interval": (1, None), "window": (1, None), "steps": (1, None),
+          "mastery_phase": (0, None), "min_episodes": (0, None), "snapshot_every": (0, None),
+          "snapshots": (0, None), "seed": (0, None)}
 
 
 class ScheduledEnv(Protocol):
@@ -363,13 +373,19 @@ def make_schedule(spec: dict[str, Any], total_steps: int, seed: int = 0) -> Oppo
     if not isinstance(kind, str) or kind not in classes:
         raise ValueError(f"unknown schedule kind {kind!r}; valid: none, curriculum, cycle, "
                          f"winrate, lineup, league")
-    params = inspect.signature(classes[kind]).parameters
+    params = inspect.signature(classes[kind], eval_str=True).parameters
     given = {"steps": total_steps, "seed": seed}
     spec = {**{k: v for k, v in given.items() if k in params}, **spec}
-    for key in spec:
+    for key, value in spec.items():
         if key not in params:
             raise ValueError(f"{key}: unknown key for kind {kind!r}; valid keys: "
                              f"{['kind', *sorted(params)]}")
+        ann = params[key].annotation
+        kinds = typing.get_args(ann) if isinstance(ann, types.UnionType) else (ann,)
+        if all(k in SCALARS for k in kinds):  # numbers, flags and names: type and range
+            _, why = check_value(kinds, value, RANGES.get(key))
+            if why:
+                raise ValueError(f"{key} {why}")
     for key, param in params.items():
         if key not in spec and param.default is param.empty:
             raise ValueError(f"{key}: required for kind {kind!r}")
