@@ -332,3 +332,22 @@ def test_a_checkpoint_teaches_as_the_policy_it_holds(tmp_path):
 
     # the teacher samples its actions, so it agrees with the bot less often than greedily
     assert agree(taught, bot) > agree(rand, bot) + 0.2, (agree(taught, bot), agree(rand, bot))
+
+
+def test_cloning_into_a_run_with_a_sac_learner_is_refused_before_it_starts(tmp_path):
+    sac = (LearnerSpec("sac", "sac", (0,)),)
+    with pytest.raises(ValueError, match=r"imitate: the cloning fills PPO and MAPPO learners "
+                                         r"only; this run also has \[\('sac', 'sac'\)\]"):
+        Trainer(run_config("bc", imitate={"bot": "smart", "steps": 32}, learners=sac),
+                tmp_path / "bc", progress=False)
+    assert not (tmp_path / "bc").exists()
+
+
+@pytest.mark.parametrize("table, field", [
+    ({"bot": "learner"}, "bot"), ({"bot": "human:wasd"}, "bot"),
+    ({"bot": "smart", "teachers": {"vs_smart": "human"}}, "teachers.vs_smart")])
+def test_a_teacher_must_play_by_itself(table, field):
+    """A learner seat has nothing to copy and a keyboard seat idles: both are refused."""
+    with pytest.raises(FieldError, match=rf"imitate\.{field} must be a seat that plays by "
+                                         r"itself"):
+        imitate_config(table)

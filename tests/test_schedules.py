@@ -314,3 +314,17 @@ def test_the_logged_return_is_the_one_paid_after_the_victory_scale(tmp_path):
     tr._record_episode({**ep, "outcome": ["loss"], "return": np.array([-40.0])}, rewards,
                        scale=0.25)
     assert tr.returns["ppo"][-1] == pytest.approx(-40.0)
+
+
+@pytest.mark.parametrize("schedule, message", [
+    ({"kind": "lineup", "levels": [[5], []]},
+     r"schedule levels: vs_aggressive: cannot bench seats \[5\]; bot seats: \[1\]"),
+    ({"kind": "lineup", "levels": [[0], []]}, r"cannot bench seats \[0\]"),
+    ({"kind": "league", "settings": {"smart": ["vs_nope"]}},
+     r"league settings name scenario\(s\) \['vs_nope'\] that the env does not play"),
+])
+def test_a_schedule_the_scenario_cannot_play_is_refused_before_the_run_starts(
+        tmp_path, schedule, message):
+    with pytest.raises(ValueError, match=message):
+        Trainer(_cycle_config(64, schedule=schedule), tmp_path / "run", progress=False)
+    assert not (tmp_path / "run").exists()

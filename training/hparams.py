@@ -154,13 +154,23 @@ def imitate_config(data: dict[str, Any]) -> ImitateConfig | None:
     """The config of a run's ``imitate`` table (its bot checked); None when it is empty."""
     if not data:
         return None
-    from alphatank.game.lineup import spec_seat
-
     cfg = build(ImitateConfig, data, "imitate.")
-    spec_seat(cfg.bot, where=f"imitate.bot {cfg.bot!r}")
+    _check_teacher(cfg.bot, "bot")
     for name, spec in cfg.teachers.items():
         if not isinstance(spec, str):
             raise FieldError("imitate", f"teachers.{name}", "must be a seat spec string "
                              f"(smart, checkpoint:PATH, agent:NAME), got {spec!r}")
-        spec_seat(spec, where=f"imitate.teachers.{name} {spec!r}")
+        _check_teacher(spec, f"teachers.{name}")
     return cfg
+
+
+def _check_teacher(spec: str, field: str) -> None:
+    """A seat spec that plays by itself (a bot, checkpoint, agent, ...): not a learner
+    seat, which has nothing to copy, nor a player at a keyboard."""
+    from alphatank.game.lineup import spec_seat
+    from alphatank.game.seats import controller_kind
+
+    seat = spec_seat(spec, where=f"imitate.{field} {spec!r}")
+    if seat.controller == "learner" or controller_kind(seat.controller).interactive:
+        raise FieldError("imitate", field, f"must be a seat that plays by itself (smart, "
+                         f"checkpoint:PATH, agent:NAME), got {spec!r}")

@@ -216,6 +216,10 @@ class LeagueSchedule(OpponentSchedule):
                              f"not play; it plays {sorted(have)}")
         return blocks
 
+    def check(self, scenario: Any, env: Any) -> None:
+        if self.settings:
+            self._blocks(env)
+
     def record(self, opponent: str, outcome: str) -> None:
         name = opponent_name(opponent)
         if name not in self.results or outcome not in SCORE:

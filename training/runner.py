@@ -254,6 +254,7 @@ class Trainer:
         self.victory = (env.core.reward_cfg.victory if hasattr(env, "core")
                         else self.scenario.reward_config(**cfg.rewards).victory)
         self.schedule = make_schedule(cfg.schedule, cfg.total_steps, cfg.seed)
+        self.schedule.check(self.scenario, env)
         game = self.scenario.game_config(**cfg.game)
         walls, buffs, debuffs = slot_counts(game, self.scenario.map_specs())
         seat_learner = {}
@@ -290,6 +291,13 @@ class Trainer:
         # the cloning to do first: a fresh run's, or one a stop cut short (restarted whole)
         self.imitation = (imitate_config(cfg.imitate) if resume is None
                           or resume.meta["progress"].get("clone_pending") is True else None)
+        if self.imitation is not None:
+            from alphatank.training.warmstart import WARM_STARTED
+            others = [(s.name, s.algo) for s in self.specs if s.algo not in WARM_STARTED]
+            if others:
+                raise ValueError(f"imitate: the cloning fills "
+                                 f"{' and '.join(a.upper() for a in WARM_STARTED)} learners "
+                                 f"only; this run also has {others}")
         if resume is None and self.imitation is None:  # with imitate: after the cloning
             for lr in self.learners.values():
                 lr.anchor()

@@ -56,6 +56,10 @@ class OpponentSchedule:
     def victory_scale(self, step: int) -> float:
         return 1.0
 
+    def check(self, scenario: Any, env: Any) -> None:
+        """Refuse settings the run's ``scenario`` and ``env`` cannot play, before it
+        starts (ValueError)."""
+
     def bind(self, trainer: Any) -> None:
         """Called once by the trainer after its set-up; schedules that need the learners
         (the league's snapshots, :mod:`alphatank.training.league`) keep it."""
@@ -351,6 +355,15 @@ class LineupCurriculum(_LevelCurriculum):
 
     def _push(self, env: ScheduledEnv) -> None:
         env.set_benched(self.benched)
+
+    def check(self, scenario: Any, env: Any) -> None:
+        from alphatank.envs.core import check_benched
+
+        for seats in self.levels:
+            try:
+                check_benched(scenario, scenario.learner_seats, seats)
+            except ValueError as exc:
+                raise ValueError(f"schedule levels: {exc}") from None
 
     def _at_level(self, opponent: str) -> bool:
         return opponent.count(":absent") == len(self.benched)
