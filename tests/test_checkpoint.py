@@ -240,7 +240,15 @@ def test_meta_fields_that_resuming_reads_are_checked_at_load(trained, tmp_path):
                         ({"windows": {"returns": {"ppo": ["x"]}}},
                          r"meta\.json: windows\.returns: must map learner names \['ppo'\]"),
                         ({"windows": {"outcomes": []}}, r"windows\.outcomes"),
-                        ({"schedule": [1]}, r"meta\.json: schedule: must be an object")):
+                        ({"schedule": [1]}, r"meta\.json: schedule: must be an object"),
+                        ({"scenario": "vs_smart"},
+                         r"meta\.json: scenario: must be an object, got 'vs_smart'"),
+                        ({"observation": {**meta["observation"], "kind": "bogus"}},
+                         r"meta\.json: observation\.kind: unknown observation kind 'bogus'"),
+                        ({"observation": {**meta["observation"],
+                                          "seat_learner": {"0": "nobody"}}},
+                         r"meta\.json: observation\.seat_learner: must map seat numbers to "
+                         r"learner names \['ppo'\]")):
         (ck / "meta.json").write_text(json.dumps({**meta, **edit}))
         with pytest.raises(CheckpointError, match=error):
             load_checkpoint(ck)

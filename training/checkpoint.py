@@ -36,6 +36,7 @@ import torch
 
 from alphatank.errors import InputError
 from alphatank.files import write_text_atomic
+from alphatank.game.observe import OBS_KINDS
 from alphatank.game.scenarios import Scenario, ScenarioError, parse_scenario
 from alphatank.game.seats import agent_path
 from alphatank.sim.config import ACTION_REPEAT_MAX, check_value
@@ -383,16 +384,23 @@ def _check_meta(meta: dict[str, Any], meta_file: Path) -> None:
             _, why = check_value(kinds, data[name], rng)
             if why is not None:
                 raise fail(f"{key}.{name}", why)
-    seat_learner = meta["observation"]["seat_learner"]
-    if not all(isinstance(k, str) and k.isdigit() and isinstance(v, str)
-               for k, v in seat_learner.items()):
-        raise fail("observation.seat_learner", "must map seat numbers to learner names, "
-                   f"got {seat_learner!r}")
+    if meta["observation"]["kind"] not in OBS_KINDS:
+        raise fail("observation.kind", f"unknown observation kind "
+                   f"{meta['observation']['kind']!r}; valid: {list(OBS_KINDS)}")
+    for key in ("scenario", "train_config"):
+        if not isinstance(meta[key], dict):
+            raise fail(key, f"must be an object, got {meta[key]!r}")
     learners = meta["learners"]
     if (not isinstance(learners, list) or not learners
             or not all(isinstance(d, dict) and isinstance(d.get("name"), str) and d["name"]
                        for d in learners)):
         raise fail("learners", "must be a non-empty list of objects with a 'name'")
+    names = {d["name"] for d in learners}
+    seat_learner = meta["observation"]["seat_learner"]
+    if not all(isinstance(k, str) and k.isdigit() and v in names
+               for k, v in seat_learner.items()):
+        raise fail("observation.seat_learner", f"must map seat numbers to learner names "
+                   f"{sorted(names)}, got {seat_learner!r}")
     files = meta["files"]
     if not isinstance(files, dict) or not all(
             isinstance(k, str) and _file_key(k) and isinstance(v, str) for k, v in files.items()):
@@ -403,7 +411,6 @@ def _check_meta(meta: dict[str, Any], meta_file: Path) -> None:
     windows = meta.get("windows", {})
     if not isinstance(windows, dict):
         raise fail("windows", f"must be an object, got {windows!r}")
-    names = {d["name"] for d in learners}
     for part in ("outcomes", "returns"):
         table = windows.get(part, {})
         if not isinstance(table, dict) or not all(
