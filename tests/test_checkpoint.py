@@ -352,3 +352,21 @@ def test_a_new_trainer_never_writes_into_a_run_and_a_trainer_trains_once(tmp_pat
     assert {p.name: p.stat().st_mtime_ns for p in (tmp_path / "once").rglob("*")} == before
     resume_trainer(tmp_path / "once", progress=False, total_steps=3 * ITER).train()
 
+
+
+def test_a_tensor_of_the_wrong_shape_is_named_with_both_shapes(trained, tmp_path):
+    """torch puts the tensor and its shapes on the lines after its heading: the one-line
+    error keeps them."""
+    import hashlib
+
+    ck = _copy(trained, tmp_path)
+    state = torch.load(ck / "ppo.pt", weights_only=True)
+    state["net"]["critic.0.weight"] = torch.zeros(3, 5)
+    torch.save(state, ck / "ppo.pt")
+    meta = json.loads((ck / "meta.json").read_text())
+    meta["files"]["ppo.pt"] = hashlib.sha256((ck / "ppo.pt").read_bytes()).hexdigest()
+    (ck / "meta.json").write_text(json.dumps(meta))
+    with pytest.raises(CheckpointError, match=r"ppo\.pt: does not fit a ppo learner .*size "
+                                              r"mismatch for critic\.0\.weight: .*\[3, 5\]") as info:
+        load_policy(ck)
+    assert "\n" not in str(info.value)

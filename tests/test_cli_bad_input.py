@@ -246,6 +246,8 @@ CASES = [
     ("arena-map-unknown", ["arena", "--map", "nowhere"],
      ["map: unknown map 'nowhere'", "battlefield", "folder of maps"]),
     ("arena-games", ["arena", "--games", "0"], ["--games", ">= 1"]),
+    ("arena-human", ["arena", "--seats", "human,random"],
+     ["['human'] needs a player at the keyboard"]),
     ("arena-steps", ["arena", "--max-steps", "0"], ["--max-steps", "must be an integer >= 1"]),
     ("arena-preset", ["arena", "--preset", "fast"], ["unknown preset 'fast'"]),
     ("arena-seed", ["arena", "--seed", "-1"], ["--seed", "[0, 2^63)", "'-1'"]),

@@ -243,7 +243,10 @@ def test_play_command_refuses_dummy_driver_without_headless_test(capsys):
 def test_play_command_runs_with_headless_test(capsys):
     rc = play.run(_args("--seats", "human,smart", "--headless-test", "--max-frames", "8"))
     assert rc == 0
-    assert "player 1 (wasd)" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "player 1 (wasd)" in out
+    # the match was cut off by --max-frames: not a draw
+    assert "Unfinished after" in out and "results {'unfinished': 1}" in out
 
 
 def test_play_command_overwrites_a_replay_file_only_with_force(tmp_path):

@@ -317,10 +317,9 @@ class Checkpoint:
         try:
             learner.load_state_dict(state, weights_only=weights_only)
         except (RuntimeError, KeyError, ValueError) as exc:
-            first = str(exc).strip().splitlines()[0]
             raise CheckpointError(f"{self.path / (name + '.pt')}: does not fit a {spec.algo} "
                                   f"learner with obs_dim {self.obs_dim} and its saved config: "
-                                  f"{type(exc).__name__}: {first}") from None
+                                  f"{type(exc).__name__}: {load_problem(exc)}") from None
         return learner
 
 
@@ -362,6 +361,13 @@ _PROGRESS_FIELDS = {"global_step": ((int,), (0, None)), "iteration": ((int,), (0
 # fields added later, which older checkpoints lack: their defaults
 _OPTIONAL_FIELDS = {"observation": {"action_repeat": 1},
                     "progress": {"cut": 0, "clone_pending": False}}
+
+
+def load_problem(exc: BaseException) -> str:
+    """What a failed ``load_state_dict`` says, on one line: torch's heading and the first
+    two tensors that differ (their names and shapes follow the heading's line)."""
+    lines = [x.strip() for x in str(exc).splitlines() if x.strip()]
+    return " ".join(lines[:3])
 
 
 def _check_meta(meta: dict[str, Any], meta_file: Path) -> None:

@@ -60,6 +60,7 @@ from alphatank.training.checkpoint import (
     CheckpointError,
     LivePolicy,
     load_checkpoint,
+    load_problem,
     resume_dir,
     save_checkpoint,
     scenario_to_dict,
@@ -375,7 +376,7 @@ class Trainer:
                 if isinstance(exc, CheckpointError):
                     raise
                 raise CheckpointError(f"{ckpt.path / (name + '.pt')}: does not fit learner "
-                                      f"{name!r}: {str(exc).splitlines()[0]}") from None
+                                      f"{name!r}: {load_problem(exc)}") from None
         prog = ckpt.meta["progress"]
         self.global_step, self.iteration = int(prog["global_step"]), int(prog["iteration"])
         self.episodes, self.elapsed = int(prog["episodes"]), float(prog["elapsed"])

@@ -73,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     wins: dict[str, int] = {}
     for ep in report.episodes:
-        key = ep.winner or "draw"
+        key = ep.winner or ("draw" if ep.done else "unfinished")  # quit or restarted
         wins[key] = wins.get(key, 0) + 1
     print(f"{len(report.episodes)} match(es), results {wins}; "
           f"{report.frames} frames at {report.fps:.1f} fps")

@@ -20,7 +20,7 @@ import numpy as np
 
 from alphatank.game.lineup import Lineup, seat_label, spec_seat
 from alphatank.game.scenarios import Scenario, parse_scenario
-from alphatank.game.seats import SeatError, make_controller
+from alphatank.game.seats import SeatError, controller_kind, make_controller
 from alphatank.sim.episode import Episode, EpisodeHook
 from alphatank.sim.match import Match
 from alphatank.sim.policy import Policy
@@ -112,6 +112,11 @@ def run_arena(seats: Sequence[str], map_name: str = "maze", games: int = 20, see
     if len(seats) < 2:
         raise SeatError(f"an arena needs at least 2 seats, got {list(seats)}")
     parsed = [spec_seat(s) for s in seats]  # fail early, naming the valid values
+    people = [s for s, p in zip(seats, parsed, strict=True)
+              if controller_kind(p.controller).interactive]
+    if people:
+        raise SeatError(f"arena seats play by themselves; {people} needs a player at the "
+                        "keyboard (alphatank play is for people)")
     ctrls = [make_controller(s) for s in parsed]
     bad = [s for s, c in zip(seats, ctrls, strict=True) if c is None]
     if bad:
