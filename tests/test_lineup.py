@@ -152,6 +152,10 @@ def test_seat_list_grammar():
     assert [s.describe() for s in sc.seats] == ["smart(w=0.5,ricochet=False)", "human:ijkl"]
     again = seats_scenario("B=human:ijkl,A=random", "open")  # describe() reads back
     assert again.seats[0] == sc.seats[1]
+    # a human seat without keys gets the first set no other seat names
+    assert [t["keys"] for t in parse_seat_list("human:arrows,human")] == ["arrows", "wasd"]
+    assert [t.get("keys") for t in parse_seat_list("human,smart,human:wasd")] == [
+        "arrows", None, "wasd"]
 
 
 @pytest.mark.parametrize("text,hint", [

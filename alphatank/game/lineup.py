@@ -97,6 +97,12 @@ def build_lineup(scenario: str | Scenario, *, interactive: bool = False,
     labels, descs, notes = [], [], []
     stand = spec_seat(stand_in, where=f"stand-in {stand_in!r}") if stand_in else None
     fill = spec_seat(learner, where=f"learner seat {learner!r}") if learner else None
+    for given, seat in ((stand_in, stand), (learner, fill)):
+        if seat is not None and (seat.controller == "learner"
+                                 or controller_kind(seat.controller).interactive):
+            raise ScenarioError(f"{given!r}: a seat filled for the scenario plays by itself "
+                                "(a bot, checkpoint:PATH or agent:NAME); put players in "
+                                "--seats")
     if fill is not None and not sc.learner_seats:
         raise ScenarioError(f"{learner}: {sc.source} has no learner seat for it to play; "
                             f"put it in a seat instead (e.g. --seats \"human,{learner}\")")

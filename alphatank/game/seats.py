@@ -291,19 +291,21 @@ def parse_seat_spec(text: str, where: str | None = None) -> dict[str, Any]:
 
 def parse_seat_list(text: str) -> list[dict[str, Any]]:
     """The ``[[seats]]`` tables of a ``--seats`` list (see the module docstring); human
-    seats without keys get WASD, arrows, IJKL in order."""
+    seats without keys get the first of WASD, arrows, IJKL that no other seat names."""
     items = [s.strip() for s in text.split(",") if s.strip()]
     if len(items) < 2:
         raise SeatError(f"--seats needs at least 2 seats, got {text!r}; {SEAT_HELP}")
-    seats, humans = [], 0
+    seats = []
     for k, item in enumerate(items):
         m = _TEAM.fullmatch(item)
         team, body = (m.group(1), m.group(2)) if m else (chr(ord("A") + k), item)
         seat = parse_seat_spec(body, where=f"--seats[{k}] {item!r}")  # seats count from 0
-        if seat["controller"] == "human":
-            seat.setdefault("keys", KEYSETS[min(humans, len(KEYSETS) - 1)])
-            humans += 1
         seats.append({"team": team, **seat})
+    humans = [s for s in seats if s["controller"] == "human"]
+    free = [k for k in KEYSETS if k not in {s.get("keys") for s in humans}]
+    for seat in humans:
+        if "keys" not in seat:  # with none free, the check of the seats names the clash
+            seat["keys"] = free.pop(0) if free else KEYSETS[-1]
     return seats
 
 
