@@ -461,3 +461,13 @@ def test_steps_reported_are_those_of_the_evaluated_checkpoint():
     assert trained_steps({"global_step": 36_864, "saved_step": 34_816}) == 34_816
     assert trained_steps({"global_step": 512}) == 512  # a run from before saved_step
 
+
+
+@pytest.mark.parametrize("rate", ["nan", "inf", "0"])
+def test_a_row_planning_rate_must_be_a_finite_positive_number(tmp_path, rate):
+    root = write_rows(tmp_path / "exp")
+    row = root / "tiny" / "a_random.toml"
+    row.write_text(f"steps_per_minute = {rate}\n" + row.read_text())
+    with pytest.raises(ValueError, match=r"a_random\.toml: steps_per_minute: must be a finite "
+                                         r"number > 0, got"):
+        load_tables(["tiny"], root)

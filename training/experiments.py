@@ -309,8 +309,9 @@ def _row(table: str, name: str, data: dict[str, Any], source: str,
             raise ExperimentError(f"{source}: budget_fractions.{k}: needs a fraction in (0, 1], "
                                   f"got {v!r}")
     rate = _typed(data, "steps_per_minute", (int, float), source, DEFAULT_STEPS_PER_MINUTE)
-    if rate <= 0:
-        raise ExperimentError(f"{source}: steps_per_minute: must be > 0, got {rate}")
+    if not 0 < rate < math.inf:
+        raise ExperimentError(f"{source}: steps_per_minute: must be a finite number > 0, "
+                              f"got {rate}")
     from alphatank.game.scenarios import load_scenario
     for k, sc in enumerate(scenarios):
         try:
