@@ -471,3 +471,17 @@ def test_a_row_planning_rate_must_be_a_finite_positive_number(tmp_path, rate):
     with pytest.raises(ValueError, match=r"a_random\.toml: steps_per_minute: must be a finite "
                                          r"number > 0, got"):
         load_tables(["tiny"], root)
+
+
+def test_a_rows_run_observation_and_imitate_are_checked_when_it_is_planned(tmp_path):
+    """Before anything trains, not when the row's run starts after the others."""
+    root = write_rows(tmp_path / "exp")
+    row = root / "tiny" / "a_random.toml"
+    good = row.read_text()
+    for bad, message in (('observation = "egocentric"', r"run: observation: 'bad' is not one"),
+                         ('num_envs = 4', r"run: imitate\.bot 'smrt'")):
+        text = good.replace('observation = "egocentric"', 'observation = "bad"') \
+            if "observation" in bad else good.replace(bad, bad + '\nimitate = { bot = "smrt" }')
+        row.write_text(text)
+        with pytest.raises(ValueError, match=r"a_random\.toml: " + message):
+            make_plan(load_tables(["tiny"], root), tmp_path / "out", rows=["a_random"])

@@ -49,6 +49,7 @@ from alphatank.files import FolderLock, write_text_atomic
 from alphatank.sim.config import GameConfig, from_dict
 from alphatank.training.presets import (
     TrainConfig,
+    check_run_fields,
     get_preset,
     parse_hp,
     parse_run,
@@ -457,6 +458,9 @@ def row_config(row: Row, seed: int, budget_min: float, steps: int | None = None,
         data["scenario"] = row.scenarios[0]
     try:
         cfg = parse_run(data, row.source)
+        # teachers may be runs not trained yet (row:NAME): the plan checks those
+        check_run_fields(dataclasses.replace(cfg, imitate={
+            k: v for k, v in cfg.imitate.items() if k != "teachers"}), f"{row.source}: run")
         if row.hp:
             from alphatank.training.presets import run_scenario
             n = len(run_scenario(cfg).learner_seats)

@@ -354,6 +354,21 @@ def with_hp(cfg: TrainConfig, overrides: dict[str, dict[str, Any]], num_learners
 
 # ---- run files ----------------------------------------------------------------------------
 
+def check_run_fields(cfg: TrainConfig, source: str) -> None:
+    """The observation and imitate settings of a run file or preset (no flag replaces
+    them), checked before the run starts; errors name ``source`` and the field."""
+    from alphatank.game.observe import OBS_KINDS
+    from alphatank.training.hparams import imitate_config
+
+    if cfg.observation is not None and cfg.observation not in OBS_KINDS:
+        raise ValueError(f"{source}: observation: {cfg.observation!r} is not one of "
+                         f"{list(OBS_KINDS)}")
+    try:
+        imitate_config(cfg.imitate)
+    except ValueError as exc:
+        raise ValueError(f"{source}: {exc}") from None
+
+
 def parse_run(data: dict[str, Any], source: str, base: Path | None = None,
               name: str | None = None) -> TrainConfig:
     """A :class:`TrainConfig` from a run file's mapping. ``name`` is the default run name

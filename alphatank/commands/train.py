@@ -24,6 +24,7 @@ from alphatank.training.presets import (
     CYCLE_INTERVAL,
     WANDB_MODES,
     TrainConfig,
+    check_run_fields,
     default_learners,
     get_preset,
     hyperparameter_help,
@@ -240,21 +241,6 @@ def _check_init_from(spec: str, label: str) -> None:
         raise ValueError(f"{label}: {exc}") from None
 
 
-def _check_file_fields(cfg: TrainConfig, source: str) -> None:
-    """The observation and imitate settings of a run file or preset (no flag replaces
-    them), checked before the run starts; errors name ``source`` and the field."""
-    from alphatank.game.observe import OBS_KINDS
-    from alphatank.training.hparams import imitate_config
-
-    if cfg.observation is not None and cfg.observation not in OBS_KINDS:
-        raise ValueError(f"{source}: observation: {cfg.observation!r} is not one of "
-                         f"{list(OBS_KINDS)}")
-    try:
-        imitate_config(cfg.imitate)
-    except ValueError as exc:
-        raise ValueError(f"{source}: {exc}") from None
-
-
 def build_run(args: argparse.Namespace) -> TrainConfig:
     """The TrainConfig a new run's flags describe; ValueError (one line) on bad input."""
     if args.config and args.preset:
@@ -272,7 +258,7 @@ def build_run(args: argparse.Namespace) -> TrainConfig:
     except ValueError as exc:
         raise ValueError(f"{label}: {exc}") from None
     cfg = dataclasses.replace(cfg, scenario=scenario)
-    _check_file_fields(cfg, source)
+    check_run_fields(cfg, source)
     if args.map is not None:
         cfg = dataclasses.replace(cfg, map=args.map)
     if args.action_repeat is not None:
