@@ -168,9 +168,8 @@ def _check_teacher(spec: str, field: str) -> None:
     """A seat spec that plays by itself (a bot, checkpoint, agent, ...): not a learner
     seat, which has nothing to copy, nor a player at a keyboard."""
     from alphatank.game.lineup import spec_seat
-    from alphatank.game.seats import controller_kind
+    from alphatank.game.seats import plays_by_itself
 
-    seat = spec_seat(spec, where=f"imitate.{field} {spec!r}")
-    if seat.controller == "learner" or controller_kind(seat.controller).interactive:
+    if not plays_by_itself(spec_seat(spec, where=f"imitate.{field} {spec!r}")):
         raise FieldError("imitate", field, f"must be a seat that plays by itself (smart, "
                          f"checkpoint:PATH, agent:NAME), got {spec!r}")

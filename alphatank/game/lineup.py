@@ -29,6 +29,7 @@ from alphatank.game.seats import (
     make_controller,
     parse_seat_spec,
     parse_seat_table,
+    plays_by_itself,
 )
 from alphatank.sim.episode import Episode, EpisodeHook, start_episode
 from alphatank.sim.policy import Policy
@@ -98,8 +99,7 @@ def build_lineup(scenario: str | Scenario, *, interactive: bool = False,
     stand = spec_seat(stand_in, where=f"stand-in {stand_in!r}") if stand_in else None
     fill = spec_seat(learner, where=f"learner seat {learner!r}") if learner else None
     for given, seat in ((stand_in, stand), (learner, fill)):
-        if seat is not None and (seat.controller == "learner"
-                                 or controller_kind(seat.controller).interactive):
+        if seat is not None and not plays_by_itself(seat):
             raise ScenarioError(f"{given!r}: a seat filled for the scenario plays by itself "
                                 "(a bot, checkpoint:PATH or agent:NAME); put players in "
                                 "--seats")

@@ -150,6 +150,11 @@ def controller_kind(name: str) -> ControllerKind:
     return kind
 
 
+def plays_by_itself(seat: Seat) -> bool:
+    """Whether ``seat`` acts with no one at it: not a learner seat, not a keyboard."""
+    return seat.controller != "learner" and not controller_kind(seat.controller).interactive
+
+
 def resolve(entry_point: str) -> Any:
     """The object an entry point ``"module:attribute"`` names (imported on first use)."""
     obj = _RESOLVED.get(entry_point)
