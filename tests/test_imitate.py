@@ -301,11 +301,10 @@ def test_each_scenario_of_a_mixed_run_is_taught_by_its_own_teacher(tmp_path):
     smart, rand = fire[:, :2][demo.alive[:, :2]], fire[:, 2:][demo.alive[:, 2:]]
     assert smart.mean() < 0.2 and rand.mean() > 0.35, (smart.mean(), rand.mean())
     bad = {"bot": "smart", "teachers": {"vs_dodge": "random"}}
-    tr = Trainer(cfg.with_overrides(num_envs=4, imitate=bad), tmp_path / "bad", env=env,
-                 progress=False)
     with pytest.raises(FieldError, match="imitate.teachers names no scenario of this run: "
                                          "'vs_dodge'; its scenarios: vs_aggressive, vs_random"):
-        gather(tr, tr.imitation, 8, seed=3)
+        Trainer(cfg.with_overrides(num_envs=4, imitate=bad), tmp_path / "bad", env=env,
+                progress=False)
 
 
 def test_a_checkpoint_teaches_as_the_policy_it_holds(tmp_path):
@@ -351,3 +350,11 @@ def test_a_teacher_must_play_by_itself(table, field):
     with pytest.raises(FieldError, match=rf"imitate\.{field} must be a seat that plays by "
                                          r"itself"):
         imitate_config(table)
+
+
+def test_a_teacher_for_a_scenario_the_run_does_not_play_is_refused_before_it_starts(tmp_path):
+    table = {"bot": "smart", "steps": 32, "teachers": {"vs_smart": "smart"}}
+    with pytest.raises(ValueError, match=r"imitate\.teachers names no scenario of this run: "
+                                         r"'vs_smart'; its scenarios: vs_aggressive"):
+        Trainer(run_config("bc", imitate=table), tmp_path / "bc", progress=False)
+    assert not (tmp_path / "bc").exists()
