@@ -13,7 +13,8 @@ import torch
 from alphatank.cli import main
 from alphatank.envs.core import MatchSet
 from alphatank.game.lineup import build_lineup
-from alphatank.game.scenarios import load_scenario, parse_scenario
+from alphatank.game.scenarios import (load_scenario, parse_scenario, team_misfit,
+                                      team_shape)
 from alphatank.training.checkpoint import (
     CheckpointError,
     LivePolicy,
@@ -112,6 +113,51 @@ def test_a_checkpoint_of_another_team_size_says_what_fits(team_runs):
     with pytest.raises(CheckpointError, match=r"gives 226.*fits seats of matches with 4 tanks"
                                               r".*'team_vs_bot'"):
         core.reset_env(0, 1)
+
+
+def test_a_team_checkpoint_in_teams_of_other_sizes_says_where_it_trained(team_runs, tmp_path):
+    """Four tanks as in training, but split 1 vs 3 or 2 vs 1 vs 1: the observation has the
+    same size and other meanings, so the seat is refused with the place it trained in."""
+    pol = load_policy(team_runs / "full")
+    sc = parse_scenario({"name": "t", "map": "arena4", "seats": [
+        {"team": "A", "controller": "learner"},
+        *({"team": "B", "controller": "bot", "bot": "random"} for _ in range(3))]})
+    core = MatchSet(sc, 1, driven=[], seat_policies={0: pol})
+    with pytest.raises(CheckpointError, match=r"seat 0 of this match \(teams \['A', 'B', 'B', "
+                       r"'B'\]\) plays alone against a team of 3; it trained in a team of 2 "
+                       r"against a team of 2, in its training scenario 'team_vs_bot'"):
+        core.reset_env(0, 1)
+    lineup = {"name": "t", "map": "arena4", "seats": [
+        {"team": "A", "controller": "learner"}, {"team": "A", "controller": "learner"},
+        {"team": "B", "controller": "bot", "bot": "random"},
+        {"team": "C", "controller": "bot", "bot": "random"}]}
+    file = tmp_path / "split.toml"
+    file.write_text("\n".join(
+        ['name = "split"', 'map = "arena4"']
+        + [f'[[seats]]\nteam = "{s["team"]}"\ncontroller = "{s["controller"]}"'
+           + (f'\nbot = "{s["bot"]}"' if "bot" in s else "") for s in lineup["seats"]]))
+    with pytest.raises(ValueError, match=r"scenario 'split': seat 0 of this match .* plays in "
+                       r"a team of 2 against teams of 1 and 1; it trained in a team of 2 "
+                       r"against a team of 2"):
+        evaluate_checkpoint(team_runs / "full", [None], games=1, scenario=str(file))
+    # the place it trained in plays from other seats, with other bots
+    swapped = parse_scenario({"name": "t", "map": "arena4", "seats": [
+        {"team": "B", "controller": "bot", "bot": "smart"},
+        {"team": "B", "controller": "bot", "bot": "dodge"},
+        {"team": "A", "controller": "learner"}, {"team": "A", "controller": "learner"}]})
+    core = MatchSet(swapped, 1, driven=[], seat_policies={2: pol, 3: pol})
+    core.reset_env(0, 1)
+    core.step(np.zeros((1, 0, 3), dtype=np.int64))
+
+
+def test_team_shape_reads_own_and_other_team_sizes():
+    assert team_shape(["A", "A", "B"], 2) == (1, (2,))
+    assert team_shape(["A", "B", "C", "C"], 2) == (2, (1, 1))
+    assert team_misfit(["A", "A", "B"], [0, 1], ["B", "A", "A"], 2) is None
+    assert team_misfit(["A", "B"], [0], ["A", "B", "C"], 0) == (
+        "seat 0 of this match (teams ['A', 'B', 'C']) plays alone against teams of 1 and 1; "
+        "it trained alone against a team of 1")
+    assert team_misfit([], [0], ["A", "B", "C"], 0) is None
 
 
 def _play(core: MatchSet, ticks: int) -> np.ndarray:

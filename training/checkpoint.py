@@ -37,7 +37,7 @@ import torch
 from alphatank.errors import InputError
 from alphatank.files import write_text_atomic
 from alphatank.game.observe import OBS_KINDS
-from alphatank.game.scenarios import Scenario, ScenarioError, parse_scenario
+from alphatank.game.scenarios import Scenario, ScenarioError, parse_scenario, team_misfit
 from alphatank.game.seats import agent_path
 from alphatank.sim.config import ACTION_REPEAT_MAX, check_value
 from alphatank.sim.mapspec import map_text
@@ -243,6 +243,12 @@ class Checkpoint:
             return ""
         return (f"its training scenario {sc.get('name', '?')!r} (teams {teams}, "
                 f"{self.meta['observation']['kind']} observation)")
+
+    @property
+    def trained_teams(self) -> tuple[str, ...]:
+        """The team of each seat of its training scenario (empty when not recorded)."""
+        return tuple(str(t.get("team", "?")) for t in
+                     self.meta.get("scenario", {}).get("seats", []))
 
     def learner_names(self) -> list[str]:
         return [d["name"] for d in self.meta["learners"]]
@@ -507,7 +513,8 @@ class _SeatState:
 
 class NetworkPolicy:
     """Trained learners as a :class:`alphatank.sim.policy.BatchPolicy` for any seat of any
-    match with the same number of tanks and observation size as their training scenario.
+    match with the same number of tanks and observation size as their training scenario,
+    and (``trained_teams``, when given) a place in its teams that a training seat had.
 
     The learner is picked per seat at :meth:`reset`: ``learner`` if given, else the one
     that trained in that scenario seat, else the first. Observations come from the
@@ -523,7 +530,8 @@ class NetworkPolicy:
 
     def __init__(self, observation: dict[str, Any], learner_names: list[str],
                  learner: str | None = None, deterministic: bool = False,
-                 source: str = "policy", trained_as: str = ""):
+                 source: str = "policy", trained_as: str = "",
+                 trained_teams: Sequence[str] = ()):
         if learner is not None and learner not in learner_names:
             raise CheckpointError(f"{source}: no learner {learner!r}; learners: "
                                   f"{learner_names}")
@@ -537,6 +545,7 @@ class NetworkPolicy:
         self.n_tanks = int(observation["tanks"])
         self.repeat = int(observation["action_repeat"])  # ticks an action is held
         self.trained_as = trained_as  # the training scenario, for error messages
+        self.trained_teams = tuple(trained_teams)  # its seats' teams, when known
         self._seats: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
         self._banks: list[_Bank] = []
 
@@ -592,6 +601,10 @@ class NetworkPolicy:
                 f"({self.kind}, {self.n_tanks} tanks); seat {seat} of this match "
                 f"({match.n} tanks, teams {match.teams}) gives {bank.builder.layout.size}"
                 f"{self._fit_hint()}")
+        misfit = team_misfit(self.trained_teams, self.seat_learner, match.teams, seat)
+        if misfit is not None:
+            raise CheckpointError(f"{self.source}: {misfit}"
+                                  + (f", in {self.trained_as}" if self.trained_as else ""))
         self._banks.append(bank)
         return bank, 0
 
@@ -706,7 +719,7 @@ class CheckpointPolicy(NetworkPolicy):
     def __init__(self, ckpt: Checkpoint, learner: str | None = None,
                  deterministic: bool = False):
         super().__init__(ckpt.meta["observation"], ckpt.learner_names(), learner,
-                         deterministic, str(ckpt.path), ckpt.trained_as)
+                         deterministic, str(ckpt.path), ckpt.trained_as, ckpt.trained_teams)
         self.ckpt = ckpt
         wanted = [learner] if learner is not None else ckpt.learner_names()
         self.learners = {name: ckpt.load_learner(name, weights_only=True) for name in wanted}

@@ -27,7 +27,7 @@ import numpy as np
 
 from alphatank.envs.core import MatchSet
 from alphatank.files import write_text_atomic
-from alphatank.game.scenarios import Scenario, Seat, load_scenario
+from alphatank.game.scenarios import Scenario, Seat, load_scenario, team_misfit
 from alphatank.sim.config import MATCHES_MAX
 from alphatank.sim.policy import Policy
 from alphatank.stats import League, wilson_interval
@@ -240,7 +240,7 @@ def evaluate_checkpoint(checkpoint: str | Path | Checkpoint, opponents: Sequence
         deterministic=deterministic, num_envs=num_envs, weakness=weakness,
         game_overrides={**tc.game, **(game or {})}, reward_overrides=tc.rewards,
         source=str(ckpt.path),
-        team_stats=team_stats, trained_as=ckpt.trained_as)
+        team_stats=team_stats, trained_as=ckpt.trained_as, trained_teams=ckpt.trained_teams)
     for r in results:
         r.agent = label if label is not None else str(checkpoint if not isinstance(
             checkpoint, Checkpoint) else checkpoint.path)
@@ -253,7 +253,8 @@ def evaluate_learners(learners: dict[str, Any], observation: dict[str, Any],
                       deterministic: bool = False, num_envs: int = 16,
                       weakness: float | None = None, game_overrides: dict | None = None,
                       reward_overrides: dict | None = None, source: str = "learners",
-                      team_stats: bool = False, trained_as: str = "") -> list[EvalResult]:
+                      team_stats: bool = False, trained_as: str = "",
+                      trained_teams: Sequence[str] = ()) -> list[EvalResult]:
     """One :class:`EvalResult` per opponent. The evaluated ``team`` (default: the team of
     the first learner seat) is played by ``learners`` (per seat as in training). Opponent
     ``None`` keeps the scenario's own opponents (other learner seats are played by their
@@ -261,7 +262,9 @@ def evaluate_learners(learners: dict[str, Any], observation: dict[str, Any],
     outside the team. Results do not depend on ``num_envs`` (module docstring).
     ``team_stats``: each result's ``team_stats`` holds the team's cooperation figures of
     the same games (:mod:`~alphatank.training.teamstats`). ``trained_as`` names what the
-    learners were trained on, for the error when the scenario does not fit them."""
+    learners were trained on, for the error when the scenario does not fit them;
+    ``trained_teams`` (the team of each training seat) refuses seats in teams of other
+    sizes."""
     seat_learner = {int(k): v for k, v in observation["seat_learner"].items()}
     first = next(iter(learners))
     team = learner_team(base, team)
@@ -280,6 +283,11 @@ def evaluate_learners(learners: dict[str, Any], observation: dict[str, Any],
                              f"features; scenario {sc.name!r} gives {core.obs_dim} "
                              f"(different map walls, tank count or observation kind)"
                              + (f"; it fits {trained_as}" if trained_as else ""))
+        for seat in driven:
+            misfit = team_misfit(trained_teams, seat_learner, sc.teams, seat)
+            if misfit is not None:
+                raise ValueError(f"{source}: scenario {sc.name!r}: {misfit}"
+                                 + (f", in {trained_as}" if trained_as else ""))
         groups: dict[str, list[int]] = {}
         for col, seat in enumerate(driven):
             groups.setdefault(seat_learner.get(seat, first), []).append(col)

@@ -32,6 +32,8 @@ the scenario file's folder. Every error names the file and the field.
 from __future__ import annotations
 
 import tomllib
+from collections import Counter
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -140,6 +142,36 @@ class Scenario:
 
 
 _MAP_CACHE: dict[str, MapSpec] = {}
+
+
+def team_shape(teams: Sequence[str], seat: int) -> tuple[int, tuple[int, ...]]:
+    """Where ``seat`` of a match of ``teams`` plays: its team's size and the sizes of the
+    other teams, smallest first (what a team observation's layout means)."""
+    sizes = Counter(teams)
+    own = teams[seat]
+    return sizes[own], tuple(sorted(n for t, n in sizes.items() if t != own))
+
+
+def _shape_text(shape: tuple[int, tuple[int, ...]]) -> str:
+    own, others = shape
+    them = (f"a team of {others[0]}" if len(others) == 1 else
+            "teams of " + ", ".join(map(str, others[:-1])) + f" and {others[-1]}")
+    return f"{'alone' if own == 1 else f'in a team of {own}'} against {them}"
+
+
+def team_misfit(trained: Sequence[str], trained_seats: Iterable[int], teams: Sequence[str],
+                seat: int) -> str | None:
+    """Why ``seat`` of a match of ``teams`` is not a place that a policy trained in
+    ``trained_seats`` of a match of ``trained`` (teams per seat) played, or None when it
+    is (or ``trained`` is unknown)."""
+    if not trained:
+        return None
+    fits = {team_shape(trained, s) for s in trained_seats}
+    shape = team_shape(teams, seat)
+    if shape in fits:
+        return None
+    return (f"seat {seat} of this match (teams {list(teams)}) plays {_shape_text(shape)}; "
+            f"it trained {' or '.join(sorted(map(_shape_text, fits)))}")
 
 
 def _load_map_cached(source: str) -> MapSpec:
