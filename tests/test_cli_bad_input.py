@@ -90,6 +90,8 @@ def files(tmp_path_factory) -> dict[str, str]:
     put("runscenario.toml", 'scenario = "vs_nobody"\n')
     put("rungame.toml", 'scenario = "vs_random"\n[game]\nmax_steps = -1\n')
     put("runseats.toml", 'scenario = "vs_random"\n[[learners]]\nname = "p"\nseats = [5]\n')
+    put("rundecay.toml", 'scenario = "vs_random"\n[rewards]\nteam_win_time_decay = 2\n')
+    put("rundraw.toml", 'scenario = "vs_random"\n[rewards]\nteam_draw = 5\nteam_loss = -5\n')
     put("runname.toml", 'name = "../../escaped"\nscenario = "vs_random"\n')
     put("runmap.toml", run + 'map = "nowhere"\n')
     put("runinit.toml", run + 'init_from = "agent:nobody"\n')
@@ -480,6 +482,11 @@ CASES = [
      ["{runsteps_toml}", "total_steps", "'many'"]),
     ("train-config-game", ["train", "--config", "{rungame_toml}"],
      ["{rungame_toml}: [game].max_steps", "[1, 10000000]", "-1"]),
+    # the team-outcome rules name the file and the table like every other [rewards] error
+    ("train-config-team-decay", ["train", "--config", "{rundecay_toml}", "--print-config"],
+     ["{rundecay_toml}: [rewards].team_win_time_decay: must be in [0, 1], got 2.0"]),
+    ("train-config-team-draw", ["train", "--config", "{rundraw_toml}", "--print-config"],
+     ["{rundraw_toml}: [rewards].team_draw: (5.0) must not exceed team_loss (-5.0)"]),
     ("train-config-seats", ["train", "--config", "{runseats_toml}"],
      ["{runseats_toml}: learners", "do not drive scenario 'vs_random'"]),
     ("train-config-hp", ["train", "--config", "{rungamma_toml}"],
