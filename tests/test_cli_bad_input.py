@@ -90,6 +90,7 @@ def files(tmp_path_factory) -> dict[str, str]:
     put("runscenario.toml", 'scenario = "vs_nobody"\n')
     put("rungame.toml", 'scenario = "vs_random"\n[game]\nmax_steps = -1\n')
     put("runseats.toml", 'scenario = "vs_random"\n[[learners]]\nname = "p"\nseats = [5]\n')
+    put("runsched.toml", 'scenario = "pair"\n[schedule]\nkind = "curriculum"\n')
     put("rundecay.toml", 'scenario = "vs_random"\n[rewards]\nteam_win_time_decay = 2\n')
     put("rundraw.toml", 'scenario = "vs_random"\n[rewards]\nteam_draw = 5\nteam_loss = -5\n')
     put("runname.toml", 'name = "../../escaped"\nscenario = "vs_random"\n')
@@ -482,6 +483,9 @@ CASES = [
      ["{runsteps_toml}", "total_steps", "'many'"]),
     ("train-config-game", ["train", "--config", "{rungame_toml}"],
      ["{rungame_toml}: [game].max_steps", "[1, 10000000]", "-1"]),
+    ("train-config-schedule-no-bots", ["train", "--config", "{runsched_toml}"],
+     ["{runsched_toml}: schedule: the curriculum schedule needs bot seats; scenario 'pair' "
+      "has none"]),
     # the team-outcome rules name the file and the table like every other [rewards] error
     ("train-config-team-decay", ["train", "--config", "{rundecay_toml}", "--print-config"],
      ["{rundecay_toml}: [rewards].team_win_time_decay: must be in [0, 1], got 2.0"]),

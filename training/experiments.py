@@ -50,10 +50,12 @@ from alphatank.sim.config import GameConfig, from_dict
 from alphatank.training.presets import (
     TrainConfig,
     check_run_fields,
+    check_run_play,
     get_preset,
     parse_hp,
     parse_run,
     run_learners,
+    run_scenario,
     with_hp,
 )
 from alphatank.training.stopping import exit_with_parent, orphaned
@@ -315,8 +317,11 @@ def _row(table: str, name: str, data: dict[str, Any], source: str,
                               f"got {rate}")
     from alphatank.game.scenarios import load_scenario
     for k, sc in enumerate(scenarios):
+        if not isinstance(sc, str):
+            raise ExperimentError(f"{source}: scenarios[{k}]: needs a scenario name or path (a "
+                                  f"string), got {sc!r}")
         try:
-            load_scenario(sc if isinstance(sc, str) else "")
+            load_scenario(sc)
         except ValueError as exc:
             raise ExperimentError(f"{source}: scenarios[{k}]: {exc}") from None
     cols = _typed(data, "columns", list, source, [])
@@ -458,18 +463,34 @@ def row_config(row: Row, seed: int, budget_min: float, steps: int | None = None,
         data["scenario"] = row.scenarios[0]
     try:
         cfg = parse_run(data, row.source)
+        where = f"{row.source}: run"
         # teachers may be runs not trained yet (row:NAME): the plan checks those
         check_run_fields(dataclasses.replace(cfg, imitate={
-            k: v for k, v in cfg.imitate.items() if k != "teachers"}), f"{row.source}: run")
+            k: v for k, v in cfg.imitate.items() if k != "teachers"}), where)
+        sc = _run_scenario(cfg, where)
+        check_run_play(cfg, sc, where)
         if row.hp:
-            from alphatank.training.presets import run_scenario
-            n = len(run_scenario(cfg).learner_seats)
-            cfg = with_hp(cfg, parse_hp([("hp", ",".join(row.hp))]), n)
+            cfg = with_hp(cfg, parse_hp([("hp", ",".join(row.hp))]), len(sc.learner_seats))
     except ValueError as exc:
         msg = str(exc)
         raise ExperimentError(msg if msg.startswith(row.source) else
                               f"{row.source}: {msg}") from None
     return cfg
+
+
+def _run_scenario(cfg: TrainConfig, where: str) -> Any:
+    """The scenario a row's run plays, its map in place; errors name ``where`` and the
+    field (scenario or map)."""
+    from alphatank.game.scenarios import load_scenario
+
+    try:
+        load_scenario(cfg.scenario)
+    except ValueError as exc:
+        raise ExperimentError(f"{where}: scenario: {exc}") from None
+    try:
+        return run_scenario(cfg)
+    except ValueError as exc:
+        raise ExperimentError(f"{where}: map: {str(exc).rpartition(': map: ')[2]}") from None
 
 
 def digest(obj: Any) -> str:

@@ -369,6 +369,34 @@ def check_run_fields(cfg: TrainConfig, source: str) -> None:
         raise ValueError(f"{source}: {exc}") from None
 
 
+def check_run_play(cfg: TrainConfig, sc: Any, source: str, where: str | None = None) -> None:
+    """What a run's own settings ask of the scenario ``sc`` it plays (its map override
+    in place), checked before the run starts: learner seats to train, learners that drive
+    each of them once (self-play: at most once, leaving one to the snapshot pool), bot
+    seats for its schedule, and the ranges of its [game] and [rewards] tables. Errors name
+    ``source`` and the field; ``where`` says where the scenario was chosen (default:
+    ``source``)."""
+    where = where or source
+    n = len(sc.learner_seats)
+    if not n:
+        raise ValueError(f"{where}: scenario {sc.name!r} has no learner seats: nothing to "
+                         "train (a scenario for training has controller = \"learner\" seats)")
+    if not learners_fit(run_learners(cfg, n), n, selfplay=bool(cfg.selfplay)):
+        drives = [(s.name, list(s.seats)) for s in cfg.learners]
+        if cfg.selfplay:
+            raise ValueError(f"{where}: self-play learners {drives} must drive each of "
+                             f"scenario {sc.name!r}'s {n} learner seats at most once and "
+                             "leave at least one to the snapshot pool")
+        raise ValueError(f"{source}: learners {drives} do not drive scenario "
+                         f"{sc.name!r}'s {n} learner seats exactly once")
+    kind = cfg.schedule.get("kind", "none")
+    if kind != "none" and not any(s.controller == "bot" for s in sc.seats):
+        raise ValueError(f"{source}: schedule: the {kind} schedule needs bot seats; scenario "
+                         f"{sc.name!r} has none (drop the schedule)")
+    sc.game_config(where=f"{source}: [game]", **cfg.game)
+    sc.reward_config(where=f"{source}: [rewards]", **cfg.rewards)
+
+
 def parse_run(data: dict[str, Any], source: str, base: Path | None = None,
               name: str | None = None) -> TrainConfig:
     """A :class:`TrainConfig` from a run file's mapping. ``name`` is the default run name

@@ -25,6 +25,7 @@ from alphatank.training.presets import (
     WANDB_MODES,
     TrainConfig,
     check_run_fields,
+    check_run_play,
     default_learners,
     get_preset,
     hyperparameter_help,
@@ -277,25 +278,21 @@ def build_run(args: argparse.Namespace) -> TrainConfig:
         where = "--map: " if args.map is not None else f"{source}: map: " if cfg.map else ""
         raise ValueError(f"{where}{exc}") from None
     n = len(sc.learner_seats)
-    where = "--scenario" if args.scenario is not None else source
-    if not n:
-        raise ValueError(f"{where}: scenario {sc.name!r} has no learner seats: nothing to "
-                         "train (a scenario for training has controller = \"learner\" seats)")
-    if not learners_fit(run_learners(cfg, n), n, selfplay=bool(cfg.selfplay)):
-        drives = [(s.name, list(s.seats)) for s in cfg.learners]
-        if cfg.selfplay:
-            raise ValueError(f"{where}: self-play learners {drives} must drive each of "
-                             f"scenario {sc.name!r}'s {n} learner seats at most once and "
-                             "leave at least one to the snapshot pool")
-        if args.scenario is None:
-            raise ValueError(f"{source}: learners {drives} do not drive scenario "
-                             f"{sc.name!r}'s {n} learner seats exactly once")
+    if n and args.scenario is not None and not cfg.selfplay and \
+            not learners_fit(run_learners(cfg, n), n):
         first = cfg.learners[0]
         learners = default_learners(n, first.algo, first.config)
         print(f"note: learners {[(s.name, list(s.seats)) for s in cfg.learners]} do not fit "
               f"scenario {sc.name!r} ({n} learner seats): one {first.algo} learner per seat "
               f"instead", file=sys.stderr)
         cfg = dataclasses.replace(cfg, learners=learners)
+    schedule = _schedule(cfg, args)
+    if (args.schedule or args.curriculum is not None) and schedule and not any(
+            s.controller == "bot" for s in sc.seats):
+        flag = "--schedule" if args.schedule else "--curriculum"
+        raise ValueError(f"{flag}: scenario {sc.name!r} has no bot seats to schedule")
+    cfg = dataclasses.replace(cfg, schedule=schedule)
+    check_run_play(cfg, sc, source, "--scenario" if args.scenario is not None else None)
     if cfg.init_from:
         from alphatank.training.warmstart import WARM_STARTED
         if not any(s.algo in WARM_STARTED for s in cfg.learners):
@@ -303,22 +300,11 @@ def build_run(args: argparse.Namespace) -> TrainConfig:
             raise ValueError(f"{label}: a warm start fills "
                              f"{' and '.join(a.upper() for a in WARM_STARTED)} learners; this "
                              f"run's {[(s.name, s.algo) for s in cfg.learners]} take none")
-    schedule = _schedule(cfg, args)
-    if schedule.get("kind", "none") != "none" and not any(
-            s.controller == "bot" for s in sc.seats):
-        if args.schedule or args.curriculum is not None:
-            flag = "--schedule" if args.schedule else "--curriculum"
-            raise ValueError(f"{flag}: scenario {sc.name!r} has no bot seats to schedule")
-        raise ValueError(f"schedule: the {schedule['kind']} schedule of {cfg.name!r} needs bot "
-                         f"seats; scenario {sc.name!r} has none (--schedule none drops it)")
-    cfg = dataclasses.replace(cfg, schedule=schedule)
     from alphatank.training.schedules import make_schedule
     try:
         make_schedule(cfg.schedule, cfg.total_steps)
     except ValueError as exc:
         raise ValueError(f"schedule: {exc}") from None
-    sc.game_config(where=f"{source}: [game]", **cfg.game)
-    sc.reward_config(where=f"{source}: [rewards]", **cfg.rewards)
     hp_items = [("--hp", t) for t in args.hp] + [("--ppo", args.ppo), ("--sac", args.sac)]
     return with_hp(cfg, parse_hp(hp_items), n)
 
