@@ -515,3 +515,10 @@ def test_a_schedule_on_a_scenario_without_bot_seats_is_refused_when_planned(tmp_
                                          r"schedule needs bot seats; scenario 'pair' has none"):
         make_plan(load_tables(["tiny"], root), tmp_path / "out", rows=["c_bad"])
 
+
+def test_the_wandb_mode_leaves_the_run_digests_alone(tmp_path):
+    """A logging mode: finished runs still count when only --wandb differs."""
+    tables = load_tables(["tiny"], write_rows(tmp_path / "exp"))
+    plans = [make_plan(tables, tmp_path / "out", wandb=mode) for mode in ("disabled", "offline")]
+    assert [j.key for j in plans[0].jobs] == [j.key for j in plans[1].jobs]
+    assert plans[1].jobs[0].cfg["wandb"] == "offline"  # the run still logs in that mode

@@ -501,11 +501,15 @@ def digest(obj: Any) -> str:
 # it was, so result folders made before them still resume and report (learner, run)
 LATER_SETTINGS = {"anchor_kl": 0.0}
 LATER_RUN_SETTINGS = {"action_repeat": 1}
+# how a run is watched, not what it does: hashed at the value runs were made with before
+# (the --wandb default), so a finished run counts whatever mode the next command logs in
+LOGGING_SETTINGS = {"wandb": "disabled"}
 
 
 def run_digest(cfg: TrainConfig, scenarios: Sequence[str]) -> str:
-    """Hash of what a run does (its settings without the name, and its scenario mix)."""
-    data = cfg.to_dict()
+    """Hash of what a run does (its settings without the name and the logging mode, and
+    its scenario mix)."""
+    data = {**cfg.to_dict(), **LOGGING_SETTINGS}
     data.pop("name")
     for key, off in LATER_RUN_SETTINGS.items():
         if data.get(key, off) == off:
