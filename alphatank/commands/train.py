@@ -331,15 +331,8 @@ def run(args: argparse.Namespace) -> int:
         if not args.env_runner_timeout > 0:
             raise InputError(f"--env-runner-timeout: must be > 0 seconds, got "
                              f"{args.env_runner_timeout:g}")
-    if args.ray is not None and not args.print_config:
-        from alphatank.cluster import connect
-        connection = connect(args.ray or None, feature="alphatank train --ray")
-        print(connection.describe(), flush=True)
-        try:
-            return _run(args, progress, connection.cpus)
-        finally:
-            connection.close()
-    return _run(args, progress)
+    with contextlib.ExitStack() as stack:  # holds the Ray connection of a --ray run
+        return _run(args, progress, stack)
 
 
 def _runner_timeout(args: argparse.Namespace) -> float:
@@ -347,23 +340,30 @@ def _runner_timeout(args: argparse.Namespace) -> float:
             else args.env_runner_timeout)
 
 
-def _env_runners(args: argparse.Namespace, cfg: TrainConfig, cpus: float) -> int:
-    """Env-runner actors of a ``--ray`` run (0 without --ray); a count the cluster cannot
-    place is bad input."""
+def _env_runners(args: argparse.Namespace, cfg: TrainConfig, stack: contextlib.ExitStack
+                 ) -> int:
+    """Env-runner actors of a ``--ray`` run (0 without --ray). A count the run's envs
+    cannot fill is refused before Ray starts; then the cluster is joined (or a local Ray
+    started, closed with ``stack``) and a count it cannot place is refused."""
     if args.ray is None:
         return 0
     n = args.env_runners or min(max(2, cfg.num_workers), cfg.num_envs)
     if n > cfg.num_envs:
         raise InputError(f"--env-runners: {n} runners for {cfg.num_envs} envs; at most "
                          f"--num-envs")
-    if n > cpus:
+    from alphatank.cluster import connect
+    connection = connect(args.ray or None, feature="alphatank train --ray")
+    stack.callback(connection.close)
+    print(connection.describe(), flush=True)
+    if n > connection.cpus:
         raise InputError(f"--env-runners: {n} runners need {n} CPUs; the Ray cluster has "
-                         f"{cpus:g}")
+                         f"{connection.cpus:g}")
     return n
 
 
-def _run(args: argparse.Namespace, progress: bool, cpus: float = 0.0) -> int:
-    """:func:`run` after the Ray connection (``cpus``: the cluster's) when --ray."""
+def _run(args: argparse.Namespace, progress: bool, stack: contextlib.ExitStack) -> int:
+    """:func:`run` once the flags are checked; a --ray run joins Ray (held by ``stack``)
+    when its settings are known, just before its trainer is made."""
     if args.resume:
         given = [f"--{k.replace('_', '-')}" for k in NEW_RUN_ONLY
                  if getattr(args, k) not in (None, "", [])]
@@ -386,7 +386,7 @@ def _run(args: argparse.Namespace, progress: bool, cpus: float = 0.0) -> int:
             if args.print_config:
                 print(run_toml(cfg), end="")
                 return 0
-            runners = _env_runners(args, cfg, cpus)
+            runners = _env_runners(args, cfg, stack)
             with _one_line_warnings():
                 trainer = resume_trainer(args.resume, progress=progress, env_runners=runners,
                                          env_runner_timeout_s=_runner_timeout(args),
@@ -421,7 +421,7 @@ def _run(args: argparse.Namespace, progress: bool, cpus: float = 0.0) -> int:
             raise InputError(f"{run_dir} already holds a run; continue it with --resume "
                              f"{run_dir} or pick another --name")
         from alphatank.training.runner import Trainer
-        runners = _env_runners(args, cfg, cpus)
+        runners = _env_runners(args, cfg, stack)
         try:
             with _one_line_warnings():
                 trainer = Trainer(cfg, run_dir, progress=progress, env_runners=runners,
