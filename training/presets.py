@@ -315,10 +315,10 @@ def parse_hp(items: Iterable[tuple[str, str]]) -> dict[str, dict[str, Any]]:
 
 
 def parse_game(flag: str, text: str) -> dict[str, Any]:
-    """``"random_spawns=false,max_steps=600"`` -> typed GameConfig overrides (ranges are
-    checked where the game is built). Errors are one line naming the flag, the key and
-    what is allowed."""
-    from alphatank.sim.config import GameConfig
+    """``"random_spawns=false,max_steps=600"`` -> typed GameConfig overrides, each in its
+    range (rules across settings, such as bullets faster than tanks, are checked where the
+    game is built). Errors are one line naming the flag, the key and what is allowed."""
+    from alphatank.sim.config import ConfigError, GameConfig, check_field
 
     fields = field_map(GameConfig)
     out: dict[str, Any] = {}
@@ -330,9 +330,11 @@ def parse_game(flag: str, text: str) -> dict[str, Any]:
         if key not in fields:
             raise ValueError(f"{flag} {key}: unknown game setting; valid: {sorted(fields)}")
         try:
-            out[key] = parse_value(GameConfig, key, raw)
+            out[key] = check_field(GameConfig, key, parse_value(GameConfig, key, raw))
         except FieldError as exc:
             raise ValueError(f"{flag} {key}: {exc.problem}") from None
+        except ConfigError as exc:
+            raise ValueError(f"{flag} {key}: {exc.reason}") from None
     return out
 
 
