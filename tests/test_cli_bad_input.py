@@ -492,7 +492,8 @@ CASES = [
     ("train-config-team-draw", ["train", "--config", "{rundraw_toml}", "--print-config"],
      ["{rundraw_toml}: [rewards].team_draw: (5.0) must not exceed team_loss (-5.0)"]),
     ("train-config-seats", ["train", "--config", "{runseats_toml}"],
-     ["{runseats_toml}: learners", "do not drive scenario 'vs_random'"]),
+     ["{runseats_toml}: learners [('p', [5])] do not drive each of the 1 learner seat(s) "
+      "of scenario 'vs_random' exactly once"]),
     ("train-config-hp", ["train", "--config", "{rungamma_toml}"],
      ["{rungamma_toml}", "learners[0].config.gamma", "[0, 1]"]),
     # the run file's own settings: the error names the file, then the field

@@ -490,7 +490,8 @@ def test_a_rows_run_observation_and_imitate_are_checked_when_it_is_planned(tmp_p
 @pytest.mark.parametrize(("text", "message"), [
     ('[run.game]\nmax_steps = 0\n', "run: [game].max_steps: must be in [1, 10000000], got 0"),
     ('[[run.learners]]\nname = "a"\nseats = [3]\n',
-     "run: learners [('a', [3])] do not drive scenario 'vs_aggressive''s 1 learner seats"),
+     "run: learners [('a', [3])] do not drive each of the 1 learner seat(s) of scenario "
+     "'vs_aggressive' exactly once"),
     ('[run.rewards]\nteam_draw = 3\n', "run: [rewards].team_draw: (3.0) must not exceed"),
     ('[run]\nmap = "nosuchmap"\n', "run: map: unknown map 'nosuchmap'"),
     ('[run]\nscenario = "nosuch"\n', "run: scenario: unknown scenario 'nosuch'"),

@@ -386,11 +386,11 @@ def check_run_play(cfg: TrainConfig, sc: Any, source: str, where: str | None = N
     if not learners_fit(run_learners(cfg, n), n, selfplay=bool(cfg.selfplay)):
         drives = [(s.name, list(s.seats)) for s in cfg.learners]
         if cfg.selfplay:
-            raise ValueError(f"{where}: self-play learners {drives} must drive each of "
-                             f"scenario {sc.name!r}'s {n} learner seats at most once and "
+            raise ValueError(f"{where}: self-play learners {drives} must drive each of the "
+                             f"{n} learner seat(s) of scenario {sc.name!r} at most once and "
                              "leave at least one to the snapshot pool")
-        raise ValueError(f"{source}: learners {drives} do not drive scenario "
-                         f"{sc.name!r}'s {n} learner seats exactly once")
+        raise ValueError(f"{source}: learners {drives} do not drive each of the {n} learner "
+                         f"seat(s) of scenario {sc.name!r} exactly once")
     kind = cfg.schedule.get("kind", "none")
     if kind != "none" and not any(s.controller == "bot" for s in sc.seats):
         raise ValueError(f"{source}: schedule: the {kind} schedule needs bot seats; scenario "
