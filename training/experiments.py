@@ -50,7 +50,6 @@ from alphatank.sim.config import GameConfig, from_dict
 from alphatank.training.presets import (
     TrainConfig,
     check_run_fields,
-    check_run_play,
     get_preset,
     parse_hp,
     parse_run,
@@ -464,11 +463,10 @@ def row_config(row: Row, seed: int, budget_min: float, steps: int | None = None,
     try:
         cfg = parse_run(data, row.source)
         where = f"{row.source}: run"
+        sc = _run_scenario(cfg, where)
         # teachers may be runs not trained yet (row:NAME): the plan checks those
         check_run_fields(dataclasses.replace(cfg, imitate={
-            k: v for k, v in cfg.imitate.items() if k != "teachers"}), where)
-        sc = _run_scenario(cfg, where)
-        check_run_play(cfg, sc, where)
+            k: v for k, v in cfg.imitate.items() if k != "teachers"}), sc, where)
         if row.hp:
             cfg = with_hp(cfg, parse_hp([("hp", ",".join(row.hp))]), len(sc.learner_seats))
     except ValueError as exc:

@@ -356,9 +356,15 @@ def with_hp(cfg: TrainConfig, overrides: dict[str, dict[str, Any]], num_learners
 
 # ---- run files ----------------------------------------------------------------------------
 
-def check_run_fields(cfg: TrainConfig, source: str) -> None:
-    """The observation and imitate settings of a run file or preset (no flag replaces
-    them), checked before the run starts; errors name ``source`` and the field."""
+def check_run_fields(cfg: TrainConfig, sc: Any, source: str, where: str | None = None
+                     ) -> None:
+    """The settings of a run file or preset that no flag replaces, checked before the run
+    starts against the scenario ``sc`` it plays (its map override in place): its
+    observation and imitate table, learner seats to train, learners that drive each of
+    them once (self-play: at most once, leaving one to the snapshot pool), bot seats for
+    its schedule, and the ranges of its [game] and [rewards] tables. Errors name
+    ``source`` and the field; ``where`` says where the scenario was chosen (default:
+    ``source``)."""
     from alphatank.game.observe import OBS_KINDS
     from alphatank.training.hparams import imitate_config
 
@@ -369,15 +375,6 @@ def check_run_fields(cfg: TrainConfig, source: str) -> None:
         imitate_config(cfg.imitate)
     except ValueError as exc:
         raise ValueError(f"{source}: {exc}") from None
-
-
-def check_run_play(cfg: TrainConfig, sc: Any, source: str, where: str | None = None) -> None:
-    """What a run's own settings ask of the scenario ``sc`` it plays (its map override
-    in place), checked before the run starts: learner seats to train, learners that drive
-    each of them once (self-play: at most once, leaving one to the snapshot pool), bot
-    seats for its schedule, and the ranges of its [game] and [rewards] tables. Errors name
-    ``source`` and the field; ``where`` says where the scenario was chosen (default:
-    ``source``)."""
     where = where or source
     n = len(sc.learner_seats)
     if not n:

@@ -25,7 +25,6 @@ from alphatank.training.presets import (
     WANDB_MODES,
     TrainConfig,
     check_run_fields,
-    check_run_play,
     default_learners,
     get_preset,
     hyperparameter_help,
@@ -259,7 +258,6 @@ def build_run(args: argparse.Namespace) -> TrainConfig:
     except ValueError as exc:
         raise ValueError(f"{label}: {exc}") from None
     cfg = dataclasses.replace(cfg, scenario=scenario)
-    check_run_fields(cfg, source)
     if args.map is not None:
         cfg = dataclasses.replace(cfg, map=args.map)
     if args.action_repeat is not None:
@@ -292,7 +290,7 @@ def build_run(args: argparse.Namespace) -> TrainConfig:
         flag = "--schedule" if args.schedule else "--curriculum"
         raise ValueError(f"{flag}: scenario {sc.name!r} has no bot seats to schedule")
     cfg = dataclasses.replace(cfg, schedule=schedule)
-    check_run_play(cfg, sc, source, "--scenario" if args.scenario is not None else None)
+    check_run_fields(cfg, sc, source, "--scenario" if args.scenario is not None else None)
     if cfg.init_from:
         from alphatank.training.warmstart import WARM_STARTED
         if not any(s.algo in WARM_STARTED for s in cfg.learners):
