@@ -90,6 +90,9 @@ def files(tmp_path_factory) -> dict[str, str]:
     put("runscenario.toml", 'scenario = "vs_nobody"\n')
     put("rungame.toml", 'scenario = "vs_random"\n[game]\nmax_steps = -1\n')
     put("runseats.toml", 'scenario = "vs_random"\n[[learners]]\nname = "p"\nseats = [5]\n')
+    put("runsched.toml", 'scenario = "pair"\n[schedule]\nkind = "curriculum"\n')
+    put("rundecay.toml", 'scenario = "vs_random"\n[rewards]\nteam_win_time_decay = 2\n')
+    put("rundraw.toml", 'scenario = "vs_random"\n[rewards]\nteam_draw = 5\nteam_loss = -5\n')
     put("runname.toml", 'name = "../../escaped"\nscenario = "vs_random"\n')
     put("runmap.toml", run + 'map = "nowhere"\n')
     put("runinit.toml", run + 'init_from = "agent:nobody"\n')
@@ -480,8 +483,17 @@ CASES = [
      ["{runsteps_toml}", "total_steps", "'many'"]),
     ("train-config-game", ["train", "--config", "{rungame_toml}"],
      ["{rungame_toml}: [game].max_steps", "[1, 10000000]", "-1"]),
+    ("train-config-schedule-no-bots", ["train", "--config", "{runsched_toml}"],
+     ["{runsched_toml}: schedule: the curriculum schedule needs bot seats; scenario 'pair' "
+      "has none"]),
+    # the team-outcome rules name the file and the table like every other [rewards] error
+    ("train-config-team-decay", ["train", "--config", "{rundecay_toml}", "--print-config"],
+     ["{rundecay_toml}: [rewards].team_win_time_decay: must be in [0, 1], got 2.0"]),
+    ("train-config-team-draw", ["train", "--config", "{rundraw_toml}", "--print-config"],
+     ["{rundraw_toml}: [rewards].team_draw: (5.0) must not exceed team_loss (-5.0)"]),
     ("train-config-seats", ["train", "--config", "{runseats_toml}"],
-     ["{runseats_toml}: learners", "do not drive scenario 'vs_random'"]),
+     ["{runseats_toml}: learners [('p', [5])] do not drive each of the 1 learner seat(s) "
+      "of scenario 'vs_random' exactly once"]),
     ("train-config-hp", ["train", "--config", "{rungamma_toml}"],
      ["{rungamma_toml}", "learners[0].config.gamma", "[0, 1]"]),
     # the run file's own settings: the error names the file, then the field

@@ -183,7 +183,9 @@ def test_eval_game_settings_override_the_checkpoints_own(checkpoint, capsys, tmp
     for text, words in (("nope=1", ["--game nope: unknown game setting", "random_spawns"]),
                         ("max_steps=abc", ["--game max_steps:", "'abc'"]),
                         ("max_steps", ["--game: expected KEY=VALUE"]),
-                        ("max_steps=0", ["max_steps"])):
+                        ("max_steps=0", ["--game max_steps: must be in [1, 10000000], got 0"]),
+                        ("tank_speed=nan", ["--game tank_speed: must be a finite number"]),
+                        ("bullet_speed=50", ["--game bullet_speed: (50) must exceed tank_speed"])):
         assert main(["eval", str(checkpoint), "--games", "2", "--game", text]) == 2
         err = capsys.readouterr().err
         assert all(w in err for w in words) and len(err.strip().splitlines()) == 1, err

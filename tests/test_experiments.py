@@ -485,3 +485,41 @@ def test_a_rows_run_observation_and_imitate_are_checked_when_it_is_planned(tmp_p
         row.write_text(text)
         with pytest.raises(ValueError, match=r"a_random\.toml: " + message):
             make_plan(load_tables(["tiny"], root), tmp_path / "out", rows=["a_random"])
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ('[run.game]\nmax_steps = 0\n', "run: [game].max_steps: must be in [1, 10000000], got 0"),
+    ('[[run.learners]]\nname = "a"\nseats = [3]\n',
+     "run: learners [('a', [3])] do not drive each of the 1 learner seat(s) of scenario "
+     "'vs_aggressive' exactly once"),
+    ('[run.rewards]\nteam_draw = 3\n', "run: [rewards].team_draw: (3.0) must not exceed"),
+    ('[run]\nmap = "nosuchmap"\n', "run: map: unknown map 'nosuchmap'"),
+    ('[run]\nscenario = "nosuch"\n', "run: scenario: unknown scenario 'nosuch'"),
+    ('scenarios = [1, 2]\n', "scenarios[0]: needs a scenario name or path (a string), got 1"),
+])
+def test_a_rows_run_is_checked_as_train_checks_a_run_file_when_it_is_planned(
+        tmp_path, capsys, text, message):
+    """Before anything trains (--list too), naming the row's file: not when the row's run
+    starts after the rows before it have trained."""
+    root = write_rows(tmp_path / "exp")
+    (root / "tiny" / "c_bad.toml").write_text(f'preset = "demo"\n{text}')
+    assert cli("tiny", "--experiments-dir", str(root), "--list") == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"experiments/tiny/c_bad.toml: {message}" in err, err
+
+
+def test_a_schedule_on_a_scenario_without_bot_seats_is_refused_when_planned(tmp_path):
+    root = write_rows(tmp_path / "exp")
+    (root / "tiny" / "c_bad.toml").write_text('preset = "ppo_vs_ppo"\n[run.schedule]\n'
+                                              'kind = "curriculum"\n')
+    with pytest.raises(ValueError, match=r"c_bad\.toml: run: schedule: the curriculum "
+                                         r"schedule needs bot seats; scenario 'pair' has none"):
+        make_plan(load_tables(["tiny"], root), tmp_path / "out", rows=["c_bad"])
+
+
+def test_the_wandb_mode_leaves_the_run_digests_alone(tmp_path):
+    """A logging mode: finished runs still count when only --wandb differs."""
+    tables = load_tables(["tiny"], write_rows(tmp_path / "exp"))
+    plans = [make_plan(tables, tmp_path / "out", wandb=mode) for mode in ("disabled", "offline")]
+    assert [j.key for j in plans[0].jobs] == [j.key for j in plans[1].jobs]
+    assert plans[1].jobs[0].cfg["wandb"] == "offline"  # the run still logs in that mode

@@ -10,7 +10,7 @@ import pytest
 from alphatank import rewards as R
 from alphatank.envs.core import MatchSet
 from alphatank.envs.vector import VectorMatchEnv
-from alphatank.game.scenarios import parse_scenario
+from alphatank.game.scenarios import ScenarioError, parse_scenario
 from alphatank.sim.config import RewardConfig, game_config
 from alphatank.sim.match import Hit
 
@@ -299,10 +299,13 @@ def test_team_outcome_pays_every_seat_and_decays_the_win():
 
 
 def test_a_draw_worth_more_than_a_loss_is_rejected():
-    with pytest.raises(R.ConfigError, match="team_draw .* must not exceed team_loss"):
+    with pytest.raises(ScenarioError,  # when the scenario is read, naming its table
+                       match=r"\[rewards\]\.team_draw: \(0\.0\) must not exceed team_loss"):
         match_set(team_loss=-100.0, team_draw=0.0)
-    with pytest.raises(R.ConfigError, match="team_win_time_decay"):
+    with pytest.raises(ScenarioError, match=r"\[rewards\]\.team_win_time_decay: must be in"):
         match_set(team_win=1.0, team_win_time_decay=1.5)
+    with pytest.raises(R.ConfigError, match="RewardConfig.team_draw .* must not exceed"):
+        R.check_team_outcome(RewardConfig(team_loss=-100.0))  # built in code
     match_set(team_loss=-100.0, team_draw=-100.0)  # equal is allowed
 
 

@@ -118,6 +118,10 @@ def test_fields_added_later_are_checked_by_their_type():
     ("[game]\nvictory = 1\n", "[game]", "unknown GameConfig key"),
     ("[rewards]\nvictory = \"lots\"\n", "[rewards].victory", "number, got 'lots'"),
     ("[rewards]\nvictory = nan\n", "[rewards].victory", "finite"),
+    ("[rewards]\nteam_win_time_decay = 2\n", "[rewards].team_win_time_decay",
+     "must be in [0, 1], got 2.0"),
+    ("[rewards]\nteam_draw = 5\nteam_loss = -5\n", "[rewards].team_draw",
+     "(5.0) must not exceed team_loss (-5.0)"),
 ])
 def test_scenario_files_name_file_and_field(tmp_path, table, line, where):
     p = tmp_path / "x.toml"

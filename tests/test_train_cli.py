@@ -90,6 +90,17 @@ def test_bad_flags_are_one_line_errors(capsys, argv, error):
     assert all(ln.startswith("note: ") for ln in lines[:-1]), cap.err
 
 
+def test_more_env_runners_than_envs_are_refused_before_ray_starts(capsys, tmp_path):
+    """The count does not depend on the cluster: no Ray is joined (the address has none,
+    which would be the error) or started, nor a run folder made."""
+    assert main(["train", "--ray", "127.0.0.1:1", "--env-runners", "9", "--num-envs", "4",
+                 "--runs", str(tmp_path), "--wandb", "disabled", "--no-progress"]) == 2
+    cap = capsys.readouterr()
+    assert cap.out == "" and cap.err == ("alphatank train: error: --env-runners: 9 runners "
+                                         "for 4 envs; at most --num-envs\n")
+    assert not any(tmp_path.iterdir())
+
+
 def test_resume_refuses_new_run_flags(capsys, tmp_path):
     assert main(["train", "--resume", str(tmp_path), "--hp", "ppo.gamma=0.9", "--map",
                  "open"]) == 2

@@ -54,6 +54,7 @@ from alphatank.training.presets import (
     parse_hp,
     parse_run,
     run_learners,
+    run_scenario,
     with_hp,
 )
 from alphatank.training.stopping import exit_with_parent, orphaned
@@ -315,8 +316,11 @@ def _row(table: str, name: str, data: dict[str, Any], source: str,
                               f"got {rate}")
     from alphatank.game.scenarios import load_scenario
     for k, sc in enumerate(scenarios):
+        if not isinstance(sc, str):
+            raise ExperimentError(f"{source}: scenarios[{k}]: needs a scenario name or path (a "
+                                  f"string), got {sc!r}")
         try:
-            load_scenario(sc if isinstance(sc, str) else "")
+            load_scenario(sc)
         except ValueError as exc:
             raise ExperimentError(f"{source}: scenarios[{k}]: {exc}") from None
     cols = _typed(data, "columns", list, source, [])
@@ -458,18 +462,33 @@ def row_config(row: Row, seed: int, budget_min: float, steps: int | None = None,
         data["scenario"] = row.scenarios[0]
     try:
         cfg = parse_run(data, row.source)
+        where = f"{row.source}: run"
+        sc = _run_scenario(cfg, where)
         # teachers may be runs not trained yet (row:NAME): the plan checks those
         check_run_fields(dataclasses.replace(cfg, imitate={
-            k: v for k, v in cfg.imitate.items() if k != "teachers"}), f"{row.source}: run")
+            k: v for k, v in cfg.imitate.items() if k != "teachers"}), sc, where)
         if row.hp:
-            from alphatank.training.presets import run_scenario
-            n = len(run_scenario(cfg).learner_seats)
-            cfg = with_hp(cfg, parse_hp([("hp", ",".join(row.hp))]), n)
+            cfg = with_hp(cfg, parse_hp([("hp", ",".join(row.hp))]), len(sc.learner_seats))
     except ValueError as exc:
         msg = str(exc)
         raise ExperimentError(msg if msg.startswith(row.source) else
                               f"{row.source}: {msg}") from None
     return cfg
+
+
+def _run_scenario(cfg: TrainConfig, where: str) -> Any:
+    """The scenario a row's run plays, its map in place; errors name ``where`` and the
+    field (scenario or map)."""
+    from alphatank.game.scenarios import load_scenario
+
+    try:
+        load_scenario(cfg.scenario)
+    except ValueError as exc:
+        raise ExperimentError(f"{where}: scenario: {exc}") from None
+    try:
+        return run_scenario(cfg)
+    except ValueError as exc:
+        raise ExperimentError(f"{where}: map: {str(exc).rpartition(': map: ')[2]}") from None
 
 
 def digest(obj: Any) -> str:
@@ -480,11 +499,15 @@ def digest(obj: Any) -> str:
 # it was, so result folders made before them still resume and report (learner, run)
 LATER_SETTINGS = {"anchor_kl": 0.0}
 LATER_RUN_SETTINGS = {"action_repeat": 1}
+# how a run is watched, not what it does: hashed at the value runs were made with before
+# (the --wandb default), so a finished run counts whatever mode the next command logs in
+LOGGING_SETTINGS = {"wandb": "disabled"}
 
 
 def run_digest(cfg: TrainConfig, scenarios: Sequence[str]) -> str:
-    """Hash of what a run does (its settings without the name, and its scenario mix)."""
-    data = cfg.to_dict()
+    """Hash of what a run does (its settings without the name and the logging mode, and
+    its scenario mix)."""
+    data = {**cfg.to_dict(), **LOGGING_SETTINGS}
     data.pop("name")
     for key, off in LATER_RUN_SETTINGS.items():
         if data.get(key, off) == off:

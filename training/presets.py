@@ -315,10 +315,10 @@ def parse_hp(items: Iterable[tuple[str, str]]) -> dict[str, dict[str, Any]]:
 
 
 def parse_game(flag: str, text: str) -> dict[str, Any]:
-    """``"random_spawns=false,max_steps=600"`` -> typed GameConfig overrides (ranges are
-    checked where the game is built). Errors are one line naming the flag, the key and
-    what is allowed."""
-    from alphatank.sim.config import GameConfig
+    """``"random_spawns=false,max_steps=600"`` -> typed GameConfig overrides, each in its
+    range (rules across settings, such as bullets faster than tanks, are checked where the
+    game is built). Errors are one line naming the flag, the key and what is allowed."""
+    from alphatank.sim.config import ConfigError, GameConfig, check_field
 
     fields = field_map(GameConfig)
     out: dict[str, Any] = {}
@@ -330,9 +330,11 @@ def parse_game(flag: str, text: str) -> dict[str, Any]:
         if key not in fields:
             raise ValueError(f"{flag} {key}: unknown game setting; valid: {sorted(fields)}")
         try:
-            out[key] = parse_value(GameConfig, key, raw)
+            out[key] = check_field(GameConfig, key, parse_value(GameConfig, key, raw))
         except FieldError as exc:
             raise ValueError(f"{flag} {key}: {exc.problem}") from None
+        except ConfigError as exc:
+            raise ValueError(f"{flag} {key}: {exc.reason}") from None
     return out
 
 
@@ -354,9 +356,15 @@ def with_hp(cfg: TrainConfig, overrides: dict[str, dict[str, Any]], num_learners
 
 # ---- run files ----------------------------------------------------------------------------
 
-def check_run_fields(cfg: TrainConfig, source: str) -> None:
-    """The observation and imitate settings of a run file or preset (no flag replaces
-    them), checked before the run starts; errors name ``source`` and the field."""
+def check_run_fields(cfg: TrainConfig, sc: Any, source: str, where: str | None = None
+                     ) -> None:
+    """The settings of a run file or preset that no flag replaces, checked before the run
+    starts against the scenario ``sc`` it plays (its map override in place): its
+    observation and imitate table, learner seats to train, learners that drive each of
+    them once (self-play: at most once, leaving one to the snapshot pool), bot seats for
+    its schedule, and the ranges of its [game] and [rewards] tables. Errors name
+    ``source`` and the field; ``where`` says where the scenario was chosen (default:
+    ``source``)."""
     from alphatank.game.observe import OBS_KINDS
     from alphatank.training.hparams import imitate_config
 
@@ -367,6 +375,25 @@ def check_run_fields(cfg: TrainConfig, source: str) -> None:
         imitate_config(cfg.imitate)
     except ValueError as exc:
         raise ValueError(f"{source}: {exc}") from None
+    where = where or source
+    n = len(sc.learner_seats)
+    if not n:
+        raise ValueError(f"{where}: scenario {sc.name!r} has no learner seats: nothing to "
+                         "train (a scenario for training has controller = \"learner\" seats)")
+    if not learners_fit(run_learners(cfg, n), n, selfplay=bool(cfg.selfplay)):
+        drives = [(s.name, list(s.seats)) for s in cfg.learners]
+        if cfg.selfplay:
+            raise ValueError(f"{where}: self-play learners {drives} must drive each of the "
+                             f"{n} learner seat(s) of scenario {sc.name!r} at most once and "
+                             "leave at least one to the snapshot pool")
+        raise ValueError(f"{source}: learners {drives} do not drive each of the {n} learner "
+                         f"seat(s) of scenario {sc.name!r} exactly once")
+    kind = cfg.schedule.get("kind", "none")
+    if kind != "none" and not any(s.controller == "bot" for s in sc.seats):
+        raise ValueError(f"{source}: schedule: the {kind} schedule needs bot seats; scenario "
+                         f"{sc.name!r} has none (drop the schedule)")
+    sc.game_config(where=f"{source}: [game]", **cfg.game)
+    sc.reward_config(where=f"{source}: [rewards]", **cfg.rewards)
 
 
 def parse_run(data: dict[str, Any], source: str, base: Path | None = None,

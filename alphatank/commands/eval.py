@@ -13,7 +13,7 @@ import json
 import os
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from alphatank.commands.argtypes import match_count, positive_int, seed
 from alphatank.errors import InputError, as_input_error
@@ -97,6 +97,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         game = parse_game("--game", args.game)
         sources = [load_source(arg, args.scenario) for arg in args.checkpoints]
+        for ckpt in sources:
+            check_game(game, args.scenario, ckpt)
         if args.pool:
             check_pool(args, sources, opponents)
         for arg, ckpt in zip(args.checkpoints, sources, strict=True):
@@ -170,6 +172,23 @@ def load_source(arg: str, scenario: str | None) -> Checkpoint | None:
         raise InputError(f"{arg}: a bot has no scenario of its own; give --scenario (its "
                          "learner seats are played by the bot)")
     return None
+
+
+def check_game(game: dict[str, Any], scenario: str | None, ckpt: Checkpoint | None) -> None:
+    """``--game`` over the game a row plays (its scenario's, then the checkpoint's own
+    settings), before any game: a rule across settings it breaks (bullets faster than
+    tanks) names the flag."""
+    from alphatank.game.scenarios import load_scenario
+    from alphatank.sim.config import ConfigError, game_config
+
+    if not game:
+        return
+    sc = load_scenario(scenario) if scenario is not None else ckpt.scenario
+    own = ckpt.train_config.game if ckpt is not None else {}
+    try:
+        game_config(sc.preset, **{**sc.game, **own, **game})
+    except ConfigError as exc:
+        raise InputError(f"--game {exc.key}: {exc.reason}") from None
 
 
 def check_pool(args: argparse.Namespace, sources: Sequence[Checkpoint | None],

@@ -258,7 +258,6 @@ def build_run(args: argparse.Namespace) -> TrainConfig:
     except ValueError as exc:
         raise ValueError(f"{label}: {exc}") from None
     cfg = dataclasses.replace(cfg, scenario=scenario)
-    check_run_fields(cfg, source)
     if args.map is not None:
         cfg = dataclasses.replace(cfg, map=args.map)
     if args.action_repeat is not None:
@@ -277,25 +276,21 @@ def build_run(args: argparse.Namespace) -> TrainConfig:
         where = "--map: " if args.map is not None else f"{source}: map: " if cfg.map else ""
         raise ValueError(f"{where}{exc}") from None
     n = len(sc.learner_seats)
-    where = "--scenario" if args.scenario is not None else source
-    if not n:
-        raise ValueError(f"{where}: scenario {sc.name!r} has no learner seats: nothing to "
-                         "train (a scenario for training has controller = \"learner\" seats)")
-    if not learners_fit(run_learners(cfg, n), n, selfplay=bool(cfg.selfplay)):
-        drives = [(s.name, list(s.seats)) for s in cfg.learners]
-        if cfg.selfplay:
-            raise ValueError(f"{where}: self-play learners {drives} must drive each of "
-                             f"scenario {sc.name!r}'s {n} learner seats at most once and "
-                             "leave at least one to the snapshot pool")
-        if args.scenario is None:
-            raise ValueError(f"{source}: learners {drives} do not drive scenario "
-                             f"{sc.name!r}'s {n} learner seats exactly once")
+    if n and args.scenario is not None and not cfg.selfplay and \
+            not learners_fit(run_learners(cfg, n), n):
         first = cfg.learners[0]
         learners = default_learners(n, first.algo, first.config)
         print(f"note: learners {[(s.name, list(s.seats)) for s in cfg.learners]} do not fit "
               f"scenario {sc.name!r} ({n} learner seats): one {first.algo} learner per seat "
               f"instead", file=sys.stderr)
         cfg = dataclasses.replace(cfg, learners=learners)
+    schedule = _schedule(cfg, args)
+    if (args.schedule or args.curriculum is not None) and schedule and not any(
+            s.controller == "bot" for s in sc.seats):
+        flag = "--schedule" if args.schedule else "--curriculum"
+        raise ValueError(f"{flag}: scenario {sc.name!r} has no bot seats to schedule")
+    cfg = dataclasses.replace(cfg, schedule=schedule)
+    check_run_fields(cfg, sc, source, "--scenario" if args.scenario is not None else None)
     if cfg.init_from:
         from alphatank.training.warmstart import WARM_STARTED
         if not any(s.algo in WARM_STARTED for s in cfg.learners):
@@ -303,22 +298,11 @@ def build_run(args: argparse.Namespace) -> TrainConfig:
             raise ValueError(f"{label}: a warm start fills "
                              f"{' and '.join(a.upper() for a in WARM_STARTED)} learners; this "
                              f"run's {[(s.name, s.algo) for s in cfg.learners]} take none")
-    schedule = _schedule(cfg, args)
-    if schedule.get("kind", "none") != "none" and not any(
-            s.controller == "bot" for s in sc.seats):
-        if args.schedule or args.curriculum is not None:
-            flag = "--schedule" if args.schedule else "--curriculum"
-            raise ValueError(f"{flag}: scenario {sc.name!r} has no bot seats to schedule")
-        raise ValueError(f"schedule: the {schedule['kind']} schedule of {cfg.name!r} needs bot "
-                         f"seats; scenario {sc.name!r} has none (--schedule none drops it)")
-    cfg = dataclasses.replace(cfg, schedule=schedule)
     from alphatank.training.schedules import make_schedule
     try:
         make_schedule(cfg.schedule, cfg.total_steps)
     except ValueError as exc:
         raise ValueError(f"schedule: {exc}") from None
-    sc.game_config(where=f"{source}: [game]", **cfg.game)
-    sc.reward_config(where=f"{source}: [rewards]", **cfg.rewards)
     hp_items = [("--hp", t) for t in args.hp] + [("--ppo", args.ppo), ("--sac", args.sac)]
     return with_hp(cfg, parse_hp(hp_items), n)
 
@@ -345,15 +329,8 @@ def run(args: argparse.Namespace) -> int:
         if not args.env_runner_timeout > 0:
             raise InputError(f"--env-runner-timeout: must be > 0 seconds, got "
                              f"{args.env_runner_timeout:g}")
-    if args.ray is not None and not args.print_config:
-        from alphatank.cluster import connect
-        connection = connect(args.ray or None, feature="alphatank train --ray")
-        print(connection.describe(), flush=True)
-        try:
-            return _run(args, progress, connection.cpus)
-        finally:
-            connection.close()
-    return _run(args, progress)
+    with contextlib.ExitStack() as stack:  # holds the Ray connection of a --ray run
+        return _run(args, progress, stack)
 
 
 def _runner_timeout(args: argparse.Namespace) -> float:
@@ -361,23 +338,30 @@ def _runner_timeout(args: argparse.Namespace) -> float:
             else args.env_runner_timeout)
 
 
-def _env_runners(args: argparse.Namespace, cfg: TrainConfig, cpus: float) -> int:
-    """Env-runner actors of a ``--ray`` run (0 without --ray); a count the cluster cannot
-    place is bad input."""
+def _env_runners(args: argparse.Namespace, cfg: TrainConfig, stack: contextlib.ExitStack
+                 ) -> int:
+    """Env-runner actors of a ``--ray`` run (0 without --ray). A count the run's envs
+    cannot fill is refused before Ray starts; then the cluster is joined (or a local Ray
+    started, closed with ``stack``) and a count it cannot place is refused."""
     if args.ray is None:
         return 0
     n = args.env_runners or min(max(2, cfg.num_workers), cfg.num_envs)
     if n > cfg.num_envs:
         raise InputError(f"--env-runners: {n} runners for {cfg.num_envs} envs; at most "
                          f"--num-envs")
-    if n > cpus:
+    from alphatank.cluster import connect
+    connection = connect(args.ray or None, feature="alphatank train --ray")
+    stack.callback(connection.close)
+    print(connection.describe(), flush=True)
+    if n > connection.cpus:
         raise InputError(f"--env-runners: {n} runners need {n} CPUs; the Ray cluster has "
-                         f"{cpus:g}")
+                         f"{connection.cpus:g}")
     return n
 
 
-def _run(args: argparse.Namespace, progress: bool, cpus: float = 0.0) -> int:
-    """:func:`run` after the Ray connection (``cpus``: the cluster's) when --ray."""
+def _run(args: argparse.Namespace, progress: bool, stack: contextlib.ExitStack) -> int:
+    """:func:`run` once the flags are checked; a --ray run joins Ray (held by ``stack``)
+    when its settings are known, just before its trainer is made."""
     if args.resume:
         given = [f"--{k.replace('_', '-')}" for k in NEW_RUN_ONLY
                  if getattr(args, k) not in (None, "", [])]
@@ -400,7 +384,7 @@ def _run(args: argparse.Namespace, progress: bool, cpus: float = 0.0) -> int:
             if args.print_config:
                 print(run_toml(cfg), end="")
                 return 0
-            runners = _env_runners(args, cfg, cpus)
+            runners = _env_runners(args, cfg, stack)
             with _one_line_warnings():
                 trainer = resume_trainer(args.resume, progress=progress, env_runners=runners,
                                          env_runner_timeout_s=_runner_timeout(args),
@@ -435,7 +419,7 @@ def _run(args: argparse.Namespace, progress: bool, cpus: float = 0.0) -> int:
             raise InputError(f"{run_dir} already holds a run; continue it with --resume "
                              f"{run_dir} or pick another --name")
         from alphatank.training.runner import Trainer
-        runners = _env_runners(args, cfg, cpus)
+        runners = _env_runners(args, cfg, stack)
         try:
             with _one_line_warnings():
                 trainer = Trainer(cfg, run_dir, progress=progress, env_runners=runners,

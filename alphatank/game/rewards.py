@@ -62,17 +62,22 @@ def team_outcome(team_index: np.ndarray, winner: int | None, elapsed: float,
     return np.where(mine, win, 0.0), np.where(mine, 0.0, cfg.team_loss), zero
 
 
-def check_team_outcome(cfg: RewardConfig) -> None:
+def check_team_outcome(cfg: RewardConfig, where: str = "") -> None:
     """A draw is never worth more than a loss (waiting out the clock must not be the safe
-    choice), and the time decay is a share in [0, 1]."""
+    choice), and the time decay is a share in [0, 1]. Errors read ``<where>.<field>:
+    <reason>`` as :func:`~alphatank.sim.config.from_dict`'s do (``where``: the file and
+    table, e.g. ``run.toml: [rewards]``)."""
+    problem = None
     if cfg.team_draw > cfg.team_loss:
-        raise ConfigError(
-            f"RewardConfig.team_draw ({cfg.team_draw}) must not exceed team_loss "
-            f"({cfg.team_loss}): a draw is never worth more than a loss; set team_draw <= "
-            f"team_loss")
-    if not 0.0 <= cfg.team_win_time_decay <= 1.0:
-        raise ConfigError(f"RewardConfig.team_win_time_decay must be in [0, 1], got "
-                          f"{cfg.team_win_time_decay}")
+        problem = ("team_draw", f"({cfg.team_draw}) must not exceed team_loss "
+                                f"({cfg.team_loss}): a draw is never worth more than a loss; "
+                                f"set team_draw <= team_loss")
+    elif not 0.0 <= cfg.team_win_time_decay <= 1.0:
+        problem = ("team_win_time_decay", f"must be in [0, 1], got {cfg.team_win_time_decay}")
+    if problem is not None:
+        key, reason = problem
+        raise ConfigError(f"{where}.{key}: {reason}" if where else
+                          f"RewardConfig.{key} {reason}", key, reason)
 
 
 def hits(events: Iterable[Hit], n: int, cfg: RewardConfig

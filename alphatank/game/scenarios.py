@@ -42,6 +42,7 @@ from typing import Any
 from alphatank.errors import InputError
 from alphatank.files import decode_text, read_text
 from alphatank.game.observe import OBS_KINDS
+from alphatank.game.rewards import check_team_outcome
 from alphatank.game.seats import (
     Seat,
     SeatError,
@@ -121,9 +122,8 @@ class Scenario:
     def reward_config(self, where: str = "reward_overrides", **overrides: Any) -> RewardConfig:
         """The scenario's [rewards] table plus ``overrides`` (errors as for game_config)."""
         try:
-            cfg = from_dict(RewardConfig, self.rewards, where=f"{self.source}: [rewards]")
-            return from_dict(RewardConfig, {**self.rewards, **overrides}, where=where) \
-                if overrides else cfg
+            cfg = _rewards(self.rewards, f"{self.source}: [rewards]")
+            return _rewards({**self.rewards, **overrides}, where) if overrides else cfg
         except ConfigError as exc:
             raise ScenarioError(str(exc)) from None
 
@@ -139,6 +139,14 @@ class Scenario:
     def map_specs(self) -> list[MapSpec]:
         """Parsed maps, in ``maps`` order (an episode's map is drawn from these)."""
         return [_load_map_cached(m) for m in self.maps]
+
+
+def _rewards(table: dict[str, Any], where: str) -> RewardConfig:
+    """A RewardConfig from a [rewards] table, its team-outcome rules checked too; errors
+    name ``where`` and the field."""
+    cfg = from_dict(RewardConfig, table, where=where)
+    check_team_outcome(cfg, where)
+    return cfg
 
 
 _MAP_CACHE: dict[str, MapSpec] = {}
@@ -263,7 +271,7 @@ def parse_scenario(data: dict[str, Any], source: str = "<dict>",
         tables[key] = dict(table)
     try:
         game_config(preset, where=f"{source}: [game]", **tables["game"])
-        from_dict(RewardConfig, tables["rewards"], where=f"{source}: [rewards]")
+        _rewards(tables["rewards"], f"{source}: [rewards]")
     except ConfigError as exc:
         raise ScenarioError(str(exc)) from None
 

@@ -103,20 +103,33 @@ def check_value(kinds: tuple[type, ...], value: Any, rng: tuple[Any, Any] | None
 _HINTS: dict[type, dict[str, Any]] = {}
 
 
+def _hints(cls: type) -> dict[str, Any]:
+    hints = _HINTS.get(cls)
+    if hints is None:
+        hints = _HINTS[cls] = typing.get_type_hints(cls)
+    return hints
+
+
+def _checked(cls: type, f: dataclasses.Field, value: Any) -> Any:
+    value, reason = check_value(_kinds(_hints(cls)[f.name]), value, f.metadata.get("range"))
+    if reason is not None:
+        raise ConfigError(f"{cls.__name__}.{f.name}: {reason}", f.name, reason)
+    return value
+
+
+def check_field(cls: type, name: str, value: Any) -> Any:
+    """``value`` normalised for field ``name`` of the config dataclass ``cls``, checked
+    on its own (its type and declared range; rules across fields are checked when the
+    config is built); ConfigError names the field."""
+    return _checked(cls, next(f for f in fields(cls) if f.name == name), value)
+
+
 def check_fields(obj: Any) -> None:
     """Check (and normalise: int -> float for float fields) every field of the frozen
     dataclass ``obj`` against its annotation and declared range; ConfigError names the
     first bad field."""
-    cls = type(obj)
-    hints = _HINTS.get(cls)
-    if hints is None:
-        hints = _HINTS[cls] = typing.get_type_hints(cls)
     for f in fields(obj):
-        value, reason = check_value(_kinds(hints[f.name]), getattr(obj, f.name),
-                                    f.metadata.get("range"))
-        if reason is not None:
-            raise ConfigError(f"{cls.__name__}.{f.name}: {reason}", f.name, reason)
-        object.__setattr__(obj, f.name, value)
+        object.__setattr__(obj, f.name, _checked(type(obj), f, getattr(obj, f.name)))
 
 
 # Most ticks an agent may hold one action for (action_repeat): one second at 30 Hz.
