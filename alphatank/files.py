@@ -61,12 +61,15 @@ def write_text_atomic(path: str | Path, text: str, newline: str | None = None) -
     return path
 
 
-def check_writable(path: str | Path, label: str) -> None:
+def check_writable(path: str | Path, label: str, overwrite: bool = True) -> None:
     """InputError ``label: path: why`` unless a file can be written at ``path`` (missing
-    folders are made when it is): asked before a long job whose result would be lost."""
+    folders are made when it is): asked before a long job whose result would be lost.
+    With ``overwrite=False`` an existing file is refused too (the command's ``--force``)."""
     p = Path(path)
     if p.is_dir():
         raise InputError(f"{label}: {path}: is a folder; give a file name in it")
+    if p.is_file() and not overwrite:
+        raise InputError(f"{label}: {path}: exists (use --force to overwrite)")
     if p.exists() and not p.is_file():  # a device or pipe (/dev/stdout): written into
         if not os.access(p, os.W_OK):
             raise InputError(f"{label}: {path}: is not writable")

@@ -354,9 +354,9 @@ def test_a_new_trainer_never_writes_into_a_run_and_a_trainer_trains_once(tmp_pat
 
 
 
-def test_a_tensor_of_the_wrong_shape_is_named_with_both_shapes(trained, tmp_path):
-    """torch puts the tensor and its shapes on the lines after its heading: the one-line
-    error keeps them."""
+def _wrong_shape(trained: Path, tmp_path: Path) -> Path:
+    """A copy of the run's checkpoint with a 3 x 5 ``critic.0.weight`` (and its SHA-256 in
+    meta.json updated, so it passes the digest check)."""
     import hashlib
 
     ck = _copy(trained, tmp_path)
@@ -366,7 +366,33 @@ def test_a_tensor_of_the_wrong_shape_is_named_with_both_shapes(trained, tmp_path
     meta = json.loads((ck / "meta.json").read_text())
     meta["files"]["ppo.pt"] = hashlib.sha256((ck / "ppo.pt").read_bytes()).hexdigest()
     (ck / "meta.json").write_text(json.dumps(meta))
+    return ck
+
+
+def test_a_tensor_of_the_wrong_shape_is_named_with_both_shapes(trained, tmp_path):
+    """torch puts the tensor and its shapes on the lines after its heading: the one-line
+    error keeps them."""
+    ck = _wrong_shape(trained, tmp_path)
     wrong = r"ppo\.pt: does not fit a ppo learner .*size mismatch for critic\.0\.weight: .*\[3, 5\]"
     with pytest.raises(CheckpointError, match=wrong) as info:
         load_policy(ck)
     assert "\n" not in str(info.value)
+
+
+def test_init_from_a_damaged_checkpoint_names_the_tensor_not_the_hidden_size(trained, tmp_path,
+                                                                            capsys):
+    """A weight of the wrong shape is the file's fault: the error names the file, the tensor
+    and both shapes before any run folder is made (it advised hidden=3)."""
+    from alphatank.cli import main
+
+    ck = _wrong_shape(trained, tmp_path)
+    runs = tmp_path / "runs"
+    assert main(["train", "--preset", "ppo_vs_aggressive", "--init-from", str(ck), "--runs",
+                 str(runs), "--num-envs", "2", "--total-steps", "128", "--wandb", "disabled",
+                 "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "hidden" not in err
+    assert f"{ck / 'ppo.pt'}: does not fit a ppo learner" in err
+    assert "critic.0.weight: copying a param with shape torch.Size([3, 5])" in err
+    assert "the shape in current model is torch.Size([128, " in err
+    assert not any(runs.glob("*"))  # no run folder (nor a lock file) is left

@@ -699,6 +699,20 @@ def test_record_accepts_dash_o(files, tmp_path, capsys):
     assert "seat" not in capsys.readouterr().err
 
 
+def test_record_overwrites_a_replay_only_with_force(tmp_path, capsys):
+    """An existing --replay file is refused before the match (no video is made), as
+    play's --save-replay is; --force overwrites it."""
+    old, video = tmp_path / "keep.npz", tmp_path / "m.mp4"
+    old.write_bytes(b"old")
+    argv = ["record", "--seats", "smart,random", "--map", "open", "--max-steps", "5",
+            "-o", str(video), "--replay", str(old)]
+    rc, out, err = _run_main(main, argv, capsys)
+    _check(rc, out, err, [f"--replay: {old}: exists (use --force to overwrite)"])
+    assert old.read_bytes() == b"old" and not video.exists()
+    assert main([*argv, "--force"]) == 0
+    assert old.read_bytes() != b"old" and video.stat().st_size > 0
+
+
 def test_maps_lists_shipped_folders(capsys):
     assert main(["maps"]) == 0
     out = capsys.readouterr().out

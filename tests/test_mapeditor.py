@@ -77,10 +77,27 @@ def test_open_keeps_header_and_reopens_unreachable_maps_but_not_broken_ones(tmp_
     assert m.header == {"name": "mine", "author": "me"} and rows_of(m)[1] == "#1#2#"
     m.paint(1, 2, ".")
     m.save(path)
-    assert path.read_text() == "name: mine\nauthor: me\n\n#####\n#1.2#\n#####\n"
+    assert path.read_text() == "; note\nname: mine\nauthor: me\n\n#####\n#1.2#\n#####\n"
     path.write_text("####\n#.#\n####\n")
     with pytest.raises(MapError, match="ragged row"):
         EditorModel.from_file(path)
+
+
+def test_save_keeps_comment_lines_in_place(tmp_path):
+    text = ("; top\nauthor: me\n; about the name\nname: mine\n; after the header\n\n"
+            "; the north wall\n#######\n  ; inside the grid\n#1...2#\n#######\n; the end\n")
+    path = tmp_path / "m.txt"
+    path.write_text(text)
+    m = EditorModel.from_file(path)
+    m.paint(1, 3, "+")
+    m.save(path)
+    # header lines come out in the format's order; each comment moves with the line below it
+    assert path.read_text() == text.replace("author: me\n; about the name\nname: mine\n",
+                                            "; about the name\nname: mine\nauthor: me\n"
+                                            ).replace("#1...2#", "#1.+.2#")
+    path.write_text("; no header\n#####\n#1.2#\n#####\n")
+    EditorModel.from_file(path).save(path)
+    assert path.read_text() == "; no header\nname: m\n\n#####\n#1.2#\n#####\n"
 
 
 # ---- window -------------------------------------------------------------------------------

@@ -341,6 +341,8 @@ def test_variants_turn_and_flip_walls_spawns_and_zones_together(tmp_path, capsys
     # a map that is its own mirror image (spawn digits aside) keeps what differs
     plain = load_map(ROOT / "maps" / "open.txt")
     assert 1 <= len(map_variants(plain)) <= 8
+    authored = parse_map(map_text(spec).replace("\n\n", "\nauthor: me\n\n", 1), "a.txt")
+    assert all("\nauthor: me\n\n" in map_text(v) for v in map_variants(authored))
     assert cli.main(["variants", str(ROOT / "maps" / "train" / "rooms_0002.txt"), "--out",
                      str(tmp_path)]) == 0
     assert sorted(p.stem for p in tmp_path.glob("*.txt")) == sorted(v.name for v in variants)

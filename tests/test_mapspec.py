@@ -55,6 +55,14 @@ def test_map_text_round_trips():
     assert again.debuffs == spec.debuffs and again.cell == spec.cell
 
 
+def test_map_text_keeps_the_author():
+    text = GOOD.replace("description: test map\n", "description: test map\nauthor: me; you\n")
+    spec = parse_map(text, "tiny.txt")
+    assert spec.author == "me; you"
+    assert map_text(spec) == text.removeprefix("; a comment line\n")
+    assert parse_map(map_text(spec), "again.txt").author == "me; you"
+
+
 @pytest.mark.parametrize("seed", range(20))
 def test_merged_rectangles_cover_walls_exactly(seed):
     walls = np.random.default_rng(seed).random((9, 13)) < 0.45

@@ -156,3 +156,30 @@ def test_a_run_file_trains_on_the_training_maps(capsys, tmp_path):
     assert main(["train", "--resume", str(tmp_path / "nope")]) == 2
     assert capsys.readouterr().err.startswith(
         f"alphatank train: error: {tmp_path / 'nope'}: no such checkpoint")
+
+
+def test_a_scenario_seat_that_does_not_fit_is_refused_before_the_run_folder(capsys, tmp_path):
+    """An agent seat trained for 2 tanks and 11 wall slots, in a 3-tank match or on a map
+    with more walls: one line naming the seat before the run folder is made (it failed at
+    the first reset, with worker processes as a traceback)."""
+    seats = ('[[seats]]\nteam = "A"\ncontroller = "learner"\n[[seats]]\nteam = "B"\n'
+             'controller = "agent"\nagent = "ppo_vs_smart"\n')
+    third = '[[seats]]\nteam = "B"\ncontroller = "bot"\nbot = "smart"\n'
+    for name, text, why in (
+            ("three", f'name = "three"\nmap = "arena4"\n{seats}{third}',
+             "expects 236 observation features (paper, 2 tanks); seat 1 of this match "
+             "(3 tanks, teams ['A', 'B', 'B']) gives"),
+            ("maze", f'name = "maze"\nmap = "maze"\n{seats}',
+             "trained with room for 11 wall rectangles in its 'paper' observation; map "
+             "'maze' has 15")):
+        scenario = tmp_path / f"{name}.toml"
+        scenario.write_text(text)
+        runs = tmp_path / f"runs_{name}"
+        assert main(["train", "--preset", "ppo_vs_smart", "--scenario", str(scenario),
+                     "--runs", str(runs), "--num-envs", "2", "--workers", "2",
+                     "--total-steps", "128", "--wandb", "disabled", "--no-progress"]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"alphatank train: error: {scenario}: seats[1] "
+                              "(agent:ppo_vs_smart) does not fit: "), err
+        assert why in err and err.count("\n") == 1, err
+        assert not any(runs.glob("*"))

@@ -53,6 +53,7 @@ from alphatank.envs.vector import make_vector_env
 from alphatank.errors import InputError
 from alphatank.extras import require
 from alphatank.files import FolderLock
+from alphatank.game.lineup import check_seats_fit
 from alphatank.game.observe import slot_counts
 from alphatank.game.scenarios import Scenario
 from alphatank.training.checkpoint import (
@@ -219,6 +220,10 @@ class Trainer:
         cfg, env = self.cfg, self.env
         if cfg.video_every:
             require("video", "training videos (video_every)")
+        # a scenario's checkpoint or agent seat that does not fit its maps would fail at
+        # the first reset (in a worker process, after the run folder was made)
+        for sc in getattr(env, "scenarios", [self.scenario]):
+            check_seats_fit(sc, cfg.game)
         self.E, self.L, self.D = env.num_envs, env.num_learners, env.obs_dim
         mask_dim = int(ACTION_NVEC.sum()) if self.action_mask is not None else 0
         supplied = getattr(env, "input_shapes", {})

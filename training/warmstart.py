@@ -191,5 +191,8 @@ def warm_start_from_checkpoint(learner: Any, path: str | Path, dst_layout: ObsLa
     if specs[name].algo != "ppo":
         raise ValueError(f"{ckpt.path}: learner {name!r} is {specs[name].algo}; warm start "
                          f"reads PPO learners")
+    # A file that does not fit its own saved config is damaged: its error names the tensor
+    # and both shapes (a hidden-size mismatch found below is then a real one).
+    ckpt.load_learner(name, weights_only=True)
     layout, mates = checkpoint_layout(ckpt, name)
     return warm_start(learner, ckpt.state(name), layout, dst_layout, mates, dst_mates)

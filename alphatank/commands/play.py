@@ -12,11 +12,10 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from pathlib import Path
 
 from alphatank.commands.argtypes import positive_int, scale, window_fps
 from alphatank.commands.lineup_options import add_lineup_arguments, lineup_from_args
-from alphatank.errors import InputError, one_line
+from alphatank.errors import one_line
 from alphatank.files import check_writable
 from alphatank.ui.human import HUMAN_ORDER
 from alphatank.ui.render import DisplayUnavailable, parse_overlays
@@ -46,10 +45,7 @@ def run(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return 2
     if args.save_replay:
-        check_writable(args.save_replay, "--save-replay")
-        if Path(args.save_replay).is_file() and not args.force:
-            raise InputError(f"--save-replay: {args.save_replay}: exists (use --force to "
-                             "overwrite)")
+        check_writable(args.save_replay, "--save-replay", overwrite=args.force)
     try:
         lineup = lineup_from_args(args, interactive=True)
         if args.save_replay:

@@ -31,7 +31,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("-o", "--out", default="match.mp4",
                    help="MP4 to write (default: match.mp4)")
     p.add_argument("--gif", metavar="FILE", help="also write a GIF (half size, 15 fps)")
-    p.add_argument("--replay", metavar="FILE", help="also save the match as a replay file")
+    p.add_argument("--replay", metavar="FILE",
+                   help="also save the match as a replay file (refused if it exists, unless "
+                        "--force)")
+    p.add_argument("--force", action="store_true", help="overwrite an existing --replay")
     p.add_argument("--every", type=positive_int, default=1,
                    help="draw every N-th tick (default: 1, a frame per tick)")
     p.add_argument("--fps", type=video_fps,
@@ -47,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
         check_outputs(args.out, args.gif, ("--out", "--gif"))
         check_distinct({"--out": args.out, "--gif": args.gif, "--replay": args.replay})
         if args.replay:
-            check_writable(args.replay, "--replay")
+            check_writable(args.replay, "--replay", overwrite=args.force)
         lineup = lineup_from_args(args, interactive=False)
         if args.replay:
             sc = lineup.scenario

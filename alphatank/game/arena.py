@@ -18,12 +18,10 @@ from typing import Any
 
 import numpy as np
 
-from alphatank.game.lineup import Lineup, seat_label, spec_seat
+from alphatank.game.lineup import Lineup, check_fit, seat_label, spec_seat
 from alphatank.game.scenarios import Scenario, parse_scenario
 from alphatank.game.seats import SeatError, controller_kind, make_controller
 from alphatank.sim.episode import Episode, EpisodeHook
-from alphatank.sim.match import Match
-from alphatank.sim.policy import Policy
 from alphatank.stats import League, wilson_interval
 
 
@@ -87,18 +85,6 @@ def arena_scenario(first: str, second: str, map_name: str, preset: str = "paper"
                            "game": dict(game or {}), "seats": seats}, source="arena")
 
 
-def check_fit(scenario: Scenario, ctrls: Sequence[Policy]) -> None:
-    """Reset every controller in both seats of a match on each of ``scenario``'s maps, so
-    one that does not fit a map (a checkpoint trained with fewer wall slots) raises its
-    error before any game is played."""
-    cfg = scenario.game_config()
-    for spec in scenario.map_specs():
-        match = Match(cfg, spec, scenario.teams, seed=0)
-        for ctrl in ctrls:
-            for seat in range(match.n):
-                ctrl.reset(match, seat, 0)
-
-
 def run_arena(seats: Sequence[str], map_name: str = "maze", games: int = 20, seed: int = 0,
               *, preset: str = "paper", game: Mapping[str, Any] | None = None,
               on_game: Callable[[str, str, Episode], None] | None = None,
@@ -122,7 +108,9 @@ def run_arena(seats: Sequence[str], map_name: str = "maze", games: int = 20, see
     if bad:
         raise SeatError(f"arena seats need a controller; {bad} is a learner seat (give a "
                         "bot, checkpoint:PATH or agent:NAME)")
-    check_fit(arena_scenario(seats[0], seats[1], map_name, preset, game), ctrls)
+    # each controller in both seats of a game on each map: one that does not fit fails now
+    check_fit(arena_scenario(seats[0], seats[1], map_name, preset, game),
+              [(side, c) for c in ctrls for side in (0, 1)])
     labels = [seat_label(s) for s in parsed]
     n = len(seats)
     result = ArenaResult(list(seats), np.zeros((n, n, 3), dtype=np.int64), League(list(seats)))

@@ -10,10 +10,11 @@ and evaluation. Controllers come from the seat kinds of :mod:`alphatank.game.sea
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from alphatank.errors import InputError
 from alphatank.game.scenarios import (
     Scenario,
     ScenarioError,
@@ -32,6 +33,7 @@ from alphatank.game.seats import (
     plays_by_itself,
 )
 from alphatank.sim.episode import Episode, EpisodeHook, start_episode
+from alphatank.sim.match import Match
 from alphatank.sim.policy import Policy
 
 
@@ -130,6 +132,32 @@ def build_lineup(scenario: str | Scenario, *, interactive: bool = False,
         labels.append(seat_label(played))
         descs.append(desc)
     return Lineup(sc, controllers, labels, descs, notes)
+
+
+def check_fit(scenario: Scenario, placed: Sequence[tuple[int, Policy]],
+              game: Mapping[str, Any] | None = None) -> None:
+    """Reset each ``(seat, controller)`` of ``placed`` in that seat of a match on each of
+    ``scenario``'s maps (``game`` overrides its [game] table), so a controller that does
+    not fit (a checkpoint trained with another tank count, or fewer wall or zone slots)
+    raises its error before any game is played."""
+    cfg = scenario.game_config(**dict(game or {}))
+    for spec in scenario.map_specs():
+        match = Match(cfg, spec, scenario.teams, seed=0)
+        for seat, ctrl in placed:
+            ctrl.reset(match, seat, 0)
+
+
+def check_seats_fit(scenario: Scenario, game: Mapping[str, Any] | None = None) -> None:
+    """:func:`check_fit` for every seat of ``scenario`` that plays by itself (bots,
+    checkpoints, agents); ScenarioError naming the seat when one does not fit."""
+    for i, seat in enumerate(scenario.seats):
+        if not plays_by_itself(seat):
+            continue
+        try:
+            check_fit(scenario, [(i, make_controller(seat))], game)
+        except InputError as exc:
+            raise ScenarioError(f"{scenario.source}: seats[{i}] ({seat.describe()}) does not "
+                                f"fit: {exc}") from None
 
 
 def lineup_scenario(scenario: str | None = None, seats: str | None = None,

@@ -19,6 +19,12 @@ from alphatank.sim.mapspec import (
 )
 
 TOOLS = GRID_CHARS  # '#', '.', '1'..'8', '+', '-'
+# Where a whole-line ';' comment goes back on save: before the header ("top"), before a header
+# key ("key", name), after the header lines ("head"), before grid row r ("row", r), at the end.
+Anchor = tuple[str, str | int]
+TOP: Anchor = ("top", "")
+HEAD: Anchor = ("head", "")
+END: Anchor = ("end", "")
 
 
 @dataclass
@@ -27,6 +33,7 @@ class EditorModel:
 
     grid: np.ndarray  # (rows, cols) '<U1' characters from GRID_CHARS
     header: dict[str, str] = field(default_factory=dict)
+    comments: dict[Anchor, list[str]] = field(default_factory=dict)  # kept lines, by place
     _undo: list[list[tuple[int, int, str, str]]] = field(default_factory=list, repr=False)
     _redo: list[list[tuple[int, int, str, str]]] = field(default_factory=list, repr=False)
     _stroke: list[tuple[int, int, str, str]] | None = field(default=None, repr=False)
@@ -45,7 +52,8 @@ class EditorModel:
     @classmethod
     def from_text(cls, text: str, source: str = "<string>") -> EditorModel:
         """Open map text. A grid that only fails the reachability rule still opens (so it can
-        be fixed); anything the parser rejects earlier raises its MapError."""
+        be fixed); anything the parser rejects earlier raises its MapError. Whole-line
+        comments are kept next to the header line or grid row that follows them."""
         try:
             parse_map(text, source)
         except MapError as err:
@@ -53,20 +61,32 @@ class EditorModel:
                 raise
         header: dict[str, str] = {}
         rows: list[str] = []
+        comments: dict[Anchor, list[str]] = {}
+        pending: list[str] = []
+
+        def place(anchor: Anchor) -> None:
+            if pending:  # comments above the first header line or row stay on top
+                comments.setdefault(anchor if header or rows else TOP, []).extend(pending)
+                pending.clear()
+
         in_header = True
         for ln in text.splitlines():
             if ln.lstrip().startswith(";"):
-                continue
-            if in_header and ":" in ln and not rows:
+                pending.append(ln.rstrip())
+            elif in_header and ":" in ln and not rows:
                 key, value = (p.strip() for p in ln.split(":", 1))
+                place(("key", key))
                 header[key] = value
             elif ln.strip():
                 in_header = False
+                place(("row", len(rows)))
                 rows.append(ln.rstrip())
-            elif header:
+            elif header and in_header:
                 in_header = False
+                place(HEAD)
+        place(END)
         grid = np.array([list(r) for r in rows], dtype="<U1")
-        return cls(grid, header)
+        return cls(grid, header, comments)
 
     @classmethod
     def from_file(cls, path: str | Path) -> EditorModel:
@@ -141,11 +161,20 @@ class EditorModel:
         return True
 
     def text(self) -> str:
-        """The map file as it would be saved."""
-        head = [f"{k}: {self.header[k]}" for k in HEADER_KEYS if k in self.header]
-        head += [f"{k}: {v}" for k, v in self.header.items() if k not in HEADER_KEYS]
-        body = "\n".join("".join(row) for row in self.grid) + "\n"
-        return ("\n".join(head) + "\n\n" + body) if head else body
+        """The map file as it would be saved (header keys in the format's order)."""
+        keys = [k for k in HEADER_KEYS if k in self.header]
+        keys += [k for k in self.header if k not in HEADER_KEYS]
+        lines = list(self.comments.get(TOP, []))
+        for k in keys:
+            lines += self.comments.get(("key", k), [])
+            lines.append(f"{k}: {self.header[k]}")
+        if keys:
+            lines += [*self.comments.get(HEAD, []), ""]
+        for r, row in enumerate(self.grid):
+            lines += self.comments.get(("row", r), [])
+            lines.append("".join(row))
+        lines += self.comments.get(END, [])
+        return "\n".join(lines) + "\n"
 
     def check(self, source: str = "<editor>") -> MapSpec:
         """Validate with the game's parser (raises its MapError)."""

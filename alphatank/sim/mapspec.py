@@ -55,6 +55,7 @@ class MapSpec:
     debuffs: tuple[tuple[int, int], ...]
     cell: float = DEFAULT_CELL
     description: str = ""
+    author: str = ""
     random_zones: bool = False
     source: str = "<string>"
     wall_rects: tuple[tuple[float, float, float, float], ...] = field(default=())
@@ -262,7 +263,8 @@ def parse_map(text: str, source: str = "<string>", name: str | None = None) -> M
     spec = MapSpec(
         name=header.get("name") or name or Path(source).stem,
         walls=walls, spawns=spawns, buffs=tuple(buffs), debuffs=tuple(debuffs), cell=cell,
-        description=header.get("description", ""), random_zones=zones == "random",
+        description=header.get("description", ""), author=header.get("author", ""),
+        random_zones=zones == "random",
         source=source, wall_rects=rects)
     if spawns:
         top = max(spawns)
@@ -297,6 +299,8 @@ def map_text(spec: MapSpec) -> str:
         head.append(f"description: {spec.description}")
     if spec.random_zones:
         head.append("zones: random")
+    if spec.author:
+        head.append(f"author: {spec.author}")
     return "\n".join(head) + "\n\n" + "\n".join("".join(row) for row in chars) + "\n"
 
 
