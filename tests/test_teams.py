@@ -13,8 +13,7 @@ import torch
 from alphatank.cli import main
 from alphatank.envs.core import MatchSet
 from alphatank.game.lineup import build_lineup
-from alphatank.game.scenarios import (load_scenario, parse_scenario, team_misfit,
-                                      team_shape)
+from alphatank.game.scenarios import load_scenario, parse_scenario, team_misfit, team_shape
 from alphatank.training.checkpoint import (
     CheckpointError,
     LivePolicy,
