@@ -12,10 +12,13 @@ import torch
 from alphatank.cli import main
 from alphatank.game.lineup import build_lineup, lineup_scenario
 from alphatank.game.seats import SeatError, agent_path, shipped_agents
+from alphatank.training.algorithms import ALGORITHMS
 from alphatank.training.checkpoint import CheckpointError, load_checkpoint, load_policy
-from alphatank.training.hparams import PPOConfig
+from alphatank.training.hparams import MAPPOConfig, PPOConfig, SACConfig
+from alphatank.training.learners import learner_class
 from alphatank.training.presets import LearnerSpec, TrainConfig
 from alphatank.training.runner import Trainer
+from alphatank.training.warmstart import warm_start_from_checkpoint
 
 TABLE3 = ("ppo_vs_smart", "ppo_vs_aggressive", "ppo_vs_dodge", "ppo_vs_defensive",
           "team_vs_2smart", "team_vs_def", "team_vs_def_2smart", "team_vs_four_bots")
@@ -82,7 +85,7 @@ def test_export_strips_training_state_and_lists(tmp_path, capsys):
     (tmp_path / "e.json").write_text(json.dumps([row]))
     assert main(export) == 0
     state = torch.load(tmp_path / "agent" / "ppo.pt", weights_only=True)
-    assert set(state) == {"net", "obs_norm", "updates"}
+    assert set(state) == {"net", "obs_norm"}
     meta = load_checkpoint(tmp_path / "agent").meta
     assert meta["agent"]["description"] == "tiny" and meta["agent"]["eval"][0]["games"] == 2
     assert "windows" not in meta
@@ -93,6 +96,40 @@ def test_export_strips_training_state_and_lists(tmp_path, capsys):
     assert all(name in out for name in shipped_agents()) or "no shipped agents" in out
     cycle = next(line for line in out.splitlines() if line.startswith("ppo_cycle_full"))
     assert all(f"vs {bot} " in cycle for bot in ("random", "aggressive", "defensive", "dodge"))
+
+
+TINY = {"ppo": ("vs_aggressive", PPOConfig(num_steps=16, update_epochs=1)),
+        "sac": ("vs_aggressive", SACConfig(hidden=16, batch_size=16, start_steps=16,
+                                           update_after=16, update_every=16,
+                                           buffer_size=1000)),
+        "mappo": ("team_vs_bot", MAPPOConfig(num_steps=16, update_epochs=1, hidden=16))}
+
+
+@pytest.mark.parametrize("algo", sorted(ALGORITHMS))
+def test_export_keeps_only_the_inference_state_of_every_algorithm(algo, tmp_path):
+    """No optimiser, target network or other training-only state (SAC's q_target and
+    three optimisers included); the agent still loads weights-only, plays its scenario
+    and, for PPO, warm-starts a new learner."""
+    scenario, hp = TINY[algo]
+    seats = (0, 1) if algo == "mappo" else (0,)
+    cfg = TrainConfig(name="one", scenario=scenario, total_steps=64, num_envs=2,
+                      wandb="disabled", game={"max_steps": 40},
+                      learners=(LearnerSpec(algo, algo, seats, hp),))
+    run = Trainer(cfg, tmp_path / "one", progress=False)
+    run.train()
+    trained = run.learners[algo].state_dict()
+    assert main(["agents", "export", str(tmp_path / "one"), str(tmp_path / "agent")]) == 0
+    state = torch.load(tmp_path / "agent" / f"{algo}.pt", weights_only=True)
+    assert set(state) == set(learner_class(algo).inference_keys) < set(trained)
+    assert not any("optim" in k or "target" in k for k in state)
+    ckpt = load_checkpoint(tmp_path / "agent")
+    ckpt.load_learner(algo, weights_only=True)
+    lineup = build_lineup(ckpt.scenario, learner=f"checkpoint:{tmp_path / 'agent'}")
+    assert lineup.start(seed=1, tick_limit=60).run().ticks > 0
+    if algo == "ppo":  # --init-from reads the same entries
+        fresh = learner_class("ppo")(run.env.layout.size, 1, hp)
+        info = warm_start_from_checkpoint(fresh, tmp_path / "agent", run.env.layout, 0)
+        assert info["mapped"] == run.env.layout.size
 
 
 def test_export_replaces_only_an_agent_folder(tmp_path, capsys):

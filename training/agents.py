@@ -4,10 +4,12 @@
 
 An agent folder is a checkpoint folder stripped to what inference and warm starts need:
 ``meta.json`` (with an ``agent`` record: where it came from, its training budget and its
-evaluation) and one ``<learner>.pt`` per learner without optimiser, generator or reward
-scaling states. It loads with ``torch.load(weights_only=True)`` like any checkpoint; it
-cannot be resumed (``alphatank train --resume`` needs the optimiser), but a new run can
-start from it with ``--init-from agent:NAME``.
+evaluation) and one ``<learner>.pt`` per learner holding only what the learner's
+``load_state_dict(weights_only=True)`` reads
+(:func:`~alphatank.training.learners.inference_state`): no optimiser, target network,
+generator or reward scaling states. It loads with ``torch.load(weights_only=True)`` like
+any checkpoint; it cannot be resumed (``alphatank train --resume`` needs the optimiser),
+but a new run can start from it with ``--init-from agent:NAME``.
 """
 
 from __future__ import annotations
@@ -22,9 +24,7 @@ import torch
 
 from alphatank.errors import InputError
 from alphatank.training.checkpoint import _sha256, load_checkpoint
-
-# What a learner's state_dict holds only to continue training.
-TRAINING_ONLY = ("optimizer", "generator", "np_rng", "ret_norm")
+from alphatank.training.learners import inference_state
 
 
 def export_agent(source: str | Path, dest: str | Path, record: dict[str, Any] | None = None
@@ -54,8 +54,9 @@ def export_agent(source: str | Path, dest: str | Path, record: dict[str, Any] | 
         shutil.rmtree(tmp)
     tmp.mkdir(parents=True)
     files = {}
-    for name in ckpt.learner_names():
-        state = {k: v for k, v in ckpt.state(name).items() if k not in TRAINING_ONLY}
+    for spec in ckpt.learner_specs:
+        name = spec.name
+        state = inference_state(spec.algo, ckpt.state(name))
         torch.save(state, tmp / f"{name}.pt")
         files[f"{name}.pt"] = _sha256(tmp / f"{name}.pt")
     meta = {k: v for k, v in ckpt.meta.items() if k not in ("windows", "wandb_id", "files")}

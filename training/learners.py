@@ -49,6 +49,9 @@ class Learner(Protocol):
 
     algo: ClassVar[str]  # its name in the algorithm table
     inputs: ClassVar[tuple[str, ...]]  # extra per-stream inputs from the env (see above)
+    # The state_dict entries that load_state_dict(weights_only=True) reads (inference,
+    # warm starts); the rest (optimisers, target networks, generators, ...) only resumes.
+    inference_keys: ClassVar[tuple[str, ...]]
     obs_dim: int
     num_streams: int
     updates: int  # updates done so far (saved in state_dict)
@@ -124,6 +127,14 @@ class Learner(Protocol):
 def learner_class(algo: str) -> Any:
     """The learner class registered for ``algo``."""
     return get_algorithm(algo).learner_class()
+
+
+def inference_state(algo: str, state: dict[str, Any]) -> dict[str, Any]:
+    """The entries of an ``algo`` learner's ``state_dict`` that inference and warm starts
+    read (its class's ``inference_keys``): no optimiser, target network, generator,
+    reward scaling or counter states."""
+    keys = learner_class(algo).inference_keys
+    return {k: v for k, v in state.items() if k in keys}
 
 
 def make_learner(spec: Any, obs_dim: int, num_streams: int, seed: int, mask_dim: int = 0,

@@ -229,6 +229,7 @@ class MAPPO(OnPolicyPlumbing, MAPPOActing):
 
     algo = "mappo"
     inputs: tuple[str, ...] = ("state", "alive")
+    inference_keys = ("net", "obs_norm", "state_norm", "value_norm", "num_seats", "state_dim")
 
     def __init__(self, obs_dim: int, num_streams: int, cfg: MAPPOConfig | None = None,
                  seed: int = 0, mask_dim: int = 0, *, num_seats: int = 1, state_dim: int = 0,

@@ -265,6 +265,7 @@ class PPO(OnPolicyPlumbing):
 
     algo = "ppo"
     inputs: tuple[str, ...] = ()
+    inference_keys = ("net", "obs_norm")
 
     def __init__(self, obs_dim: int, num_streams: int, cfg: PPOConfig | None = None,
                  seed: int = 0, mask_dim: int = 0, num_seats: int = 1):

@@ -178,6 +178,7 @@ class SAC:
 
     algo = "sac"
     inputs: tuple[str, ...] = ()
+    inference_keys = ("actor", "obs_norm")
     rollout_steps = None  # updates on its own replay schedule, any rollout length
 
     def __init__(self, obs_dim: int, num_streams: int, cfg: SACConfig | None = None,

@@ -28,15 +28,14 @@ import numpy as np
 import torch
 
 from alphatank.stats import League
+from alphatank.training.learners import inference_state
 from alphatank.training.presets import check_pool_args
 
-# Parts of a learner's state_dict a frozen opponent does not need.
-TRAINING_ONLY = ("optimizer", "generator", "np_rng", "ret_norm")
 OUTCOMES = {"win": 1, "draw": 0, "loss": -1}
 
 
 def frozen_state(state: dict[str, Any]) -> dict[str, Any]:
-    """A detached copy of a learner state without its optimiser and generator states."""
+    """A detached copy of a learner state (tensors cloned, dicts copied)."""
 
     def copy(v: Any) -> Any:
         if isinstance(v, torch.Tensor):
@@ -45,7 +44,7 @@ def frozen_state(state: dict[str, Any]) -> dict[str, Any]:
             return {k: copy(x) for k, x in v.items()}
         return v
 
-    return {k: copy(v) for k, v in state.items() if k not in TRAINING_ONLY}
+    return {k: copy(v) for k, v in state.items()}
 
 
 @dataclass
@@ -89,8 +88,10 @@ class SnapshotPool:
         return self.last_step is None or step - self.last_step >= self.every
 
     def add(self, state: dict[str, Any], step: int) -> int:
-        """Freeze a learner ``state_dict`` taken at env step ``step``; returns its id. The
-        oldest snapshot leaves the window when it is full (its rating stays)."""
+        """Freeze a learner's inference state
+        (:func:`~alphatank.training.learners.inference_state`) taken at env step ``step``;
+        returns its id. The oldest snapshot leaves the window when it is full (its rating
+        stays)."""
         snap = Snapshot(self.next_id, int(step), frozen_state(state))
         self.next_id += 1
         me = self.league.ratings[0]
@@ -208,7 +209,7 @@ class SelfPlay:
         """Add a snapshot of ``learner`` when one is due at env step ``step``, and
         register every snapshot of the window the env does not know yet."""
         if self.pool.due(step):
-            self.pool.add(learner.state_dict(), step)
+            self.pool.add(inference_state(learner.algo, learner.state_dict()), step)
         for snap in self.pool.snapshots:
             if snap.id not in self._registered:
                 env.add_opponent(opponent_name(snap.id), self.make_policy(snap))
