@@ -731,3 +731,21 @@ def test_eval_pool_without_shared_opponents_is_refused_before_any_game(files, ca
     _check(rc, out, err, ["--pool needs two or more checkpoints against the same opponents",
                           "agent:ppo_vs_smart: B:smart(w=1)", "B:aggressive(w=1)"])
     assert out == "" and not any(p.exists() for p in rows)
+
+
+@pytest.mark.parametrize(("argv", "fragments"), [
+    (["--preset", "nope"], ["unknown preset 'nope'"]),
+    (["--train", "--train-preset", "nope"],
+     ["--train-preset nope: unknown training preset 'nope'; valid: ", "ppo_vs_smart"]),
+    (["--train", "--train-preset", "sac_vs_aggressive", "--train-fragments", "--train-envs",
+      "2", "--train-workers", "1", "--train-iterations", "1"],
+     ["--train-preset sac_vs_aggressive --train-fragments: ",
+      "fragments are acted by PPO and MAPPO learners only"]),
+], ids=["preset", "train-preset", "train-sac-fragments"])
+def test_bench_checks_every_setting_before_measuring(capsys, tmp_path, argv, fragments):
+    """A bad game preset, training preset or a --train combination `alphatank train`
+    refuses: one line, exit 2, before any header, figure or --json file."""
+    rc, out, err = _run_main(main, ["bench", "--ticks", "10", "--repeats", "1", "--json",
+                                    str(tmp_path / "b.json"), *argv], capsys)
+    _check(rc, out, err, fragments)
+    assert rc == 2 and out == "" and not (tmp_path / "b.json").exists()

@@ -12,17 +12,23 @@ import argparse
 import json
 import statistics
 import time
+from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from alphatank.commands.argtypes import positive_int
 from alphatank.commands.benchfloor import find_floor, floor_us_per_tick
 from alphatank.commands.benchsoak import DEFAULT_SOAK_SCENARIOS, soak
+from alphatank.errors import InputError, one_line
 from alphatank.files import check_writable, write_text_atomic
 from alphatank.game.scenarios import ScenarioError
 from alphatank.sim.config import game_config
 from alphatank.sim.mapspec import MapError, load_map
 from alphatank.sim.match import Match
+
+if TYPE_CHECKING:
+    from alphatank.commands.benchtrain import TrainBench
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -96,6 +102,7 @@ def match_ticks_per_second(map_name: str, teams: list[str], ticks: int, seed: in
 
 
 def run(args: argparse.Namespace) -> int:
+    """Every setting is checked (one line, exit 2) before anything is measured."""
     if args.json:
         check_writable(args.json, "--json")
     if args.soak:
@@ -105,6 +112,34 @@ def run(args: argparse.Namespace) -> int:
     if spec.tank_room(8) < 8:
         raise MapError(f"map {spec.name!r} has room for {spec.tank_room(8)} tanks; the bench "
                        "plays 1v1 and 4v4 (8 tanks)", f"--map {args.map}")
+    game_config(args.preset)  # an unknown --preset: one line from alphatank.cli
+    train = _train_bench(args) if args.train else None
+    try:
+        return _measure(args, floor, train)
+    finally:
+        if train is not None:
+            train.close()  # when the match bench failed or was interrupted
+
+
+def _train_bench(args: argparse.Namespace) -> TrainBench:
+    """The ``--train`` run and raw env, made (and so checked as ``alphatank train`` checks
+    the same settings) before anything is measured."""
+    from alphatank.commands.benchtrain import TrainBench
+
+    flags = " ".join([f"--train-preset {args.train_preset}"]
+                     + ["--train-fragments"] * args.train_fragments
+                     + ["--train-overlap"] * args.train_overlap)
+    try:
+        return TrainBench(args.train_preset, args.train_workers, args.train_envs,
+                          torch_threads=args.train_threads, fragments=args.train_fragments,
+                          overlap=args.train_overlap, iterations=args.train_iterations)
+    except ValueError as exc:
+        raise InputError(f"{flags}: {one_line(exc)}") from None
+
+
+def _measure(args: argparse.Namespace, floor: Path | None, train: TrainBench | None
+             ) -> int:
+    """The measurements of :func:`run` once its settings are checked."""
     results: dict[str, object] = {}
     print(f"bare match on {args.map!r} ({args.preset}), tanks firing constantly, "
           f"{args.ticks} ticks x {args.repeats} runs (median):")
@@ -149,14 +184,8 @@ def run(args: argparse.Namespace) -> int:
         fps = render_bench()
         results["render_fps"] = fps
         print(f"renderer 4v4 with overlays: {fps:,.0f} frames/s")
-    if args.train:
-        from alphatank.commands.benchtrain import train_bench
-
-        results["train"] = train_bench(args.train_preset, args.train_workers, args.train_envs,
-                                       torch_threads=args.train_threads,
-                                       fragments=args.train_fragments,
-                                       overlap=args.train_overlap,
-                                       iterations=args.train_iterations)
+    if train is not None:
+        results["train"] = train.measure()
     if args.sac:
         from alphatank.commands.benchtrain import sac_step_bench, sac_train_bench
 

@@ -148,10 +148,7 @@ def _raw_round(env: Any, actions: np.ndarray, steps: int) -> tuple[float, float]
     return n / (time.perf_counter() - t), (_cpu_seconds(pids) - c) / n
 
 
-def train_bench(preset: str = "ppo_vs_smart", workers: int = 2, num_envs: int = 32,
-                hp: Sequence[str] | None = None, rounds: int = 3, iterations: int = 3,
-                seed: int = 0, torch_threads: int = 1, fragments: bool = False,
-                overlap: bool = False, verbose: bool = True) -> dict[str, Any]:
+class TrainBench:
     """Training steps/s of ``preset`` (``hp``: ``--hp`` strings) against raw env steps/s of
     the same scenario, workers and envs, alternating ``rounds`` rounds; each training
     round runs ``iterations`` iterations (after one warm-up iteration), each raw round
@@ -160,87 +157,123 @@ def train_bench(preset: str = "ppo_vs_smart", workers: int = 2, num_envs: int = 
     ``torch_threads``: the run's torch threads (PPO's updates; rollouts use numpy).
     ``fragments``: the workers act the rollouts (``alphatank train --fragments``);
     ``overlap``: and the next one during each update (``train --overlap``), except after
-    a round's last iteration, so that no rollout runs into the raw round."""
-    from alphatank.envs.vector import make_vector_env
-    from alphatank.training.presets import get_preset, parse_hp, run_scenario, with_hp
-    from alphatank.training.runner import Trainer
-    from alphatank.training.threads import limit_threads
+    a round's last iteration, so that no rollout runs into the raw round.
 
-    limit_threads(1)
-    cfg = get_preset(preset)
-    scenario = run_scenario(cfg)
-    if hp is None:
-        hp = DEFAULT_HP if "ppo" in {s.algo for s in cfg.learners} or not cfg.learners else ()
-    cfg = with_hp(cfg, parse_hp([("--hp", h) for h in hp]), len(scenario.learner_seats))
-    cfg = cfg.with_overrides(num_envs=num_envs, num_workers=workers, wandb="disabled",
-                             checkpoint_every=0, eval_every=0, video_every=0, seed=seed,
-                             time_limit_s=0.0, total_steps=10**12, name="bench",
-                             torch_threads=torch_threads)
-    tmp = tempfile.mkdtemp(prefix="alphatank-bench-")
-    trainer = Trainer(cfg, os.path.join(tmp, "run"), progress=False, fragments=fragments,
-                      overlap=overlap)
-    fragments = trainer.fragments
+    Making one builds the run and the raw env, so every setting is checked as
+    ``alphatank train`` checks it (ValueError) before anything is measured;
+    :meth:`measure` then measures once and closes them (:meth:`close` without measuring).
+    """
 
-    def collect(obs: np.ndarray, last: bool) -> tuple[np.ndarray, dict[str, float]]:
-        if fragments:
-            return trainer._collect_fragment(obs, last_round=last)
-        return trainer._collect(obs)
-    # the raw env does what the training env does: game and reward overrides, and the
-    # learners' extra inputs (MAPPO's agent-specific states)
-    env = make_vector_env(scenario, num_envs, seed=seed, num_workers=workers,
-                          observation=cfg.observation, game_overrides=cfg.game or None,
-                          reward_overrides=cfg.rewards or None,
-                          action_repeat=cfg.action_repeat,
-                          **({"inputs": trainer.inputs} if trainer.inputs else {}))
-    rng = np.random.default_rng(seed)
-    actions = rng.integers(0, [3, 3, 2], size=(256, num_envs, env.num_learners, 3))
-    vector_steps = trainer.rollout_steps * iterations
-    pids = [p.pid for p in getattr(trainer.env, "_procs", [])]
-    raw, train, raw_cpu, train_cpu = [], [], [], []
-    try:
-        env.reset(seed)
-        _raw_round(env, actions, 32)
-        obs = trainer._segment_reset()
-        obs, _ = collect(obs, True)  # warm-up iteration
-        for _ in range(rounds):
-            sps, cpu = _raw_round(env, actions, vector_steps)
-            raw.append(sps)
-            raw_cpu.append(cpu)
-            t, c, s0 = time.perf_counter(), _cpu_seconds(pids), trainer.global_step
-            for k in range(iterations):
-                obs, _ = collect(obs, k == iterations - 1)
-            n = trainer.global_step - s0
-            train.append(n / (time.perf_counter() - t))
-            train_cpu.append((_cpu_seconds(pids) - c) / n)
-    finally:
-        env.close()
-        trainer.logger.close()
-        trainer.env.close()
-        shutil.rmtree(tmp, ignore_errors=True)
-    out = {"preset": preset, "workers": workers, "num_envs": num_envs, "hp": list(hp),
-           "torch_threads": torch_threads, "fragments": fragments, "overlap": overlap,
-           "iterations": iterations,
-           "raw_steps_per_s": round(statistics.median(raw)),
-           "train_steps_per_s": round(statistics.median(train)),
-           "raw_cpu_us_per_step": round(1e6 * statistics.median(raw_cpu), 1),
-           "train_cpu_us_per_step": round(1e6 * statistics.median(train_cpu), 1),
-           "load_average": os.getloadavg()[0] if hasattr(os, "getloadavg") else None}
-    out["ratio"] = round(out["train_steps_per_s"] / out["raw_steps_per_s"], 3)
-    out["cpu_ratio"] = round(out["raw_cpu_us_per_step"] / out["train_cpu_us_per_step"], 3)
-    if verbose:
-        print(f"{preset} ({' '.join(hp) or 'preset hyperparameters'}), {workers} workers"
-              f"{' acting in fragments' if fragments else ''}"
-              f"{' overlapping the updates' if overlap else ''}, {num_envs} envs, "
-              f"{torch_threads} torch threads; {rounds} alternating rounds of "
-              f"{vector_steps} vector steps "
-              f"(load average {out['load_average']:.1f}):")
-        print(f"  raw env, random actions {out['raw_steps_per_s']:9,} steps/s  "
-              f"{out['raw_cpu_us_per_step']:6.1f} CPU us/step")
-        print(f"  training                {out['train_steps_per_s']:9,} steps/s  "
-              f"{out['train_cpu_us_per_step']:6.1f} CPU us/step")
-        print(f"  training / raw: {out['ratio']:.1%} of the steps/s, "
-              f"{out['cpu_ratio']:.1%} of the CPU per step")
-    return out
+    def __init__(self, preset: str = "ppo_vs_smart", workers: int = 2, num_envs: int = 32,
+                 hp: Sequence[str] | None = None, rounds: int = 3, iterations: int = 3,
+                 seed: int = 0, torch_threads: int = 1, fragments: bool = False,
+                 overlap: bool = False):
+        from alphatank.envs.vector import make_vector_env
+        from alphatank.training.presets import get_preset, parse_hp, run_scenario, with_hp
+        from alphatank.training.runner import Trainer
+        from alphatank.training.threads import limit_threads
+
+        limit_threads(1)
+        cfg = get_preset(preset)
+        scenario = run_scenario(cfg)
+        if hp is None:
+            hp = DEFAULT_HP if "ppo" in {s.algo for s in cfg.learners} or not cfg.learners else ()
+        cfg = with_hp(cfg, parse_hp([("--hp", h) for h in hp]), len(scenario.learner_seats))
+        cfg = cfg.with_overrides(num_envs=num_envs, num_workers=workers, wandb="disabled",
+                                 checkpoint_every=0, eval_every=0, video_every=0, seed=seed,
+                                 time_limit_s=0.0, total_steps=10**12, name="bench",
+                                 torch_threads=torch_threads)
+        self.settings = {"preset": preset, "workers": workers, "num_envs": num_envs,
+                         "hp": list(hp), "torch_threads": torch_threads}
+        self.rounds, self.iterations, self.seed = rounds, iterations, seed
+        self.closed = False
+        self.tmp = tempfile.mkdtemp(prefix="alphatank-bench-")
+        try:
+            self.trainer = Trainer(cfg, os.path.join(self.tmp, "run"), progress=False,
+                                   fragments=fragments, overlap=overlap)
+        except BaseException:
+            shutil.rmtree(self.tmp, ignore_errors=True)
+            raise
+        self.fragments, self.overlap = self.trainer.fragments, overlap
+        try:
+            # the raw env does what the training env does: game and reward overrides, and
+            # the learners' extra inputs (MAPPO's agent-specific states)
+            self.env = make_vector_env(
+                scenario, num_envs, seed=seed, num_workers=workers,
+                observation=cfg.observation, game_overrides=cfg.game or None,
+                reward_overrides=cfg.rewards or None, action_repeat=cfg.action_repeat,
+                **({"inputs": self.trainer.inputs} if self.trainer.inputs else {}))
+        except BaseException:
+            self._close_trainer()
+            raise
+
+    def _close_trainer(self) -> None:
+        self.trainer.logger.close()
+        self.trainer.env.close()
+        shutil.rmtree(self.tmp, ignore_errors=True)
+
+    def close(self) -> None:
+        """Close the raw env and the run (its worker processes and folder); once."""
+        if not self.closed:
+            self.closed = True
+            self.env.close()
+            self._close_trainer()
+
+    def measure(self, verbose: bool = True) -> dict[str, Any]:
+        """Measure the rounds, close, and return the figures (printed if ``verbose``)."""
+        trainer, env, fragments = self.trainer, self.env, self.fragments
+        rounds, iterations, seed = self.rounds, self.iterations, self.seed
+
+        def collect(obs: np.ndarray, last: bool) -> tuple[np.ndarray, dict[str, float]]:
+            if fragments:
+                return trainer._collect_fragment(obs, last_round=last)
+            return trainer._collect(obs)
+        rng = np.random.default_rng(seed)
+        actions = rng.integers(0, [3, 3, 2],
+                               size=(256, env.num_envs, env.num_learners, 3))
+        vector_steps = trainer.rollout_steps * iterations
+        pids = [p.pid for p in getattr(trainer.env, "_procs", [])]
+        raw, train, raw_cpu, train_cpu = [], [], [], []
+        try:
+            env.reset(seed)
+            _raw_round(env, actions, 32)
+            obs = trainer._segment_reset()
+            obs, _ = collect(obs, True)  # warm-up iteration
+            for _ in range(rounds):
+                sps, cpu = _raw_round(env, actions, vector_steps)
+                raw.append(sps)
+                raw_cpu.append(cpu)
+                t, c, s0 = time.perf_counter(), _cpu_seconds(pids), trainer.global_step
+                for k in range(iterations):
+                    obs, _ = collect(obs, k == iterations - 1)
+                n = trainer.global_step - s0
+                train.append(n / (time.perf_counter() - t))
+                train_cpu.append((_cpu_seconds(pids) - c) / n)
+        finally:
+            self.close()
+        s = self.settings
+        out = {**s, "fragments": fragments, "overlap": self.overlap, "iterations": iterations,
+               "raw_steps_per_s": round(statistics.median(raw)),
+               "train_steps_per_s": round(statistics.median(train)),
+               "raw_cpu_us_per_step": round(1e6 * statistics.median(raw_cpu), 1),
+               "train_cpu_us_per_step": round(1e6 * statistics.median(train_cpu), 1),
+               "load_average": os.getloadavg()[0] if hasattr(os, "getloadavg") else None}
+        out["ratio"] = round(out["train_steps_per_s"] / out["raw_steps_per_s"], 3)
+        out["cpu_ratio"] = round(out["raw_cpu_us_per_step"] / out["train_cpu_us_per_step"], 3)
+        if verbose:
+            print(f"{s['preset']} ({' '.join(s['hp']) or 'preset hyperparameters'}), "
+                  f"{s['workers']} workers{' acting in fragments' if fragments else ''}"
+                  f"{' overlapping the updates' if self.overlap else ''}, {s['num_envs']} "
+                  f"envs, {s['torch_threads']} torch threads; {rounds} alternating rounds of "
+                  f"{vector_steps} vector steps "
+                  f"(load average {out['load_average']:.1f}):")
+            print(f"  raw env, random actions {out['raw_steps_per_s']:9,} steps/s  "
+                  f"{out['raw_cpu_us_per_step']:6.1f} CPU us/step")
+            print(f"  training                {out['train_steps_per_s']:9,} steps/s  "
+                  f"{out['train_cpu_us_per_step']:6.1f} CPU us/step")
+            print(f"  training / raw: {out['ratio']:.1%} of the steps/s, "
+                  f"{out['cpu_ratio']:.1%} of the CPU per step")
+        return out
 
 
 def sac_train_bench(preset: str = "sac_vs_aggressive", ratios: Sequence[float] = (1.0, 0.25),
@@ -303,9 +336,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     if args.train:
-        train_bench(args.preset, args.workers, args.num_envs,
-                    args.hp, args.rounds,
-                    torch_threads=args.torch_threads)
+        TrainBench(args.preset, args.workers, args.num_envs, args.hp, args.rounds,
+                   torch_threads=args.torch_threads).measure()
     if args.sac:
         sac_step_bench()
         sac_train_bench()
