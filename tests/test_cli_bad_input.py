@@ -239,7 +239,8 @@ CASES = [
      ["nosuch", "shipped scenarios"]),
     ("bench-soak-bots", ["bench", "--soak", "--scenarios", "bot_teams"],
      ["bot_teams", "no learner seat"]),
-    ("bench-soak-steps", ["bench", "--soak", "--steps", "2"], ["--steps", ">= 3"]),
+    ("bench-soak-steps", ["bench", "--soak", "--steps", "2"],
+     ["--steps must be >= 30003 with --sample-every 10000 and 3 scenario(s)", "got 2"]),
     ("bench-soak-every", ["bench", "--soak", "--sample-every", "0"], ["--sample-every", ">= 1"]),
     # arena
     ("arena-bot", ["arena", "--bots", "smart,genius"], ["genius", "valid bots"]),
@@ -741,10 +742,13 @@ def test_eval_pool_without_shared_opponents_is_refused_before_any_game(files, ca
       "2", "--train-workers", "1", "--train-iterations", "1"],
      ["--train-preset sac_vs_aggressive --train-fragments: ",
       "fragments are acted by PPO and MAPPO learners only"]),
-], ids=["preset", "train-preset", "train-sac-fragments"])
+    (["--soak", "--steps", "3000", "--scenarios", "vs_random"],
+     ["--steps must be >= 10001 with --sample-every 10000 and 1 scenario(s)", "got 3000"]),
+], ids=["preset", "train-preset", "train-sac-fragments", "soak-too-short"])
 def test_bench_checks_every_setting_before_measuring(capsys, tmp_path, argv, fragments):
     """A bad game preset, training preset or a --train combination `alphatank train`
-    refuses: one line, exit 2, before any header, figure or --json file."""
+    refuses, or a soak too short to measure a growth (it read 'soak FAILED', exit 1, as a
+    leak): one line, exit 2, before any header, figure or --json file."""
     rc, out, err = _run_main(main, ["bench", "--ticks", "10", "--repeats", "1", "--json",
                                     str(tmp_path / "b.json"), *argv], capsys)
     _check(rc, out, err, fragments)

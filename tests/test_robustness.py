@@ -15,6 +15,7 @@ import pytest
 from alphatank.commands.benchsoak import (
     SoakResult,
     heap_mb,
+    min_soak_steps,
     slope_per_million,
     soak_scenario,
 )
@@ -358,6 +359,16 @@ def test_short_soak_sees_no_nan():
     assert [s[0] for s in res.samples] == [1000, 2000, 3000]
     assert all(s[1] > 0 for s in res.samples)
     assert slope_per_million([0, 1e6], [1.0, 3.0]) == pytest.approx(2.0)
+
+
+def test_min_soak_steps_is_the_shortest_soak_that_measures():
+    """The bench refuses fewer steps per scenario than min_soak_steps: one step less fits
+    no growth."""
+    for every in (1, 5):
+        need = min_soak_steps(every)
+        assert soak_scenario("vs_random", need, every=every).measured
+        assert not soak_scenario("vs_random", need - 1, every=every).measured
+    assert min_soak_steps(10_000) == 10_001
 
 
 def test_a_short_soak_cannot_fail_on_a_page_of_noise():

@@ -10,7 +10,9 @@ Growth is the least-squares slope of the samples after the warm-up (the first ``
 share of each scenario's steps), in MB per 10^6 steps; the soak passes when RSS grows by
 less than ``limit_mb`` per 10^6 steps, or by less than :data:`NOISE_MB` in all after the
 warm-up (page and allocator noise, which a short soak would extrapolate to a large rate), in
-every scenario and no value was NaN or infinite.
+every scenario and no value was NaN or infinite. A scenario needs two samples after the
+warm-up to fit a growth (:func:`min_soak_steps`); ``alphatank bench --soak`` refuses
+fewer steps.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ import numpy as np
 DEFAULT_SOAK_SCENARIOS = ("vs_random", "vs_smart", "team")
 LIMIT_MB = 5.0  # per 10^6 steps after warm-up
 NOISE_MB = 1.0  # RSS growth after warm-up too small to tell from noise (10^6 steps: 1.33 MB)
+WARMUP = 0.2  # share of each scenario's steps before the growth is fitted
 _PAGE = os.sysconf("SC_PAGE_SIZE") if hasattr(os, "sysconf") else 4096
 
 
@@ -63,6 +66,16 @@ def _heap_reader() -> Callable[[], float] | None:
 
 
 heap_mb = _heap_reader()
+
+
+def min_soak_steps(every: int, warmup: float = WARMUP) -> int:
+    """The fewest steps of one scenario whose memory samples (every ``every`` steps and at
+    the last) give two after the warm-up to fit a growth."""
+    steps = every + 1
+    # the last sample before the final one must come after the warm-up
+    while (steps - 1) // every * every < int(steps * warmup):
+        steps += 1
+    return steps
 
 
 def slope_per_million(steps: Sequence[float], values: Sequence[float]) -> float:
@@ -168,7 +181,7 @@ def _make_env(scenario: str, seed: int) -> tuple[Any, Callable[[np.ndarray], tup
     return env, step_parallel
 
 
-def soak_scenario(scenario: str, steps: int, every: int = 10_000, warmup: float = 0.2,
+def soak_scenario(scenario: str, steps: int, every: int = 10_000, warmup: float = WARMUP,
                   seed: int = 0, report: Callable[[str], None] | None = None) -> SoakResult:
     """Run ``steps`` random-action steps of ``scenario`` in one env; see the module doc."""
     from alphatank.game.scenarios import load_scenario
@@ -203,7 +216,8 @@ def soak_scenario(scenario: str, steps: int, every: int = 10_000, warmup: float 
 
 
 def soak(scenarios: Sequence[str] = DEFAULT_SOAK_SCENARIOS, steps: int = 1_000_000,
-         every: int = 10_000, warmup: float = 0.2, seed: int = 0, limit_mb: float = LIMIT_MB,
+         every: int = 10_000, warmup: float = WARMUP, seed: int = 0,
+         limit_mb: float = LIMIT_MB,
          verbose: bool = True) -> tuple[bool, dict[str, Any]]:
     """``steps`` env steps split evenly over ``scenarios``; returns (passed, figures)."""
     say = print if verbose else None
