@@ -4,6 +4,8 @@ consistent figures (tiny sizes; the figures themselves are benchmarks, not tests
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 
 import pytest
 
@@ -47,3 +49,29 @@ def test_fragment_scaling_steps_worker_processes_a_fragment_each():
     assert frag.actions.min() == 0 and (frag.actions.max(axis=(0, 1, 2)) == [2, 2, 1]).all()
     rate, ratio = fragment_scaling("vs_random", 2, num_envs=2, steps=20, repeats=1)
     assert rate > 0 and ratio > 0
+
+
+@pytest.mark.parametrize(("argv", "want"), [
+    (["--steps", "0"], "argument --steps: must be an integer >= 1, got '0'"),
+    (["--num-envs", "0"], "argument --num-envs: must be an integer in [1, "),
+    (["--workers", "0"], "argument --workers: must be an integer >= 1, got '0'"),
+    (["--scenarios", "nope"], "--scenarios: unknown scenario 'nope'"),
+], ids=["steps", "num-envs", "workers", "scenario"])
+def test_benchenv_refuses_bad_settings_in_one_line(argv, want):
+    """`python -m alphatank.commands.benchenv` (docs/environments.md) with a bad size or
+    scenario: one line, exit 2, nothing measured (it ended in tracebacks)."""
+    proc = subprocess.run([sys.executable, "-m", "alphatank.commands.benchenv", *argv],
+                          capture_output=True, text=True, timeout=300)
+    assert (proc.returncode, proc.stdout) == (2, "")
+    assert proc.stderr.count("\n") == 1 and want in proc.stderr, proc.stderr
+
+
+def test_benchenv_with_one_process_leaves_the_worker_columns_blank(capsys):
+    """--workers 1 skips the worker variants: their columns read '-' (they read 0), and
+    a run shorter than the warm-up's 10 steps works."""
+    from alphatank.commands.benchenv import env_bench
+
+    out = env_bench(["vs_random"], num_envs=1, steps=2, workers=1)
+    assert "workers_steps_per_s" not in out["vs_random"]
+    row = capsys.readouterr().out.splitlines()[-1].split()
+    assert row[0] == "vs_random" and row[-5:] == ["-"] * 5

@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from alphatank.commands.argtypes import match_count, positive_int
 from alphatank.commands.benchfloor import find_floor, floor_us_per_tick
 from alphatank.envs.vector import SubprocVectorMatchEnv, VectorMatchEnv
 from alphatank.game.observe import OBS_KINDS
@@ -58,7 +59,7 @@ def _rates(env: Any, steps: int, seed: int, layers: bool = True, repeats: int = 
     shape = (steps, env.num_envs, env.num_learners, 3)
     actions = rng.integers(0, [3, 3, 2], size=shape)
     for k in range(10):
-        env.step(actions[k])
+        env.step(actions[k % steps])
     wall = cpu_rate = 0.0
     for _ in range(repeats):
         w0, c0 = time.perf_counter(), cpu()
@@ -211,8 +212,8 @@ def env_bench(scenarios: Sequence[str] = DEFAULT_SCENARIOS, observation: str = "
     (the ceiling, see the module docstring), workers_steps_per_cpu_s (all processes' CPU
     time), fragments_steps_per_s / fragments_speedup (the workers acting whole
     rollouts: :func:`fragment_scaling`)}}."""
+    proto = find_floor(floor)  # a wrong folder fails before anything is measured
     tick = match_tick_us(seed=seed)
-    proto = find_floor(floor)
     floor_us = floor_tick_us(proto, seed=seed) if proto is not None else None
     ceiling = (independent_scaling(scenarios[0], workers, num_envs, steps, seed, observation)
                if workers > 1 and scenarios else None)
@@ -264,28 +265,39 @@ def env_bench(scenarios: Sequence[str] = DEFAULT_SCENARIOS, observation: str = "
         results[name] = row
         if verbose:
             over_floor = f"{row['over_floor']:7.2f}" if floor_us else f"{'-':>7s}"
+            cells = [(k, w, ",.0f" if k.endswith("_s") else ".2f") for k, w in (
+                ("workers_steps_per_s", 8), ("workers_speedup", 8),
+                ("workers_steps_per_cpu_s", 9), ("fragments_steps_per_s", 9),
+                ("fragments_speedup", 8))]  # "-" without worker processes
+            workers_cells = " ".join(format(row[k], f"{w}{fmt}") if k in row else f"{'-':>{w}s}"
+                                     for k, w, fmt in cells)
             print(f"  {name:14s} {one:8,.0f} {us:8.1f} {row['over_match_tick']:7.2f} "
                   f"{over_floor} {bare:10,.0f} {row['layers_us_per_step']:10.1f} "
-                  f"{row.get('workers_steps_per_s', 0):8,.0f} "
-                  f"{row.get('workers_speedup', 0):8.2f} "
-                  f"{row.get('workers_steps_per_cpu_s', 0):9,.0f} "
-                  f"{row.get('fragments_steps_per_s', 0):9,.0f} "
-                  f"{row.get('fragments_speedup', 0):8.2f}")
+                  f"{workers_cells}")
     return results
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scenarios", nargs="+", default=list(DEFAULT_SCENARIOS))
     p.add_argument("--observation", default="paper", choices=list(OBS_KINDS))
-    p.add_argument("--num-envs", type=int, default=16, help="matches per process")
-    p.add_argument("--steps", type=int, default=150, help="timed steps per run")
-    p.add_argument("--workers", type=int, default=2, help="processes for the shared-memory "
-                   "variant (1: skip it)")
+    p.add_argument("--num-envs", type=match_count, default=16, help="matches per process")
+    p.add_argument("--steps", type=positive_int, default=150, help="timed steps per run")
+    p.add_argument("--workers", type=positive_int, default=2, help="processes for the "
+                   "shared-memory variant (1: skip it)")
     p.add_argument("--floor", metavar="DIR", help="folder of the shared pymunk prototype "
                    "(default: the nearest shared/bench/proto above the project or here)")
 
 
 def run(args: argparse.Namespace) -> int:
+    """Bad input (a scenario, --floor) is one line, exit 2, before anything is measured."""
+    from alphatank.game.scenarios import ScenarioError, load_scenario
+
+    try:
+        for name in args.scenarios:
+            load_scenario(name)
+    except ScenarioError as e:
+        print(f"error: --scenarios: {e}", file=sys.stderr)
+        return 2
     try:
         env_bench(args.scenarios, args.observation, args.num_envs, args.steps, args.workers,
                   floor=args.floor)
@@ -296,6 +308,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 if __name__ == "__main__":
-    parser = argparse.ArgumentParser(description=__doc__)
+    from alphatank.cli import Parser  # errors in one line, exit 2
+
+    parser = Parser(description=__doc__)
     add_arguments(parser)
     raise SystemExit(run(parser.parse_args()))
