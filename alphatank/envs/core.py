@@ -70,7 +70,8 @@ def check_reset_options(options: Mapping[str, Any] | None, why: str = "") -> Non
 
 def check_actions(actions: Any, shape: tuple[int, ...], name_of: Any) -> np.ndarray:
     """Validate an integer action array of ``shape`` (last axis 3); errors name the agent
-    (``name_of(index_tuple)``) and the allowed values. Returns an int64 array."""
+    (``name_of(index_tuple)``; for one agent's action, shape (3,), every error does) and
+    the allowed values. Returns an int64 array."""
     arr = actions if type(actions) is np.ndarray else np.asarray(actions)
     # Common cases first: one agent's row in plain Python (cheaper than numpy calls);
     # more rows by one comparison (negatives wrap round to huge unsigned values).
@@ -82,12 +83,14 @@ def check_actions(actions: Any, shape: tuple[int, ...], name_of: Any) -> np.ndar
         elif arr.size and not np.count_nonzero(np.greater_equal(arr.view(np.uint64),
                                                                 _NVEC_U)):
             return arr
+    who = f"{name_of(())}: " if len(shape) == 1 else ""  # one agent's action
     if arr.dtype == object or not (np.issubdtype(arr.dtype, np.integer)
                                    or arr.dtype == np.bool_):
-        raise TypeError(f"actions must be integers ({ACTION_HELP}), got dtype {arr.dtype}")
+        raise TypeError(f"{who}actions must be integers ({ACTION_HELP}), got dtype "
+                        f"{arr.dtype}")
     if arr.shape != shape:
-        raise ValueError(f"actions must have shape {shape} (last axis: rotate, move, fire), "
-                         f"got {arr.shape}")
+        raise ValueError(f"{who}actions must have shape {shape} (last axis: rotate, move, "
+                         f"fire), got {arr.shape}")
     bad = (arr < 0) | (arr >= ACTION_NVEC)
     if bad.any():
         idx = tuple(int(i) for i in np.argwhere(bad)[0][:-1])
