@@ -116,6 +116,18 @@ def test_gym_learner_seat_validation():
     assert info["seat"] == 1 and obs.shape == env.observation_space.shape
 
 
+@pytest.mark.parametrize("make, what", [
+    (lambda: gymnasium.make("AlphaTank/VsSmart-v0", opponent_policy="smart"),
+     "opponent_policy"),
+    (lambda: TankBattleEnv("team_vs_bot", seat_policies={1: "smart"}), r"seat_policies\[1\]"),
+    (lambda: parallel.parallel_env(scenario="mixed_teams", seat_policies={0: "smart"}),
+     r"seat_policies\[0\]"),
+])
+def test_a_policy_argument_that_is_not_a_policy_is_refused_when_the_env_is_made(make, what):
+    with pytest.raises(TypeError, match=f"{what} must be a Policy .*make_bot.*got str 'smart'"):
+        make()
+
+
 def test_the_match_before_the_first_reset_is_a_clear_error():
     env = TankBattleEnv("vs_random", render_mode="rgb_array")
     for call in (lambda: env.match, env.render, lambda: env.step([1, 1, 0])):
