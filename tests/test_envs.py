@@ -155,6 +155,18 @@ def test_max_cycles_is_checked_by_its_own_name(bad, why):
         parallel.parallel_env(scenario="team", max_cycles=bad)
 
 
+def test_max_cycles_and_a_different_max_steps_are_refused_together():
+    with pytest.raises(ScenarioError, match=r"^max_cycles 5 and game_overrides\.max_steps 50 "):
+        parallel.parallel_env(scenario="team", max_cycles=5, game_overrides={"max_steps": 50})
+    env = parallel.parallel_env(scenario="team", max_cycles=5, game_overrides={"max_steps": 5})
+    assert env.core.game.max_steps == 5
+
+
+def test_keep_dead_agents_must_be_a_bool():
+    with pytest.raises(ScenarioError, match="^keep_dead_agents: must be true or false, got 'no'"):
+        parallel.parallel_env(scenario="team", keep_dead_agents="no")
+
+
 def test_a_scenario_of_the_wrong_type_is_named():
     with pytest.raises(ScenarioError, match="scenario: a shipped scenario's name.*got int 3"):
         gymnasium.make("AlphaTank/TankBattle-v0", scenario=3)

@@ -54,14 +54,6 @@ def action_space() -> spaces.MultiDiscrete:
     return spaces.MultiDiscrete(ACTION_NVEC)
 
 
-def check_seed(seed: Any) -> int:
-    """``seed`` as a Python int: an integer >= 0 (numpy's too), what SeedSequence takes."""
-    value, why = check_value((int,), seed, (0, None))
-    if why:
-        raise ValueError(f"seed {why}")
-    return value
-
-
 def check_reset_options(options: Mapping[str, Any] | None, why: str = "") -> None:
     """The envs' ``reset`` takes no options: refuse any rather than ignore them."""
     if options:

@@ -60,11 +60,11 @@ from alphatank.envs.core import (
     check_actions,
     check_policy,
     check_reset_options,
-    check_seed,
 )
 from alphatank.game.observe import ObsLayout
 from alphatank.game.rewards import TERMS
 from alphatank.game.scenarios import Scenario, ScenarioError, load_scenario
+from alphatank.sim.config import check_seed
 from alphatank.sim.match import Match
 from alphatank.sim.policy import Policy
 from alphatank.ui.modes import RENDER_MODES, check_render_mode

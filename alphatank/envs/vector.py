@@ -77,7 +77,6 @@ from alphatank.envs.core import (
     check_env_opponents,
     check_policy,
     check_reset_options,
-    check_seed,
     check_weakness,
     opponent_entry,
 )
@@ -92,6 +91,7 @@ from alphatank.envs.gym import single_learner_seat
 from alphatank.game.observe import ObsLayout
 from alphatank.game.rewards import TERMS
 from alphatank.game.scenarios import Scenario, ScenarioError, load_scenario
+from alphatank.sim.config import check_seed
 from alphatank.sim.policy import Policy
 
 
@@ -703,8 +703,9 @@ def check_input(env: VectorMatchEnv, name: str) -> None:
 def make_vector_env(scenario: str | Scenario, num_envs: int, seed: int = 0,
                     num_workers: int = 1, **kwargs: Any
                     ) -> VectorMatchEnv | SubprocVectorMatchEnv:
-    """In-process env for ``num_workers == 1``, else worker processes (same results)."""
-    if num_workers <= 1:
+    """In-process env for ``num_workers == 1``, else worker processes (same results;
+    ``num_workers`` in 1..num_envs)."""
+    if num_workers == 1:
         return VectorMatchEnv(scenario, num_envs, seed, **kwargs)
     return SubprocVectorMatchEnv(scenario, num_envs, seed, num_workers=num_workers, **kwargs)
 
