@@ -222,6 +222,13 @@ def test_tanks_bigger_than_the_cells_are_refused_naming_map_and_sizes():
         "diagonal, 56.6 px")
 
 
+@pytest.mark.parametrize("seed, why", [(-1, r"must be in \[0, inf\], got -1"),
+                                       (1.5, "must be an integer, got 1.5")])
+def test_a_bad_seed_is_named(seed, why):
+    with pytest.raises(ValueError, match=f"^seed {why}"):
+        Match(game_config("paper"), load_map("maze"), ["A", "B"], seed=seed)
+
+
 def test_config_rejects_unknown_keys_and_slow_bullets():
     with pytest.raises(ConfigError, match="unknown GameConfig key.*'bulet_speed'.*valid keys"):
         from_dict(GameConfig, {"bulet_speed": 3})

@@ -11,7 +11,7 @@ from alphatank.envs.vector import (
     episode_seed,
     make_vector_env,
 )
-from alphatank.game.scenarios import NoopPolicy
+from alphatank.game.scenarios import NoopPolicy, ScenarioError
 
 
 class ExplodingPolicy(NoopPolicy):
@@ -168,12 +168,45 @@ def test_worker_errors_reach_the_parent():
                                 seat_policies={1: ExplodingPolicy()})
     with pytest.raises(RuntimeError, match="boom at reset"):
         sub.reset()
+    gone = r"the env is closed: a worker failed earlier \(ValueError: boom at reset\); make a new"
+    with pytest.raises(RuntimeError, match=r"^step\(\): " + gone):
+        sub.step(np.ones((2, 1, 3), dtype=np.int64))
+    with pytest.raises(RuntimeError, match=r"^reset\(\): " + gone):
+        sub.reset()
     sub.close()
+
+
+def test_bad_settings_are_refused_before_the_workers_and_a_closed_env_says_so():
+    sub = SubprocVectorMatchEnv("vs_random", 2, seed=0, num_workers=2)
+    act = np.ones((2, 1, 3), dtype=np.int64)
+    try:
+        sub.reset()
+        with pytest.raises(ValueError, match=r"^weakness must be in \[0, 1\], got 1.5"):
+            sub.set_opponents(["smart"], weakness=1.5)
+        with pytest.raises(ValueError, match=r"^unknown bot name\(s\) \['smartt'\]; valid"):
+            sub.set_opponents(["smartt"])
+        with pytest.raises(TypeError, match="policy must be a Policy"):
+            sub.set_opponent_policy("smart")
+        with pytest.raises(ScenarioError, match="opponent 'x'"):
+            sub.add_opponent("x", "genius")
+        with pytest.raises(ValueError, match=r"^unknown opponent\(s\) \['x'\]"):
+            sub.set_env_opponents(["x", None])
+        sub.set_opponents(["smart"], weakness=0.5)  # the workers are still there
+        assert sub.step(act)[1].shape == (2, 1)
+    finally:
+        sub.close()
+    for call in (lambda: sub.step(act), sub.reset, lambda: sub.set_bot_weakness(0.5)):
+        with pytest.raises(RuntimeError, match=r"the env is closed: close\(\) was called"):
+            call()
 
 
 def test_make_vector_env_picks_the_variant():
     env = make_vector_env("vs_random", 2, seed=0)
     assert isinstance(env, VectorMatchEnv)
+    for bad in (0, -1, 3):
+        with pytest.raises(ValueError, match=rf"^num_workers must be in 1\.\.num_envs=2, got "
+                                             rf"{bad}"):
+            make_vector_env("vs_random", 2, seed=0, num_workers=bad)
     sub = make_vector_env("vs_random", 2, seed=0, num_workers=2)
     try:
         assert isinstance(sub, SubprocVectorMatchEnv)
@@ -207,6 +240,9 @@ def test_opponent_controls_apply_from_next_episode():
         env.set_opponents(["genius"])
     with pytest.raises(ValueError, match=r"\[0, 1\]"):
         env.set_bot_weakness(2.0)
+    with pytest.raises(ValueError, match=r"\[0, 1\]"):  # refused whole: no bot changes
+        env.set_opponents(["dodge"], weakness=2.0)
+    assert env.core.bot_override is None
 
 
 def test_selfplay_two_learners_and_no_learner_scenarios():
@@ -232,7 +268,7 @@ def test_named_opponents_per_env(workers):
         assert by_env[0] == by_env[3] == "B:weak_smart"
         assert by_env[1] == "B:smart(w=1), B:smart(w=1)"
         assert by_env[2] == "B:idle"
-        with pytest.raises((ValueError, RuntimeError), match="unknown opponent"):
+        with pytest.raises(ValueError, match="unknown opponent"):
             env.set_env_opponents(["nobody", None, None, None])
         with pytest.raises(ValueError, match="one opponent name per env"):
             env.set_env_opponents([None])

@@ -91,7 +91,7 @@ def test_cleanrl_style_loop_with_same_step_autoreset():
     envs_.close()
 
 
-def test_same_results_as_the_engine_and_its_worker_processes():
+def test_same_results_as_the_engine_and_its_worker_processes_and_closed_is_said():
     def rollout(env, steps=90):
         rng = np.random.default_rng(3)
         out = [env.reset(seed=7)[0]]
@@ -107,8 +107,13 @@ def test_same_results_as_the_engine_and_its_worker_processes():
     workers = vec(game_overrides=SHORT, num_workers=2)
     try:
         remote = rollout(workers)
+        with pytest.raises(ValueError, match=r"unknown bot name\(s\) \['smartt'\]"):
+            workers.set_opponents(["smartt"])  # refused here: the workers live on
+        workers.step(np.ones((3, 3), dtype=np.int64))
     finally:
         workers.close()
+    with pytest.raises(RuntimeError, match=r"^step\(\): the env is closed"):
+        workers.step(np.ones((3, 3), dtype=np.int64))
     engine = VectorMatchEnv("vs_random", 3, game_overrides=SHORT)
     engine.reset(7)
     rng = np.random.default_rng(3)

@@ -22,7 +22,7 @@ Rules shared by all envs:
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -38,7 +38,7 @@ from alphatank.game.observe import (
     slot_counts,
 )
 from alphatank.game.rewards import RewardTracker, as_index
-from alphatank.game.scenarios import Scenario, ScenarioError, Seat, load_scenario
+from alphatank.game.scenarios import Scenario, ScenarioError, Seat, bot_names, load_scenario
 from alphatank.game.seats import make_controller
 from alphatank.sim.config import ACTION_REPEAT_MAX, MATCHES_MAX, check_value
 from alphatank.sim.episode import episode_match, episode_seeds, reset_controllers
@@ -54,14 +54,6 @@ def action_space() -> spaces.MultiDiscrete:
     return spaces.MultiDiscrete(ACTION_NVEC)
 
 
-def check_seed(seed: Any) -> int:
-    """``seed`` as a Python int: an integer >= 0 (numpy's too), what SeedSequence takes."""
-    value, why = check_value((int,), seed, (0, None))
-    if why:
-        raise ValueError(f"seed {why}")
-    return value
-
-
 def check_reset_options(options: Mapping[str, Any] | None, why: str = "") -> None:
     """The envs' ``reset`` takes no options: refuse any rather than ignore them."""
     if options:
@@ -70,7 +62,8 @@ def check_reset_options(options: Mapping[str, Any] | None, why: str = "") -> Non
 
 def check_actions(actions: Any, shape: tuple[int, ...], name_of: Any) -> np.ndarray:
     """Validate an integer action array of ``shape`` (last axis 3); errors name the agent
-    (``name_of(index_tuple)``) and the allowed values. Returns an int64 array."""
+    (``name_of(index_tuple)``; for one agent's action, shape (3,), every error does) and
+    the allowed values. Returns an int64 array."""
     arr = actions if type(actions) is np.ndarray else np.asarray(actions)
     # Common cases first: one agent's row in plain Python (cheaper than numpy calls);
     # more rows by one comparison (negatives wrap round to huge unsigned values).
@@ -82,18 +75,77 @@ def check_actions(actions: Any, shape: tuple[int, ...], name_of: Any) -> np.ndar
         elif arr.size and not np.count_nonzero(np.greater_equal(arr.view(np.uint64),
                                                                 _NVEC_U)):
             return arr
+    who = f"{name_of(())}: " if len(shape) == 1 else ""  # one agent's action
     if arr.dtype == object or not (np.issubdtype(arr.dtype, np.integer)
                                    or arr.dtype == np.bool_):
-        raise TypeError(f"actions must be integers ({ACTION_HELP}), got dtype {arr.dtype}")
+        raise TypeError(f"{who}actions must be integers ({ACTION_HELP}), got dtype "
+                        f"{arr.dtype}")
     if arr.shape != shape:
-        raise ValueError(f"actions must have shape {shape} (last axis: rotate, move, fire), "
-                         f"got {arr.shape}")
+        raise ValueError(f"{who}actions must have shape {shape} (last axis: rotate, move, "
+                         f"fire), got {arr.shape}")
     bad = (arr < 0) | (arr >= ACTION_NVEC)
     if bad.any():
         idx = tuple(int(i) for i in np.argwhere(bad)[0][:-1])
         raise ValueError(f"{name_of(idx)}: action {arr[idx].tolist()} out of range; allowed: "
                          f"{ACTION_HELP} (MultiDiscrete([3, 3, 2]))")
     return arr.astype(np.int64, copy=False)
+
+
+def check_weakness(weakness: Any) -> float:
+    """``weakness`` (a bot's chance to act each tick) as a float; ValueError unless a
+    number in [0, 1]."""
+    value, why = check_value((float,), weakness, (0, 1))
+    if why:
+        raise ValueError(f"weakness {why}")
+    return value
+
+
+def check_bot_names(names: Sequence[str] | None) -> list[str] | None:
+    """``names`` (bot types for the bot seats; None: the scenario's own) as a list;
+    ValueError unless a non-empty list of bot types, naming the valid ones."""
+    if names is None:
+        return None
+    valid = list(bot_names())
+    if isinstance(names, str):
+        raise ValueError(f"bot names must be a list, got the string {names!r} (e.g. "
+                         f"[{names!r}]); valid: {valid}")
+    names = list(names)
+    bad = [b for b in names if b not in valid]
+    if bad or not names:
+        raise ValueError(f"unknown bot name(s) {bad or names}; valid: {valid}")
+    return names
+
+
+def check_policy(policy: Any, what: str) -> None:
+    """TypeError naming the argument ``what`` unless ``policy`` is a
+    :class:`~alphatank.sim.policy.Policy` (an object with ``reset`` and ``act``)."""
+    if not isinstance(policy, Policy) or isinstance(policy, type):
+        raise TypeError(f"{what} must be a Policy (an object with reset(match, seat, seed) and "
+                        "act(match, seat), e.g. alphatank.bots.make_bot('smart') or "
+                        "alphatank.training.checkpoint.load_policy(path)), got "
+                        f"{type(policy).__name__} {policy!r}")
+
+
+def opponent_entry(name: str, opponent: str | Policy) -> Seat | Policy:
+    """The named opponent ``name`` as :meth:`MatchSet.add_opponent` keeps it: a seat spec
+    parsed into a Seat (ScenarioError naming it), or a Policy (TypeError otherwise)."""
+    if isinstance(opponent, str):
+        return spec_seat(opponent, "A", where=f"opponent {name!r}")
+    check_policy(opponent, f"opponent {name!r}")
+    return opponent
+
+
+def check_env_opponents(names: Sequence[str | None], num_envs: int,
+                        registered: Iterable[str]) -> list[str | None]:
+    """``names`` as a list after checking it holds one registered opponent name (or
+    None) per env; ValueError names what is allowed."""
+    if len(names) != num_envs:
+        raise ValueError(f"need one opponent name per env ({num_envs}), got {len(names)}")
+    known = set(registered)
+    bad = sorted({n for n in names if n is not None and n not in known})
+    if bad:
+        raise ValueError(f"unknown opponent(s) {bad}; registered: {sorted(known)}")
+    return list(names)
 
 
 def check_benched(scenario: Scenario, driven: Sequence[int], seats: Sequence[int]
@@ -153,10 +205,11 @@ class MatchSet:
             if not 0 <= s < n:
                 raise ScenarioError(f"{sc.source}: driven seat {s} out of range 0..{n - 1}")
         self.seat_policies = dict(seat_policies or {})
-        for s in self.seat_policies:
+        for s, policy in self.seat_policies.items():
             if s in self.driven or not 0 <= s < n:
                 raise ScenarioError(f"{sc.source}: seat_policies names seat {s}; allowed: "
                                     f"{[i for i in range(n) if i not in self.driven]}")
+            check_policy(policy, f"seat_policies[{s}]")
         orphans = [s for s in sc.learner_seats
                    if s not in self.driven and s not in self.seat_policies]
         self.orphans = orphans  # learner seats nobody drives: need an opponent policy
@@ -274,20 +327,12 @@ class MatchSet:
         """Register a named opponent for :meth:`set_env_opponents`: a seat spec
         (``smart@0.5``, ``checkpoint:PATH``, ``agent:NAME``) or a Policy (one object may
         fill every seat of every env: policies keep their state per match and seat)."""
-        if isinstance(opponent, str):
-            opponent = spec_seat(opponent, "A", where=f"opponent {name!r}")
-        self.opponents[name] = opponent
+        self.opponents[name] = opponent_entry(name, opponent)
 
     def set_env_opponents(self, names: Sequence[str | None]) -> None:
         """Per env: the named opponent that fills every seat this set plays (not the
         ``seat_policies``) from that env's next episode; None restores the default."""
-        if len(names) != self.num_envs:
-            raise ValueError(f"need one opponent name per env ({self.num_envs}), got "
-                             f"{len(names)}")
-        bad = sorted({n for n in names if n is not None and n not in self.opponents})
-        if bad:
-            raise ValueError(f"unknown opponent(s) {bad}; registered: {sorted(self.opponents)}")
-        self.env_opponent = list(names)
+        self.env_opponent = check_env_opponents(names, self.num_envs, self.opponents)
 
     def set_benched(self, seats: Sequence[int]) -> None:
         """Bot seats left out of every env's next episodes (a line-up curriculum; see

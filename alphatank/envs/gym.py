@@ -58,12 +58,13 @@ from alphatank.envs.core import (
     MatchSet,
     action_space,
     check_actions,
+    check_policy,
     check_reset_options,
-    check_seed,
 )
 from alphatank.game.observe import ObsLayout
 from alphatank.game.rewards import TERMS
 from alphatank.game.scenarios import Scenario, ScenarioError, load_scenario
+from alphatank.sim.config import check_seed
 from alphatank.sim.match import Match
 from alphatank.sim.policy import Policy
 from alphatank.ui.modes import RENDER_MODES, check_render_mode
@@ -74,7 +75,8 @@ def single_learner_seat(sc: Scenario, learner_seat: int | None,
                         opponent_policy: Policy | None) -> int:
     """The learner seat a one-learner env drives (default: the scenario's first); the
     scenario's other learner seats need a Policy (``seat_policies`` or
-    ``opponent_policy``). Errors name the scenario file and what is allowed."""
+    ``opponent_policy``, checked to be one). Errors name the scenario file or the
+    argument, and what is allowed."""
     learners = sc.learner_seats
     if not learners:
         raise ScenarioError(f"{sc.source}: TankBattle needs a learner seat; this scenario "
@@ -84,6 +86,8 @@ def single_learner_seat(sc: Scenario, learner_seat: int | None,
         raise TypeError(f"learner_seat must be an int (a seat index), got {seat!r}; "
                         f"learner seats: {learners}")
     seat = int(seat)
+    if opponent_policy is not None:
+        check_policy(opponent_policy, "opponent_policy")
     if seat not in learners:
         raise ScenarioError(f"{sc.source}: learner_seat {seat} is not a learner seat; "
                             f"learner seats: {learners}")

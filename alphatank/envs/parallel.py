@@ -25,7 +25,8 @@ Episode end
 
 Arguments
     ``scenario``, ``observation``, ``seat_policies``, ``game_overrides``,
-    ``reward_overrides``, ``max_cycles`` (GameConfig.max_steps), ``keep_dead_agents``,
+    ``reward_overrides``, ``max_cycles`` (GameConfig.max_steps: refused beside a different
+    ``game_overrides["max_steps"]``), ``keep_dead_agents`` (a bool),
     ``render_mode`` (None, "rgb_array", "human").
 
 Version history
@@ -48,13 +49,12 @@ from alphatank.envs.core import (
     MatchSet,
     action_space,
     check_actions,
-    check_seed,
 )
 from alphatank.envs.ids import ENV_VERSION
 from alphatank.game.observe import ObsLayout
 from alphatank.game.rewards import TERMS
 from alphatank.game.scenarios import Scenario, ScenarioError, load_scenario
-from alphatank.sim.config import GameConfig, check_value
+from alphatank.sim.config import GameConfig, check_seed, check_value
 from alphatank.sim.policy import Policy
 from alphatank.ui.modes import RENDER_MODES, check_render_mode
 
@@ -84,7 +84,14 @@ class TankBattleParallelEnv(ParallelEnv):
             max_cycles, why = check_value((int,), max_cycles, steps.metadata["range"])
             if why:
                 raise ScenarioError(f"max_cycles: {why}")
+            if overrides.get("max_steps", max_cycles) != max_cycles:
+                raise ScenarioError(f"max_cycles {max_cycles} and game_overrides.max_steps "
+                                    f"{overrides['max_steps']!r} set the same setting "
+                                    "(GameConfig.max_steps); give one of them")
             overrides["max_steps"] = max_cycles
+        why = check_value((bool,), keep_dead_agents)[1]
+        if why:
+            raise ScenarioError(f"keep_dead_agents: {why}")
         self.core = MatchSet(sc, 1, observation=observation, game_overrides=overrides,
                              reward_overrides=reward_overrides, seat_policies=seat_policies)
         self.keep_dead_agents = keep_dead_agents

@@ -46,7 +46,15 @@ from typing import Any
 import numpy as np
 
 from alphatank.cluster import ENV_RUNNER_TIMEOUT_S
-from alphatank.envs.core import check_actions, check_benched
+from alphatank.envs.core import (
+    check_actions,
+    check_benched,
+    check_bot_names,
+    check_env_opponents,
+    check_policy,
+    check_weakness,
+    opponent_entry,
+)
 from alphatank.envs.fragments import Fragment, RolloutPolicy, SplitRollout, merge_fragments
 from alphatank.envs.vector import ShardedEnv, VectorMatchEnv
 from alphatank.game.scenarios import Scenario
@@ -290,22 +298,18 @@ class RayVectorMatchEnv(ShardedEnv, SplitRollout):
     # ---- opponents (from each env's next episode), as on VectorMatchEnv ----------------
 
     def set_bot_weakness(self, weakness: float) -> None:
-        if not 0.0 <= weakness <= 1.0:
-            raise ValueError(f"weakness must be in [0, 1], got {weakness!r}")
-        self._setting("weakness", "set_bot_weakness", (weakness,))
+        self._setting("weakness", "set_bot_weakness", (check_weakness(weakness),))
 
     def set_opponents(self, bot_names: Sequence[str] | None,
                       weakness: float | None = None) -> None:
-        if bot_names is not None:
-            from alphatank.game.scenarios import bot_names as valid_names
-            valid = valid_names()
-            bad = [b for b in bot_names if b not in valid]
-            if bad or not bot_names:
-                raise ValueError(f"unknown bot name(s) {bad or bot_names}; valid: {list(valid)}")
-            bot_names = list(bot_names)
+        bot_names = check_bot_names(bot_names)
+        if weakness is not None:
+            weakness = check_weakness(weakness)
         self._setting("opponents", "set_opponents", (bot_names, weakness))
 
     def set_opponent_policy(self, policy: Policy | None) -> None:
+        if policy is not None:
+            check_policy(policy, "set_opponent_policy's policy")
         self._setting("opponent_policy", "set_opponent_policy", (policy,))
 
     def set_benched(self, seats: Sequence[int]) -> None:
@@ -313,13 +317,13 @@ class RayVectorMatchEnv(ShardedEnv, SplitRollout):
         self._setting("benched", "set_benched", (seats,))
 
     def add_opponent(self, name: str, opponent: str | Policy) -> None:
+        opponent_entry(name, opponent)
         self._setting(("add_opponent", name), "add_opponent", (name, opponent))
 
     def set_env_opponents(self, names: Sequence[str | None]) -> None:
-        if len(names) != self.num_envs:
-            raise ValueError(f"need one opponent name per env ({self.num_envs}), got "
-                             f"{len(names)}")
-        names = list(names)
+        registered = [key[1] for key in self._settings
+                      if isinstance(key, tuple) and key[0] == "add_opponent"]
+        names = check_env_opponents(names, self.num_envs, registered)
         self._setting("env_opponents", "set_env_opponents", (names,),
                       [(names[lo:hi],) for lo, hi in self._blocks])
 

@@ -51,11 +51,13 @@ per rollout: :mod:`alphatank.envs.fragments`).
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import multiprocessing as mp
 import pickle
 import signal
 import traceback
+import weakref
 from collections.abc import Mapping, Sequence
 from multiprocessing import shared_memory
 from typing import Any
@@ -71,8 +73,12 @@ from alphatank.envs.core import (
     action_space,
     check_actions,
     check_benched,
+    check_bot_names,
+    check_env_opponents,
+    check_policy,
     check_reset_options,
-    check_seed,
+    check_weakness,
+    opponent_entry,
 )
 from alphatank.envs.fragments import (
     Fragment,
@@ -85,6 +91,7 @@ from alphatank.envs.gym import single_learner_seat
 from alphatank.game.observe import ObsLayout
 from alphatank.game.rewards import TERMS
 from alphatank.game.scenarios import Scenario, ScenarioError, load_scenario
+from alphatank.sim.config import check_seed
 from alphatank.sim.policy import Policy
 
 
@@ -175,32 +182,28 @@ class VectorMatchEnv(SplitRollout):
 
     def set_bot_weakness(self, weakness: float) -> None:
         """Weakness (0..1) of every bot seat from the next episode on (curriculum)."""
-        if not 0.0 <= weakness <= 1.0:
-            raise ValueError(f"weakness must be in [0, 1], got {weakness!r}")
+        weakness = check_weakness(weakness)
         self.check_idle("set_bot_weakness")
-        self.core.weakness = float(weakness)
+        self.core.weakness = weakness
 
     def set_opponents(self, bot_names: Sequence[str] | None,
                       weakness: float | None = None) -> None:
         """Bot type of the bot seats from the next episode on: env ``i`` uses
         ``bot_names[i % len(bot_names)]`` (one name: all envs; several: a mixture for
         cycle learning). ``None`` restores the scenario's bots."""
-        self.check_idle("set_opponents")
-        if bot_names is not None:
-            from alphatank.game.scenarios import bot_names as valid_names
-            valid = valid_names()
-            bad = [b for b in bot_names if b not in valid]
-            if bad or not bot_names:
-                raise ValueError(f"unknown bot name(s) {bad or bot_names}; valid: {list(valid)}")
-            self.core.bot_override = list(bot_names)
-        else:
-            self.core.bot_override = None
+        bot_names = check_bot_names(bot_names)
         if weakness is not None:
-            self.set_bot_weakness(weakness)
+            weakness = check_weakness(weakness)
+        self.check_idle("set_opponents")
+        self.core.bot_override = bot_names
+        if weakness is not None:
+            self.core.weakness = weakness
 
     def set_opponent_policy(self, policy: Policy | None) -> None:
         """A frozen Policy in every non-learner seat from the next episode on (self-play
         against a snapshot); ``None`` restores the scenario's controllers."""
+        if policy is not None:
+            check_policy(policy, "set_opponent_policy's policy")
         self.check_idle("set_opponent_policy")
         self.core.opponent_policy = policy
 
@@ -470,6 +473,16 @@ class ShardedEnv:
                 f"{self.learner_teams[slot]})")
 
 
+# worker envs not closed yet: closed at exit, before multiprocessing's own exit handler
+# (registered earlier, so run later) would wait for workers that ignore SIGTERM
+_OPEN_ENVS: weakref.WeakSet[SubprocVectorMatchEnv] = weakref.WeakSet()
+
+
+def _close_open_envs() -> None:
+    for env in list(_OPEN_ENVS):
+        env.close()
+
+
 class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
     """:class:`VectorMatchEnv` split over ``num_workers`` processes (shared-memory arrays,
     same interface, bit-identical results for the same seed). Workers start with
@@ -511,7 +524,12 @@ class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
             self._conns.append(parent)
             self._procs.append(p)
         self._closed = False
+        self._failed: str | None = None  # why a worker failed (the env closed then)
+        self._opponent_names: set[str] = set()  # registered by add_opponent
         self._in_flight = False  # a rollout sent by rollout_start, not yet collected
+        _OPEN_ENVS.add(self)
+        atexit.unregister(_close_open_envs)  # registered last: run first
+        atexit.register(_close_open_envs)
         self._gather()
         self._started = False
 
@@ -535,10 +553,20 @@ class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
                     "method a script must create the env under `if __name__ == "
                     "\"__main__\":`)")
             if status == "error":
+                self._failed = payload.splitlines()[0]
                 self.close()
                 raise RuntimeError(f"vector env worker failed: {payload}")
             out.append(payload)
         return out
+
+    def check_idle(self, call: str) -> None:
+        """As :meth:`SplitRollout.check_idle`, and RuntimeError naming ``call`` once the
+        env is closed (by :meth:`close`, or because a worker failed)."""
+        if self._closed:
+            why = (f"a worker failed earlier ({self._failed})" if self._failed
+                   else "close() was called")
+            raise RuntimeError(f"{call}(): the env is closed: {why}; make a new env")
+        super().check_idle(call)
 
     def _broadcast(self, cmd: str, arg: Any = None) -> list:
         """Send ``cmd`` to every worker and gather the answers (refused while a rollout
@@ -548,16 +576,22 @@ class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
             conn.send((cmd, arg))
         return self._gather()
 
+    # each setting is checked here, as in-process, before it goes to the workers: a
+    # worker that fails stops, and the env with it
+
     def set_bot_weakness(self, weakness: float) -> None:
-        if not 0.0 <= weakness <= 1.0:
-            raise ValueError(f"weakness must be in [0, 1], got {weakness!r}")
-        self._broadcast("call", ("set_bot_weakness", (weakness,)))
+        self._broadcast("call", ("set_bot_weakness", (check_weakness(weakness),)))
 
     def set_opponents(self, bot_names: Sequence[str] | None,
                       weakness: float | None = None) -> None:
+        bot_names = check_bot_names(bot_names)
+        if weakness is not None:
+            weakness = check_weakness(weakness)
         self._broadcast("call", ("set_opponents", (bot_names, weakness)))
 
     def set_opponent_policy(self, policy: Policy | None) -> None:
+        if policy is not None:
+            check_policy(policy, "set_opponent_policy's policy")
         self._broadcast("call", ("set_opponent_policy", (policy,)))
 
     def set_benched(self, seats: Sequence[int]) -> None:
@@ -565,12 +599,12 @@ class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
         self._broadcast("call", ("set_benched", (seats,)))
 
     def add_opponent(self, name: str, opponent: str | Policy) -> None:
+        opponent_entry(name, opponent)
         self._broadcast("call", ("add_opponent", (name, opponent)))
+        self._opponent_names.add(name)
 
     def set_env_opponents(self, names: Sequence[str | None]) -> None:
-        if len(names) != self.num_envs:
-            raise ValueError(f"need one opponent name per env ({self.num_envs}), got "
-                             f"{len(names)}")
+        names = check_env_opponents(names, self.num_envs, self._opponent_names)
         self.check_idle("set_env_opponents")
         for conn, (lo, hi) in zip(self._conns, self._blocks, strict=True):
             conn.send(("call", ("set_env_opponents", (list(names[lo:hi]),))))
@@ -586,9 +620,9 @@ class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
 
     def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
                                           dict[str, Any]]:
+        self.check_idle("step")
         if not self._started:
             raise RuntimeError("step() before reset()")
-        self.check_idle("step")
         return self._step(check_actions(actions, self._shared.arr["actions"].shape,
                                         self._name))
 
@@ -612,10 +646,9 @@ class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
     def rollout_start(self, policy: RolloutPolicy, obs: np.ndarray, steps: int) -> None:
         """Send the rollout to the workers and return at once: they play it while this
         process does other work (:meth:`rollout_finish` collects it)."""
+        self.check_idle("rollout_start")
         if not self._started:
             raise RuntimeError("rollout() before reset()")
-        if self._in_flight:
-            raise RuntimeError("rollout_start() while a rollout is in flight")
         for conn, (lo, hi) in zip(self._conns, self._blocks, strict=True):
             conn.send(("rollout", (policy, obs[lo:hi], steps)))
         self._in_flight = True
@@ -623,6 +656,8 @@ class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
     def rollout_finish(self) -> Fragment:
         """The fragment of the rollout sent by :meth:`rollout_start`."""
         if not self._in_flight:
+            if self._closed:
+                self.check_idle("rollout_finish")
             raise RuntimeError("rollout_finish() without rollout_start()")
         self._in_flight = False
         return merge_fragments(self._gather())
@@ -635,6 +670,7 @@ class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
         if self._closed:
             return
         self._closed = True
+        _OPEN_ENVS.discard(self)
         for conn in self._conns:
             try:
                 if self._in_flight:  # its answer comes before close's
@@ -644,6 +680,7 @@ class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
             except (OSError, EOFError):
                 pass
             conn.close()
+        self._in_flight = False
         for p in self._procs:
             p.join(timeout=5)
             if p.is_alive():
@@ -666,8 +703,9 @@ def check_input(env: VectorMatchEnv, name: str) -> None:
 def make_vector_env(scenario: str | Scenario, num_envs: int, seed: int = 0,
                     num_workers: int = 1, **kwargs: Any
                     ) -> VectorMatchEnv | SubprocVectorMatchEnv:
-    """In-process env for ``num_workers == 1``, else worker processes (same results)."""
-    if num_workers <= 1:
+    """In-process env for ``num_workers == 1``, else worker processes (same results;
+    ``num_workers`` in 1..num_envs)."""
+    if num_workers == 1:
         return VectorMatchEnv(scenario, num_envs, seed, **kwargs)
     return SubprocVectorMatchEnv(scenario, num_envs, seed, num_workers=num_workers, **kwargs)
 
@@ -762,6 +800,7 @@ class TankBattleVectorEnv(VectorEnv):
 
     def step(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
                                           dict[str, Any]]:
+        self.engine.check_idle("step")
         if not self._started:
             raise RuntimeError("step() before reset()")
         acts = check_actions(actions, self._shape, self._name)

@@ -100,6 +100,14 @@ def check_value(kinds: tuple[type, ...], value: Any, rng: tuple[Any, Any] | None
     return value, None
 
 
+
+def check_seed(seed: Any) -> int:
+    """``seed`` as a Python int: an integer >= 0 (numpy's too), what SeedSequence takes."""
+    value, why = check_value((int,), seed, (0, None))
+    if why:
+        raise ValueError(f"seed {why}")
+    return value
+
 _HINTS: dict[type, dict[str, Any]] = {}
 
 

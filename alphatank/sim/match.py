@@ -15,7 +15,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from alphatank.sim.config import GameConfig
+from alphatank.sim.config import GameConfig, check_seed
 from alphatank.sim.grid import floor_areas
 from alphatank.sim.mapspec import MapError, MapSpec
 from alphatank.sim.world import World
@@ -127,8 +127,9 @@ class Match:
     # ---- set-up ---------------------------------------------------------------------
 
     def reset(self, seed: int | None = None) -> None:
-        """Start a new episode: new spawns, zones and world from the seeded generator."""
-        self.rng = np.random.default_rng(seed)
+        """Start a new episode: new spawns, zones and world from the generator seeded
+        with ``seed`` (an integer >= 0; None: fresh entropy)."""
+        self.rng = np.random.default_rng(None if seed is None else check_seed(seed))
         spec, n = self.spec, self.n
         spawn_cells = self._spawn_cells()
         taken = set(spawn_cells)
