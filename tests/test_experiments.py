@@ -523,3 +523,17 @@ def test_the_wandb_mode_leaves_the_run_digests_alone(tmp_path):
     plans = [make_plan(tables, tmp_path / "out", wandb=mode) for mode in ("disabled", "offline")]
     assert [j.key for j in plans[0].jobs] == [j.key for j in plans[1].jobs]
     assert plans[1].jobs[0].cfg["wandb"] == "offline"  # the run still logs in that mode
+
+
+def test_the_wandb_project_and_tensorboard_leave_the_run_digests_alone(tmp_path):
+    """Where a row's metrics are logged is not what its run does: a row that only logs
+    elsewhere shares the finished run (shipped digests stay: the defaults are hashed)."""
+    root = write_rows(tmp_path / "exp")
+    row = root / "tiny" / "a_random.toml"
+    plain = make_plan(load_tables(["tiny"], root), tmp_path / "out", rows=["a_random"])
+    row.write_text(row.read_text().replace('num_envs = 4',
+                                           'num_envs = 4\nproject = "elsewhere"\n'
+                                           'tensorboard = true'))
+    logged = make_plan(load_tables(["tiny"], root), tmp_path / "out", rows=["a_random"])
+    assert [j.key for j in logged.jobs] == [j.key for j in plain.jobs]
+    assert logged.jobs[0].cfg["project"] == "elsewhere" and logged.jobs[0].cfg["tensorboard"]

@@ -499,14 +499,15 @@ def digest(obj: Any) -> str:
 # it was, so result folders made before them still resume and report (learner, run)
 LATER_SETTINGS = {"anchor_kl": 0.0}
 LATER_RUN_SETTINGS = {"action_repeat": 1}
-# how a run is watched, not what it does: hashed at the value runs were made with before
-# (the --wandb default), so a finished run counts whatever mode the next command logs in
-LOGGING_SETTINGS = {"wandb": "disabled"}
+# how a run is watched, not what it does: hashed at the values runs were made with before
+# (the --wandb default, the run-file defaults), so a finished run counts whatever mode,
+# wandb project or TensorBoard setting the next command logs with
+LOGGING_SETTINGS = {"wandb": "disabled", "project": "alphatank", "tensorboard": False}
 
 
 def run_digest(cfg: TrainConfig, scenarios: Sequence[str]) -> str:
-    """Hash of what a run does (its settings without the name and the logging mode, and
-    its scenario mix)."""
+    """Hash of what a run does (its settings without the name and where its metrics are
+    logged, and its scenario mix)."""
     data = {**cfg.to_dict(), **LOGGING_SETTINGS}
     data.pop("name")
     for key, off in LATER_RUN_SETTINGS.items():
