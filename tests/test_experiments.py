@@ -496,6 +496,12 @@ def test_a_rows_run_observation_and_imitate_are_checked_when_it_is_planned(tmp_p
     ('[run]\nmap = "nosuchmap"\n', "run: map: unknown map 'nosuchmap'"),
     ('[run]\nscenario = "nosuch"\n', "run: scenario: unknown scenario 'nosuch'"),
     ('scenarios = [1, 2]\n', "scenarios[0]: needs a scenario name or path (a string), got 1"),
+    ('[run]\ninit_from = "agent:nobody"\n', "run: init_from: unknown agent 'nobody'"),
+    ('[run]\ninit_from = "no_such_run"\n',
+     "run: init_from: no_such_run: no such checkpoint or run directory"),
+    ('[run]\ninit_from = "agent:ppo_vs_smart"\n[[run.learners]]\nname = "s"\nalgo = "sac"\n',
+     "run: init_from: a warm start fills PPO and MAPPO learners; this run's [('s', 'sac')] "
+     "take none"),
 ])
 def test_a_rows_run_is_checked_as_train_checks_a_run_file_when_it_is_planned(
         tmp_path, capsys, text, message):
@@ -537,3 +543,17 @@ def test_the_wandb_project_and_tensorboard_leave_the_run_digests_alone(tmp_path)
     logged = make_plan(load_tables(["tiny"], root), tmp_path / "out", rows=["a_random"])
     assert [j.key for j in logged.jobs] == [j.key for j in plain.jobs]
     assert logged.jobs[0].cfg["project"] == "elsewhere" and logged.jobs[0].cfg["tensorboard"]
+
+
+def test_a_rows_damaged_init_from_is_refused_when_planned(tmp_path, capsys):
+    """A run folder whose ``latest`` points at no save: refused by --list, naming the row's
+    file, not when the row starts training."""
+    run = tmp_path / "warm"
+    run.mkdir()
+    (run / "latest").write_text("step_64\n")
+    root = write_rows(tmp_path / "exp")
+    (root / "tiny" / "c_bad.toml").write_text(f'preset = "demo"\n[run]\ninit_from = "{run}"\n')
+    assert cli("tiny", "--experiments-dir", str(root), "--list") == 2
+    err = capsys.readouterr().err
+    assert f"experiments/tiny/c_bad.toml: run: init_from: {run / 'latest'}: points at " in err
+    assert err.count("\n") == 1, err

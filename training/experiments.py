@@ -49,6 +49,7 @@ from alphatank.files import FolderLock, write_text_atomic
 from alphatank.sim.config import GameConfig, from_dict
 from alphatank.training.presets import (
     TrainConfig,
+    check_init_from,
     check_run_fields,
     get_preset,
     parse_hp,
@@ -467,6 +468,8 @@ def row_config(row: Row, seed: int, budget_min: float, steps: int | None = None,
         # teachers may be runs not trained yet (row:NAME): the plan checks those
         check_run_fields(dataclasses.replace(cfg, imitate={
             k: v for k, v in cfg.imitate.items() if k != "teachers"}), sc, where)
+        if cfg.init_from:
+            check_init_from(cfg, f"{where}: init_from")
         if row.hp:
             cfg = with_hp(cfg, parse_hp([("hp", ",".join(row.hp))]), len(sc.learner_seats))
     except ValueError as exc:

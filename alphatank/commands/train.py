@@ -24,6 +24,7 @@ from alphatank.training.presets import (
     CYCLE_INTERVAL,
     WANDB_MODES,
     TrainConfig,
+    check_init_from,
     check_run_fields,
     default_learners,
     get_preset,
@@ -231,16 +232,6 @@ def _stretched(saved: TrainConfig, cfg: TrainConfig) -> list[str]:
     return out
 
 
-def _check_init_from(spec: str, label: str) -> None:
-    """ValueError ``label: problem`` unless ``spec`` names a checkpoint to warm-start from."""
-    from alphatank.game.seats import checkpoint_source
-    from alphatank.training.checkpoint import CheckpointError, resolve_checkpoint_dir
-    try:
-        resolve_checkpoint_dir(checkpoint_source(spec))
-    except (CheckpointError, ValueError) as exc:
-        raise ValueError(f"{label}: {exc}") from None
-
-
 def build_run(args: argparse.Namespace) -> TrainConfig:
     """The TrainConfig a new run's flags describe; ValueError (one line) on bad input."""
     if args.config and args.preset:
@@ -266,10 +257,7 @@ def build_run(args: argparse.Namespace) -> TrainConfig:
         except FieldError as exc:
             raise ValueError(f"--action-repeat: {exc.problem}") from None
     if args.init_from is not None:
-        _check_init_from(args.init_from, "--init-from")
         cfg = dataclasses.replace(cfg, init_from=args.init_from)
-    elif cfg.init_from:
-        _check_init_from(cfg.init_from, f"{source}: init_from")
     try:
         sc = run_scenario(cfg)
     except ValueError as exc:
@@ -292,12 +280,8 @@ def build_run(args: argparse.Namespace) -> TrainConfig:
     cfg = dataclasses.replace(cfg, schedule=schedule)
     check_run_fields(cfg, sc, source, "--scenario" if args.scenario is not None else None)
     if cfg.init_from:
-        from alphatank.training.warmstart import WARM_STARTED
-        if not any(s.algo in WARM_STARTED for s in cfg.learners):
-            label = "--init-from" if args.init_from is not None else f"{source}: init_from"
-            raise ValueError(f"{label}: a warm start fills "
-                             f"{' and '.join(a.upper() for a in WARM_STARTED)} learners; this "
-                             f"run's {[(s.name, s.algo) for s in cfg.learners]} take none")
+        check_init_from(cfg, "--init-from" if args.init_from is not None
+                        else f"{source}: init_from")
     from alphatank.training.schedules import make_schedule
     try:
         make_schedule(cfg.schedule, cfg.total_steps)
