@@ -496,6 +496,15 @@ def test_a_rows_run_observation_and_imitate_are_checked_when_it_is_planned(tmp_p
     ('[run]\nmap = "nosuchmap"\n', "run: map: unknown map 'nosuchmap'"),
     ('[run]\nscenario = "nosuch"\n', "run: scenario: unknown scenario 'nosuch'"),
     ('scenarios = [1, 2]\n', "scenarios[0]: needs a scenario name or path (a string), got 1"),
+    # every scenario of a mix, not only the first: learners, schedule and [game] ranges
+    ('scenarios = ["vs_random", "pair"]\n',
+     "scenarios[1]: run: learners [('ppo', [0])] do not drive each of the 2 learner seat(s) "
+     "of scenario 'pair' exactly once"),
+    ('scenarios = ["vs_random", "vs_smart", "vs_agent"]\n[run.schedule]\nkind = "curriculum"\n',
+     "scenarios[2]: run: schedule: the curriculum schedule needs bot seats; scenario "
+     "'vs_agent' has none"),
+    ('scenarios = ["vs_dodge", "vs_random"]\n[run.game]\ntank_speed = 500.0\n',
+     "scenarios[1]: run: [game].bullet_speed: (300) must exceed tank_speed (500)"),
     ('[run]\ninit_from = "agent:nobody"\n', "run: init_from: unknown agent 'nobody'"),
     ('[run]\ninit_from = "no_such_run"\n',
      "run: init_from: no_such_run: no such checkpoint or run directory"),

@@ -466,8 +466,13 @@ def row_config(row: Row, seed: int, budget_min: float, steps: int | None = None,
         where = f"{row.source}: run"
         sc = _run_scenario(cfg, where)
         # teachers may be runs not trained yet (row:NAME): the plan checks those
-        check_run_fields(dataclasses.replace(cfg, imitate={
-            k: v for k, v in cfg.imitate.items() if k != "teachers"}), sc, where)
+        checked = dataclasses.replace(cfg, imitate={
+            k: v for k, v in cfg.imitate.items() if k != "teachers"})
+        check_run_fields(checked, sc, where)
+        for k, name in enumerate(row.scenarios[1:], 1):  # the others of a mix, each in turn
+            at = f"{row.source}: scenarios[{k}]"
+            other = _run_scenario(dataclasses.replace(cfg, scenario=name), f"{at}: run")
+            check_run_fields(checked, other, f"{at}: run", at)
         if cfg.init_from:
             check_init_from(cfg, f"{where}: init_from")
         if row.hp:
