@@ -49,7 +49,6 @@ from alphatank.files import FolderLock, write_text_atomic
 from alphatank.sim.config import GameConfig, from_dict
 from alphatank.training.presets import (
     TrainConfig,
-    check_init_from,
     check_run_fields,
     get_preset,
     parse_hp,
@@ -474,6 +473,7 @@ def row_config(row: Row, seed: int, budget_min: float, steps: int | None = None,
             other = _run_scenario(dataclasses.replace(cfg, scenario=name), f"{at}: run")
             check_run_fields(checked, other, f"{at}: run", at)
         if cfg.init_from:
+            from alphatank.training.warmstart import check_init_from
             check_init_from(cfg, f"{where}: init_from")
         if row.hp:
             cfg = with_hp(cfg, parse_hp([("hp", ",".join(row.hp))]), len(sc.learner_seats))

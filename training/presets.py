@@ -396,23 +396,6 @@ def check_run_fields(cfg: TrainConfig, sc: Any, source: str, where: str | None =
     sc.reward_config(where=f"{source}: [rewards]", **cfg.rewards)
 
 
-def check_init_from(cfg: TrainConfig, label: str) -> None:
-    """ValueError ``label: problem`` unless the run's ``init_from`` names a checkpoint to
-    warm-start from and the run has a learner that a warm start fills."""
-    from alphatank.game.seats import checkpoint_source
-    from alphatank.training.checkpoint import CheckpointError, resolve_checkpoint_dir
-    from alphatank.training.warmstart import WARM_STARTED
-
-    try:
-        resolve_checkpoint_dir(checkpoint_source(cfg.init_from))
-    except (CheckpointError, ValueError) as exc:
-        raise ValueError(f"{label}: {exc}") from None
-    if not any(s.algo in WARM_STARTED for s in cfg.learners):
-        raise ValueError(f"{label}: a warm start fills "
-                         f"{' and '.join(a.upper() for a in WARM_STARTED)} learners; this "
-                         f"run's {[(s.name, s.algo) for s in cfg.learners]} take none")
-
-
 def parse_run(data: dict[str, Any], source: str, base: Path | None = None,
               name: str | None = None) -> TrainConfig:
     """A :class:`TrainConfig` from a run file's mapping. ``name`` is the default run name

@@ -37,6 +37,7 @@ import numpy as np
 import torch
 
 from alphatank.game.observe import ObservationBuilder, ObsLayout, StateBatch
+from alphatank.training.presets import TrainConfig
 
 _TANK = re.compile(r"^tank\[(\d+)\]\.(.+)$")
 # Other-tank order of the kinds that map onto each other (they differ in the path fields
@@ -116,6 +117,22 @@ def _copy_mlp(dst: torch.nn.Sequential, prefix: str, net: dict[str, torch.Tensor
 
 
 WARM_STARTED = ("ppo", "mappo")  # the algorithms a warm start can fill
+
+
+def check_init_from(cfg: TrainConfig, label: str) -> None:
+    """ValueError ``label: problem`` unless the run's ``init_from`` names a checkpoint to
+    warm-start from and the run has a learner that a warm start fills."""
+    from alphatank.game.seats import checkpoint_source
+    from alphatank.training.checkpoint import CheckpointError, resolve_checkpoint_dir
+
+    try:
+        resolve_checkpoint_dir(checkpoint_source(cfg.init_from))
+    except (CheckpointError, ValueError) as exc:
+        raise ValueError(f"{label}: {exc}") from None
+    if not any(s.algo in WARM_STARTED for s in cfg.learners):
+        raise ValueError(f"{label}: a warm start fills "
+                         f"{' and '.join(a.upper() for a in WARM_STARTED)} learners; this "
+                         f"run's {[(s.name, s.algo) for s in cfg.learners]} take none")
 
 
 def warm_start(learner: Any, src_state: dict[str, Any], src_layout: ObsLayout,

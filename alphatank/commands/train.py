@@ -24,7 +24,6 @@ from alphatank.training.presets import (
     CYCLE_INTERVAL,
     WANDB_MODES,
     TrainConfig,
-    check_init_from,
     check_run_fields,
     default_learners,
     get_preset,
@@ -280,6 +279,7 @@ def build_run(args: argparse.Namespace) -> TrainConfig:
     cfg = dataclasses.replace(cfg, schedule=schedule)
     check_run_fields(cfg, sc, source, "--scenario" if args.scenario is not None else None)
     if cfg.init_from:
+        from alphatank.training.warmstart import check_init_from
         check_init_from(cfg, "--init-from" if args.init_from is not None
                         else f"{source}: init_from")
     from alphatank.training.schedules import make_schedule
