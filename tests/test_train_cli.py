@@ -183,3 +183,47 @@ def test_a_scenario_seat_that_does_not_fit_is_refused_before_the_run_folder(caps
                               "(agent:ppo_vs_smart) does not fit: "), err
         assert why in err and err.count("\n") == 1, err
         assert not any(runs.glob("*"))
+
+
+def test_self_play_and_league_runs_skip_the_fit_of_seats_they_fill(capsys, tmp_path):
+    """Self-play and a league put their own opponents in every seat no learner drives: an
+    agent seat that does not fit (trained for 2 tanks, in a 4-tank match; trained in a
+    team of 2, in a team of 3) never plays, so those runs start; a plain run of the same
+    scenario, or a league run that evaluates against the scenario's own seats, is still
+    refused naming the seat."""
+    learner, bot = 'controller = "learner"\n', 'controller = "bot"\nbot = "smart"\n'
+    for name, *seats in (("four", ("A", learner), ("A", bot), ("B", learner),
+                          ("B", 'controller = "agent"\nagent = "ppo_vs_smart"\n')),
+                         ("teams", ("A", learner), ("B", learner), ("B", bot),
+                          ("B", 'controller = "agent"\nagent = "team_vs_2smart"\n'))):
+        (tmp_path / f"{name}.toml").write_text(f'name = "{name}"\nmap = "arena4"\n' + "".join(
+            f'[[seats]]\nteam = "{team}"\n{kind}' for team, kind in seats))
+    run = ('scenario = "{scenario}"\nobservation = "egocentric"\nnum_envs = 2\n'
+           'total_steps = 64\ncheckpoint_every = 0\nwandb = "disabled"\n'
+           'game = {{ max_steps = 30 }}\n{extra}\n'
+           '[[learners]]\nname = "ppo"\nseats = {seats}\n'
+           '[learners.config]\nnum_steps = 32\nupdate_epochs = 1\n')
+    league = '[schedule]\nkind = "league"\nbots = ["random"]\nweaknesses = [1.0]\nsnapshots = 0\n'
+    for name, scenario, agent, extra, seats, rc in (
+            ("selfplay", "four", "ppo_vs_smart", "[selfplay]\nwindow = 2\nevery = 64\n", "[0]", 0),
+            ("league", "four", "ppo_vs_smart", league, "[0, 1]", 0),
+            ("plain", "four", "ppo_vs_smart", "", "[0, 1]", 2),
+            ("league_eval", "four", "ppo_vs_smart", "eval_every = 1\n" + league, "[0, 1]", 2),
+            ("league_teams", "teams", "team_vs_2smart", league, "[0, 1]", 0),
+            ("plain_teams", "teams", "team_vs_2smart", "", "[0, 1]", 2)):
+        path = tmp_path / f"{name}.toml"
+        sc_path = tmp_path / f"{scenario}.toml"
+        path.write_text(run.format(scenario=sc_path, extra=extra, seats=seats))
+        runs = tmp_path / f"runs_{name}"
+        assert main(["train", "--config", str(path), "--runs", str(runs),
+                     "--no-progress"]) == rc, name
+        err = capsys.readouterr().err
+        if rc:
+            assert err.startswith(f"alphatank train: error: {sc_path}: seats[3] "
+                                  f"(agent:{agent}) does not fit: "), err
+            assert err.count("\n") == 1 and not any(runs.glob("*")), err
+            if scenario == "teams":
+                assert "plays in a team of 3 against a team of 1; it trained in a team of 2" \
+                    in err, err
+        else:
+            assert load_checkpoint(runs / name).meta["progress"]["global_step"] >= 64, name

@@ -58,6 +58,7 @@ class LeagueSchedule(OpponentSchedule):
     """PFSP over bots and snapshots (see the module docstring)."""
 
     kind = "league"
+    fills_seats = True
 
     def __init__(self, bots: Sequence[str] = DEFAULT_BOTS,
                  weaknesses: Sequence[float] = (0.25, 0.5, 1.0),

@@ -221,9 +221,14 @@ class Trainer:
         if cfg.video_every:
             require("video", "training videos (video_every)")
         # a scenario's checkpoint or agent seat that does not fit its maps would fail at
-        # the first reset (in a worker process, after the run folder was made)
-        for sc in getattr(env, "scenarios", [self.scenario]):
-            check_seats_fit(sc, cfg.game)
+        # the first reset (in a worker process, after the run folder was made); self-play
+        # and a league put their own opponents in every seat no learner drives, and then
+        # only a cloning, evaluations and videos meet the scenario's own
+        self.schedule = make_schedule(cfg.schedule, cfg.total_steps, cfg.seed)
+        if not (cfg.selfplay or self.schedule.fills_seats) or cfg.imitate \
+                or cfg.eval_every or cfg.video_every:
+            for sc in getattr(env, "scenarios", [self.scenario]):
+                check_seats_fit(sc, cfg.game)
         self.E, self.L, self.D = env.num_envs, env.num_learners, env.obs_dim
         mask_dim = int(ACTION_NVEC.sum()) if self.action_mask is not None else 0
         supplied = getattr(env, "input_shapes", {})
@@ -259,7 +264,6 @@ class Trainer:
                           if layout is not None and "self.alive" in layout else None)
         self.victory = (env.core.reward_cfg.victory if hasattr(env, "core")
                         else self.scenario.reward_config(**cfg.rewards).victory)
-        self.schedule = make_schedule(cfg.schedule, cfg.total_steps, cfg.seed)
         self.schedule.check(self.scenario, env)
         game = self.scenario.game_config(**cfg.game)
         walls, buffs, debuffs = slot_counts(game, self.scenario.map_specs())

@@ -45,6 +45,9 @@ class OpponentSchedule:
     """No schedule: the scenario's opponents, unchanged. Base class of the others."""
 
     kind = "none"
+    # names every env's opponent (set_env_opponents), which fills every seat no learner
+    # drives: the scenario's own opponents never play in its games
+    fills_seats = False
 
     def apply(self, env: ScheduledEnv, step: int) -> dict[str, float]:
         """Push the setting for env step ``step`` to ``env``; returns metrics to log."""
