@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from alphatank.commands.argtypes import positive_int
+from alphatank.commands.argtypes import match_count, positive_int
 from alphatank.commands.benchfloor import find_floor, floor_us_per_tick
 from alphatank.commands.benchsoak import DEFAULT_SOAK_SCENARIOS, min_soak_steps, soak
 from alphatank.errors import InputError, one_line
@@ -52,7 +52,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="preset of --train (default: ppo_vs_smart, 128-step x 4-epoch PPO)")
     p.add_argument("--train-workers", type=positive_int, default=2, metavar="N",
                    help="env worker processes of --train (default: 2)")
-    p.add_argument("--train-envs", type=positive_int, default=32, metavar="N",
+    p.add_argument("--train-envs", type=match_count, default=32, metavar="N",
                    help="matches stepped together in --train (default: 32)")
     p.add_argument("--train-fragments", action="store_true",
                    help="--train with the workers acting whole rollouts (train --fragments)")
