@@ -106,6 +106,29 @@ def _check_nearest(folder: Path, path: str | Path, label: str) -> None:
         raise InputError(f"{label}: {path}: {existing} is not writable")
 
 
+def missing_folders(path: str | Path) -> list[Path]:
+    """``path`` and its parent folders that do not exist yet, deepest first: what making
+    ``path`` would create, for :func:`remove_empty_folders` to undo when a job fails."""
+    missing = []
+    for folder in (Path(path).absolute(), *Path(path).absolute().parents):
+        if folder.exists():
+            break
+        missing.append(folder)
+    return missing
+
+
+def remove_empty_folders(folders: list[Path]) -> None:
+    """Remove those of ``folders`` (deepest first, as :func:`missing_folders` lists them)
+    that are empty; one that holds anything is kept, and so are the folders above it."""
+    for folder in folders:
+        try:
+            folder.rmdir()
+        except FileNotFoundError:
+            continue  # never made
+        except OSError:
+            return  # holds a file (or cannot be removed)
+
+
 def replace_into(tmp: str | Path, path: str | Path) -> None:
     """Finish an atomic write: ``os.replace`` the complete temporary file ``tmp`` onto
     ``path``, its symbolic links resolved (a rename onto a link would put a file in the

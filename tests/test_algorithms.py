@@ -141,6 +141,17 @@ def test_an_env_without_the_input_is_refused(probe_algo, tmp_path):
         Trainer(cfg, tmp_path / "x", env=VectorMatchEnv("vs_aggressive", 2), progress=False)
 
 
+def test_a_trainer_that_fails_to_start_releases_its_folder(tmp_path):
+    """Learners that do not fit the scenario, refused after the run locked its folder: the
+    lock is released and the folders the run made are removed (the --runs folder and its
+    lock file were left behind)."""
+    cfg = TrainConfig("x", "vs_aggressive", total_steps=64, num_envs=2, wandb="disabled",
+                      learners=(LearnerSpec("a", "ppo", (0,)), LearnerSpec("b", "ppo", (0,))))
+    with pytest.raises(ValueError, match="seats exactly once; they drive"):
+        Trainer(cfg, tmp_path / "runs" / "x", progress=False)
+    assert not any(tmp_path.iterdir())
+
+
 def test_env_inputs_match_in_process_and_worker_envs():
     kw = {"game_overrides": {"max_steps": 20}, "inputs": ("alive",)}
     envs = [make_vector_env("team_vs_bot", 4, seed=5, num_workers=w, **kw) for w in (1, 2)]

@@ -66,6 +66,23 @@ def test_benchenv_refuses_bad_settings_in_one_line(argv, want):
     assert proc.stderr.count("\n") == 1 and want in proc.stderr, proc.stderr
 
 
+@pytest.mark.parametrize(("argv", "want"), [
+    (["--workers", "0"], "argument --workers: must be an integer >= 1, got '0'"),
+    (["--num-envs", "5000"], "argument --num-envs: must be an integer in [1, "),
+    (["--rounds", "x"], "argument --rounds: must be an integer >= 1, got 'x'"),
+    (["--torch-threads", "0"], "argument --torch-threads: must be an integer >= 1, got '0'"),
+    (["--preset", "nope"], "--preset nope: unknown training preset 'nope'"),
+], ids=["workers", "num-envs", "rounds", "torch-threads", "preset"])
+def test_benchtrain_refuses_bad_settings_in_one_line(argv, want):
+    """`python -m alphatank.commands.benchtrain --train` takes the flags' types of
+    `alphatank bench --train`: a bad value is one line naming the flag, exit 2, nothing
+    measured (0 workers or threads ended in tracebacks)."""
+    proc = subprocess.run([sys.executable, "-m", "alphatank.commands.benchtrain", "--train",
+                           *argv], capture_output=True, text=True, timeout=300)
+    assert (proc.returncode, proc.stdout) == (2, "")
+    assert proc.stderr.count("\n") == 1 and want in proc.stderr, proc.stderr
+
+
 def test_benchenv_with_one_process_leaves_the_worker_columns_blank(capsys):
     """--workers 1 skips the worker variants: their columns read '-' (they read 0), and
     a run shorter than the warm-up's 10 steps works."""

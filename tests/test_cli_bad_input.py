@@ -235,6 +235,8 @@ CASES = [
     ("bench-json-folder", ["bench", "--json", "{dir}"], ["--json", "is a folder"]),
     ("bench-ticks", ["bench", "--ticks", "many"], ["--ticks", "integer >= 1", "'many'"]),
     ("bench-preset", ["bench", "--preset", "fast"], ["unknown preset 'fast'", "long_range"]),
+    ("bench-train-envs", ["bench", "--train", "--train-envs", "5000"],
+     ["argument --train-envs", "integer in [1, 4096]", "'5000'"]),
     ("bench-soak-scn", ["bench", "--soak", "--scenarios", "nosuch"],
      ["nosuch", "shipped scenarios"]),
     ("bench-soak-bots", ["bench", "--soak", "--scenarios", "bot_teams"],

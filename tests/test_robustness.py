@@ -13,10 +13,12 @@ import numpy as np
 import pytest
 
 from alphatank.commands.benchsoak import (
+    SoakError,
     SoakResult,
     heap_mb,
     min_soak_steps,
     slope_per_million,
+    soak,
     soak_scenario,
 )
 from alphatank.errors import InputError
@@ -369,6 +371,17 @@ def test_min_soak_steps_is_the_shortest_soak_that_measures():
         assert soak_scenario("vs_random", need, every=every).measured
         assert not soak_scenario("vs_random", need - 1, every=every).measured
     assert min_soak_steps(10_000) == 10_001
+
+
+def test_soak_refuses_too_few_steps_before_running(capsys):
+    """soak() from Python with too few steps to measure a growth: an InputError naming
+    the arguments, before anything runs (it ran them and reported 'soak FAILED')."""
+    with pytest.raises(SoakError, match=r"^steps must be >= 10001 with every 10000 and 1 "
+                                        r"scenario\(s\) \(each needs .*\), got 3000$"):
+        soak(["vs_random"], 3000)
+    assert issubclass(SoakError, InputError) and capsys.readouterr().out == ""
+    with pytest.raises(SoakError, match=r"^steps must be >= 12 with every 5 and 2 scenario"):
+        soak(["vs_random", "team"], 5, every=5, verbose=False)
 
 
 def test_a_short_soak_cannot_fail_on_a_page_of_noise():

@@ -182,7 +182,26 @@ def test_a_scenario_seat_that_does_not_fit_is_refused_before_the_run_folder(caps
         assert err.startswith(f"alphatank train: error: {scenario}: seats[1] "
                               "(agent:ppo_vs_smart) does not fit: "), err
         assert why in err and err.count("\n") == 1, err
-        assert not any(runs.glob("*"))
+        assert not runs.exists()  # the --runs folder the run made is removed again
+
+
+def test_a_run_that_fails_to_start_removes_only_the_folders_it_made(capsys, tmp_path):
+    """An error while the trainer is made, after it locked the run's folder (here SAC with
+    --fragments, refused once its env is made): the --runs folders the run made are removed
+    again (they were left behind, empty); a --runs folder that was there before stays."""
+    argv = ["train", "--preset", "sac_vs_aggressive", "--fragments", "--num-envs", "2",
+            "--workers", "1", "--total-steps", "512", "--wandb", "disabled", "--no-progress"]
+    assert main([*argv, "--runs", str(tmp_path / "new" / "runs")]) == 2
+    err = capsys.readouterr().err
+    assert "fragments are acted by PPO and MAPPO learners only" in err and err.count("\n") == 1
+    assert not any(tmp_path.iterdir())
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "full").mkdir()
+    (tmp_path / "full" / "notes.txt").write_text("mine")
+    for runs in ("empty", "full"):
+        assert main([*argv, "--runs", str(tmp_path / runs)]) == 2
+    assert sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*")) == [
+        "empty", "full", "full/notes.txt"]
 
 
 def test_self_play_and_league_runs_skip_the_fit_of_seats_they_fill(capsys, tmp_path):

@@ -52,7 +52,7 @@ from alphatank.envs.ray_vector import RolloutLost
 from alphatank.envs.vector import make_vector_env
 from alphatank.errors import InputError
 from alphatank.extras import require
-from alphatank.files import FolderLock
+from alphatank.files import FolderLock, missing_folders, remove_empty_folders
 from alphatank.game.lineup import check_seats_fit
 from alphatank.game.observe import slot_counts
 from alphatank.game.scenarios import Scenario
@@ -163,57 +163,59 @@ class Trainer:
             raise InputError(f"{self.run_dir} already holds a run; continue it with "
                              f"resume_trainer({str(self.run_dir)!r}) or give another folder")
         # one process at a time writes a run (BusyError otherwise), until train() ends
+        made = missing_folders(self.run_dir)  # removed again if the run does not start
         self.lock = FolderLock(self.run_dir).acquire()
-        self.progress = progress
-        limit_threads(cfg.torch_threads)
-        # an injected env brings its own scenario (tests use custom maps); a resumed run
-        # uses the one saved in its checkpoint
-        self.scenario: Scenario = (scenario or getattr(env, "scenario", None)
-                                   or run_scenario(cfg))
-        n_learners = len(self.scenario.learner_seats)
-        self.specs = specs = list(run_learners(cfg, n_learners))
-        if not learners_fit(specs, n_learners, selfplay=bool(cfg.selfplay)):
-            owned = sorted(s for spec in specs for s in spec.seats)
-            if cfg.selfplay:
-                raise ValueError(f"self-play: learners must drive some of the scenario's "
-                                 f"{n_learners} learner seats at most once and leave the "
-                                 f"others to the snapshot pool; they drive {owned}")
-            raise ValueError(f"learners must drive each of the scenario's {n_learners} learner "
-                             f"seats exactly once; they drive {owned} "
-                             f"({[(s.name, list(s.seats)) for s in specs]})")
-        # env columns: the learner seats the learners drive (all of them without self-play),
-        # each learner's columns in ascending seat order (MAPPO's seat ids follow it)
-        driven = sorted(s for spec in specs for s in spec.seats)
-        self.cols = {spec.name: [driven.index(s) for s in sorted(spec.seats)] for spec in specs}
-        # extra per-stream inputs the learners need from the env (Learner.inputs)
-        self.inputs = sorted({x for spec in specs for x in learner_class(spec.algo).inputs})
-        extra: dict[str, Any] = {"inputs": self.inputs} if self.inputs else {}
-        if cfg.action_repeat != 1:
-            extra["action_repeat"] = cfg.action_repeat
-        if cfg.selfplay:
-            extra["learner_seats"] = [self.scenario.learner_seats[s] for s in driven]
-        if env is not None:
-            self.env = env
-        elif env_runners:  # env shards in Ray actors: the same results as that many workers
-            from alphatank.envs.ray_vector import RayVectorMatchEnv
-            self.env = RayVectorMatchEnv(
-                self.scenario, cfg.num_envs, seed=cfg.seed, num_runners=env_runners,
-                step_timeout_s=env_runner_timeout_s, observation=cfg.observation,
-                game_overrides=cfg.game or None, reward_overrides=cfg.rewards or None, **extra)
-        else:
-            self.env = make_vector_env(
-                self.scenario, cfg.num_envs, seed=cfg.seed, num_workers=cfg.num_workers,
-                observation=cfg.observation, game_overrides=cfg.game or None,
-                reward_overrides=cfg.rewards or None, **extra)
-        self.fragments = fragments or overlap
-        self.overlap = overlap
-        self.ahead: dict[str, float] | None = None  # schedule metrics of a rollout in flight
         try:
+            self.progress = progress
+            limit_threads(cfg.torch_threads)
+            # an injected env brings its own scenario (tests use custom maps); a resumed run
+            # uses the one saved in its checkpoint
+            self.scenario: Scenario = (scenario or getattr(env, "scenario", None)
+                                       or run_scenario(cfg))
+            n_learners = len(self.scenario.learner_seats)
+            self.specs = specs = list(run_learners(cfg, n_learners))
+            if not learners_fit(specs, n_learners, selfplay=bool(cfg.selfplay)):
+                owned = sorted(s for spec in specs for s in spec.seats)
+                if cfg.selfplay:
+                    raise ValueError(f"self-play: learners must drive some of the scenario's "
+                                     f"{n_learners} learner seats at most once and leave the "
+                                     f"others to the snapshot pool; they drive {owned}")
+                raise ValueError(f"learners must drive each of the scenario's {n_learners} learner "
+                                 f"seats exactly once; they drive {owned} "
+                                 f"({[(s.name, list(s.seats)) for s in specs]})")
+            # env columns: the learner seats the learners drive (all of them without self-play),
+            # each learner's columns in ascending seat order (MAPPO's seat ids follow it)
+            driven = sorted(s for spec in specs for s in spec.seats)
+            self.cols = {spec.name: [driven.index(s) for s in sorted(spec.seats)] for spec in specs}
+            # extra per-stream inputs the learners need from the env (Learner.inputs)
+            self.inputs = sorted({x for spec in specs for x in learner_class(spec.algo).inputs})
+            extra: dict[str, Any] = {"inputs": self.inputs} if self.inputs else {}
+            if cfg.action_repeat != 1:
+                extra["action_repeat"] = cfg.action_repeat
+            if cfg.selfplay:
+                extra["learner_seats"] = [self.scenario.learner_seats[s] for s in driven]
+            if env is not None:
+                self.env = env
+            elif env_runners:  # env shards in Ray actors: the same results as that many workers
+                from alphatank.envs.ray_vector import RayVectorMatchEnv
+                self.env = RayVectorMatchEnv(
+                    self.scenario, cfg.num_envs, seed=cfg.seed, num_runners=env_runners,
+                    step_timeout_s=env_runner_timeout_s, observation=cfg.observation,
+                    game_overrides=cfg.game or None, reward_overrides=cfg.rewards or None, **extra)
+            else:
+                self.env = make_vector_env(
+                    self.scenario, cfg.num_envs, seed=cfg.seed, num_workers=cfg.num_workers,
+                    observation=cfg.observation, game_overrides=cfg.game or None,
+                    reward_overrides=cfg.rewards or None, **extra)
+            self.fragments = fragments or overlap
+            self.overlap = overlap
+            self.ahead: dict[str, float] | None = None  # schedule metrics of a rollout in flight
             self._setup(specs, resume, wandb_id)
         except BaseException:
-            if env is None:  # do not leave worker processes behind
+            if env is None and hasattr(self, "env"):  # do not leave worker processes behind
                 self.env.close()
             self.lock.release()
+            remove_empty_folders(made)
             raise
 
     def _setup(self, specs: list, resume: Checkpoint | None, wandb_id: str | None) -> None:

@@ -17,9 +17,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from alphatank.commands.argtypes import positive_int
+from alphatank.commands.argtypes import match_count, positive_int
 from alphatank.commands.benchfloor import find_floor, floor_us_per_tick
-from alphatank.commands.benchsoak import DEFAULT_SOAK_SCENARIOS, min_soak_steps, soak
+from alphatank.commands.benchsoak import DEFAULT_SOAK_SCENARIOS, check_soak_steps, soak
 from alphatank.errors import InputError, one_line
 from alphatank.files import check_writable, write_text_atomic
 from alphatank.game.scenarios import ScenarioError
@@ -52,7 +52,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="preset of --train (default: ppo_vs_smart, 128-step x 4-epoch PPO)")
     p.add_argument("--train-workers", type=positive_int, default=2, metavar="N",
                    help="env worker processes of --train (default: 2)")
-    p.add_argument("--train-envs", type=positive_int, default=32, metavar="N",
+    p.add_argument("--train-envs", type=match_count, default=32, metavar="N",
                    help="matches stepped together in --train (default: 32)")
     p.add_argument("--train-fragments", action="store_true",
                    help="--train with the workers acting whole rollouts (train --fragments)")
@@ -204,12 +204,8 @@ def _soak(args: argparse.Namespace) -> int:
     for name in scenarios:
         if not load_scenario(name).learner_seats:
             raise ScenarioError(f"--scenarios: {name!r} has no learner seat to step")
-    need = min_soak_steps(args.sample_every) * len(scenarios)
-    if args.steps < need:
-        raise InputError(f"--steps must be >= {need} with --sample-every "
-                         f"{args.sample_every} and {len(scenarios)} scenario(s) (each needs "
-                         f"two memory samples after its warm-up to measure a growth), got "
-                         f"{args.steps}")
+    check_soak_steps(args.steps, args.sample_every, len(scenarios),
+                     names=("--steps", "--sample-every"))
     ok, figures = soak(scenarios, args.steps, args.sample_every)
     _write_json(args.json, figures)
     return 0 if ok else 1

@@ -11,8 +11,8 @@ share of each scenario's steps), in MB per 10^6 steps; the soak passes when RSS 
 less than ``limit_mb`` per 10^6 steps, or by less than :data:`NOISE_MB` in all after the
 warm-up (page and allocator noise, which a short soak would extrapolate to a large rate), in
 every scenario and no value was NaN or infinite. A scenario needs two samples after the
-warm-up to fit a growth (:func:`min_soak_steps`); ``alphatank bench --soak`` refuses
-fewer steps.
+warm-up to fit a growth (:func:`min_soak_steps`); :func:`soak` (and so ``alphatank bench
+--soak``) refuses fewer steps (:class:`SoakError`).
 """
 
 from __future__ import annotations
@@ -27,6 +27,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+
+from alphatank.errors import InputError
 
 DEFAULT_SOAK_SCENARIOS = ("vs_random", "vs_smart", "team")
 LIMIT_MB = 5.0  # per 10^6 steps after warm-up
@@ -76,6 +78,22 @@ def min_soak_steps(every: int, warmup: float = WARMUP) -> int:
     while (steps - 1) // every * every < int(steps * warmup):
         steps += 1
     return steps
+
+
+class SoakError(InputError, ValueError):
+    """Soak settings that cannot measure a growth (too few steps)."""
+
+
+def check_soak_steps(steps: int, every: int, scenarios: int, warmup: float = WARMUP,
+                     names: tuple[str, str] = ("steps", "every")) -> None:
+    """SoakError unless ``steps`` split over ``scenarios`` give each the
+    :func:`min_soak_steps` of samples ``every`` steps; ``names``: how the message names
+    ``steps`` and ``every`` (the command's flags)."""
+    need = min_soak_steps(every, warmup) * scenarios
+    if steps < need:
+        raise SoakError(f"{names[0]} must be >= {need} with {names[1]} {every} and "
+                        f"{scenarios} scenario(s) (each needs two memory samples after its "
+                        f"warm-up to measure a growth), got {steps}")
 
 
 def slope_per_million(steps: Sequence[float], values: Sequence[float]) -> float:
@@ -219,7 +237,9 @@ def soak(scenarios: Sequence[str] = DEFAULT_SOAK_SCENARIOS, steps: int = 1_000_0
          every: int = 10_000, warmup: float = WARMUP, seed: int = 0,
          limit_mb: float = LIMIT_MB,
          verbose: bool = True) -> tuple[bool, dict[str, Any]]:
-    """``steps`` env steps split evenly over ``scenarios``; returns (passed, figures)."""
+    """``steps`` env steps split evenly over ``scenarios``; returns (passed, figures).
+    Too few steps to measure a growth: :class:`SoakError` before anything runs."""
+    check_soak_steps(steps, every, len(scenarios), warmup)
     say = print if verbose else None
     per = max(1, steps // len(scenarios))
     if say:

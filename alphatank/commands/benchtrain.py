@@ -19,12 +19,16 @@ import argparse
 import os
 import shutil
 import statistics
+import sys
 import tempfile
 import time
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+
+from alphatank.commands.argtypes import match_count, positive_int
+from alphatank.errors import one_line
 
 DEFAULT_HP = ("ppo.update_epochs=4,ppo.num_steps=128",)  # for presets with PPO learners
 
@@ -327,17 +331,24 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--sac", action="store_true", help="SAC gradient step vs its floor, and "
                    "SAC training steps/s per update-to-data ratio")
     p.add_argument("--preset", default="ppo_vs_smart")
-    p.add_argument("--workers", type=int, default=2)
-    p.add_argument("--num-envs", type=int, default=32)
+    p.add_argument("--workers", type=positive_int, default=2)
+    p.add_argument("--num-envs", type=match_count, default=32)
     p.add_argument("--hp", action="append", default=None)
-    p.add_argument("--rounds", type=int, default=3)
-    p.add_argument("--torch-threads", type=int, default=1)
+    p.add_argument("--rounds", type=positive_int, default=3)
+    p.add_argument("--torch-threads", type=positive_int, default=1)
 
 
 def run(args: argparse.Namespace) -> int:
+    """A setting ``alphatank train`` refuses (--preset, --hp) is one line, exit 2, before
+    anything is measured."""
     if args.train:
-        TrainBench(args.preset, args.workers, args.num_envs, args.hp, args.rounds,
-                   torch_threads=args.torch_threads).measure()
+        try:
+            bench = TrainBench(args.preset, args.workers, args.num_envs, args.hp, args.rounds,
+                               torch_threads=args.torch_threads)
+        except ValueError as exc:
+            print(f"error: --preset {args.preset}: {one_line(exc)}", file=sys.stderr)
+            return 2
+        bench.measure()
     if args.sac:
         sac_step_bench()
         sac_train_bench()
@@ -345,6 +356,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 if __name__ == "__main__":
-    parser = argparse.ArgumentParser(description=__doc__)
+    from alphatank.cli import Parser  # errors in one line, exit 2
+
+    parser = Parser(description=__doc__)
     add_arguments(parser)
     raise SystemExit(run(parser.parse_args()))
