@@ -47,6 +47,22 @@ def test_shipped_agent_loads_weights_only_and_plays_its_scenario(name):
                if s.controller == "learner")
 
 
+def test_the_shipped_agents_hold_the_inference_keys_and_only_known_extras():
+    """Exported before export kept only the inference keys, the shipped agents' files also
+    hold ``updates`` (and the league agent ``anchor``), which loading ignores; nothing
+    else (the module doc names both)."""
+    extra = {}
+    for name in shipped_agents():
+        ckpt = load_checkpoint(agent_path(name))
+        for spec in ckpt.learner_specs:
+            state = torch.load(Path(agent_path(name)) / f"{spec.name}.pt", weights_only=True)
+            keys = set(learner_class(spec.algo).inference_keys)
+            assert keys <= set(state)
+            for key in set(state) - keys:
+                extra.setdefault(key, set()).add(name)
+    assert set(extra) <= {"updates", "anchor"} and extra.get("anchor", set()) <= {"league"}
+
+
 def test_an_egocentric_agent_plays_a_map_with_more_walls_than_it_trained_on():
     # ppo_cycle_full trained on battlefield and open (11 and 4 wall rectangles); maze has
     # 15. Its observation has no wall block, so it plays there; a paper agent says why not.

@@ -3,8 +3,10 @@ hyperparameters and --hp overrides, and per-opponent metrics of agent-vs-agent r
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
+import os
 import subprocess
 import sys
 
@@ -150,6 +152,33 @@ def test_a_trainer_that_fails_to_start_releases_its_folder(tmp_path):
     with pytest.raises(ValueError, match="seats exactly once; they drive"):
         Trainer(cfg, tmp_path / "runs" / "x", progress=False)
     assert not any(tmp_path.iterdir())
+
+
+def _open_files() -> set[str]:
+    """Paths of the files this process holds open (Linux: /proc/self/fd)."""
+    paths = set()
+    for fd in os.listdir("/proc/self/fd"):
+        with contextlib.suppress(OSError):  # the listing's own descriptor, closed by now
+            paths.add(os.readlink(f"/proc/self/fd/{fd}"))
+    return paths
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self/fd"), reason="needs /proc/self/fd")
+def test_a_trainer_that_fails_after_its_logger_closes_it(tmp_path):
+    """An error after the metrics logger is made (a league schedule that snapshots a run of
+    two learners, refused in schedule.bind): the logger's metrics.jsonl is closed (it stayed
+    open) and the folder's lock is released."""
+    cfg = TrainConfig("x", "team_vs_bot", total_steps=64, num_envs=2, wandb="disabled",
+                      learners=(LearnerSpec("a", "ppo", (0,)), LearnerSpec("b", "ppo", (1,))),
+                      schedule={"kind": "league"})
+    run = tmp_path / "runs" / "x"
+    with pytest.raises(ValueError, match="league snapshots need one learner") as failed:
+        Trainer(cfg, run, progress=False)
+    # the half-made trainer, and so its logger, is still reachable from the traceback
+    assert failed.traceback and str(run / "metrics.jsonl") not in _open_files()
+    # lock released (its file .x.lock removed); the run folder holds the metrics file
+    assert sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*")) == [
+        "runs", "runs/x", "runs/x/metrics.jsonl"]
 
 
 def test_env_inputs_match_in_process_and_worker_envs():

@@ -384,6 +384,18 @@ def test_soak_refuses_too_few_steps_before_running(capsys):
         soak(["vs_random", "team"], 5, every=5, verbose=False)
 
 
+@pytest.mark.parametrize("kwargs, message", [
+    ({"every": 0}, r"^every must be an integer >= 1, got 0$"),
+    ({"every": -5}, r"^every must be an integer >= 1, got -5$"),
+    ({"scenarios": []}, r"^scenarios: need at least one scenario, got none$")])
+def test_soak_refuses_every_below_one_and_no_scenarios(kwargs, message, capsys):
+    """soak() from Python with every < 1 or no scenario: a SoakError naming the argument,
+    before anything runs (ZeroDivisionError)."""
+    with pytest.raises(SoakError, match=message):
+        soak(**{"scenarios": ["vs_random"], "steps": 100, **kwargs})
+    assert capsys.readouterr().out == ""
+
+
 def test_a_short_soak_cannot_fail_on_a_page_of_noise():
     """One 4 kB page over 50 steps is 78 MB per 10^6 steps: within noise, not a leak; a
     real leak (2 kB a step) fails a short soak too."""

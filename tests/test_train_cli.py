@@ -79,7 +79,6 @@ def test_scenario_flag_refits_learners_of_the_first_kind(capsys, tmp_path):
     (["--preset", "nope"], "unknown training preset 'nope'"),
     (["--config", "missing.toml"], "missing.toml: no such run file"),
     (["--config", "x.toml", "--preset", "demo"], "--config and --preset: give one"),
-    (["--total-steps", "0"], "--total-steps: must be > 0, got 0"),
     (["--time-limit", "-1"], "--time-limit: must be >= 0, got -1.0"),
 ])
 def test_bad_flags_are_one_line_errors(capsys, argv, error):
@@ -88,6 +87,37 @@ def test_bad_flags_are_one_line_errors(capsys, argv, error):
     lines = cap.err.splitlines()
     assert cap.out == "" and lines[-1].startswith(f"alphatank train: error: {error}"), cap.err
     assert all(ln.startswith("note: ") for ln in lines[:-1]), cap.err
+
+
+@pytest.mark.parametrize("flag,value,allowed", [
+    ("--num-envs", "0", "an integer in [1, 4096]"),
+    ("--num-envs", "5000", "an integer in [1, 4096]"),
+    ("--total-steps", "0", "an integer >= 1"),
+    ("--workers", "0", "an integer >= 1"),
+    ("--eval-games", "0", "an integer >= 1"),
+    ("--torch-threads", "x", "an integer >= 1"),
+    ("--env-runners", "0", "an integer >= 1"),
+    ("--checkpoint-every", "-1", "an integer >= 0"),
+    ("--keep-checkpoints", "-1", "an integer >= 0"),
+    ("--eval-every", "-1", "an integer >= 0"),
+    ("--video-every", "1.5", "an integer >= 0"),
+])
+@pytest.mark.parametrize("resume", [False, True])
+def test_bad_counts_are_usage_errors_before_anything_runs(capsys, tmp_path, flag, value, allowed,
+                                                          resume):
+    """The run's counts take the project's argument types (as eval, bench and benchenv do):
+    one usage line naming the flag, exit 2, before a preset, a checkpoint (--resume: it read
+    the checkpoint first, and --num-envs 0 said the run plays 16 matches) or a folder."""
+    where = ["--resume", str(tmp_path / "runs" / "old")] if resume else [
+        "--runs", str(tmp_path / "runs")]
+    with pytest.raises(SystemExit) as exited:
+        main(["train", *where, "--wandb", "disabled", "--no-progress", flag, value])
+    assert exited.value.code == 2
+    cap = capsys.readouterr()
+    assert cap.out == "" and cap.err == (f"alphatank train: error: argument {flag}: must be "
+                                         f"{allowed}, got '{value}' (see alphatank train "
+                                         "--help)\n")
+    assert not any(tmp_path.iterdir())
 
 
 def test_more_env_runners_than_envs_are_refused_before_ray_starts(capsys, tmp_path):

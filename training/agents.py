@@ -4,12 +4,15 @@
 
 An agent folder is a checkpoint folder stripped to what inference and warm starts need:
 ``meta.json`` (with an ``agent`` record: where it came from, its training budget and its
-evaluation) and one ``<learner>.pt`` per learner holding only what the learner's
-``load_state_dict(weights_only=True)`` reads
+evaluation) and one ``<learner>.pt`` per learner. :func:`export_agent` writes to each only
+what the learner's ``load_state_dict(weights_only=True)`` reads
 (:func:`~alphatank.training.learners.inference_state`): no optimiser, target network,
-generator or reward scaling states. It loads with ``torch.load(weights_only=True)`` like
-any checkpoint; it cannot be resumed (``alphatank train --resume`` needs the optimiser),
-but a new run can start from it with ``--init-from agent:NAME``.
+generator or reward scaling states. The shipped agents were exported before it dropped the
+rest: their files also carry the learner's update count ``updates`` (and the ``league``
+agent's ``anchor``, the starting policy its ``anchor_kl`` pulled towards), which loading
+does not read. It loads with ``torch.load(weights_only=True)`` like any checkpoint; it
+cannot be resumed (``alphatank train --resume`` needs the optimiser), but a new run can
+start from it with ``--init-from agent:NAME``.
 """
 
 from __future__ import annotations

@@ -212,6 +212,8 @@ class Trainer:
             self.ahead: dict[str, float] | None = None  # schedule metrics of a rollout in flight
             self._setup(specs, resume, wandb_id)
         except BaseException:
+            if hasattr(self, "logger"):  # made last in _setup: its metrics file is open
+                self.logger.close()
             if env is None and hasattr(self, "env"):  # do not leave worker processes behind
                 self.env.close()
             self.lock.release()

@@ -81,14 +81,18 @@ def min_soak_steps(every: int, warmup: float = WARMUP) -> int:
 
 
 class SoakError(InputError, ValueError):
-    """Soak settings that cannot measure a growth (too few steps)."""
+    """Soak settings that cannot measure a growth (too few steps, no scenario)."""
 
 
 def check_soak_steps(steps: int, every: int, scenarios: int, warmup: float = WARMUP,
                      names: tuple[str, str] = ("steps", "every")) -> None:
-    """SoakError unless ``steps`` split over ``scenarios`` give each the
-    :func:`min_soak_steps` of samples ``every`` steps; ``names``: how the message names
-    ``steps`` and ``every`` (the command's flags)."""
+    """SoakError unless ``every`` >= 1, ``scenarios`` >= 1 and ``steps`` split over
+    ``scenarios`` give each the :func:`min_soak_steps` of samples ``every`` steps;
+    ``names``: how the message names ``steps`` and ``every`` (the command's flags)."""
+    if every < 1:
+        raise SoakError(f"{names[1]} must be an integer >= 1, got {every}")
+    if scenarios < 1:
+        raise SoakError("scenarios: need at least one scenario, got none")
     need = min_soak_steps(every, warmup) * scenarios
     if steps < need:
         raise SoakError(f"{names[0]} must be >= {need} with {names[1]} {every} and "
@@ -238,7 +242,8 @@ def soak(scenarios: Sequence[str] = DEFAULT_SOAK_SCENARIOS, steps: int = 1_000_0
          limit_mb: float = LIMIT_MB,
          verbose: bool = True) -> tuple[bool, dict[str, Any]]:
     """``steps`` env steps split evenly over ``scenarios``; returns (passed, figures).
-    Too few steps to measure a growth: :class:`SoakError` before anything runs."""
+    Too few steps to measure a growth, ``every`` < 1 or no scenario: :class:`SoakError`
+    before anything runs."""
     check_soak_steps(steps, every, len(scenarios), warmup)
     say = print if verbose else None
     per = max(1, steps // len(scenarios))

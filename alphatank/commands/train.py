@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from alphatank.cluster import ENV_RUNNER_TIMEOUT_S
-from alphatank.commands.argtypes import seed
+from alphatank.commands.argtypes import match_count, non_negative_int, positive_int, seed
 from alphatank.errors import InputError, as_input_error
 from alphatank.files import check_folder
 from alphatank.training.fields import FieldError
@@ -95,33 +95,36 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     run.add_argument("--runs", help="folder of runs (default: runs)")
     run.add_argument("--resume", metavar="DIR",
                      help="continue the run saved in DIR (a run folder or a checkpoint)")
-    run.add_argument("--total-steps", type=int, help="env steps to train in total")
-    run.add_argument("--num-envs", type=int, help="matches stepped together")
-    run.add_argument("--workers", type=int, help="env worker processes (2 uses both cores)")
+    run.add_argument("--total-steps", type=positive_int, help="env steps to train in total")
+    run.add_argument("--num-envs", type=match_count, help="matches stepped together")
+    run.add_argument("--workers", type=positive_int,
+                     help="env worker processes (2 uses both cores)")
     run.add_argument("--seed", type=seed, help="run seed")
     run.add_argument("--time-limit", type=float, metavar="S",
                      help="stop (with a checkpoint) after S seconds of this invocation: a "
                           "resumed run gets S seconds more (the logged elapsed time counts "
                           "the whole run); SIGINT (Ctrl-C) and SIGTERM also stop with a "
                           "checkpoint within seconds")
-    run.add_argument("--checkpoint-every", type=int, metavar="N",
+    run.add_argument("--checkpoint-every", type=non_negative_int, metavar="N",
                      help="iterations per save (every save restarts all matches: keep N x "
                           "the rollout length above the episode length)")
-    run.add_argument("--keep-checkpoints", type=int, metavar="K",
+    run.add_argument("--keep-checkpoints", type=non_negative_int, metavar="K",
                      help="newest saves kept (default: 3; 0 keeps all)")
-    run.add_argument("--eval-every", type=int, metavar="N", help="iterations per evaluation")
-    run.add_argument("--eval-games", type=int, help="games per evaluation during training")
-    run.add_argument("--video-every", type=int, metavar="N", help="iterations per match video")
+    run.add_argument("--eval-every", type=non_negative_int, metavar="N",
+                     help="iterations per evaluation")
+    run.add_argument("--eval-games", type=positive_int, help="games per evaluation during training")
+    run.add_argument("--video-every", type=non_negative_int, metavar="N",
+                     help="iterations per match video")
     run.add_argument("--wandb", choices=WANDB_MODES, help="wandb mode (default: offline)")
     run.add_argument("--tensorboard", action="store_true", default=None,
                      help="also write TensorBoard logs (needs the tensorboard package)")
-    run.add_argument("--torch-threads", type=int, help="torch threads (default: 1)")
+    run.add_argument("--torch-threads", type=positive_int, help="torch threads (default: 1)")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
     cluster = p.add_argument_group("Ray cluster (the ray extra; docs/distributed.md)")
     cluster.add_argument("--ray", nargs="?", const="", metavar="ADDRESS",
                          help="step the matches in Ray actors: join the cluster at "
                               "HOST:PORT, or without ADDRESS start a local Ray instance")
-    cluster.add_argument("--env-runners", type=int, metavar="N",
+    cluster.add_argument("--env-runners", type=positive_int, metavar="N",
                          help="with --ray: env-runner actors (one CPU each), in place of "
                               "--workers processes; the same seed and N give the same run as "
                               "--workers N (default: the run's workers, at least 2)")
@@ -305,8 +308,6 @@ def run(args: argparse.Namespace) -> int:
     if args.env_runners is not None and args.ray is None:
         raise InputError("--env-runners: needs --ray (env runners are Ray actors; --workers "
                          "sets local worker processes)")
-    if args.env_runners is not None and args.env_runners < 1:
-        raise InputError(f"--env-runners: must be >= 1, got {args.env_runners}")
     if args.env_runner_timeout is not None:
         if args.ray is None:
             raise InputError("--env-runner-timeout: needs --ray (it applies to env runners)")
