@@ -230,6 +230,10 @@ def test_stop_flag_signals_and_interruptible_blocks():
             pass  # a pending stop skips the block
         with pytest.raises(KeyboardInterrupt):
             signal.raise_signal(signal.SIGINT)  # a second Ctrl-C while stopping aborts
+        with pytest.raises(KeyboardInterrupt), flag.shielded():  # a save is finished first
+            signal.raise_signal(signal.SIGINT)
+            saved = True
+        assert saved
     assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
     timed = StopFlag(0.05)
     with stop_on_signals(timed), pytest.raises(StopRequested), timed.interruptible():

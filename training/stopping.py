@@ -6,8 +6,10 @@ the duration of a run (main thread only; previous handlers are restored afterwar
 when the flag has a deadline, a ``SIGALRM`` timer so that the budget also ends long
 stretches that do not poll (evaluation, videos) inside :meth:`StopFlag.interruptible`.
 A SIGINT while a signal's stop is under way (or a second SIGINT) aborts at once
-(``KeyboardInterrupt``; the previous checkpoint stays intact). :func:`exit_with_parent`
-makes a worker process stop the same way when the process that started it dies.
+(``KeyboardInterrupt``; the previous checkpoint stays intact), unless a checkpoint is being
+written (:meth:`StopFlag.shielded`): then the save is finished first and the abort comes
+right after it. :func:`exit_with_parent` makes a worker process stop the same way when
+the process that started it dies.
 """
 
 from __future__ import annotations
@@ -45,6 +47,8 @@ class StopFlag:
         self.deadline = (time.monotonic() + time_limit_s if time_limit_s > 0
                          else math.inf)
         self._interruptible = 0
+        self._shielded = 0
+        self._aborted = False
 
     def __call__(self) -> bool:
         if self.reason is None and time.monotonic() >= self.deadline:
@@ -63,6 +67,26 @@ class StopFlag:
         """128 + the signal's number for a signal (130 for SIGINT, 143 for SIGTERM), else 0
         (a time limit is a normal end)."""
         return 128 + self.signum if self.signum is not None else 0
+
+    def abort(self) -> None:
+        """Abort the run (a second Ctrl-C): ``KeyboardInterrupt`` now, or at the end of the
+        :meth:`shielded` block under way."""
+        if self._shielded:
+            self._aborted = True
+        else:
+            raise KeyboardInterrupt
+
+    @contextmanager
+    def shielded(self) -> Iterator[None]:
+        """A block that :meth:`abort` does not cut short (writing a checkpoint): an abort
+        asked for inside it raises ``KeyboardInterrupt`` once it has ended."""
+        self._shielded += 1
+        try:
+            yield
+        finally:
+            self._shielded -= 1
+        if self._aborted and not self._shielded:
+            raise KeyboardInterrupt
 
     @contextmanager
     def interruptible(self) -> Iterator[None]:
@@ -94,7 +118,8 @@ def stop_on_signals(flag: StopFlag) -> Iterator[StopFlag]:
         if signum == signal.SIGINT:
             interrupts += 1
             if interrupts > 1 or flag.signum is not None:
-                raise KeyboardInterrupt  # Ctrl-C while stopping: abort without waiting
+                flag.abort()  # Ctrl-C while stopping: abort (once a save under way is done)
+                return
         flag.request(signal.Signals(signum).name, signum)
 
     def on_alarm(signum: int, frame: Any) -> None:
