@@ -8,8 +8,8 @@ stretches that do not poll (evaluation, videos) inside :meth:`StopFlag.interrupt
 A SIGINT while a signal's stop is under way (or a second SIGINT) aborts at once
 (``KeyboardInterrupt``; the previous checkpoint stays intact), unless a checkpoint is being
 written (:meth:`StopFlag.shielded`): then the save is finished first and the abort comes
-right after it. :func:`exit_with_parent` makes a worker process stop the same way when
-the process that started it dies.
+right after it. :func:`exit_with_parent` makes a pool worker stop its job the same way when
+the process that started it dies or ends the pool early (:func:`running_job`).
 """
 
 from __future__ import annotations
@@ -143,20 +143,38 @@ def stop_on_signals(flag: StopFlag) -> Iterator[StopFlag]:
             signal.setitimer(signal.ITIMER_REAL, max(1e-3, left), timer[1])
 
 
-_orphaned = threading.Event()
+_orphaned = threading.Event()  # the command has ended, or ended the pool early
+_parent_died = threading.Event()
+_busy = threading.Event()  # a job is under way (running_job)
 
 
 def orphaned() -> bool:
-    """True once :func:`exit_with_parent` has seen this process's parent die: a pool
-    worker then starts no further job in its grace period."""
+    """True once :func:`exit_with_parent` has seen this process's parent die or end the
+    pool: a pool worker then starts no further job."""
     return _orphaned.is_set()
 
 
-def exit_with_parent(poll_s: float = 1.0, grace_s: float = 60.0) -> None:
-    """In a worker process (e.g. a process pool's initializer): once its parent dies, mark
-    it :func:`orphaned` and send it SIGTERM, so a run in it stops and saves as on any
-    SIGTERM, and end it outright ``grace_s`` seconds later if it is still alive. A daemon
-    thread polls the parent's pid every ``poll_s`` seconds."""
+@contextmanager
+def running_job() -> Iterator[None]:
+    """One job of a pool worker: :func:`exit_with_parent` sends SIGTERM to a worker only
+    inside one (an idle worker needs none), and a worker whose parent has died exits once
+    its job is over (its results have no reader, and no further job can come)."""
+    _busy.set()
+    try:
+        yield
+    finally:
+        _busy.clear()
+        if _parent_died.is_set():
+            os._exit(128 + signal.SIGTERM)
+
+
+def exit_with_parent(ended: Any = None, poll_s: float = 1.0, grace_s: float = 60.0) -> None:
+    """In a worker process (e.g. a process pool's initializer): once its parent dies or sets
+    ``ended`` (a ``multiprocessing`` Event: the command is stopping), mark it
+    :func:`orphaned` and, inside a :func:`running_job`, send it SIGTERM, so that a run in it
+    stops and saves as on any SIGTERM. A worker whose parent died then exits: at once when
+    idle, else when its job is over, and outright ``grace_s`` seconds later if it is still
+    alive. A daemon thread polls the parent's pid every ``poll_s`` seconds."""
     if not poll_s > 0 or not grace_s >= 0:
         raise ValueError(f"exit_with_parent: need poll_s > 0 and grace_s >= 0, got "
                            f"poll_s={poll_s}, grace_s={grace_s}")
@@ -164,10 +182,20 @@ def exit_with_parent(poll_s: float = 1.0, grace_s: float = 60.0) -> None:
 
     def watch() -> None:
         while os.getppid() == parent:
-            time.sleep(poll_s)
+            if ended is None:
+                time.sleep(poll_s)
+            elif ended.wait(poll_s):
+                break
+        died = os.getppid() != parent
+        if died:
+            _parent_died.set()  # before looking at _busy: running_job exits after it
         _orphaned.set()
-        os.kill(os.getpid(), signal.SIGTERM)
-        time.sleep(grace_s)
-        os._exit(128 + signal.SIGTERM)
+        if _busy.is_set():
+            os.kill(os.getpid(), signal.SIGTERM)
+        elif died:
+            os._exit(128 + signal.SIGTERM)
+        if died:
+            time.sleep(grace_s)
+            os._exit(128 + signal.SIGTERM)
 
     threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
