@@ -396,3 +396,11 @@ def test_init_from_a_damaged_checkpoint_names_the_tensor_not_the_hidden_size(tra
     assert "critic.0.weight: copying a param with shape torch.Size([3, 5])" in err
     assert "the shape in current model is torch.Size([128, " in err
     assert not any(runs.glob("*"))  # no run folder (nor a lock file) is left
+
+
+def test_a_save_that_fails_leaves_no_temporary_folder(tmp_path):
+    """A save cut short (an error, or a Ctrl-C that could not wait) removes its folder."""
+    with pytest.raises(Exception):  # noqa: B017 (whatever pickle raises for a lambda)
+        save_checkpoint(tmp_path, "step_0000000001", {}, {"ppo": {"f": lambda: 0}})
+    assert list((tmp_path / "checkpoints").iterdir()) == []
+    assert not (tmp_path / "latest").exists()

@@ -566,3 +566,62 @@ def test_a_rows_damaged_init_from_is_refused_when_planned(tmp_path, capsys):
     err = capsys.readouterr().err
     assert f"experiments/tiny/c_bad.toml: run: init_from: {run / 'latest'}: points at " in err
     assert err.count("\n") == 1, err
+
+
+def _children(pid: int) -> list[int]:
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            found.append(int(stat.parent.name))
+    return found
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return (Path("/proc") / str(pid) / "stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM, signal.SIGKILL])
+def test_a_signal_to_the_command_alone_stops_its_workers_runs_at_once(tmp_path, signum):
+    """SIGINT or SIGTERM sent to the command's process alone (not its group, as a
+    supervisor does) reaches its pool workers: their runs stop and save, the command
+    prints its interrupted line and exits 130 / 143; killed, its workers save and exit
+    once their runs are saved. Nothing lingers."""
+    import subprocess
+    import sys
+
+    root = write_rows(tmp_path / "exp")
+    out = tmp_path / "out"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "alphatank.cli", "experiments", "tiny", "--experiments-dir",
+         str(root), "--out", str(out), "--steps", "100000000", "--games", "2", "--budget",
+         "1", "--workers", "2", "--no-progress"],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
+    try:
+        end = time.monotonic() + 180
+        while len([m for m in out.glob("runs/*/metrics.jsonl") if m.stat().st_size]) < 2:
+            assert proc.poll() is None, proc.communicate()[0]
+            assert time.monotonic() < end, "timed out waiting for the runs"
+            time.sleep(0.1)
+        workers = _children(proc.pid)
+        t0 = time.monotonic()
+        proc.send_signal(signum)
+        text = proc.communicate(timeout=30)[0]
+        while any(map(_alive, workers)) and time.monotonic() < t0 + 20:
+            time.sleep(0.1)
+        assert not any(map(_alive, workers)), (workers, text)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    if signum != signal.SIGKILL:
+        assert proc.returncode == 128 + signum, text
+        assert "interrupted: finished runs and evaluations are kept" in text
+    assert len(list(out.glob("runs/*/latest"))) == 2  # both runs saved
+    assert not list(out.glob("runs/*/done.json"))

@@ -230,6 +230,10 @@ def test_stop_flag_signals_and_interruptible_blocks():
             pass  # a pending stop skips the block
         with pytest.raises(KeyboardInterrupt):
             signal.raise_signal(signal.SIGINT)  # a second Ctrl-C while stopping aborts
+        with pytest.raises(KeyboardInterrupt), flag.shielded():  # a save is finished first
+            signal.raise_signal(signal.SIGINT)
+            saved = True
+        assert saved
     assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
     timed = StopFlag(0.05)
     with stop_on_signals(timed), pytest.raises(StopRequested), timed.interruptible():
@@ -238,23 +242,31 @@ def test_stop_flag_signals_and_interruptible_blocks():
     assert signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)
 
 
-# a worker: watches its parent, then runs until a stop (like a run) and says why it ended;
-# with "ignore" it ignores SIGTERM, so only the grace period can end it
+# a worker: watches its parent, then runs a job until a stop (like a run), says why it
+# ended and waits as a pool worker does for its next job (the job's end ends it); with
+# "ignore" it ignores SIGTERM, so only the (short) grace period can end it; with "idle" it
+# waits outside a job, so it exits at once
 WORKER = """
 import pathlib, signal, sys, time
-from alphatank.training.stopping import StopFlag, exit_with_parent, orphaned, stop_on_signals
+from alphatank.training.stopping import (StopFlag, exit_with_parent, orphaned, running_job,
+                                         stop_on_signals)
 out = pathlib.Path(sys.argv[1])
-exit_with_parent(poll_s=0.05, grace_s=0.5)
-if sys.argv[2] == "ignore":
-    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+exit_with_parent(poll_s=0.05, grace_s=0.5 if sys.argv[2] == "ignore" else 60)
+if sys.argv[2] == "idle":
     out.with_suffix(".ready").write_text("ready")
     time.sleep(60)
-flag = StopFlag()
-with stop_on_signals(flag):
-    out.with_suffix(".ready").write_text("ready")
-    while not flag():
-        time.sleep(0.01)
-out.write_text(f"{flag.reason} orphaned={orphaned()}")
+with running_job():
+    if sys.argv[2] == "ignore":
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        out.with_suffix(".ready").write_text("ready")
+        time.sleep(60)
+    flag = StopFlag()
+    with stop_on_signals(flag):
+        out.with_suffix(".ready").write_text("ready")
+        while not flag():
+            time.sleep(0.01)
+    out.write_text(f"{flag.reason} orphaned={orphaned()}")
+time.sleep(60)  # as a pool worker waits for its next job: the job's end ends it
 """
 # the driver: starts a worker, waits until it watches, then dies without waiting for it
 DRIVER = """
@@ -275,20 +287,21 @@ def _alive(pid: int) -> bool:
         return False
 
 
-def test_a_worker_whose_parent_dies_stops_like_on_sigterm_or_ends_after_the_grace(tmp_path):
+def test_a_worker_whose_parent_dies_stops_like_on_sigterm_and_exits_after_its_job(tmp_path):
     with pytest.raises(ValueError, match="poll_s"):
         exit_with_parent(poll_s=0)
     pids = {}
-    for mode in ("stop", "ignore"):
+    for mode in ("stop", "ignore", "idle"):
         out = tmp_path / f"{mode}.txt"
         done = subprocess.run([sys.executable, "-c", DRIVER, WORKER, str(out), mode],
                               capture_output=True, text=True, timeout=60, check=True)
         pids[mode] = int(done.stdout)
-    deadline = time.monotonic() + 20
+    deadline = time.monotonic() + 20  # a grace of 60 s, but for "ignore"
     while any(_alive(p) for p in pids.values()) and time.monotonic() < deadline:
         time.sleep(0.05)
     assert not any(_alive(p) for p in pids.values())
-    # its run stopped, not killed, and the worker knows why (so it starts no next job)
+    # its run stopped, not killed, and the worker knows why (so it starts no next job); it
+    # exited when its job ended
     assert (tmp_path / "stop.txt").read_text() == "SIGTERM orphaned=True"
     assert not (tmp_path / "ignore.txt").exists()
 

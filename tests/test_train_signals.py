@@ -121,3 +121,22 @@ def test_kill_9_during_a_checkpoint_write_keeps_the_previous_one(tmp_path):
     steps = [r["step"] for r in rows(run)]
     assert steps == sorted(set(steps)) and steps[-1] == saved + 96  # no step twice
     assert not writing()  # the killed save's leftovers are gone
+
+
+@pytest.mark.slow
+def test_a_second_ctrl_c_during_the_stops_save_lets_it_finish(tmp_path):
+    """Ctrl-C twice, the second while the stop writes the run's first checkpoint: the save
+    is finished, then the run aborts; it resumes from that save and leaves no temporary
+    folder."""
+    run = tmp_path / "twice"
+    proc = start(tmp_path, "twice", [*PPO, "--num-envs", "2", "--checkpoint-every", "1000"],
+                 **{DELAY_ENV: "2"})
+    wait_for(lambda: len(rows(run)) >= 1, proc)
+    writing = lambda: [p for p in (run / "checkpoints").glob(".step_*.tmp-*")]  # noqa: E731
+    os.killpg(proc.pid, signal.SIGINT)
+    wait_for(lambda: bool(writing()), proc)  # the save sleeps 2 s in the middle
+    seconds, out = stop(proc, signal.SIGINT, group=True)
+    assert proc.returncode == 130, out
+    assert seconds < 20, (seconds, out)  # the save's 2 s, then the abort
+    assert not writing()
+    assert load_checkpoint(run).meta["progress"]["global_step"] > 0

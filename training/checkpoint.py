@@ -93,22 +93,11 @@ def save_checkpoint(run_dir: str | Path, tag: str, meta: dict[str, Any],
     if tmp.exists():
         shutil.rmtree(tmp)
     tmp.mkdir()
-    files: dict[str, str] = {}
-    for name, state in states.items():
-        torch.save(state, tmp / f"{name}.pt")
-        files[f"{name}.pt"] = _sha256(tmp / f"{name}.pt")
-    for name, arrs in (arrays or {}).items():
-        np.savez(tmp / f"{name}.replay.npz", **arrs)
-        files[f"{name}.replay.npz"] = _sha256(tmp / f"{name}.replay.npz")
-    for key, state in (extra or {}).items():
-        (tmp / "extra").mkdir(exist_ok=True)
-        torch.save(state, tmp / "extra" / f"{key}.pt")
-        files[f"extra/{key}.pt"] = _sha256(tmp / "extra" / f"{key}.pt")
-    meta = {"format": FORMAT, "version": VERSION, "saved_at": time.time(), **meta,
-            "files": files}
-    if os.environ.get(DELAY_ENV):
-        time.sleep(float(os.environ[DELAY_ENV]))
-    (tmp / "meta.json").write_text(json.dumps(meta, indent=1), encoding="utf-8")
+    try:
+        _write_save(tmp, meta, states, arrays or {}, extra or {})
+    except BaseException:  # a failed or aborted write leaves nothing behind
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
     if final.exists():  # re-saving a tag: move the old one aside first (rename is atomic;
         old = root / f".{tag}.old-{os.getpid()}"  # resolve_checkpoint_dir finds it if the
         os.replace(final, old)  # process dies before the next rename)
@@ -123,6 +112,28 @@ def save_checkpoint(run_dir: str | Path, tag: str, meta: dict[str, Any],
                 shutil.rmtree(old, ignore_errors=True)
     _remove_leftovers(root)
     return final
+
+
+def _write_save(tmp: Path, meta: dict[str, Any], states: dict[str, dict[str, Any]],
+                arrays: dict[str, dict[str, np.ndarray]],
+                extra: dict[str, dict[str, Any]]) -> None:
+    """The files of a save (:func:`save_checkpoint`) in its temporary folder ``tmp``."""
+    files: dict[str, str] = {}
+    for name, state in states.items():
+        torch.save(state, tmp / f"{name}.pt")
+        files[f"{name}.pt"] = _sha256(tmp / f"{name}.pt")
+    for name, arrs in arrays.items():
+        np.savez(tmp / f"{name}.replay.npz", **arrs)
+        files[f"{name}.replay.npz"] = _sha256(tmp / f"{name}.replay.npz")
+    for key, state in extra.items():
+        (tmp / "extra").mkdir(exist_ok=True)
+        torch.save(state, tmp / "extra" / f"{key}.pt")
+        files[f"extra/{key}.pt"] = _sha256(tmp / "extra" / f"{key}.pt")
+    meta = {"format": FORMAT, "version": VERSION, "saved_at": time.time(), **meta,
+            "files": files}
+    if os.environ.get(DELAY_ENV):
+        time.sleep(float(os.environ[DELAY_ENV]))
+    (tmp / "meta.json").write_text(json.dumps(meta, indent=1), encoding="utf-8")
 
 
 _SAVE = re.compile(r"step_(\d+)")  # the name of a save's folder (save_checkpoint's tag)

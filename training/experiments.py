@@ -57,7 +57,14 @@ from alphatank.training.presets import (
     run_scenario,
     with_hp,
 )
-from alphatank.training.stopping import exit_with_parent, orphaned
+from alphatank.training.stopping import (
+    StopFlag,
+    StopRequested,
+    exit_with_parent,
+    orphaned,
+    running_job,
+    stop_on_signals,
+)
 
 TABLES = ("table3", "table4", "sac", "league", "heldout")
 EVAL_SEED_BASE = 1_000_000
@@ -685,9 +692,10 @@ def clone_cut(summary: dict[str, Any]) -> bool:
 
 
 class RunInterrupted(RuntimeError):
-    """A row's training was stopped by a signal: it has no done.json and no evaluation.
-    Run in this process, it ends :func:`execute` (the signal was meant for the command);
-    ``exit_code`` is the run's (130 after SIGINT, 143 after SIGTERM)."""
+    """A row's job was stopped by a signal: a run cut short has no done.json and no
+    evaluation, an evaluation cut short no file. Run in this process, it ends
+    :func:`execute` (the signal was meant for the command); ``exit_code`` is the job's
+    (130 after SIGINT, 143 after SIGTERM)."""
 
     def __init__(self, message: str, exit_code: int = 130):
         super().__init__(message)
@@ -763,7 +771,7 @@ def train_step(job: Job) -> Failure | None:
     try:
         if not job.done_file.is_file():
             _train(job)
-    except RunInterrupted:
+    except (RunInterrupted, StopRequested):
         raise
     except Exception as exc:  # a failed row is reported; the others go on
         return _failure(exc)
@@ -778,6 +786,8 @@ def eval_step(job: Job, spec: EvalSpec) -> Failure | None:
     try:
         if not job.eval_file(spec).is_file():
             _evaluate(job, spec)
+    except StopRequested:
+        raise
     except Exception as exc:
         return _failure(exc)
     return None
@@ -809,16 +819,25 @@ def run_job(job: Job) -> tuple[str, str | None, float]:
     that fails does not stop the others); returns (key, error or None, seconds). Failures
     are written to ``<run_dir>/error.txt`` and do not raise; a run another command is
     training is reported busy and nothing is written to its folder. A pool worker whose
-    command has ended starts nothing (its queue may still hold jobs)."""
+    command has ended starts nothing (its queue may still hold jobs). SIGINT or SIGTERM
+    stops the job (a run saves): :class:`RunInterrupted`."""
     t0 = time.time()
-    if orphaned():
-        return job.key, "not started: the command that ran it has ended", 0.0
-    failure = train_step(job)
-    if failure is not None and failure[0].startswith(BUSY):
-        return job.key, failure[0], time.time() - t0
-    failures = [failure] if failure else [f for spec in job.evals
-                                          if (f := eval_step(job, spec))]
-    return job.key, record_failures(job, failures), time.time() - t0
+    with running_job():
+        if orphaned():
+            return job.key, "not started: the command that ran it has ended", 0.0
+        stop = StopFlag()
+        try:  # a run handles the signals itself, and the rest has nothing to save
+            with stop_on_signals(stop), stop.interruptible():
+                failure = train_step(job)
+                if failure is not None and failure[0].startswith(BUSY):
+                    return job.key, failure[0], time.time() - t0
+                failures = [failure] if failure else [f for spec in job.evals
+                                                      if (f := eval_step(job, spec))]
+                return job.key, record_failures(job, failures), time.time() - t0
+        except StopRequested:
+            raise RunInterrupted(f"stopped by {stop.reason} before its run and evaluations "
+                                 f"were done; --resume does the rest",
+                                 stop.exit_code) from None
 
 
 def stages(jobs: Sequence[Job]) -> list[list[Job]]:
@@ -877,20 +896,28 @@ def execute(jobs: Sequence[Job], workers: int = 1, progress: bool = True,
             import multiprocessing as mp
             from concurrent.futures import ProcessPoolExecutor, as_completed
 
-            # a worker whose driver was killed stops its run (saving it) instead of
-            # training on as an orphan
-            with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"),
-                                     initializer=exit_with_parent) as pool:
+            # a worker whose driver was killed or stopped (ended) stops its run (saving
+            # it) instead of training on as an orphan, and starts no other job
+            context = mp.get_context("spawn")
+            ended = context.Event()
+            with ProcessPoolExecutor(max_workers=workers, mp_context=context,
+                                     initializer=exit_with_parent,
+                                     initargs=(ended,)) as pool:
                 futures = {pool.submit(run_job, job): job for job in stage}
-                for fut in as_completed(futures):
-                    job = futures[fut]
-                    try:
-                        _, error, seconds = fut.result()
-                    except RunInterrupted as exc:  # a signal stopped the worker's run
-                        error, seconds = f"{type(exc).__name__}: {exc}", 0.0
-                    except Exception as exc:  # the worker process died
-                        error, seconds = f"worker died: {type(exc).__name__}: {exc}", 0.0
-                    finish(job, error, seconds)
+                try:
+                    for fut in as_completed(futures):
+                        job = futures[fut]
+                        try:
+                            _, error, seconds = fut.result()
+                        except RunInterrupted as exc:  # a signal stopped the worker's run
+                            error, seconds = f"{type(exc).__name__}: {exc}", 0.0
+                        except Exception as exc:  # the worker process died
+                            error, seconds = f"worker died: {type(exc).__name__}: {exc}", 0.0
+                        finish(job, error, seconds)
+                except BaseException:  # Ctrl-C or SIGTERM of this process: stop the workers
+                    ended.set()
+                    pool.shutdown(cancel_futures=True)
+                    raise
 
     by_key = {j.key: j for j in jobs}
     try:

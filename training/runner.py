@@ -441,12 +441,13 @@ class Trainer:
 
     def save(self, payload: dict[str, Any] | None = None) -> Path:
         """Write a checkpoint of the current state (or of ``payload``, from
-        :meth:`_payload`)."""
-        payload = payload or self._payload()
-        step = int(payload["meta"]["progress"]["global_step"])
-        path = save_checkpoint(self.run_dir, f"step_{step:010d}", **payload,
-                               keep=self.cfg.keep_checkpoints)
-        self.saved_step = step
+        :meth:`_payload`). A second Ctrl-C during it aborts the run once it is written."""
+        with self.stop.shielded():
+            payload = payload or self._payload()
+            step = int(payload["meta"]["progress"]["global_step"])
+            path = save_checkpoint(self.run_dir, f"step_{step:010d}", **payload,
+                                   keep=self.cfg.keep_checkpoints)
+            self.saved_step = step
         return path
 
     def _iteration_start(self) -> Any:

@@ -6,8 +6,10 @@ the duration of a run (main thread only; previous handlers are restored afterwar
 when the flag has a deadline, a ``SIGALRM`` timer so that the budget also ends long
 stretches that do not poll (evaluation, videos) inside :meth:`StopFlag.interruptible`.
 A SIGINT while a signal's stop is under way (or a second SIGINT) aborts at once
-(``KeyboardInterrupt``; the previous checkpoint stays intact). :func:`exit_with_parent`
-makes a worker process stop the same way when the process that started it dies.
+(``KeyboardInterrupt``; the previous checkpoint stays intact), unless a checkpoint is being
+written (:meth:`StopFlag.shielded`): then the save is finished first and the abort comes
+right after it. :func:`exit_with_parent` makes a pool worker stop its job the same way when
+the process that started it dies or ends the pool early (:func:`running_job`).
 """
 
 from __future__ import annotations
@@ -45,6 +47,8 @@ class StopFlag:
         self.deadline = (time.monotonic() + time_limit_s if time_limit_s > 0
                          else math.inf)
         self._interruptible = 0
+        self._shielded = 0
+        self._aborted = False
 
     def __call__(self) -> bool:
         if self.reason is None and time.monotonic() >= self.deadline:
@@ -63,6 +67,26 @@ class StopFlag:
         """128 + the signal's number for a signal (130 for SIGINT, 143 for SIGTERM), else 0
         (a time limit is a normal end)."""
         return 128 + self.signum if self.signum is not None else 0
+
+    def abort(self) -> None:
+        """Abort the run (a second Ctrl-C): ``KeyboardInterrupt`` now, or at the end of the
+        :meth:`shielded` block under way."""
+        if self._shielded:
+            self._aborted = True
+        else:
+            raise KeyboardInterrupt
+
+    @contextmanager
+    def shielded(self) -> Iterator[None]:
+        """A block that :meth:`abort` does not cut short (writing a checkpoint): an abort
+        asked for inside it raises ``KeyboardInterrupt`` once it has ended."""
+        self._shielded += 1
+        try:
+            yield
+        finally:
+            self._shielded -= 1
+        if self._aborted and not self._shielded:
+            raise KeyboardInterrupt
 
     @contextmanager
     def interruptible(self) -> Iterator[None]:
@@ -94,7 +118,8 @@ def stop_on_signals(flag: StopFlag) -> Iterator[StopFlag]:
         if signum == signal.SIGINT:
             interrupts += 1
             if interrupts > 1 or flag.signum is not None:
-                raise KeyboardInterrupt  # Ctrl-C while stopping: abort without waiting
+                flag.abort()  # Ctrl-C while stopping: abort (once a save under way is done)
+                return
         flag.request(signal.Signals(signum).name, signum)
 
     def on_alarm(signum: int, frame: Any) -> None:
@@ -118,20 +143,38 @@ def stop_on_signals(flag: StopFlag) -> Iterator[StopFlag]:
             signal.setitimer(signal.ITIMER_REAL, max(1e-3, left), timer[1])
 
 
-_orphaned = threading.Event()
+_orphaned = threading.Event()  # the command has ended, or ended the pool early
+_parent_died = threading.Event()
+_busy = threading.Event()  # a job is under way (running_job)
 
 
 def orphaned() -> bool:
-    """True once :func:`exit_with_parent` has seen this process's parent die: a pool
-    worker then starts no further job in its grace period."""
+    """True once :func:`exit_with_parent` has seen this process's parent die or end the
+    pool: a pool worker then starts no further job."""
     return _orphaned.is_set()
 
 
-def exit_with_parent(poll_s: float = 1.0, grace_s: float = 60.0) -> None:
-    """In a worker process (e.g. a process pool's initializer): once its parent dies, mark
-    it :func:`orphaned` and send it SIGTERM, so a run in it stops and saves as on any
-    SIGTERM, and end it outright ``grace_s`` seconds later if it is still alive. A daemon
-    thread polls the parent's pid every ``poll_s`` seconds."""
+@contextmanager
+def running_job() -> Iterator[None]:
+    """One job of a pool worker: :func:`exit_with_parent` sends SIGTERM to a worker only
+    inside one (an idle worker needs none), and a worker whose parent has died exits once
+    its job is over (its results have no reader, and no further job can come)."""
+    _busy.set()
+    try:
+        yield
+    finally:
+        _busy.clear()
+        if _parent_died.is_set():
+            os._exit(128 + signal.SIGTERM)
+
+
+def exit_with_parent(ended: Any = None, poll_s: float = 1.0, grace_s: float = 60.0) -> None:
+    """In a worker process (e.g. a process pool's initializer): once its parent dies or sets
+    ``ended`` (a ``multiprocessing`` Event: the command is stopping), mark it
+    :func:`orphaned` and, inside a :func:`running_job`, send it SIGTERM, so that a run in it
+    stops and saves as on any SIGTERM. A worker whose parent died then exits: at once when
+    idle, else when its job is over, and outright ``grace_s`` seconds later if it is still
+    alive. A daemon thread polls the parent's pid every ``poll_s`` seconds."""
     if not poll_s > 0 or not grace_s >= 0:
         raise ValueError(f"exit_with_parent: need poll_s > 0 and grace_s >= 0, got "
                            f"poll_s={poll_s}, grace_s={grace_s}")
@@ -139,10 +182,20 @@ def exit_with_parent(poll_s: float = 1.0, grace_s: float = 60.0) -> None:
 
     def watch() -> None:
         while os.getppid() == parent:
-            time.sleep(poll_s)
+            if ended is None:
+                time.sleep(poll_s)
+            elif ended.wait(poll_s):
+                break
+        died = os.getppid() != parent
+        if died:
+            _parent_died.set()  # before looking at _busy: running_job exits after it
         _orphaned.set()
-        os.kill(os.getpid(), signal.SIGTERM)
-        time.sleep(grace_s)
-        os._exit(128 + signal.SIGTERM)
+        if _busy.is_set():
+            os.kill(os.getpid(), signal.SIGTERM)
+        elif died:
+            os._exit(128 + signal.SIGTERM)
+        if died:
+            time.sleep(grace_s)
+            os._exit(128 + signal.SIGTERM)
 
     threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()

@@ -79,6 +79,7 @@ def run(args: argparse.Namespace) -> int:
         read_json,
         table_names,
     )
+    from alphatank.training.stopping import StopFlag, StopRequested, stop_on_signals
 
     if args.workers < 1:
         return _error(f"--workers must be >= 1, got {args.workers}")
@@ -158,13 +159,15 @@ def run(args: argparse.Namespace) -> int:
             tqdm.write(f"  {', '.join(job.rows)} seed {job.seed}: {status} "
                        f"({seconds / 60:.1f} min)")
 
+        stop = StopFlag()  # SIGINT / SIGTERM to this process alone stop it as Ctrl-C does
         try:
-            failed = execute(todo, args.workers, progress=not args.no_progress,
-                             on_done=on_done, runner=runner)
-        except (KeyboardInterrupt, RunInterrupted) as exc:  # Ctrl-C, or a run's signal
+            with stop_on_signals(stop), stop.interruptible():
+                failed = execute(todo, args.workers, progress=not args.no_progress,
+                                 on_done=on_done, runner=runner)
+        except (KeyboardInterrupt, RunInterrupted, StopRequested) as exc:  # Ctrl-C, SIGTERM
             print("interrupted: finished runs and evaluations are kept; --resume finishes "
                   "the rest", file=sys.stderr)
-            return getattr(exc, "exit_code", 130)
+            return getattr(exc, "exit_code", stop.exit_code or 130)
         finally:
             if connection is not None:
                 connection.close()

@@ -104,7 +104,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                      help="stop (with a checkpoint) after S seconds of this invocation: a "
                           "resumed run gets S seconds more (the logged elapsed time counts "
                           "the whole run); SIGINT (Ctrl-C) and SIGTERM also stop with a "
-                          "checkpoint within seconds")
+                          "checkpoint within seconds (a second Ctrl-C quits without it, "
+                          "but lets a save under way finish first)")
     run.add_argument("--checkpoint-every", type=non_negative_int, metavar="N",
                      help="iterations per save (every save restarts all matches: keep N x "
                           "the rollout length above the episode length)")
