@@ -118,6 +118,27 @@ def test_a_stop_inside_an_iteration_saves_its_start_and_resumes_exactly(tmp_path
                         runs[1].learners["ppo"].state_dict())
 
 
+def test_the_summary_of_a_stop_that_drops_an_iteration_counts_what_was_saved(tmp_path):
+    """A stop inside the update of iteration 4 drops that iteration's episodes with it:
+    the summary counts the episodes and win rates the checkpoint holds (those of the
+    iterations before), not those of the dropped one."""
+    spec = LearnerSpec("ppo", "ppo", (0,), PPO_TINY)
+    ref = trainer(config("ref", spec, 4), tmp_path / "ref")
+    ref.train()
+    done, dropped = ref.history[2], ref.history[3]
+    assert dropped["charts/episodes"] > done["charts/episodes"]  # episodes ended in it
+    stopped = trainer(config("stop", spec, 5), tmp_path / "stop", at=4 * 16)  # in the update
+    summary = stopped.train()
+    assert summary["stopped"] == {"reason": "SIGINT", "checkpoint_step": 3 * 16 * E,
+                                  "dropped_steps": 16 * E}
+    ck = load_checkpoint(tmp_path / "stop")
+    assert summary["episodes"] == ck.meta["progress"]["episodes"] == done["charts/episodes"]
+    for key in ("charts/episodes", "charts/win_rate", "charts/episode_return",
+                "charts/episode_length"):
+        assert summary[key] == done[key], key
+    assert stopped._windows() == ck.meta["windows"]
+
+
 def test_a_sac_stop_cuts_the_segment_keeps_every_transition_and_resumes_deterministically(
         tmp_path):
     spec = LearnerSpec("sac", "sac", (0,), SAC_TINY)

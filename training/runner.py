@@ -284,10 +284,9 @@ class Trainer:
         self.iteration = 0
         self.episodes = 0
         self.elapsed = 0.0
-        self.outcomes = {n: deque(maxlen=WINDOW) for n in self.learners}
-        self.returns = {n: deque(maxlen=WINDOW) for n in self.learners}
-        self.lengths: deque[int] = deque(maxlen=WINDOW)
-        self.by_opponent: dict[str, dict[str, deque[float]]] = {n: {} for n in self.learners}
+        self._load_windows({})  # outcomes, returns, lengths, by_opponent: the last episodes
+        # (episodes, windows) at the start of an iteration of fixed-rollout learners
+        self.counted: tuple[int, dict[str, Any]] = (0, {})
         self.cut = 0  # vector steps of a stopped iteration inside global_step (0: none)
         self.lost_rollouts = 0  # iterations collected again after an env runner died
         self.notes: list[str] = []  # what happened to the run (lost rollouts), in words
@@ -398,17 +397,33 @@ class Trainer:
         self.episodes, self.elapsed = int(prog["episodes"]), float(prog["elapsed"])
         self.cut = int(prog.get("cut", 0))
         self.schedule.load_state_dict(ckpt.meta.get("schedule", {}))
-        windows = ckpt.meta.get("windows", {})  # older saves lack lengths, by_opponent
-        for name, outs in windows.get("outcomes", {}).items():
-            self.outcomes[name].extend(outs)
-        for name, rets in windows.get("returns", {}).items():
-            self.returns[name].extend(rets)
-        self.lengths.extend(int(x) for x in windows.get("lengths", []))
-        for name, opps in windows.get("by_opponent", {}).items():
-            for opp, scores in opps.items():
-                self.by_opponent[name][opp] = deque(scores, maxlen=WINDOW)
+        self._load_windows(ckpt.meta.get("windows", {}))
         if self.selfplay is not None:
             self.selfplay.load_state_dict(ckpt.extra_state("selfplay"))
+
+    def _windows(self) -> dict[str, Any]:
+        """The rolling episode windows as a checkpoint holds them (copies)."""
+        return {"outcomes": {n: list(d) for n, d in self.outcomes.items()},
+                "returns": {n: [float(x) for x in d] for n, d in self.returns.items()},
+                "lengths": list(self.lengths),
+                "by_opponent": {n: {opp: list(d) for opp, d in opps.items()}
+                                for n, opps in self.by_opponent.items()}}
+
+    def _load_windows(self, windows: dict[str, Any]) -> None:
+        """Set the rolling episode windows to ``windows`` (:meth:`_windows`; older saves
+        lack lengths and by_opponent)."""
+        def window(values: Any) -> deque:
+            return deque(values, maxlen=WINDOW)
+
+        self.outcomes: dict[str, deque[float]] = {
+            n: window(windows.get("outcomes", {}).get(n, ())) for n in self.learners}
+        self.returns: dict[str, deque[float]] = {
+            n: window(windows.get("returns", {}).get(n, ())) for n in self.learners}
+        self.lengths: deque[int] = window(int(x) for x in windows.get("lengths", ()))
+        self.by_opponent: dict[str, dict[str, deque[float]]] = {
+            n: {opp: window(scores) for opp, scores
+                                in windows.get("by_opponent", {}).get(n, {}).items()}
+                            for n in self.learners}
 
     def _payload(self) -> dict[str, Any]:
         """What a checkpoint of the current state holds (:func:`save_checkpoint`'s
@@ -426,11 +441,7 @@ class Trainer:
                          "episodes": self.episodes, "elapsed": self.elapsed, "cut": self.cut,
                          "clone_pending": self.imitation is not None},
             "schedule": self.schedule.state_dict(),
-            "windows": {"outcomes": {n: list(d) for n, d in self.outcomes.items()},
-                        "returns": {n: [float(x) for x in d] for n, d in self.returns.items()},
-                        "lengths": list(self.lengths),
-                        "by_opponent": {n: {opp: list(d) for opp, d in opps.items()}
-                                        for n, opps in self.by_opponent.items()}},
+            "windows": self._windows(),
             "wandb_id": self.logger.run_id,
             "env": env_id(self.scenario),
         }
@@ -456,6 +467,8 @@ class Trainer:
         (their rollouts are empty now)."""
         fixed = [n for n, lr in self.learners.items() if lr.rollout_steps]
         if len(fixed) == len(self.learners):
+            # the episodes a stop drops with the iteration leave the summary too
+            self.counted = (self.episodes, self._windows())
             return None if self.global_step == self.saved_step else copy.deepcopy(
                 self._payload())
         return {n: copy.deepcopy(self.learners[n].state_dict()) for n in fixed}
@@ -805,6 +818,8 @@ class Trainer:
         snapshot (see the module docstring)."""
         if all(lr.rollout_steps for lr in self.learners.values()):
             self.stopped = {"dropped_steps": self.global_step - s0}
+            self.episodes, windows = self.counted  # as the save holds them
+            self._load_windows(windows)
             if before is not None:  # else the state at the iteration start is on disk
                 before["meta"]["progress"]["elapsed"] = self.elapsed  # the run's whole time
                 self.save(before)
