@@ -276,3 +276,36 @@ def test_self_play_and_league_runs_skip_the_fit_of_seats_they_fill(capsys, tmp_p
                     in err, err
         else:
             assert load_checkpoint(runs / name).meta["progress"]["global_step"] >= 64, name
+
+
+TINY_RUN = ('scenario = "vs_random"\ntotal_steps = 32\nnum_envs = 2\nwandb = "disabled"\n'
+            '[[learners]]\nname = "p"\n[learners.config]\nnum_steps = 16\nupdate_epochs = 1\n')
+
+
+def test_a_time_limit_beyond_a_week_is_refused_before_anything_runs(capsys, tmp_path):
+    """A time limit of 1e10 s overflowed the SIGALRM timer once training began (a
+    traceback, and an empty run folder left): the flag, a run file's time_limit_s and a
+    resume's flag are one line naming it, exit 2, before a folder is made or a run
+    resumed."""
+    runs = tmp_path / "runs"
+    argv = ["train", "--runs", str(runs), "--wandb", "disabled", "--no-progress",
+            "--num-envs", "2", "--total-steps", "32"]
+    assert main([*argv, "--time-limit", "1e10"]) == 2
+    assert capsys.readouterr().err == ("alphatank train: error: --time-limit: must be in "
+                                       "[0, 604800], got 10000000000.0\n")
+    run = tmp_path / "tiny.toml"
+    run.write_text("time_limit_s = 1e30\n" + TINY_RUN)
+    assert main([*argv, "--config", str(run)]) == 2
+    assert capsys.readouterr().err == (f"alphatank train: error: {run}: time_limit_s: must be "
+                                       f"in [0, 604800], got 1e+30\n")
+    assert not runs.exists()
+    run.write_text("time_limit_s = 604800\n" + TINY_RUN)  # a week is allowed
+    assert main([*argv, "--config", str(run)]) == 0
+    capsys.readouterr()
+    metrics = (runs / "tiny" / "metrics.jsonl").read_text()
+    assert main(["train", "--resume", str(runs / "tiny"), "--total-steps", "64",
+                 "--time-limit", "1e30", "--no-progress"]) == 2
+    assert capsys.readouterr().err == ("alphatank train: error: --time-limit: must be in "
+                                       "[0, 604800], got 1e+30\n")
+    assert (runs / "tiny" / "metrics.jsonl").read_text() == metrics
+    assert load_checkpoint(runs / "tiny").meta["progress"]["global_step"] == 32

@@ -31,6 +31,7 @@ from alphatank.training.fields import (
     parse_value,
 )
 from alphatank.training.fields import validate as validate_fields
+from alphatank.training.stopping import TIME_LIMIT_MAX_S
 from alphatank.training.tomlwriter import dumps
 
 WANDB_MODES = ("offline", "online", "disabled")
@@ -158,8 +159,8 @@ class TrainConfig:
     tensorboard: bool = hp(False, "also write TensorBoard logs")
     torch_threads: int = hp(1, "torch threads", gt=0)
     time_limit_s: float = hp(0.0, "stop (and checkpoint) after this much wall time in "
-                             "seconds of one invocation; a resumed run gets it again "
-                             "(0: none)", ge=0)
+                             "seconds of one invocation, at most a week; a resumed run gets "
+                             "it again (0: none)", ge=0, le=TIME_LIMIT_MAX_S)
     map: str | None = hp(None, "map override: shipped map or folder name (e.g. train), "
                          "a .txt path or a folder of maps (none: the scenario's)")
 

@@ -37,6 +37,7 @@ from alphatank.training.presets import (
     run_toml,
     with_hp,
 )
+from alphatank.training.stopping import TIME_LIMIT_MAX_S
 
 DEFAULT_PRESET = "ppo_vs_aggressive"
 SCHEDULES = ("none", "cycle:fixed", "cycle:random", "cycle:adaptive")
@@ -101,10 +102,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                      help="env worker processes (2 uses both cores)")
     run.add_argument("--seed", type=seed, help="run seed")
     run.add_argument("--time-limit", type=float, metavar="S",
-                     help="stop (with a checkpoint) after S seconds of this invocation: a "
-                          "resumed run gets S seconds more (the logged elapsed time counts "
-                          "the whole run); SIGINT (Ctrl-C) and SIGTERM also stop with a "
-                          "checkpoint within seconds")
+                     help="stop (with a checkpoint) after S seconds of this invocation, at "
+                          f"most a week ({TIME_LIMIT_MAX_S}): a resumed run gets S seconds "
+                          "more (the logged elapsed time counts the whole run); SIGINT "
+                          "(Ctrl-C) and SIGTERM also stop with a checkpoint within seconds")
     run.add_argument("--checkpoint-every", type=non_negative_int, metavar="N",
                      help="iterations per save (every save restarts all matches: keep N x "
                           "the rollout length above the episode length)")
