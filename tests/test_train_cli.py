@@ -4,8 +4,14 @@ bad value is a one-line error naming the flag and what is allowed."""
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import os
 import re
+import shutil
+import subprocess
+from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 
@@ -309,3 +315,50 @@ def test_a_time_limit_beyond_a_week_is_refused_before_anything_runs(capsys, tmp_
                                        "[0, 604800], got 1e+30\n")
     assert (runs / "tiny" / "metrics.jsonl").read_text() == metrics
     assert load_checkpoint(runs / "tiny").meta["progress"]["global_step"] == 32
+
+
+@contextlib.contextmanager
+def unwritable(folder: Path) -> Iterator[None]:
+    """``folder`` cannot be written in while the block runs: read-only by its mode, or for
+    root (whom the mode does not stop) immutable (``chattr +i``); skips the test where
+    neither works."""
+    mode = folder.stat().st_mode
+    folder.chmod(0o555)
+    immutable = False
+    if os.access(folder, os.W_OK) and shutil.which("chattr"):
+        immutable = subprocess.run(["chattr", "+i", str(folder)],
+                                   capture_output=True).returncode == 0
+    try:
+        if os.access(folder, os.W_OK):
+            pytest.skip("cannot make a folder unwritable here (root without chattr +i)")
+        yield
+    finally:
+        if immutable:
+            subprocess.run(["chattr", "-i", str(folder)], check=True)
+        folder.chmod(mode)
+
+
+def test_a_resume_into_folders_it_cannot_write_is_refused_before_training(capsys, tmp_path):
+    """A resumed run whose checkpoints folder (or run folder, or the folder its lock goes
+    in) cannot be written trained its whole budget, then failed at the save with a bare
+    '[Errno 1] ... .tmp' line: it is one line naming the folder, before training, as a new
+    run's --runs is."""
+    runs = tmp_path / "runs"
+    run = tmp_path / "tiny.toml"
+    run.write_text(TINY_RUN)
+    assert main(["train", "--config", str(run), "--runs", str(runs), "--no-progress"]) == 0
+    capsys.readouterr()
+    run_dir = runs / "tiny"
+    metrics = (run_dir / "metrics.jsonl").read_text()
+    for folder in (run_dir / "checkpoints", run_dir, runs):
+        with unwritable(folder):
+            assert main(["train", "--resume", str(run_dir), "--total-steps", "64",
+                         "--no-progress"]) == 2
+        cap = capsys.readouterr()
+        assert cap.out == "" and cap.err == (f"alphatank train: error: --resume: {folder}: "
+                                             f"{folder.absolute()} is not writable\n")
+        assert (run_dir / "metrics.jsonl").read_text() == metrics
+        assert load_checkpoint(run_dir).meta["progress"]["global_step"] == 32
+    assert main(["train", "--resume", str(run_dir), "--total-steps", "64",
+                 "--no-progress"]) == 0
+    assert load_checkpoint(run_dir).meta["progress"]["global_step"] == 64

@@ -358,10 +358,11 @@ def _run(args: argparse.Namespace, progress: bool, stack: contextlib.ExitStack) 
             raise InputError("--name and --runs name a new run's folder; a resumed run "
                              "continues in its own (--resume DIR); to branch a run, copy its "
                              "folder and resume the copy")
-        from alphatank.training.checkpoint import load_checkpoint
+        from alphatank.training.checkpoint import load_checkpoint, resume_dir
         from alphatank.training.runner import resume_trainer
         try:  # a CheckpointError is an InputError already
-            saved = load_checkpoint(args.resume).train_config
+            ckpt = load_checkpoint(args.resume)
+            saved = ckpt.train_config
             if args.num_envs not in (None, saved.num_envs):
                 raise InputError(f"--num-envs: the run plays {saved.num_envs} matches, and a "
                                  f"resumed run keeps them (its normalisers and rollouts hold "
@@ -370,6 +371,11 @@ def _run(args: argparse.Namespace, progress: bool, stack: contextlib.ExitStack) 
             if args.print_config:
                 print(run_toml(cfg), end="")
                 return 0
+            run_dir = resume_dir(ckpt)
+            # its lock goes beside it, its saves and metrics in it: checked before training,
+            # not when the first save fails
+            for folder in (run_dir.parent, run_dir, run_dir / "checkpoints"):
+                check_folder(folder, "--resume")
             runners = _env_runners(args, cfg, stack)
             with _one_line_warnings():
                 trainer = resume_trainer(args.resume, progress=progress, env_runners=runners,
