@@ -663,8 +663,10 @@ class Trainer:
     def train(self) -> dict[str, Any]:
         """Run until ``total_steps``, the time budget of this call (``time_limit_s``) or
         SIGINT / SIGTERM, always ending with a checkpoint to resume from. Returns a
-        summary; ``stopped`` says why it ended early (None: it reached ``total_steps``)
-        and ``exit_code`` is 130 / 143 after SIGINT / SIGTERM, else 0. A Trainer trains
+        summary; ``stopped`` says why it ended early (None: it reached ``total_steps``;
+        ``finished``: a stop that came once the steps were trained, which skipped the final
+        evaluation if ``final_eval_skipped``) and ``exit_code`` is 130 / 143 after SIGINT
+        / SIGTERM, else 0. A Trainer trains
         once (its env and log close at the end): go on with :func:`resume_trainer`."""
         if self.trained:
             raise RuntimeError(f"this Trainer has trained; continue the run with "
@@ -695,8 +697,9 @@ class Trainer:
                 self.env.close()  # a rollout started ahead is dropped with it
                 self.lock.release()
         if self.stop.reason is not None:
+            finished = {"finished": True} if self.saved_step >= cfg.total_steps else {}
             self.stopped = {"reason": self.stop.reason, "checkpoint_step": self.saved_step,
-                            **self.stopped}
+                            **finished, **self.stopped}
         return {"run_dir": str(self.run_dir), "global_step": self.global_step,
                 "saved_step": self.saved_step, "iterations": self.iteration,
                 "episodes": self.episodes, "elapsed_s": self.elapsed,
@@ -762,6 +765,8 @@ class Trainer:
                             self._video()
                 except StopRequested:
                     last = True
+                    if evaluate and self.global_step >= cfg.total_steps:
+                        self.stopped = {"final_eval_skipped": True}
             self.logger.log(metrics, self.global_step)
             self.history.append({"step": self.global_step, **metrics})
             if bar is not None:

@@ -451,8 +451,12 @@ def report(summary: dict[str, Any]) -> int:
     run_dir = Path(summary["run_dir"])
     latest = (run_dir / "latest").read_text().strip()
     stopped = summary.get("stopped")
-    if stopped:
-        done = stopped["checkpoint_step"]
+    done = stopped["checkpoint_step"] if stopped else summary["global_step"]
+    if stopped and stopped.get("finished"):  # nothing to resume
+        print(f"stopped by {stopped['reason']}: the run is finished (saved step {done:,})"
+              + ("; its final evaluation was skipped: alphatank eval "
+                 f"{run_dir} plays one" if stopped.get("final_eval_skipped") else ""))
+    elif stopped:
         how = (f"dropped the unfinished iteration of {stopped['dropped_steps']:,} steps, "
                f"collected again on resume" if "dropped_steps" in stopped else
                f"cut the iteration after {stopped['cut_steps']:,} steps; its matches restart on "
@@ -461,8 +465,6 @@ def report(summary: dict[str, Any]) -> int:
                if "clone_pending" in stopped else "at an iteration end")
         print(f"stopped by {stopped['reason']}: saved step {done:,} ({how}); continue with "
               f"alphatank train --resume {run_dir}")
-    else:
-        done = summary["global_step"]
     print(f"run {run_dir}: {done:,} steps, {summary['episodes']:,} episodes, "
           f"{summary['elapsed_s']:.0f} s")
     for key, val in summary.items():
