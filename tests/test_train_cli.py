@@ -18,7 +18,8 @@ import pytest
 from alphatank.cli import main
 from alphatank.training.checkpoint import load_checkpoint
 from alphatank.training.hparams import PPOConfig
-from alphatank.training.presets import get_preset, load_run
+from alphatank.training.presets import get_preset, iteration_steps, load_run, planned_steps
+from alphatank.training.runner import Trainer
 
 
 def printed_run(capsys, tmp_path, *argv: str):
@@ -85,7 +86,7 @@ def test_scenario_flag_refits_learners_of_the_first_kind(capsys, tmp_path):
     (["--preset", "nope"], "unknown training preset 'nope'"),
     (["--config", "missing.toml"], "missing.toml: no such run file"),
     (["--config", "x.toml", "--preset", "demo"], "--config and --preset: give one"),
-    (["--time-limit", "-1"], "--time-limit: must be >= 0, got -1.0"),
+    (["--time-limit", "-1"], "--time-limit: must be in [0, 604800], got -1.0"),
 ])
 def test_bad_flags_are_one_line_errors(capsys, argv, error):
     assert main(["train", "--print-config", *argv]) == 2
@@ -362,3 +363,38 @@ def test_a_resume_into_folders_it_cannot_write_is_refused_before_training(capsys
     assert main(["train", "--resume", str(run_dir), "--total-steps", "64",
                  "--no-progress"]) == 0
     assert load_checkpoint(run_dir).meta["progress"]["global_step"] == 64
+
+
+def test_total_steps_are_rounded_up_to_whole_iterations_as_help_and_plan_say(capsys, tmp_path):
+    """The step count is checked between iterations: --total-steps 1500 of SAC (512 vector
+    steps x 2 matches an iteration) trains 2,048 steps, planned_steps' figure; --help says
+    so (it said 'env steps to train in total')."""
+    assert main(["train", "--preset", "sac_vs_aggressive", "--num-envs", "2",
+                 "--total-steps", "1500", "--runs", str(tmp_path), "--wandb", "disabled",
+                 "--no-progress", "--hp", "sac.hidden=16,sac.batch_size=16,sac.utd_ratio=0.05,"
+                 "sac.buffer_size=4096"]) == 0
+    ck = load_checkpoint(tmp_path / "sac_vs_aggressive")
+    assert (iteration_steps(ck.train_config), planned_steps(ck.train_config)) == (1024, 2048)
+    assert ck.meta["progress"]["global_step"] == 2048
+    assert "run " + str(tmp_path / "sac_vs_aggressive") + ": 2,048 steps" in \
+        capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        main(["train", "--help"])
+    assert "rounded up to a whole iteration" in " ".join(capsys.readouterr().out.split())
+
+
+@pytest.mark.parametrize("preset,changes", [
+    ("ppo_vs_aggressive", {}), ("team_vs_def", {}), ("sac_vs_ppo", {}),
+    ("sac_vs_aggressive", {"rollout_steps": 64, "checkpoint_every": 0})])
+def test_iteration_steps_are_the_trainers(tmp_path, preset, changes):
+    """iteration_steps (what --list plans with) is the trainer's iteration: PPO's and
+    MAPPO's rollout, SAC's default, the longest of a mix, a run's own rollout_steps."""
+    cfg = dataclasses.replace(get_preset(preset), num_envs=2, wandb="disabled", **changes)
+    tr = Trainer(cfg, tmp_path / preset, progress=False)
+    try:
+        assert tr.rollout_steps * tr.E == iteration_steps(cfg)
+        assert tr.total_iterations * iteration_steps(cfg) == planned_steps(cfg)
+    finally:
+        tr.env.close()
+        tr.logger.close()
+        tr.lock.release()

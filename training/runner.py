@@ -77,6 +77,7 @@ from alphatank.training.imitate import imitate
 from alphatank.training.learners import learner_class, make_learner
 from alphatank.training.logging import RunLogger
 from alphatank.training.presets import (
+    DEFAULT_ROLLOUT_STEPS,
     TrainConfig,
     learners_fit,
     run_learners,
@@ -89,7 +90,6 @@ from alphatank.training.stopping import StopFlag, StopRequested, stop_on_signals
 from alphatank.training.threads import limit_threads
 
 WINDOW = 100  # episodes in the rolling win-rate / return windows
-DEFAULT_ROLLOUT_STEPS = 512  # vector steps per iteration when no learner asks for a length
 
 
 class RunWarning(UserWarning):

@@ -96,7 +96,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     run.add_argument("--runs", help="folder of runs (default: runs)")
     run.add_argument("--resume", metavar="DIR",
                      help="continue the run saved in DIR (a run folder or a checkpoint)")
-    run.add_argument("--total-steps", type=positive_int, help="env steps to train in total")
+    run.add_argument("--total-steps", type=positive_int,
+                     help="env steps to train in total, rounded up to a whole iteration "
+                          "(rollout_steps x num_envs env steps, e.g. SAC's 512 x 16 = "
+                          "8,192): the step count is checked between iterations")
     run.add_argument("--num-envs", type=match_count, help="matches stepped together")
     run.add_argument("--workers", type=positive_int,
                      help="env worker processes (2 uses both cores)")
