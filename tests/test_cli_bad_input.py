@@ -527,6 +527,8 @@ CASES = [
     ("train-hp-nan", ["train", "--preset", "sac_vs_aggressive", "--hp",
                       "sac.target_entropy=nan"], ["--hp sac.target_entropy", "finite"]),
     ("train-time-limit-inf", ["train", "--time-limit", "inf"], ["--time-limit", "finite"]),
+    ("train-time-limit-huge", ["train", "--runs", "{dir}/runs_tl", "--time-limit", "1e30"],
+     ["--time-limit", "in [0, 604800]", "1e+30"]),
     ("train-schedule", ["train", "--schedule", "cycle:sometimes"], ["--schedule", "cycle:fixed"]),
     ("train-curriculum", ["train", "--curriculum", "0.1:2"], ["--curriculum", "START:END"]),
     ("train-map", ["train", "--map", "nowhere"], ["--map", "unknown map 'nowhere'"]),
@@ -556,7 +558,8 @@ CASES = [
                                     "0.2", "--games", "2", "--out", "{good_txt}/x",
                                     "--no-progress"], ["--out", "{good_txt} is a file"]),
     # demo
-    ("demo-minutes", ["demo", "--minutes", "-1"], ["--minutes", "> 0", "'-1'"]),
+    ("demo-minutes", ["demo", "--minutes", "-1"], ["--minutes", "in (0, 10080]", "'-1'"]),
+    ("demo-minutes-huge", ["demo", "--minutes", "1e9"], ["--minutes", "(a week)", "'1e9'"]),
     ("demo-name", ["demo", "--runs", "{dir}/runs", "--name", "a/b"], ["--name", "'a/b'"]),
     ("demo-runs-file", ["demo", "--runs", "{good_txt}/runs"], ["--runs", "{good_txt} is a file"]),
     ("demo-wandb", ["demo", "--wandb", "cloud"], ["--wandb", "invalid choice"]),

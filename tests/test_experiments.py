@@ -310,6 +310,22 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
         assert capsys.readouterr().err.count("\n") == 1
 
 
+def test_the_plan_lists_the_steps_each_run_trains(tmp_path, capsys):
+    """Runs train whole iterations: --list shows the steps rounded up (it said 'steps<=' the
+    asked figure, and a SAC run of --steps 1000 trained 8,192), with the figure asked."""
+    root = write_rows(tmp_path / "exp")
+    assert cli("tiny", "--experiments-dir", str(root), "--steps", "600", "--list") == 0
+    out = capsys.readouterr().out
+    assert "steps<=" not in out
+    assert "  a_random           vs_random          steps       768  Random Bot  (600 asked; " \
+           "iterations of 256)" in out  # 64 vector steps x 4 matches
+    assert "steps: env steps per run, whole iterations (rollout_steps x num_envs), unless " \
+           "the 15-minute budget ends it first" in out
+    assert cli("sac", "--rows", "sac_vs_aggressive", "--steps", "1000", "--list") == 0
+    assert "steps     8,192  SAC vs Aggressive Bot  (1,000 asked; iterations of 8,192)" in \
+        capsys.readouterr().out
+
+
 def test_shipped_tables_load_and_plan(tmp_path):
     names = table_names()
     assert names == ["table3", "table4", "sac", "league", "heldout"]

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 import torch
 
+from alphatank.commands.train import report
 from alphatank.envs.vector import VectorMatchEnv
 from alphatank.training.checkpoint import load_checkpoint
 from alphatank.training.logging import RunLogger, rewind_metrics
@@ -116,6 +117,57 @@ def test_a_stop_inside_an_iteration_saves_its_start_and_resumes_exactly(tmp_path
         assert [h[key] for h in runs[0].history] == [h[key] for h in runs[1].history], key
     assert states_equal(runs[0].learners["ppo"].state_dict(),
                         runs[1].learners["ppo"].state_dict())
+
+
+def test_the_summary_of_a_stop_that_drops_an_iteration_counts_what_was_saved(tmp_path):
+    """A stop inside the update of iteration 4 drops that iteration's episodes with it:
+    the summary counts the episodes and win rates the checkpoint holds (those of the
+    iterations before), not those of the dropped one."""
+    spec = LearnerSpec("ppo", "ppo", (0,), PPO_TINY)
+    ref = trainer(config("ref", spec, 4), tmp_path / "ref")
+    ref.train()
+    done, dropped = ref.history[2], ref.history[3]
+    assert dropped["charts/episodes"] > done["charts/episodes"]  # episodes ended in it
+    stopped = trainer(config("stop", spec, 5), tmp_path / "stop", at=4 * 16)  # in the update
+    summary = stopped.train()
+    assert summary["stopped"] == {"reason": "SIGINT", "checkpoint_step": 3 * 16 * E,
+                                  "dropped_steps": 16 * E}
+    ck = load_checkpoint(tmp_path / "stop")
+    assert summary["episodes"] == ck.meta["progress"]["episodes"] == done["charts/episodes"]
+    for key in ("charts/episodes", "charts/win_rate", "charts/episode_return",
+                "charts/episode_length"):
+        assert summary[key] == done[key], key
+    assert stopped._windows() == ck.meta["windows"]
+
+
+class SignalInFinalEval(Trainer):
+    """A trainer that gets SIGINT during its final evaluation (after its last iteration)."""
+
+    def evaluate(self, games: int) -> dict[str, float]:
+        if self.global_step >= self.cfg.total_steps:
+            signal.raise_signal(signal.SIGINT)
+        return super().evaluate(games)
+
+
+def test_a_stop_during_the_final_evaluation_says_the_run_is_finished(tmp_path, capsys):
+    """The run has all its steps: the stop skips the final evaluation, and the summary says
+    the run is finished and how to evaluate it, not to resume (which would do nothing)."""
+    spec = LearnerSpec("ppo", "ppo", (0,), PPO_TINY)
+    cfg = config("fin", spec, 2, eval_every=1, eval_games=2)
+    env = SignalAt(cfg.scenario, E, cfg.seed, game_overrides=cfg.game)
+    summary = SignalInFinalEval(cfg, tmp_path / "fin", env=env, progress=False).train()
+    assert summary["exit_code"] == 130
+    assert summary["stopped"] == {"reason": "SIGINT", "checkpoint_step": 2 * 16 * E,
+                                  "finished": True, "final_eval_skipped": True}
+    assert report(summary) == 130
+    assert capsys.readouterr().out.splitlines()[0] == (
+        f"stopped by SIGINT: the run is finished (saved step {2 * 16 * E}); its final "
+        f"evaluation was skipped: alphatank eval {tmp_path / 'fin'} plays one")
+    rows = [json.loads(x) for x in (tmp_path / "fin" / "metrics.jsonl").read_text().splitlines()]
+    assert [(r["step"], "eval/win_rate" in r) for r in rows] == [(16 * E, True),
+                                                                  (32 * E, False)]
+    again = resume_trainer(tmp_path / "fin", progress=False).train()  # nothing left to do
+    assert again["stopped"] is None and again["global_step"] == 2 * 16 * E
 
 
 def test_a_sac_stop_cuts_the_segment_keeps_every_transition_and_resumes_deterministically(

@@ -4,15 +4,22 @@ bad value is a one-line error naming the flag and what is allowed."""
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import os
 import re
+import shutil
+import subprocess
+from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 
 from alphatank.cli import main
 from alphatank.training.checkpoint import load_checkpoint
 from alphatank.training.hparams import PPOConfig
-from alphatank.training.presets import get_preset, load_run
+from alphatank.training.presets import get_preset, iteration_steps, load_run, planned_steps
+from alphatank.training.runner import Trainer
 
 
 def printed_run(capsys, tmp_path, *argv: str):
@@ -79,7 +86,7 @@ def test_scenario_flag_refits_learners_of_the_first_kind(capsys, tmp_path):
     (["--preset", "nope"], "unknown training preset 'nope'"),
     (["--config", "missing.toml"], "missing.toml: no such run file"),
     (["--config", "x.toml", "--preset", "demo"], "--config and --preset: give one"),
-    (["--time-limit", "-1"], "--time-limit: must be >= 0, got -1.0"),
+    (["--time-limit", "-1"], "--time-limit: must be in [0, 604800], got -1.0"),
 ])
 def test_bad_flags_are_one_line_errors(capsys, argv, error):
     assert main(["train", "--print-config", *argv]) == 2
@@ -276,3 +283,118 @@ def test_self_play_and_league_runs_skip_the_fit_of_seats_they_fill(capsys, tmp_p
                     in err, err
         else:
             assert load_checkpoint(runs / name).meta["progress"]["global_step"] >= 64, name
+
+
+TINY_RUN = ('scenario = "vs_random"\ntotal_steps = 32\nnum_envs = 2\nwandb = "disabled"\n'
+            '[[learners]]\nname = "p"\n[learners.config]\nnum_steps = 16\nupdate_epochs = 1\n')
+
+
+def test_a_time_limit_beyond_a_week_is_refused_before_anything_runs(capsys, tmp_path):
+    """A time limit of 1e10 s overflowed the SIGALRM timer once training began (a
+    traceback, and an empty run folder left): the flag, a run file's time_limit_s and a
+    resume's flag are one line naming it, exit 2, before a folder is made or a run
+    resumed."""
+    runs = tmp_path / "runs"
+    argv = ["train", "--runs", str(runs), "--wandb", "disabled", "--no-progress",
+            "--num-envs", "2", "--total-steps", "32"]
+    assert main([*argv, "--time-limit", "1e10"]) == 2
+    assert capsys.readouterr().err == ("alphatank train: error: --time-limit: must be in "
+                                       "[0, 604800], got 10000000000.0\n")
+    run = tmp_path / "tiny.toml"
+    run.write_text("time_limit_s = 1e30\n" + TINY_RUN)
+    assert main([*argv, "--config", str(run)]) == 2
+    assert capsys.readouterr().err == (f"alphatank train: error: {run}: time_limit_s: must be "
+                                       f"in [0, 604800], got 1e+30\n")
+    assert not runs.exists()
+    run.write_text("time_limit_s = 604800\n" + TINY_RUN)  # a week is allowed
+    assert main([*argv, "--config", str(run)]) == 0
+    capsys.readouterr()
+    metrics = (runs / "tiny" / "metrics.jsonl").read_text()
+    assert main(["train", "--resume", str(runs / "tiny"), "--total-steps", "64",
+                 "--time-limit", "1e30", "--no-progress"]) == 2
+    assert capsys.readouterr().err == ("alphatank train: error: --time-limit: must be in "
+                                       "[0, 604800], got 1e+30\n")
+    assert (runs / "tiny" / "metrics.jsonl").read_text() == metrics
+    assert load_checkpoint(runs / "tiny").meta["progress"]["global_step"] == 32
+
+
+@contextlib.contextmanager
+def unwritable(folder: Path) -> Iterator[None]:
+    """``folder`` cannot be written in while the block runs: read-only by its mode, or for
+    root (whom the mode does not stop) immutable (``chattr +i``); skips the test where
+    neither works."""
+    mode = folder.stat().st_mode
+    folder.chmod(0o555)
+    immutable = False
+    if os.access(folder, os.W_OK) and shutil.which("chattr"):
+        immutable = subprocess.run(["chattr", "+i", str(folder)],
+                                   capture_output=True).returncode == 0
+    try:
+        if os.access(folder, os.W_OK):
+            pytest.skip("cannot make a folder unwritable here (root without chattr +i)")
+        yield
+    finally:
+        if immutable:
+            subprocess.run(["chattr", "-i", str(folder)], check=True)
+        folder.chmod(mode)
+
+
+def test_a_resume_into_folders_it_cannot_write_is_refused_before_training(capsys, tmp_path):
+    """A resumed run whose checkpoints folder (or run folder, or the folder its lock goes
+    in) cannot be written trained its whole budget, then failed at the save with a bare
+    '[Errno 1] ... .tmp' line: it is one line naming the folder, before training, as a new
+    run's --runs is."""
+    runs = tmp_path / "runs"
+    run = tmp_path / "tiny.toml"
+    run.write_text(TINY_RUN)
+    assert main(["train", "--config", str(run), "--runs", str(runs), "--no-progress"]) == 0
+    capsys.readouterr()
+    run_dir = runs / "tiny"
+    metrics = (run_dir / "metrics.jsonl").read_text()
+    for folder in (run_dir / "checkpoints", run_dir, runs):
+        with unwritable(folder):
+            assert main(["train", "--resume", str(run_dir), "--total-steps", "64",
+                         "--no-progress"]) == 2
+        cap = capsys.readouterr()
+        assert cap.out == "" and cap.err == (f"alphatank train: error: --resume: {folder}: "
+                                             f"{folder.absolute()} is not writable\n")
+        assert (run_dir / "metrics.jsonl").read_text() == metrics
+        assert load_checkpoint(run_dir).meta["progress"]["global_step"] == 32
+    assert main(["train", "--resume", str(run_dir), "--total-steps", "64",
+                 "--no-progress"]) == 0
+    assert load_checkpoint(run_dir).meta["progress"]["global_step"] == 64
+
+
+def test_total_steps_are_rounded_up_to_whole_iterations_as_help_and_plan_say(capsys, tmp_path):
+    """The step count is checked between iterations: --total-steps 1500 of SAC (512 vector
+    steps x 2 matches an iteration) trains 2,048 steps, planned_steps' figure; --help says
+    so (it said 'env steps to train in total')."""
+    assert main(["train", "--preset", "sac_vs_aggressive", "--num-envs", "2",
+                 "--total-steps", "1500", "--runs", str(tmp_path), "--wandb", "disabled",
+                 "--no-progress", "--hp", "sac.hidden=16,sac.batch_size=16,sac.utd_ratio=0.05,"
+                 "sac.buffer_size=4096"]) == 0
+    ck = load_checkpoint(tmp_path / "sac_vs_aggressive")
+    assert (iteration_steps(ck.train_config), planned_steps(ck.train_config)) == (1024, 2048)
+    assert ck.meta["progress"]["global_step"] == 2048
+    assert "run " + str(tmp_path / "sac_vs_aggressive") + ": 2,048 steps" in \
+        capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        main(["train", "--help"])
+    assert "rounded up to a whole iteration" in " ".join(capsys.readouterr().out.split())
+
+
+@pytest.mark.parametrize("preset,changes", [
+    ("ppo_vs_aggressive", {}), ("team_vs_def", {}), ("sac_vs_ppo", {}),
+    ("sac_vs_aggressive", {"rollout_steps": 64, "checkpoint_every": 0})])
+def test_iteration_steps_are_the_trainers(tmp_path, preset, changes):
+    """iteration_steps (what --list plans with) is the trainer's iteration: PPO's and
+    MAPPO's rollout, SAC's default, the longest of a mix, a run's own rollout_steps."""
+    cfg = dataclasses.replace(get_preset(preset), num_envs=2, wandb="disabled", **changes)
+    tr = Trainer(cfg, tmp_path / preset, progress=False)
+    try:
+        assert tr.rollout_steps * tr.E == iteration_steps(cfg)
+        assert tr.total_iterations * iteration_steps(cfg) == planned_steps(cfg)
+    finally:
+        tr.env.close()
+        tr.logger.close()
+        tr.lock.release()

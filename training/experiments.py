@@ -13,7 +13,8 @@ no evaluation game reuses a training seed, and every row of a table meets the sa
 evaluation games for the same ``s`` (common random numbers across rows).
 
 Budget: each run trains for at most ``budget`` minutes (``time_limit_s``) and
-``budget x steps_per_minute`` env steps (the row's planning rate); settings named in the
+``budget x steps_per_minute`` env steps (the row's planning rate) rounded up to a whole
+iteration (:func:`~alphatank.training.presets.planned_steps`); settings named in the
 row's ``[budget_fractions]`` are set to that fraction of the run's steps (e.g. a cycle
 interval of 1/16 visits each of four bots four times).
 

@@ -31,11 +31,13 @@ from alphatank.training.fields import (
     parse_value,
 )
 from alphatank.training.fields import validate as validate_fields
+from alphatank.training.stopping import TIME_LIMIT_MAX_S
 from alphatank.training.tomlwriter import dumps
 
 WANDB_MODES = ("offline", "online", "disabled")
 BOT_POOL = ("random", "aggressive", "defensive", "dodge")  # the cycle of paper 4.3
 CYCLE_INTERVAL = 100_000  # env steps per opponent when a cycle is set from the command line
+DEFAULT_ROLLOUT_STEPS = 512  # vector steps per iteration when no learner asks for a length
 REQUIRED: Any = dataclasses.MISSING
 _NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$")
 
@@ -123,8 +125,8 @@ class TrainConfig:
     description: str = hp("", "what the run is for (shown by alphatank train --list)")
     learners: tuple[LearnerSpec, ...] = hp((), "learners (name, algo, seats, config); "
                                            "none: one PPO learner per learner seat")
-    total_steps: int = hp(2_000_000, "env steps summed over all envs (one match tick each)",
-                          gt=0)
+    total_steps: int = hp(2_000_000, "env steps summed over all envs (one match tick each), "
+                          "rounded up to whole iterations (rollout_steps x num_envs)", gt=0)
     num_envs: int = hp(16, "matches stepped together (each holds about 0.5 MB)", gt=0,
                        le=MATCHES_MAX)
     num_workers: int = hp(1, "env worker processes", gt=0)
@@ -158,8 +160,8 @@ class TrainConfig:
     tensorboard: bool = hp(False, "also write TensorBoard logs")
     torch_threads: int = hp(1, "torch threads", gt=0)
     time_limit_s: float = hp(0.0, "stop (and checkpoint) after this much wall time in "
-                             "seconds of one invocation; a resumed run gets it again "
-                             "(0: none)", ge=0)
+                             "seconds of one invocation, at most a week; a resumed run gets "
+                             "it again (0: none)", ge=0, le=TIME_LIMIT_MAX_S)
     map: str | None = hp(None, "map override: shipped map or folder name (e.g. train), "
                          "a .txt path or a folder of maps (none: the scenario's)")
 
@@ -268,6 +270,22 @@ def selfplay_pool_args(cfg: TrainConfig) -> tuple[str, dict[str, Any]]:
 def run_learners(cfg: TrainConfig, num_learners: int) -> tuple[LearnerSpec, ...]:
     """The run's learners: its own, or one per learner seat when it names none."""
     return cfg.learners or default_learners(num_learners)
+
+
+def iteration_steps(cfg: TrainConfig) -> int:
+    """Env steps of one iteration of the run: ``rollout_steps`` vector steps (0: the
+    longest fixed rollout, ``num_steps``, its learners want; DEFAULT_ROLLOUT_STEPS when
+    none does, as for SAC) times ``num_envs``."""
+    wants = [getattr(spec.config, "num_steps", 0) for spec in run_learners(cfg, 1)]
+    return (cfg.rollout_steps or max(wants) or DEFAULT_ROLLOUT_STEPS) * cfg.num_envs
+
+
+def planned_steps(cfg: TrainConfig) -> int:
+    """The env steps the run trains unless a stop ends it sooner: ``total_steps`` rounded
+    up to whole iterations (:func:`iteration_steps`; the step count is checked between
+    iterations)."""
+    per = iteration_steps(cfg)
+    return -(-cfg.total_steps // per) * per
 
 
 def run_scenario(cfg: TrainConfig) -> Any:

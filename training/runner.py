@@ -77,6 +77,7 @@ from alphatank.training.imitate import imitate
 from alphatank.training.learners import learner_class, make_learner
 from alphatank.training.logging import RunLogger
 from alphatank.training.presets import (
+    DEFAULT_ROLLOUT_STEPS,
     TrainConfig,
     learners_fit,
     run_learners,
@@ -89,7 +90,6 @@ from alphatank.training.stopping import StopFlag, StopRequested, stop_on_signals
 from alphatank.training.threads import limit_threads
 
 WINDOW = 100  # episodes in the rolling win-rate / return windows
-DEFAULT_ROLLOUT_STEPS = 512  # vector steps per iteration when no learner asks for a length
 
 
 class RunWarning(UserWarning):
@@ -284,10 +284,9 @@ class Trainer:
         self.iteration = 0
         self.episodes = 0
         self.elapsed = 0.0
-        self.outcomes = {n: deque(maxlen=WINDOW) for n in self.learners}
-        self.returns = {n: deque(maxlen=WINDOW) for n in self.learners}
-        self.lengths: deque[int] = deque(maxlen=WINDOW)
-        self.by_opponent: dict[str, dict[str, deque[float]]] = {n: {} for n in self.learners}
+        self._load_windows({})  # outcomes, returns, lengths, by_opponent: the last episodes
+        # (episodes, windows) at the start of an iteration of fixed-rollout learners
+        self.counted: tuple[int, dict[str, Any]] = (0, {})
         self.cut = 0  # vector steps of a stopped iteration inside global_step (0: none)
         self.lost_rollouts = 0  # iterations collected again after an env runner died
         self.notes: list[str] = []  # what happened to the run (lost rollouts), in words
@@ -398,17 +397,33 @@ class Trainer:
         self.episodes, self.elapsed = int(prog["episodes"]), float(prog["elapsed"])
         self.cut = int(prog.get("cut", 0))
         self.schedule.load_state_dict(ckpt.meta.get("schedule", {}))
-        windows = ckpt.meta.get("windows", {})  # older saves lack lengths, by_opponent
-        for name, outs in windows.get("outcomes", {}).items():
-            self.outcomes[name].extend(outs)
-        for name, rets in windows.get("returns", {}).items():
-            self.returns[name].extend(rets)
-        self.lengths.extend(int(x) for x in windows.get("lengths", []))
-        for name, opps in windows.get("by_opponent", {}).items():
-            for opp, scores in opps.items():
-                self.by_opponent[name][opp] = deque(scores, maxlen=WINDOW)
+        self._load_windows(ckpt.meta.get("windows", {}))
         if self.selfplay is not None:
             self.selfplay.load_state_dict(ckpt.extra_state("selfplay"))
+
+    def _windows(self) -> dict[str, Any]:
+        """The rolling episode windows as a checkpoint holds them (copies)."""
+        return {"outcomes": {n: list(d) for n, d in self.outcomes.items()},
+                "returns": {n: [float(x) for x in d] for n, d in self.returns.items()},
+                "lengths": list(self.lengths),
+                "by_opponent": {n: {opp: list(d) for opp, d in opps.items()}
+                                for n, opps in self.by_opponent.items()}}
+
+    def _load_windows(self, windows: dict[str, Any]) -> None:
+        """Set the rolling episode windows to ``windows`` (:meth:`_windows`; older saves
+        lack lengths and by_opponent)."""
+        def window(values: Any) -> deque:
+            return deque(values, maxlen=WINDOW)
+
+        self.outcomes: dict[str, deque[float]] = {
+            n: window(windows.get("outcomes", {}).get(n, ())) for n in self.learners}
+        self.returns: dict[str, deque[float]] = {
+            n: window(windows.get("returns", {}).get(n, ())) for n in self.learners}
+        self.lengths: deque[int] = window(int(x) for x in windows.get("lengths", ()))
+        self.by_opponent: dict[str, dict[str, deque[float]]] = {
+            n: {opp: window(scores) for opp, scores
+                                in windows.get("by_opponent", {}).get(n, {}).items()}
+                            for n in self.learners}
 
     def _payload(self) -> dict[str, Any]:
         """What a checkpoint of the current state holds (:func:`save_checkpoint`'s
@@ -426,11 +441,7 @@ class Trainer:
                          "episodes": self.episodes, "elapsed": self.elapsed, "cut": self.cut,
                          "clone_pending": self.imitation is not None},
             "schedule": self.schedule.state_dict(),
-            "windows": {"outcomes": {n: list(d) for n, d in self.outcomes.items()},
-                        "returns": {n: [float(x) for x in d] for n, d in self.returns.items()},
-                        "lengths": list(self.lengths),
-                        "by_opponent": {n: {opp: list(d) for opp, d in opps.items()}
-                                        for n, opps in self.by_opponent.items()}},
+            "windows": self._windows(),
             "wandb_id": self.logger.run_id,
             "env": env_id(self.scenario),
         }
@@ -457,6 +468,8 @@ class Trainer:
         (their rollouts are empty now)."""
         fixed = [n for n, lr in self.learners.items() if lr.rollout_steps]
         if len(fixed) == len(self.learners):
+            # the episodes a stop drops with the iteration leave the summary too
+            self.counted = (self.episodes, self._windows())
             return None if self.global_step == self.saved_step else copy.deepcopy(
                 self._payload())
         return {n: copy.deepcopy(self.learners[n].state_dict()) for n in fixed}
@@ -651,8 +664,10 @@ class Trainer:
     def train(self) -> dict[str, Any]:
         """Run until ``total_steps``, the time budget of this call (``time_limit_s``) or
         SIGINT / SIGTERM, always ending with a checkpoint to resume from. Returns a
-        summary; ``stopped`` says why it ended early (None: it reached ``total_steps``)
-        and ``exit_code`` is 130 / 143 after SIGINT / SIGTERM, else 0. A Trainer trains
+        summary; ``stopped`` says why it ended early (None: it reached ``total_steps``;
+        ``finished``: a stop that came once the steps were trained, which skipped the final
+        evaluation if ``final_eval_skipped``) and ``exit_code`` is 130 / 143 after SIGINT
+        / SIGTERM, else 0. A Trainer trains
         once (its env and log close at the end): go on with :func:`resume_trainer`."""
         if self.trained:
             raise RuntimeError(f"this Trainer has trained; continue the run with "
@@ -683,8 +698,9 @@ class Trainer:
                 self.env.close()  # a rollout started ahead is dropped with it
                 self.lock.release()
         if self.stop.reason is not None:
+            finished = {"finished": True} if self.saved_step >= cfg.total_steps else {}
             self.stopped = {"reason": self.stop.reason, "checkpoint_step": self.saved_step,
-                            **self.stopped}
+                            **finished, **self.stopped}
         return {"run_dir": str(self.run_dir), "global_step": self.global_step,
                 "saved_step": self.saved_step, "iterations": self.iteration,
                 "episodes": self.episodes, "elapsed_s": self.elapsed,
@@ -750,6 +766,8 @@ class Trainer:
                             self._video()
                 except StopRequested:
                     last = True
+                    if evaluate and self.global_step >= cfg.total_steps:
+                        self.stopped = {"final_eval_skipped": True}
             self.logger.log(metrics, self.global_step)
             self.history.append({"step": self.global_step, **metrics})
             if bar is not None:
@@ -806,6 +824,8 @@ class Trainer:
         snapshot (see the module docstring)."""
         if all(lr.rollout_steps for lr in self.learners.values()):
             self.stopped = {"dropped_steps": self.global_step - s0}
+            self.episodes, windows = self.counted  # as the save holds them
+            self._load_windows(windows)
             if before is not None:  # else the state at the iteration start is on disk
                 before["meta"]["progress"]["elapsed"] = self.elapsed  # the run's whole time
                 self.save(before)

@@ -24,6 +24,9 @@ from contextlib import contextmanager
 from typing import Any
 
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
+# the longest time limit a run takes, in seconds: a week (as ``experiments --budget``);
+# far larger ones overflow the SIGALRM timer (``signal.setitimer``)
+TIME_LIMIT_MAX_S = 7 * 24 * 3600
 
 
 class StopRequested(Exception):  # noqa: N818 (a request, not an error)

@@ -8,7 +8,7 @@ import argparse
 import time
 from pathlib import Path
 
-from alphatank.commands.argtypes import positive_float, positive_int
+from alphatank.commands.argtypes import budget_minutes, positive_int
 from alphatank.errors import InputError
 from alphatank.extras import require
 from alphatank.files import check_folder, write_text_atomic
@@ -17,8 +17,9 @@ from alphatank.files import check_folder, write_text_atomic
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--name", help="run name (default: demo-<date>-<time>)")
     p.add_argument("--runs", default="runs", help="folder of runs (default: runs)")
-    p.add_argument("--minutes", type=positive_float, default=8.0,
-                   help="training budget in minutes (default: 8; the whole job stays < 10)")
+    p.add_argument("--minutes", type=budget_minutes, default=8.0,
+                   help="training budget in minutes, at most a week (default: 8; the whole "
+                        "job stays < 10)")
     p.add_argument("--games", type=positive_int, default=100,
                    help="evaluation games (default: 100)")
     p.add_argument("--workers", type=positive_int, default=2,

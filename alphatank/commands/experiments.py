@@ -40,8 +40,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="only these rows (names or TABLE/ROW ids); their tables also show "
                         "every other row with results in DIR (made with the same settings)")
     p.add_argument("--steps", type=int, metavar="N",
-                   help="env steps per run instead of budget x each row's planning rate "
-                        "(the budget still caps the time)")
+                   help="env steps per run instead of budget x each row's planning rate, "
+                        "rounded up to a whole iteration (rollout_steps x num_envs env "
+                        "steps; --list shows each run's figure); the budget still caps the "
+                        "time")
     p.add_argument("--list", action="store_true",
                    help="print the plan (rows, runs, estimated time) and exit")
     p.add_argument("--report-only", action="store_true",
@@ -211,18 +213,24 @@ def _command(args: argparse.Namespace) -> str:
 
 
 def _print_plan(plan, todo, workers, estimate) -> None:  # noqa: ANN001
+    from alphatank.training.presets import TrainConfig, iteration_steps, planned_steps
+
     by_key = {j.key: j for j in plan.jobs}
     for table in plan.tables:
         print(f"{table.name}: {table.title}")
         for row in table.rows:
             job = plan.cells[(row.id, 0)][0]
-            cfg = job.cfg
+            cfg = TrainConfig.from_dict(job.cfg)
+            steps = planned_steps(cfg)
             shared = [r for r in job.rows if r != row.id]
-            where = (f"mix of {len(job.scenarios)}" if job.scenarios else cfg["scenario"])
+            where = (f"mix of {len(job.scenarios)}" if job.scenarios else cfg.scenario)
             after = [r for k in job.needs for r in by_key[k].rows[:1]]
-            print(f"  {row.name:18s} {where:18s} steps<={cfg['total_steps']:>9,}"
-                  f"  {row.title}" + (f"  (run shared with {', '.join(shared)})"
-                                      if shared else "")
+            print(f"  {row.name:18s} {where:18s} steps {steps:>9,}  {row.title}"
+                  + (f"  ({cfg.total_steps:,} asked; iterations of {iteration_steps(cfg):,})"
+                     if steps != cfg.total_steps else "")
+                  + (f"  (run shared with {', '.join(shared)})" if shared else "")
                   + (f"  (trains after {', '.join(after)})" if after else ""))
+    print(f"steps: env steps per run, whole iterations (rollout_steps x num_envs), unless "
+          f"the {plan.budget_min:g}-minute budget ends it first")
     print(f"{len(plan.jobs)} runs ({plan.seeds} seed(s)), {len(todo)} to do: about "
           f"{estimate(plan, todo, workers):.0f} min with {workers} worker(s)")

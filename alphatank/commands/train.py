@@ -37,6 +37,7 @@ from alphatank.training.presets import (
     run_toml,
     with_hp,
 )
+from alphatank.training.stopping import TIME_LIMIT_MAX_S
 
 DEFAULT_PRESET = "ppo_vs_aggressive"
 SCHEDULES = ("none", "cycle:fixed", "cycle:random", "cycle:adaptive")
@@ -95,17 +96,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     run.add_argument("--runs", help="folder of runs (default: runs)")
     run.add_argument("--resume", metavar="DIR",
                      help="continue the run saved in DIR (a run folder or a checkpoint)")
-    run.add_argument("--total-steps", type=positive_int, help="env steps to train in total")
+    run.add_argument("--total-steps", type=positive_int,
+                     help="env steps to train in total, rounded up to a whole iteration "
+                          "(rollout_steps x num_envs env steps, e.g. SAC's 512 x 16 = "
+                          "8,192): the step count is checked between iterations")
     run.add_argument("--num-envs", type=match_count, help="matches stepped together")
     run.add_argument("--workers", type=positive_int,
                      help="env worker processes (2 uses both cores)")
     run.add_argument("--seed", type=seed, help="run seed")
     run.add_argument("--time-limit", type=float, metavar="S",
-                     help="stop (with a checkpoint) after S seconds of this invocation: a "
-                          "resumed run gets S seconds more (the logged elapsed time counts "
-                          "the whole run); SIGINT (Ctrl-C) and SIGTERM also stop with a "
-                          "checkpoint within seconds (a second Ctrl-C quits without it, "
-                          "but lets a save under way finish first)")
+                     help="stop (with a checkpoint) after S seconds of this invocation, at "
+                          f"most a week ({TIME_LIMIT_MAX_S}): a resumed run gets S seconds "
+                          "more (the logged elapsed time counts the whole run); SIGINT "
+                          "(Ctrl-C) and SIGTERM also stop with a checkpoint within seconds "
+                          "(a second Ctrl-C quits without it, but lets a save under way "
+                          "finish first)")
     run.add_argument("--checkpoint-every", type=non_negative_int, metavar="N",
                      help="iterations per save (every save restarts all matches: keep N x "
                           "the rollout length above the episode length)")
@@ -358,10 +363,11 @@ def _run(args: argparse.Namespace, progress: bool, stack: contextlib.ExitStack) 
             raise InputError("--name and --runs name a new run's folder; a resumed run "
                              "continues in its own (--resume DIR); to branch a run, copy its "
                              "folder and resume the copy")
-        from alphatank.training.checkpoint import load_checkpoint
+        from alphatank.training.checkpoint import load_checkpoint, resume_dir
         from alphatank.training.runner import resume_trainer
         try:  # a CheckpointError is an InputError already
-            saved = load_checkpoint(args.resume).train_config
+            ckpt = load_checkpoint(args.resume)
+            saved = ckpt.train_config
             if args.num_envs not in (None, saved.num_envs):
                 raise InputError(f"--num-envs: the run plays {saved.num_envs} matches, and a "
                                  f"resumed run keeps them (its normalisers and rollouts hold "
@@ -370,6 +376,11 @@ def _run(args: argparse.Namespace, progress: bool, stack: contextlib.ExitStack) 
             if args.print_config:
                 print(run_toml(cfg), end="")
                 return 0
+            run_dir = resume_dir(ckpt)
+            # its lock goes beside it, its saves and metrics in it: checked before training,
+            # not when the first save fails
+            for folder in (run_dir.parent, run_dir, run_dir / "checkpoints"):
+                check_folder(folder, "--resume")
             runners = _env_runners(args, cfg, stack)
             with _one_line_warnings():
                 trainer = resume_trainer(args.resume, progress=progress, env_runners=runners,
@@ -445,8 +456,12 @@ def report(summary: dict[str, Any]) -> int:
     run_dir = Path(summary["run_dir"])
     latest = (run_dir / "latest").read_text().strip()
     stopped = summary.get("stopped")
-    if stopped:
-        done = stopped["checkpoint_step"]
+    done = stopped["checkpoint_step"] if stopped else summary["global_step"]
+    if stopped and stopped.get("finished"):  # nothing to resume
+        print(f"stopped by {stopped['reason']}: the run is finished (saved step {done:,})"
+              + ("; its final evaluation was skipped: alphatank eval "
+                 f"{run_dir} plays one" if stopped.get("final_eval_skipped") else ""))
+    elif stopped:
         how = (f"dropped the unfinished iteration of {stopped['dropped_steps']:,} steps, "
                f"collected again on resume" if "dropped_steps" in stopped else
                f"cut the iteration after {stopped['cut_steps']:,} steps; its matches restart on "
@@ -455,8 +470,6 @@ def report(summary: dict[str, Any]) -> int:
                if "clone_pending" in stopped else "at an iteration end")
         print(f"stopped by {stopped['reason']}: saved step {done:,} ({how}); continue with "
               f"alphatank train --resume {run_dir}")
-    else:
-        done = summary["global_step"]
     print(f"run {run_dir}: {done:,} steps, {summary['episodes']:,} episodes, "
           f"{summary['elapsed_s']:.0f} s")
     for key, val in summary.items():
