@@ -99,10 +99,11 @@ def main(argv: list[str] | None = None) -> int:
         return int(args._run(args) or 0)
     except BrokenPipeError:
         return broken_pipe_exit()
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:  # its message, if any, says what was kept
         if os.environ.get("ALPHATANK_TRACEBACK"):
             raise
-        print(f"alphatank {args.command}: interrupted", file=sys.stderr)
+        print(f"alphatank {args.command}: interrupted{f' {exc}' if exc.args else ''}",
+              file=sys.stderr)
         return EXIT_INTERRUPTED
     except MissingExtraError as exc:  # an ImportError, not bad input: its own message
         if os.environ.get("ALPHATANK_TRACEBACK"):

@@ -641,3 +641,28 @@ def test_a_signal_to_the_command_alone_stops_its_workers_runs_at_once(tmp_path, 
         assert "interrupted: finished runs and evaluations are kept" in text
     assert len(list(out.glob("runs/*/latest"))) == 2  # both runs saved
     assert not list(out.glob("runs/*/done.json"))
+
+
+def test_a_finished_rows_init_from_is_not_checked_when_it_only_reports(tmp_path, capsys):
+    """A row trained from a checkpoint that is gone since: --report-only and --resume still
+    report its finished run; a run still to train is refused, naming the row's file."""
+    from alphatank.game.seats import agent_path
+
+    warm = tmp_path / "warm"
+    shutil.copytree(agent_path("ppo_vs_smart"), warm)
+    root = write_rows(tmp_path / "exp")
+    (root / "tiny" / "c_warm.toml").write_text(
+        'title = "Warm"\norder = 3\n' + RUN.format(extra=f'init_from = "{warm}"')
+        .replace('"egocentric"', '"paper"'))  # the shipped agent's observation
+    args = ("tiny", "--experiments-dir", str(root), "--out", str(tmp_path / "out"),
+            "--rows", "c_warm", "--steps", "256", "--games", "2", "--budget", "2",
+            "--no-progress")
+    assert cli(*args) == 0
+    shutil.rmtree(warm)
+    capsys.readouterr()
+    assert cli(*args, "--report-only") == 0
+    assert cli(*args, "--resume") == 0
+    assert "Warm" in (tmp_path / "out" / "tiny.md").read_text()
+    assert cli(*args[:3], "--out", str(tmp_path / "other"), "--rows", "c_warm", "--list") == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"c_warm.toml: run: init_from: {warm}: " in err, err

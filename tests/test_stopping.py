@@ -4,12 +4,14 @@ and resumes deterministically, SAC update rounds stop between gradient steps, me
 rows after a checkpoint are rewound, and the time limit is the budget of each call."""
 
 import dataclasses
+import gc
 import json
 import shutil
 import signal
 import subprocess
 import sys
 import time
+import warnings
 
 import numpy as np
 import pytest
@@ -376,6 +378,20 @@ def test_a_fresh_run_starts_its_metrics_afresh_and_a_resumed_one_appends(tmp_pat
         logger.close()
         rows.append([json.loads(x)["step"] for x in path.read_text().splitlines()])
     assert rows == [[16], [16, 32]]
+
+
+def test_a_logger_that_fails_to_start_leaves_its_metrics_file_closed(tmp_path):
+    """wandb refusing the run (here a resumed run's id it cannot take) left
+    ``metrics.jsonl`` open, for the garbage collector to close ('unclosed file')."""
+    import wandb
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ResourceWarning)
+        with pytest.raises(wandb.errors.UsageError, match="Run ID cannot contain"):
+            RunLogger(tmp_path, {}, "bad", wandb_mode="offline", run_id="bad/id")
+        gc.collect()
+    assert (tmp_path / "metrics.jsonl").is_file()
+    assert not [w for w in caught if "metrics.jsonl" in str(w.message)]
 
 
 def test_rewind_metrics_drops_rows_after_the_step_and_a_torn_line(tmp_path):

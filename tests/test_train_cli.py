@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import json
 import os
 import re
 import shutil
@@ -316,6 +317,31 @@ def test_a_time_limit_beyond_a_week_is_refused_before_anything_runs(capsys, tmp_
                                        "[0, 604800], got 1e+30\n")
     assert (runs / "tiny" / "metrics.jsonl").read_text() == metrics
     assert load_checkpoint(runs / "tiny").meta["progress"]["global_step"] == 32
+
+
+def test_a_checkpoint_saved_with_a_time_limit_beyond_a_week_resumes(capsys, tmp_path):
+    """Limits were not capped once (--time-limit 1e6 trained): such a checkpoint's saved
+    limit reads as the cap, or as the resume's --time-limit; its settings did not load."""
+    runs, run = tmp_path / "runs", tmp_path / "tiny.toml"
+    run.write_text(TINY_RUN)
+    common = ["--wandb", "disabled", "--no-progress"]
+    assert main(["train", "--runs", str(runs), "--config", str(run), *common]) == 0
+    meta_file = load_checkpoint(runs / "tiny").path / "meta.json"
+    meta = json.loads(meta_file.read_text())
+    meta["train_config"]["time_limit_s"] = 1e6
+    meta_file.write_text(json.dumps(meta))
+    assert load_checkpoint(runs / "tiny").train_config.time_limit_s == 604800
+    assert main(["train", "--resume", str(runs / "tiny"), "--total-steps", "64",
+                 *common]) == 0
+    assert load_checkpoint(runs / "tiny").train_config.time_limit_s == 604800
+    meta_file = load_checkpoint(runs / "tiny").path / "meta.json"
+    meta = json.loads(meta_file.read_text())
+    meta["train_config"]["time_limit_s"] = 1e6
+    meta_file.write_text(json.dumps(meta))
+    assert main(["train", "--resume", str(runs / "tiny"), "--total-steps", "96",
+                 "--time-limit", "60", *common]) == 0
+    ckpt = load_checkpoint(runs / "tiny")
+    assert (ckpt.meta["progress"]["global_step"], ckpt.train_config.time_limit_s) == (96, 60)
 
 
 @contextlib.contextmanager

@@ -126,8 +126,8 @@ def test_kill_9_during_a_checkpoint_write_keeps_the_previous_one(tmp_path):
 @pytest.mark.slow
 def test_a_second_ctrl_c_during_the_stops_save_lets_it_finish(tmp_path):
     """Ctrl-C twice, the second while the stop writes the run's first checkpoint: the save
-    is finished, then the run aborts; it resumes from that save and leaves no temporary
-    folder."""
+    is finished, then the run aborts naming that save and how to resume it; it resumes from
+    that save and leaves no temporary folder."""
     run = tmp_path / "twice"
     proc = start(tmp_path, "twice", [*PPO, "--num-envs", "2", "--checkpoint-every", "1000"],
                  **{DELAY_ENV: "2"})
@@ -139,4 +139,8 @@ def test_a_second_ctrl_c_during_the_stops_save_lets_it_finish(tmp_path):
     assert proc.returncode == 130, out
     assert seconds < 20, (seconds, out)  # the save's 2 s, then the abort
     assert not writing()
-    assert load_checkpoint(run).meta["progress"]["global_step"] > 0
+    step = load_checkpoint(run).meta["progress"]["global_step"]
+    assert step > 0
+    assert out.splitlines()[-1] == (f"alphatank train: interrupted after saving step "
+                                    f"{step:,}; continue with alphatank train --resume "
+                                    f"{run}"), out

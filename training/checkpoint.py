@@ -44,6 +44,7 @@ from alphatank.sim.mapspec import map_text
 from alphatank.sim.policy import NOOP, Observe
 from alphatank.training.learners import make_learner
 from alphatank.training.presets import LearnerSpec, TrainConfig
+from alphatank.training.stopping import TIME_LIMIT_MAX_S
 from alphatank.training.streams import GameStreams
 
 FORMAT = "alphatank-checkpoint"
@@ -220,8 +221,14 @@ class Checkpoint:
 
     @property
     def train_config(self) -> TrainConfig:
+        """The run's settings; a time limit saved before new ones were capped at
+        :data:`TIME_LIMIT_MAX_S` reads as the cap (a resume's ``--time-limit`` replaces it)."""
         try:
-            return TrainConfig.from_dict(self.meta["train_config"])
+            data = dict(self.meta["train_config"])
+            limit = data.get("time_limit_s")
+            if isinstance(limit, int | float) and limit > TIME_LIMIT_MAX_S:
+                data["time_limit_s"] = float(TIME_LIMIT_MAX_S)
+            return TrainConfig.from_dict(data)
         except (ValueError, KeyError, TypeError) as exc:
             raise CheckpointError(f"{self.path / 'meta.json'}: train_config: {exc}") from None
 

@@ -480,9 +480,6 @@ def row_config(row: Row, seed: int, budget_min: float, steps: int | None = None,
             at = f"{row.source}: scenarios[{k}]"
             other = _run_scenario(dataclasses.replace(cfg, scenario=name), f"{at}: run")
             check_run_fields(checked, other, f"{at}: run", at)
-        if cfg.init_from:
-            from alphatank.training.warmstart import check_init_from
-            check_init_from(cfg, f"{where}: init_from")
         if row.hp:
             cfg = with_hp(cfg, parse_hp([("hp", ",".join(row.hp))]), len(sc.learner_seats))
     except ValueError as exc:
@@ -490,6 +487,20 @@ def row_config(row: Row, seed: int, budget_min: float, steps: int | None = None,
         raise ExperimentError(msg if msg.startswith(row.source) else
                               f"{row.source}: {msg}") from None
     return cfg
+
+
+def check_row_init_from(row: Row, cfg: TrainConfig) -> None:
+    """ExperimentError naming the row's file unless its run's ``init_from`` (if any) names
+    a checkpoint it can warm-start from: checked for runs that will train, so a finished
+    run still reports after its warm-start checkpoint is gone."""
+    if not cfg.init_from:
+        return
+    from alphatank.training.warmstart import check_init_from
+
+    try:
+        check_init_from(cfg, f"{row.source}: run: init_from")
+    except ValueError as exc:
+        raise ExperimentError(str(exc)) from None
 
 
 def _run_scenario(cfg: TrainConfig, where: str) -> Any:
@@ -608,9 +619,10 @@ def _eval_spec(col: Column, row: Row, cfg: TrainConfig, games: int, seed: int) -
 def make_plan(tables: Sequence[Table], out: str | Path, seeds: int = 1,
               budget_min: float = DEFAULT_BUDGET_MIN, games: int = DEFAULT_GAMES,
               steps: int | None = None, wandb: str = "disabled",
-              rows: Sequence[str] | None = None) -> Plan:
+              rows: Sequence[str] | None = None, report_only: bool = False) -> Plan:
     """Every (row, seed) of ``tables`` as jobs in ``out``; rows with equal runs share one
-    job. ``rows`` keeps only those row names (or ``table/row`` ids)."""
+    job. ``rows`` keeps only those row names (or ``table/row`` ids). The ``init_from`` of
+    a run that will train is checked (not with ``report_only``, nor for finished runs)."""
     if seeds < 1:
         raise ExperimentError(f"--seeds must be >= 1, got {seeds}")
     if not budget_min > 0:
@@ -658,6 +670,8 @@ def make_plan(tables: Sequence[Table], out: str | Path, seeds: int = 1,
             run_dir = found[0] if found else out / "runs" / f"{row.name}-s{s}-{d}"
             job = jobs[d] = Job(d, str(run_dir), cfg.to_dict(), list(row.scenarios), [], [],
                                 s, needs)
+            if not report_only and not job.done_file.is_file():
+                check_row_init_from(row, cfg)
         if row.id not in job.rows:
             job.rows.append(row.id)
         return job, cfg

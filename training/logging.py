@@ -51,17 +51,21 @@ class RunLogger:
         self._jsonl = open(self.run_dir / "metrics.jsonl", mode, encoding="utf-8")  # noqa: SIM115
         self.wandb_run = None
         self.run_id = run_id
-        if wandb_mode != "disabled":
-            import wandb
-            os.environ.setdefault("WANDB_SILENT", "true")
-            self.wandb_run = wandb.init(project=project, name=name, dir=str(self.run_dir),
-                                        mode=wandb_mode, config=config, id=run_id,
-                                        resume="allow" if run_id else None, reinit=True)
-            self.run_id = self.wandb_run.id
         self.tb = None
-        if tensorboard:
-            self.tb = SummaryWriter(str(self.run_dir / "tensorboard"),
-                                    purge_step=None if resume_step is None else resume_step + 1)
+        try:
+            if wandb_mode != "disabled":
+                import wandb
+                os.environ.setdefault("WANDB_SILENT", "true")
+                self.wandb_run = wandb.init(project=project, name=name, dir=str(self.run_dir),
+                                            mode=wandb_mode, config=config, id=run_id,
+                                            resume="allow" if run_id else None, reinit=True)
+                self.run_id = self.wandb_run.id
+            if tensorboard:
+                self.tb = SummaryWriter(str(self.run_dir / "tensorboard"), purge_step=None
+                                        if resume_step is None else resume_step + 1)
+        except BaseException:  # wandb or TensorBoard failed: close what was opened
+            self.close()
+            raise
 
     def log(self, metrics: dict[str, float], step: int) -> None:
         clean = {k: float(v) for k, v in metrics.items()

@@ -51,7 +51,7 @@ class StopFlag:
                          else math.inf)
         self._interruptible = 0
         self._shielded = 0
-        self._aborted = False
+        self.aborted = False  # an abort came inside a shielded block (raised after it)
 
     def __call__(self) -> bool:
         if self.reason is None and time.monotonic() >= self.deadline:
@@ -75,7 +75,7 @@ class StopFlag:
         """Abort the run (a second Ctrl-C): ``KeyboardInterrupt`` now, or at the end of the
         :meth:`shielded` block under way."""
         if self._shielded:
-            self._aborted = True
+            self.aborted = True
         else:
             raise KeyboardInterrupt
 
@@ -88,7 +88,7 @@ class StopFlag:
             yield
         finally:
             self._shielded -= 1
-        if self._aborted and not self._shielded:
+        if self.aborted and not self._shielded:
             raise KeyboardInterrupt
 
     @contextmanager

@@ -103,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
         planned = functools.partial(make_plan, tables, args.out, seeds=args.seeds,
                                     budget_min=args.budget, games=args.games,
                                     steps=args.steps, wandb=args.wandb)
-        plan = planned(rows=rows)
+        plan = planned(rows=rows, report_only=args.report_only)
     except (ExperimentError, ValueError) as exc:
         return _error(str(exc))
     todo = [j for j in plan.jobs if not j.complete()]
@@ -122,9 +122,9 @@ def run(args: argparse.Namespace) -> int:
 
     report = plan  # the reports: --rows, and every other row of their tables with results
     if rows:
-        full, shown = planned(), {t.name for t in plan.tables}
+        full, shown = planned(report_only=True), {t.name for t in plan.tables}
         rows += [r.id for t in full.tables if t.name in shown for r in evaluated_rows(full, t)]
-        report = planned(rows=rows)
+        report = planned(rows=rows, report_only=True)
         args.rows = ",".join(r.name for t in report.tables for r in t.rows)  # the command
     for t in report.tables:  # a report never loses results it shows (made otherwise)
         coming = evaluated_rows(report, t) if args.report_only else t.rows

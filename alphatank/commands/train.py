@@ -428,7 +428,14 @@ def _run(args: argparse.Namespace, progress: bool, stack: contextlib.ExitStack) 
             print(f"warm start {name} from {cfg.init_from}: {counts['mapped']} features "
                   f"mapped, {counts['new']} new (zero weight), {counts['dropped']} dropped"
                   f"{', critic copied' if counts['critic'] else ', critic fresh'}")
-    summary = trainer.train()
+    try:
+        summary = trainer.train()
+    except KeyboardInterrupt:
+        if not trainer.stop.aborted:
+            raise
+        # a second Ctrl-C during a save: it was finished first, so the run can go on from it
+        raise KeyboardInterrupt(f"after saving step {trainer.saved_step:,}; continue with "
+                                f"alphatank train --resume {trainer.run_dir}") from None
     code = report(summary)
     # the process ends now: spare it the final garbage collections over torch's objects
     # (about a second of the time between Ctrl-C and the prompt on a busy machine)
