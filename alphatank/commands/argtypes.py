@@ -7,7 +7,7 @@ import argparse
 import math
 from collections.abc import Callable
 
-from alphatank.sim.config import MATCHES_MAX
+from alphatank.sim.config import ACTION_REPEAT_MAX, MATCHES_MAX
 
 
 def positive_int(text: str) -> int:
@@ -32,16 +32,21 @@ def non_negative_int(text: str) -> int:
     return value
 
 
-def match_count(text: str) -> int:
-    """A number of matches played at once: an integer in [1, MATCHES_MAX]."""
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if not 1 <= value <= MATCHES_MAX:
-        raise argparse.ArgumentTypeError(f"must be an integer in [1, {MATCHES_MAX}], got "
-                                         f"{text!r}")
-    return value
+def int_in_range(lo: int, hi: int) -> Callable[[str], int]:
+    """An argparse type: an integer in [lo, hi]."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            value = lo - 1
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"must be an integer in [{lo}, {hi}], got {text!r}")
+        return value
+    return parse
+
+
+match_count = int_in_range(1, MATCHES_MAX)  # matches played at once
+action_repeat = int_in_range(1, ACTION_REPEAT_MAX)  # ticks a learner's action is held
 
 
 def positive_float(text: str) -> float:

@@ -15,7 +15,15 @@ from pathlib import Path
 from typing import Any
 
 from alphatank.cluster import ENV_RUNNER_TIMEOUT_S
-from alphatank.commands.argtypes import match_count, non_negative_int, positive_int, seed
+from alphatank.commands.argtypes import (
+    action_repeat,
+    in_range,
+    match_count,
+    non_negative_int,
+    positive_float,
+    positive_int,
+    seed,
+)
 from alphatank.errors import InputError, as_input_error
 from alphatank.files import check_folder
 from alphatank.training.fields import FieldError
@@ -73,7 +81,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                       help="warm start: every learner starts from the PPO learner of this "
                            "checkpoint (a run or checkpoint folder, or agent:NAME, e.g. a 1v1 "
                            "agent for a team run; new inputs start at zero weight)")
-    what.add_argument("--action-repeat", type=int, metavar="K",
+    what.add_argument("--action-repeat", type=action_repeat, metavar="K",
                       help="hold each learner action for K ticks (the bots still act every "
                            "tick): an env step is K ticks; default 1")
     what.add_argument("--hp", action="append", default=[], metavar="ALGO.FIELD=VALUE,...",
@@ -104,7 +112,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     run.add_argument("--workers", type=positive_int,
                      help="env worker processes (2 uses both cores)")
     run.add_argument("--seed", type=seed, help="run seed")
-    run.add_argument("--time-limit", type=float, metavar="S",
+    run.add_argument("--time-limit", type=in_range(0, TIME_LIMIT_MAX_S), metavar="S",
                      help="stop (with a checkpoint) after S seconds of this invocation, at "
                           f"most a week ({TIME_LIMIT_MAX_S}): a resumed run gets S seconds "
                           "more (the logged elapsed time counts the whole run); SIGINT "
@@ -134,7 +142,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                          help="with --ray: env-runner actors (one CPU each), in place of "
                               "--workers processes; the same seed and N give the same run as "
                               "--workers N (default: the run's workers, at least 2)")
-    cluster.add_argument("--env-runner-timeout", type=float, metavar="SECONDS",
+    cluster.add_argument("--env-runner-timeout", type=positive_float, metavar="SECONDS",
                          help="with --env-runners: a runner that does not answer a step "
                               "within SECONDS is hung: it is killed and restarted, and the "
                               f"iteration collected again (default: {ENV_RUNNER_TIMEOUT_S:g})")
@@ -260,10 +268,7 @@ def build_run(args: argparse.Namespace) -> TrainConfig:
     if args.map is not None:
         cfg = dataclasses.replace(cfg, map=args.map)
     if args.action_repeat is not None:
-        try:
-            cfg = cfg.with_overrides(action_repeat=args.action_repeat)
-        except FieldError as exc:
-            raise ValueError(f"--action-repeat: {exc.problem}") from None
+        cfg = dataclasses.replace(cfg, action_repeat=args.action_repeat)
     if args.init_from is not None:
         cfg = dataclasses.replace(cfg, init_from=args.init_from)
     try:
@@ -314,12 +319,8 @@ def run(args: argparse.Namespace) -> int:
     if args.env_runners is not None and args.ray is None:
         raise InputError("--env-runners: needs --ray (env runners are Ray actors; --workers "
                          "sets local worker processes)")
-    if args.env_runner_timeout is not None:
-        if args.ray is None:
-            raise InputError("--env-runner-timeout: needs --ray (it applies to env runners)")
-        if not args.env_runner_timeout > 0:
-            raise InputError(f"--env-runner-timeout: must be > 0 seconds, got "
-                             f"{args.env_runner_timeout:g}")
+    if args.env_runner_timeout is not None and args.ray is None:
+        raise InputError("--env-runner-timeout: needs --ray (it applies to env runners)")
     with contextlib.ExitStack() as stack:  # holds the Ray connection of a --ray run
         return _run(args, progress, stack)
 
