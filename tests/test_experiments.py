@@ -310,6 +310,20 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
         assert capsys.readouterr().err.count("\n") == 1
 
 
+def test_a_bad_row_outside_rows_is_one_line_when_the_report_is_planned(tmp_path, capsys):
+    """--rows reports every row of its tables with results: those plans read every row, and
+    a bad one raised a traceback (they were outside the error handler); one line, exit 2."""
+    root = write_rows(tmp_path / "exp")
+    (root / "tiny" / "c_bad.toml").write_text('preset = "ppo_vs_smart"\n[run]\nnum_envs = 0\n')
+    assert cli("tiny", "--experiments-dir", str(root), "--out", str(tmp_path / "out"),
+               "--rows", "a_random", "--report-only", "--no-progress") == 2
+    cap = capsys.readouterr()
+    assert cap.out == "" and cap.err.count("\n") == 1, cap.err
+    assert cap.err.startswith("alphatank experiments: error: ") and \
+        "c_bad.toml: num_envs: must be in (0, 4096], got 0" in cap.err, cap.err
+    assert not (tmp_path / "out" / "tiny.md").exists()
+
+
 def test_the_plan_lists_the_steps_each_run_trains(tmp_path, capsys):
     """Runs train whole iterations: --list shows the steps rounded up (it said 'steps<=' the
     asked figure, and a SAC run of --steps 1000 trained 8,192), with the figure asked."""

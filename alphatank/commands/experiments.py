@@ -122,9 +122,13 @@ def run(args: argparse.Namespace) -> int:
 
     report = plan  # the reports: --rows, and every other row of their tables with results
     if rows:
-        full, shown = planned(report_only=True), {t.name for t in plan.tables}
-        rows += [r.id for t in full.tables if t.name in shown for r in evaluated_rows(full, t)]
-        report = planned(rows=rows, report_only=True)
+        try:  # every row of their tables is planned: a bad one is refused here
+            full, shown = planned(report_only=True), {t.name for t in plan.tables}
+            rows += [r.id for t in full.tables if t.name in shown
+                     for r in evaluated_rows(full, t)]
+            report = planned(rows=rows, report_only=True)
+        except (ExperimentError, ValueError) as exc:
+            return _error(str(exc))
         args.rows = ",".join(r.name for t in report.tables for r in t.rows)  # the command
     for t in report.tables:  # a report never loses results it shows (made otherwise)
         coming = evaluated_rows(report, t) if args.report_only else t.rows
