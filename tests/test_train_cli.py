@@ -17,10 +17,11 @@ from pathlib import Path
 import pytest
 
 from alphatank.cli import main
+from alphatank.errors import InputError
 from alphatank.training.checkpoint import load_checkpoint
 from alphatank.training.hparams import PPOConfig
 from alphatank.training.presets import get_preset, iteration_steps, load_run, planned_steps
-from alphatank.training.runner import Trainer
+from alphatank.training.runner import Trainer, resume_trainer
 
 
 def printed_run(capsys, tmp_path, *argv: str):
@@ -368,7 +369,8 @@ def test_a_resume_into_folders_it_cannot_write_is_refused_before_training(capsys
     """A resumed run whose checkpoints folder (or run folder, or the folder its lock goes
     in) cannot be written trained its whole budget, then failed at the save with a bare
     '[Errno 1] ... .tmp' line: it is one line naming the folder, before training, as a new
-    run's --runs is."""
+    run's --runs is. resume_trainer (a resume from Python) refuses them too: the check was
+    the command's alone."""
     runs = tmp_path / "runs"
     run = tmp_path / "tiny.toml"
     run.write_text(TINY_RUN)
@@ -380,6 +382,9 @@ def test_a_resume_into_folders_it_cannot_write_is_refused_before_training(capsys
         with unwritable(folder):
             assert main(["train", "--resume", str(run_dir), "--total-steps", "64",
                          "--no-progress"]) == 2
+            with pytest.raises(InputError, match=re.escape(
+                    f"--resume: {folder}: {folder.absolute()} is not writable")):
+                resume_trainer(run_dir, progress=False, total_steps=64)
         cap = capsys.readouterr()
         assert cap.out == "" and cap.err == (f"alphatank train: error: --resume: {folder}: "
                                              f"{folder.absolute()} is not writable\n")

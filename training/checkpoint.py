@@ -35,7 +35,7 @@ import numpy as np
 import torch
 
 from alphatank.errors import InputError
-from alphatank.files import write_text_atomic
+from alphatank.files import check_folder, write_text_atomic
 from alphatank.game.observe import OBS_KINDS
 from alphatank.game.scenarios import Scenario, ScenarioError, parse_scenario, team_misfit
 from alphatank.game.seats import agent_path
@@ -150,8 +150,9 @@ def run_saves(root: Path) -> list[Path]:
 
 def resume_dir(ckpt: Checkpoint) -> Path:
     """The run folder in which resuming ``ckpt`` continues: the run of a save at
-    ``<run>/checkpoints/step_<N>`` (beside ``<run>/latest``) with no later save. Anything
-    else is refused: a resumed run writes, and prunes saves, in that folder."""
+    ``<run>/checkpoints/step_<N>`` (beside ``<run>/latest``) with no later save, that can
+    be written in. Anything else is refused: a resumed run writes, and prunes saves, in
+    that folder."""
     path = ckpt.path
     if isinstance(ckpt.meta.get("agent"), dict):
         raise CheckpointError(f"{path}: an agent folder (weights without their training "
@@ -170,6 +171,10 @@ def resume_dir(ckpt: Checkpoint) -> Path:
                               f"resuming an earlier one would write a second history into "
                               f"the same run; resume the run ({run}), or remove the later "
                               f"saves first")
+    # its lock goes beside it, its saves and metrics in it: checked before training, not
+    # when the first save fails
+    for folder in (run.parent, run, run / "checkpoints"):
+        check_folder(folder, "--resume")
     return run
 
 

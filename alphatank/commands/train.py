@@ -377,11 +377,7 @@ def _run(args: argparse.Namespace, progress: bool, stack: contextlib.ExitStack) 
             if args.print_config:
                 print(run_toml(cfg), end="")
                 return 0
-            run_dir = resume_dir(ckpt)
-            # its lock goes beside it, its saves and metrics in it: checked before training,
-            # not when the first save fails
-            for folder in (run_dir.parent, run_dir, run_dir / "checkpoints"):
-                check_folder(folder, "--resume")
+            resume_dir(ckpt)  # refused before Ray starts: not a run's save, or not writable
             runners = _env_runners(args, cfg, stack)
             with _one_line_warnings():
                 trainer = resume_trainer(args.resume, progress=progress, env_runners=runners,
