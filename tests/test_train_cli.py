@@ -398,7 +398,8 @@ def test_a_resume_into_folders_it_cannot_write_is_refused_before_training(capsys
 def test_total_steps_are_rounded_up_to_whole_iterations_as_help_and_plan_say(capsys, tmp_path):
     """The step count is checked between iterations: --total-steps 1500 of SAC (512 vector
     steps x 2 matches an iteration) trains 2,048 steps, planned_steps' figure; --help says
-    so (it said 'env steps to train in total')."""
+    so (it said 'env steps to train in total'), and a note at the start (there was none);
+    a whole number of iterations gets no note."""
     assert main(["train", "--preset", "sac_vs_aggressive", "--num-envs", "2",
                  "--total-steps", "1500", "--runs", str(tmp_path), "--wandb", "disabled",
                  "--no-progress", "--hp", "sac.hidden=16,sac.batch_size=16,sac.utd_ratio=0.05,"
@@ -406,8 +407,15 @@ def test_total_steps_are_rounded_up_to_whole_iterations_as_help_and_plan_say(cap
     ck = load_checkpoint(tmp_path / "sac_vs_aggressive")
     assert (iteration_steps(ck.train_config), planned_steps(ck.train_config)) == (1024, 2048)
     assert ck.meta["progress"]["global_step"] == 2048
-    assert "run " + str(tmp_path / "sac_vs_aggressive") + ": 2,048 steps" in \
-        capsys.readouterr().out
+    cap = capsys.readouterr()
+    assert "run " + str(tmp_path / "sac_vs_aggressive") + ": 2,048 steps" in cap.out
+    assert cap.err.splitlines() == ["note: --total-steps 1,500 rounded up to 2,048 (whole "
+                                    "iterations of 1,024 env steps)"], cap.err
+    assert main(["train", "--resume", str(tmp_path / "sac_vs_aggressive"), "--total-steps",
+                 "3072", "--no-progress"]) == 0
+    assert "rounded" not in capsys.readouterr().err
+    assert load_checkpoint(tmp_path / "sac_vs_aggressive").meta["progress"][
+        "global_step"] == 3072
     with pytest.raises(SystemExit):
         main(["train", "--help"])
     assert "rounded up to a whole iteration" in " ".join(capsys.readouterr().out.split())

@@ -36,9 +36,11 @@ from alphatank.training.presets import (
     default_learners,
     get_preset,
     hyperparameter_help,
+    iteration_steps,
     learners_fit,
     load_run,
     parse_hp,
+    planned_steps,
     preset_names,
     run_learners,
     run_scenario,
@@ -425,6 +427,8 @@ def _run(args: argparse.Namespace, progress: bool, stack: contextlib.ExitStack) 
             print(f"warm start {name} from {cfg.init_from}: {counts['mapped']} features "
                   f"mapped, {counts['new']} new (zero weight), {counts['dropped']} dropped"
                   f"{', critic copied' if counts['critic'] else ', critic fresh'}")
+    if args.total_steps is not None:
+        _note_rounding(trainer.cfg)
     try:
         summary = trainer.train()
     except KeyboardInterrupt:
@@ -438,6 +442,15 @@ def _run(args: argparse.Namespace, progress: bool, stack: contextlib.ExitStack) 
     # (about a second of the time between Ctrl-C and the prompt on a busy machine)
     gc.freeze()
     return code
+
+
+def _note_rounding(cfg: TrainConfig) -> None:
+    """Say on stderr when ``--total-steps`` is not a whole number of iterations: the run
+    trains :func:`planned_steps`."""
+    planned = planned_steps(cfg)
+    if planned != cfg.total_steps:
+        print(f"note: --total-steps {cfg.total_steps:,} rounded up to {planned:,} (whole "
+              f"iterations of {iteration_steps(cfg):,} env steps)", file=sys.stderr)
 
 
 @contextlib.contextmanager
