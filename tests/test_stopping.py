@@ -194,9 +194,12 @@ def test_a_sac_stop_cuts_the_segment_keeps_every_transition_and_resumes_determin
         assert resumed.global_step == 21 * E
         resumed.train()
         runs.append(resumed)
-    # a full iteration starts at the cut; the same checkpoint gives the same run
+    # a full iteration starts at the cut; the same checkpoint gives the same run; the
+    # last iteration is shorter: the run ends at its planned 96 x E steps (it went on to
+    # 101 x E, an iteration past what --list and experiments plan)
     assert [h["step"] for h in runs[0].history] == [37 * E, 53 * E, 69 * E, 85 * E,
-                                                    101 * E]
+                                                    96 * E]
+    assert load_checkpoint(tmp_path / "sac").meta["progress"]["global_step"] == 96 * E
     assert [h["losses/qf_loss"] for h in runs[0].history] == \
         [h["losses/qf_loss"] for h in runs[1].history]
     assert states_equal(runs[0].learners["sac"].state_dict(),
@@ -224,6 +227,11 @@ def test_mixed_runs_cut_and_drop_the_unfinished_ppo_rollout(tmp_path):
     assert states_equal(ck.state("ppo"), before["ppo"])  # as the iteration began
     assert ck.state("ppo")["obs_norm"]["count"] < 25 * E  # not the 9 dropped steps
     assert len(ck.replay("sac")["obs"]) == 25 * E
+    # the shifted iterations end at the planned 64 x E steps (the last one is 7 steps)
+    resumed = resume_trainer(tmp_path / "pair", progress=False)
+    assert resumed.train()["stopped"] is None
+    assert [h["step"] for h in resumed.history] == [41 * E, 57 * E, 64 * E]
+    assert load_checkpoint(tmp_path / "pair").meta["progress"]["global_step"] == 64 * E
 
 
 def test_sac_update_rounds_stop_between_gradient_steps_and_owe_the_rest():

@@ -24,7 +24,9 @@ run resumes from:
   learners keep everything (each gradient step is whole; owed steps are done after
   resuming), fixed-rollout learners in the same run drop their unfinished rollout. The
   resumed run restarts every match (seeds from ``(seed, iteration, cut)``) and starts a
-  full iteration there; it is deterministic, but its iterations are shifted;
+  full iteration there; it is deterministic, but its iterations are shifted, and its last
+  one is shorter so that the run ends at its planned steps (``planned_steps``; an
+  unfinished rollout of a fixed-rollout learner there is left unused);
 * the behaviour cloning of a fresh run (``imitate``) is still going: the learners as they
   were before it are saved, and the resumed run clones from the start, as the
   uninterrupted run did.
@@ -259,6 +261,8 @@ class Trainer:
             raise ValueError("fragments: " + "; ".join(problems))
         steps_per_iter = self.rollout_steps * self.E
         self.total_iterations = max(1, math.ceil(cfg.total_steps / steps_per_iter))
+        # total_steps rounded up to whole iterations (presets.planned_steps): where it ends
+        self.planned_steps = self.total_iterations * steps_per_iter
         for lr in self.learners.values():
             lr.plan(self.total_iterations * self.rollout_steps)
         self.rivals = opposing_learners(specs, [self.scenario.seats[s].team
@@ -526,16 +530,22 @@ class Trainer:
                 if out == "win":
                     rewards[env_row, col] -= (1.0 - scale) * self.victory
 
-    def _collect(self, obs: np.ndarray) -> tuple[np.ndarray, dict[str, float]]:
-        """One iteration of ``rollout_steps`` vector steps (updates included); ends early
-        after the vector step in which a stop is requested (an interrupted fixed-rollout
-        update raises :class:`StopRequested`)."""
+    def _iteration_length(self) -> int:
+        """Vector steps of the coming iteration: ``rollout_steps``, or fewer where the
+        run's iterations were shifted by a segment cut, to end at ``planned_steps``."""
+        return min(self.rollout_steps, (self.planned_steps - self.global_step) // self.E)
+
+    def _collect(self, obs: np.ndarray, steps: int | None = None
+                 ) -> tuple[np.ndarray, dict[str, float]]:
+        """One iteration of ``steps`` (default ``rollout_steps``) vector steps (updates
+        included); ends early after the vector step in which a stop is requested (an
+        interrupted fixed-rollout update raises :class:`StopRequested`)."""
         metrics: dict[str, float] = {}
         E, D, env = self.E, self.D, self.env
         sp = self.selfplay
         if sp is not None:
             sp.snapshot(env, self.learners[sp.learner], self.global_step)
-        for _ in range(self.rollout_steps):
+        for _ in range(self.rollout_steps if steps is None else steps):
             masks = self.action_mask(obs) if self.action_mask is not None else None
             inputs = env.inputs if self.inputs else {}
             for name, learner in self.learners.items():
@@ -592,7 +602,7 @@ class Trainer:
         (after which every match restarts)."""
         cfg, nxt = self.cfg, self.iteration + 1
         return (self.overlap and not last_round and not self.stop()
-                and self.global_step < cfg.total_steps
+                and self.global_step < self.planned_steps
                 and not (cfg.checkpoint_every and nxt % cfg.checkpoint_every == 0))
 
     def _collect_fragment(self, obs: np.ndarray, last_round: bool = False
@@ -698,7 +708,7 @@ class Trainer:
                 self.env.close()  # a rollout started ahead is dropped with it
                 self.lock.release()
         if self.stop.reason is not None:
-            finished = {"finished": True} if self.saved_step >= cfg.total_steps else {}
+            finished = {"finished": True} if self.saved_step >= self.planned_steps else {}
             self.stopped = {"reason": self.stop.reason, "checkpoint_step": self.saved_step,
                             **finished, **self.stopped}
         return {"run_dir": str(self.run_dir), "global_step": self.global_step,
@@ -727,16 +737,18 @@ class Trainer:
             self.elapsed = time.perf_counter() - start
             self.logger.log({**metrics, "charts/elapsed_s": self.elapsed}, 0)
         obs = self._segment_reset()
-        while self.global_step < cfg.total_steps and not self.stop():
+        while self.global_step < self.planned_steps and not self.stop():
             before = self._iteration_start()
             rollback = self._rollback_point()
             sched = (self.ahead if self.ahead is not None  # applied when it started
                      else self.schedule.apply(self.env, self.global_step))
             t0, s0 = time.perf_counter(), self.global_step
+            # fragments (fixed-rollout learners only) are never cut: whole iterations
+            steps = self.rollout_steps if self.fragments else self._iteration_length()
             try:
                 obs, metrics = (self._collect_fragment(obs) if self.fragments
-                                else self._collect(obs))
-                complete = self.global_step - s0 == self.rollout_steps * self.E
+                                else self._collect(obs, steps))
+                complete = self.global_step - s0 == steps * self.E
             except StopRequested:  # a fixed-rollout learner's update was cut short
                 metrics, complete = {}, False
             except RolloutLost as lost:  # an env runner died: collect the iteration again
@@ -754,7 +766,7 @@ class Trainer:
             metrics["charts/sps"] = (self.global_step - s0) / dt
             metrics["charts/iteration"] = float(self.iteration)
             metrics["charts/elapsed_s"] = self.elapsed
-            last = self.global_step >= cfg.total_steps or self.stop()
+            last = self.global_step >= self.planned_steps or self.stop()
             evaluate = cfg.eval_every and (self.iteration % cfg.eval_every == 0 or last)
             video = cfg.video_every and self.iteration % cfg.video_every == 0
             if evaluate or video:
@@ -766,7 +778,7 @@ class Trainer:
                             self._video()
                 except StopRequested:
                     last = True
-                    if evaluate and self.global_step >= cfg.total_steps:
+                    if evaluate and self.global_step >= self.planned_steps:
                         self.stopped = {"final_eval_skipped": True}
             self.logger.log(metrics, self.global_step)
             self.history.append({"step": self.global_step, **metrics})
