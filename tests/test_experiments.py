@@ -22,11 +22,13 @@ from alphatank.training.experiments import (
     execute,
     load_tables,
     make_plan,
+    mixed_env,
     row_config,
     run_digest,
     run_job,
     table_names,
 )
+from alphatank.training.presets import TrainConfig
 
 RUN = """
 [run]
@@ -322,6 +324,30 @@ def test_a_bad_row_outside_rows_is_one_line_when_the_report_is_planned(tmp_path,
     assert cap.err.startswith("alphatank experiments: error: ") and \
         "c_bad.toml: num_envs: must be in (0, 4096], got 0" in cap.err, cap.err
     assert not (tmp_path / "out" / "tiny.md").exists()
+
+
+def test_a_mix_trains_every_scenario_on_the_rows_map_as_the_plan_checks(tmp_path):
+    """A row's map override with several scenarios: the plan checked every scenario on
+    it, but the mix trained each on its own map (battlefield and open): it trains every
+    scenario on the override too."""
+    root = write_rows(tmp_path / "exp")
+    row = root / "tiny" / "b_cycle.toml"
+    row.write_text(row.read_text().replace('num_envs = 4', 'num_envs = 4\nmap = "maze"', 1)
+                   .replace('"vs_dodge"]', '"vs_aggressive"]', 1))
+    plan = make_plan(load_tables(["tiny"], root), tmp_path / "out", steps=256,
+                     rows=["b_cycle"])
+    job = plan.jobs[0]
+    assert job.scenarios == ["vs_random", "vs_aggressive"]
+    cfg = TrainConfig.from_dict(job.cfg)
+    assert cfg.map == "maze"
+    env = mixed_env(job, cfg)
+    try:
+        assert [(sc.name, sc.map) for sc in env.scenarios] == [("vs_random", "maze"),
+                                                               ("vs_aggressive", "maze")]
+    finally:
+        env.close()
+    assert mixed_env(make_plan(load_tables(["tiny"], root), tmp_path / "out", steps=256,
+                               rows=["a_random"]).jobs[0], cfg) is None
 
 
 def test_the_plan_lists_the_steps_each_run_trains(tmp_path, capsys):

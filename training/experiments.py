@@ -724,8 +724,21 @@ def _train(job: Job) -> dict[str, Any]:
         return _train_locked(job, cfg, run_dir)
 
 
-def _train_locked(job: Job, cfg: TrainConfig, run_dir: Path) -> dict[str, Any]:
+def mixed_env(job: Job, cfg: TrainConfig) -> Any:
+    """The env of a job whose row trains on a ``scenarios`` mix (None for one scenario):
+    each scenario on the run's ``map`` override if it has one, as the plan checks them."""
+    if not job.scenarios:
+        return None
     from alphatank.training.learners import learner_class
+    from alphatank.training.mixed import MixedVectorEnv
+
+    inputs = sorted({x for spec in run_learners(cfg, 1) for x in learner_class(spec.algo).inputs})
+    scenarios = [run_scenario(dataclasses.replace(cfg, scenario=name)) for name in job.scenarios]
+    return MixedVectorEnv(scenarios, cfg.num_envs, cfg.seed, cfg.observation, cfg.game or None,
+                          cfg.rewards or None, inputs=inputs, action_repeat=cfg.action_repeat)
+
+
+def _train_locked(job: Job, cfg: TrainConfig, run_dir: Path) -> dict[str, Any]:
     from alphatank.training.runner import Trainer
 
     if job.done_file.is_file():  # finished by another command while this one waited
@@ -735,15 +748,7 @@ def _train_locked(job: Job, cfg: TrainConfig, run_dir: Path) -> dict[str, Any]:
     run_dir.mkdir(parents=True)
     _write_json(run_dir / "row.json", {"rows": job.rows, "seed": job.seed, "cfg": job.cfg,
                                        "scenarios": job.scenarios, "digest": job.key})
-    env = None
-    if job.scenarios:
-        from alphatank.training.mixed import MixedVectorEnv
-
-        inputs = sorted({x for spec in run_learners(cfg, 1)
-                         for x in learner_class(spec.algo).inputs})
-        env = MixedVectorEnv(job.scenarios, cfg.num_envs, cfg.seed, cfg.observation,
-                             cfg.game or None, cfg.rewards or None, inputs=inputs,
-                             action_repeat=cfg.action_repeat)
+    env = mixed_env(job, cfg)
     t0 = time.time()
     trainer = Trainer(cfg, run_dir, env=env, progress=False)
     summary = trainer.train()
