@@ -758,7 +758,9 @@ def _train_locked(job: Job, cfg: TrainConfig, run_dir: Path) -> dict[str, Any]:
                              summary["exit_code"])
     league = trainer.schedule.table() if hasattr(trainer.schedule, "table") else None
     done = {"summary": summary, "wall_s": time.time() - t0, "total_steps": cfg.total_steps,
-            "stopped_by": "steps" if summary["global_step"] >= cfg.total_steps else "time",
+            # the budget's time ran out unless the run trained its planned steps
+            "stopped_by": ("steps" if summary["global_step"] >= trainer.planned_steps
+                           else "time"),
             "league": league, "finished_at": time.strftime("%Y-%m-%d %H:%M:%S")}
     _write_json(job.done_file, done)
     return done

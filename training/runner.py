@@ -691,7 +691,7 @@ class Trainer:
         bar = None
         if self.progress:
             from tqdm import tqdm
-            bar = tqdm(total=cfg.total_steps, initial=min(self.global_step, cfg.total_steps),
+            bar = tqdm(total=self.planned_steps, initial=min(self.global_step, self.planned_steps),
                        unit="step", unit_scale=True, dynamic_ncols=True, desc=cfg.name)
         for lr in self.learners.values():
             lr.interrupt = self.stop  # polled between gradient steps (Learner protocol)
@@ -783,7 +783,7 @@ class Trainer:
             self.logger.log(metrics, self.global_step)
             self.history.append({"step": self.global_step, **metrics})
             if bar is not None:
-                bar.update(min(self.global_step, cfg.total_steps) - bar.n)
+                bar.update(min(self.global_step, self.planned_steps) - bar.n)
                 win = metrics.get("charts/win_rate",
                                   next((v for k, v in metrics.items()
                                         if k.startswith("charts/win_rate/")), float("nan")))
