@@ -22,11 +22,12 @@ def test_sac_step_bench_times_the_update_against_its_floor():
 def test_bench_train_compares_training_with_raw_env_steps(tmp_path):
     assert main(["bench", "--ticks", "50", "--repeats", "1", "--train", "--train-preset",
                  "ppo_vs_aggressive", "--train-workers", "1", "--train-envs", "2",
-                 "--train-threads", "2", "--json", str(tmp_path / "b.json")]) == 0
+                 "--train-threads", "2", "--train-iterations", "1",
+                 "--json", str(tmp_path / "b.json")]) == 0
     out = json.loads((tmp_path / "b.json").read_text())["train"]
     assert out["raw_steps_per_s"] > 0 and out["train_steps_per_s"] > 0
-    assert (out["preset"], out["workers"], out["num_envs"], out["torch_threads"]) == (
-        "ppo_vs_aggressive", 1, 2, 2)
+    assert (out["preset"], out["workers"], out["num_envs"], out["torch_threads"],
+            out["iterations"]) == ("ppo_vs_aggressive", 1, 2, 2, 1)
 
 
 @pytest.mark.parametrize("flag", ["--train-fragments", "--train-overlap"])

@@ -255,10 +255,10 @@ def test_stable_baselines3_ppo_trains():
     from stable_baselines3 import PPO
 
     env = gymnasium.make("AlphaTank/VsRandom-v0")
-    model = PPO("MlpPolicy", env, n_steps=512, batch_size=128, n_epochs=2, seed=0,
+    model = PPO("MlpPolicy", env, n_steps=256, batch_size=128, n_epochs=2, seed=0,
                 device="cpu", verbose=0)
-    model.learn(total_timesteps=2048)
-    assert model.num_timesteps >= 2048
+    model.learn(total_timesteps=512)  # two rollouts, each followed by an update
+    assert model.num_timesteps >= 512 and model._n_updates == 2 * 2
     action, _ = model.predict(env.reset(seed=0)[0], deterministic=True)
     assert env.action_space.contains(action)
 

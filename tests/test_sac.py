@@ -75,10 +75,12 @@ class Bandit:
 @pytest.mark.slow
 def test_sac_learns_a_toy_task_within_bounded_updates():
     cfg = SACConfig(hidden=64, batch_size=64, start_steps=256, update_after=256,
-                    update_every=32, utd_ratio=0.5, buffer_size=20000)
+                    update_every=32, utd_ratio=0.5, buffer_size=20000, policy_lr=1e-3,
+                    q_lr=1e-3, alpha_lr=1e-3)
     env, sac = Bandit(16, 0), SAC(4, 16, cfg, seed=0)
     obs, rewards = env.obs(), []
-    for _ in range(300):  # seeds 0, 1, 2 end at 1.94-1.96 a step, greedy all correct
+    # seeds 0-5 end at 1.91-1.95 a step, greedy all correct (300 steps at lr 3e-4: 1.91-1.95)
+    for _ in range(150):
         a = sac.act(obs)
         obs, r, term, trunc, final = env.step(a)
         sac.observe(obs, r, term, trunc, final)
@@ -87,7 +89,7 @@ def test_sac_learns_a_toy_task_within_bounded_updates():
             sac.update()
     assert np.mean(rewards[:16]) < 1.2  # uniform random play earns ~0.83
     assert np.mean(rewards[-50:]) > 1.8, np.mean(rewards[-50:])
-    assert sac.grad_steps <= 0.5 * 300 * 16  # bounded by utd_ratio
+    assert sac.grad_steps <= 0.5 * 150 * 16  # bounded by utd_ratio
     greedy = sac.policy_actions(env.obs(), deterministic=True)
     assert (greedy[:, 0] == env.target).mean() > 0.9
 
