@@ -84,6 +84,22 @@ def test_benchtrain_refuses_bad_settings_in_one_line(argv, want):
     assert proc.stderr.count("\n") == 1 and want in proc.stderr, proc.stderr
 
 
+def test_benchtrain_asked_for_nothing_says_so_and_checks_settings_before_torch():
+    """Neither --train nor --sac is one line, exit 2 (it measured nothing and exited 0);
+    a bad preset is refused before torch and the runner load (it took seconds)."""
+    proc = subprocess.run([sys.executable, "-m", "alphatank.commands.benchtrain"],
+                          capture_output=True, text=True, timeout=300)
+    assert (proc.returncode, proc.stdout) == (2, "")
+    assert proc.stderr == "error: nothing to measure: give --train, --sac or both\n"
+    code = ("import sys\nfrom alphatank.commands.benchtrain import TrainBench\n"
+            "try:\n    TrainBench('nope')\nexcept ValueError as exc:\n    print(exc)\n"
+            "print(sorted(m for m in ('torch', 'alphatank.training.runner') if m in sys.modules))")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=300, check=True)
+    said = proc.stdout.splitlines()
+    assert said[0].startswith("unknown training preset 'nope'") and said[1] == "[]", said
+
+
 def test_benchenv_with_one_process_leaves_the_worker_columns_blank(capsys):
     """--workers 1 skips the worker variants: their columns read '-' (they read 0), and
     a run shorter than the warm-up's 10 steps works."""

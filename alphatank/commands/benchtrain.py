@@ -172,17 +172,19 @@ class TrainBench:
                  hp: Sequence[str] | None = None, rounds: int = 3, iterations: int = 3,
                  seed: int = 0, torch_threads: int = 1, fragments: bool = False,
                  overlap: bool = False):
-        from alphatank.envs.vector import make_vector_env
         from alphatank.training.presets import get_preset, parse_hp, run_scenario, with_hp
-        from alphatank.training.runner import Trainer
-        from alphatank.training.threads import limit_threads
 
-        limit_threads(1)
+        # the settings first: a bad one is refused before torch and the runner load
         cfg = get_preset(preset)
         scenario = run_scenario(cfg)
         if hp is None:
             hp = DEFAULT_HP if "ppo" in {s.algo for s in cfg.learners} or not cfg.learners else ()
         cfg = with_hp(cfg, parse_hp([("--hp", h) for h in hp]), len(scenario.learner_seats))
+        from alphatank.envs.vector import make_vector_env
+        from alphatank.training.runner import Trainer
+        from alphatank.training.threads import limit_threads
+
+        limit_threads(1)
         cfg = cfg.with_overrides(num_envs=num_envs, num_workers=workers, wandb="disabled",
                                  checkpoint_every=0, eval_every=0, video_every=0, seed=seed,
                                  time_limit_s=0.0, total_steps=10**12, name="bench",
@@ -340,7 +342,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """A setting ``alphatank train`` refuses (--preset, --hp) is one line, exit 2, before
-    anything is measured."""
+    anything is measured; so is asking for neither bench."""
+    if not (args.train or args.sac):
+        print("error: nothing to measure: give --train, --sac or both", file=sys.stderr)
+        return 2
     if args.train:
         try:
             bench = TrainBench(args.preset, args.workers, args.num_envs, args.hp, args.rounds,
