@@ -12,9 +12,13 @@ import functools
 import shlex
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from alphatank.commands.argtypes import budget_minutes
 from alphatank.files import check_folder
+
+if TYPE_CHECKING:
+    from alphatank.training.experiments import Plan
 
 CHOICES = ("table3", "table4", "sac", "league", "heldout", "all")
 
@@ -225,7 +229,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _write_reports(report, command: str, out: str) -> int | None:  # noqa: ANN001
+def _write_reports(report: Plan, command: str, out: str) -> int | None:
     """Write every table of ``report`` from what its folder holds, a line each; the exit
     status of a write that failed, else None."""
     from alphatank.training.report import write_report
