@@ -576,7 +576,7 @@ def test_a_rows_run_is_checked_as_train_checks_a_run_file_when_it_is_planned(
     (root / "tiny" / "c_bad.toml").write_text(f'preset = "demo"\n{text}')
     assert cli("tiny", "--experiments-dir", str(root), "--list") == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and f"experiments/tiny/c_bad.toml: {message}" in err, err
+    assert err.count("\n") == 1 and f"{root}/tiny/c_bad.toml: {message}" in err, err
 
 
 def test_a_schedule_on_a_scenario_without_bot_seats_is_refused_when_planned(tmp_path):
@@ -620,7 +620,7 @@ def test_a_rows_damaged_init_from_is_refused_when_planned(tmp_path, capsys):
     (root / "tiny" / "c_bad.toml").write_text(f'preset = "demo"\n[run]\ninit_from = "{run}"\n')
     assert cli("tiny", "--experiments-dir", str(root), "--list") == 2
     err = capsys.readouterr().err
-    assert f"experiments/tiny/c_bad.toml: run: init_from: {run / 'latest'}: points at " in err
+    assert f"{root}/tiny/c_bad.toml: run: init_from: {run / 'latest'}: points at " in err
     assert err.count("\n") == 1, err
 
 
@@ -706,3 +706,116 @@ def test_a_finished_rows_init_from_is_not_checked_when_it_only_reports(tmp_path,
     assert cli(*args[:3], "--out", str(tmp_path / "other"), "--rows", "c_warm", "--list") == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"c_warm.toml: run: init_from: {warm}: " in err, err
+
+
+def test_a_damaged_results_file_is_named_and_resume_makes_it_again(made, tmp_path, capsys):
+    """An evaluation or done.json cut short: --report-only names it in one line (exit 2,
+    nothing written); --resume sets it aside, saying so, and plays that evaluation or
+    trains that run again; nothing else is touched."""
+    root, made_out, _ = made
+    out = tmp_path / "out"
+    shutil.copytree(made_out, out)
+    args = ["tiny", "--experiments-dir", str(root), "--out", str(out), "--steps", "512",
+            "--games", "4", "--budget", "2", "--no-progress"]
+    a_run, b_run = sorted((out / "runs").iterdir())
+    cut = sorted((a_run / "eval").iterdir())[0]
+    cut.write_bytes(cut.read_bytes()[:100])
+    (b_run / "done.json").write_text("")
+    reports = {p.name: p.read_bytes() for p in out.glob("tiny.*")}
+    assert cli(*args, "--report-only") == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{cut}: not valid JSON (line " in err, err
+    assert "(and 1 more)" in err and "--resume" in err
+    assert {p.name: p.read_bytes() for p in out.glob("tiny.*")} == reports
+    kept = {p: p.stat().st_mtime_ns for p in [a_run / "done.json", *(a_run / "eval").iterdir()]
+            if p != cut}
+    assert cli(*args, "--resume") == 0
+    err = capsys.readouterr().err
+    assert f"{b_run / 'done.json'}: empty; " in err and f"set aside as {b_run}.damaged;" in err
+    assert f"{cut}: not valid JSON" in err and f"set aside as {cut}.damaged;" in err
+    assert json.loads(cut.read_text())["games"] == 4 and (a_run / "eval" / f"{cut.name}.damaged"
+                                                           ).is_file()
+    assert json.loads((b_run / "done.json").read_text())["summary"]
+    assert (Path(f"{b_run}.damaged") / "latest").exists()  # its checkpoint kept aside
+    assert {p: p.stat().st_mtime_ns for p in kept} == kept
+    data = json.loads((out / "tiny.json").read_text())
+    assert not data["missing"] and all(r["columns"]["random"]["per_seed"] for r in data["rows"])
+
+
+@pytest.mark.parametrize("size", [0, 60])
+def test_a_damaged_table_json_is_named_not_taken_for_no_report(made, tmp_path, capsys, size):
+    """The report that says which results a new one must keep, cut short: one line naming
+    it, exit 2, the report left as it is (it once let a report drop every result)."""
+    root, made_out, _ = made
+    out = tmp_path / "out"
+    shutil.copytree(made_out, out)
+    table = out / "tiny.json"
+    table.write_bytes(table.read_bytes()[:size])
+    reports = {p.name: p.read_bytes() for p in out.glob("tiny.*")}
+    assert cli("tiny", "--experiments-dir", str(root), "--out", str(out), "--steps", "512",
+               "--games", "6", "--budget", "2", "--no-progress", "--report-only") == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{table}: " in err and "move it away" in err, err
+    assert {p.name: p.read_bytes() for p in out.glob("tiny.*")} == reports
+
+
+def test_an_interrupted_command_writes_the_tables_of_what_finished(tmp_path, capsys):
+    """SIGINT while a row trains: exit 130, and the tables show the rows that finished
+    (the docs: the tables are rewritten after every command)."""
+    root = write_rows(tmp_path / "exp")
+    quick = root / "tiny" / "a_random.toml"  # 2 min x 256 = 512 steps; b_cycle: 72,000
+    quick.write_text("steps_per_minute = 256\n" + quick.read_text())
+    out = tmp_path / "out"
+    over = threading.Event()
+
+    def stop_once_b_trains() -> None:
+        while not over.wait(0.05):
+            if any(m.stat().st_size for m in out.glob("runs/b_cycle-*/metrics.jsonl")):
+                os.kill(os.getpid(), signal.SIGINT)
+                return
+
+    watcher = threading.Thread(target=stop_once_b_trains, daemon=True)
+    watcher.start()
+    try:
+        rc = cli("tiny", "--experiments-dir", str(root), "--out", str(out), "--games", "2",
+                 "--budget", "2", "--no-progress")
+    finally:
+        over.set()
+        watcher.join()
+    assert rc == 130
+    assert "interrupted: finished runs" in capsys.readouterr().err
+    data = json.loads((out / "tiny.json").read_text())
+    assert data["rows"][0]["columns"]["random"]["per_seed"]
+    assert [m for m in data["missing"] if "b_cycle" in m] and (out / "tiny.md").is_file()
+
+
+def test_errors_name_the_row_files_where_they_are(tmp_path, capsys):
+    """--experiments-dir XP: a bad row or table file is named by its path in XP."""
+    root = write_rows(tmp_path / "xp")
+    row, table = root / "tiny" / "a_random.toml", root / "tiny" / "_table.toml"
+    text = row.read_text()
+    for bad, why in (("bogus = 1\n" + text, f"{row}: bogus: unknown key"),
+                     ("steps_per_minute = 0\n" + text, f"{row}: steps_per_minute: must be"),
+                     ("title = \n" + text, f"{row}: invalid TOML")):
+        row.write_text(bad)
+        assert cli("tiny", "--experiments-dir", str(root), "--list") == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and why in err, err
+    row.write_text(text)
+    table.write_text("bogus = 1\n" + table.read_text())
+    assert cli("tiny", "--experiments-dir", str(root), "--list") == 2
+    assert f"{table}: bogus: unknown key" in capsys.readouterr().err
+
+
+def test_rows_without_a_name_and_seeds_past_the_limit_are_one_line(tmp_path, capsys):
+    """--rows ',' or '' once meant every row; --seeds past the training seeds' limit
+    planned for minutes before the first seed past it failed."""
+    for rows in (",", "", " , "):
+        assert cli("table3", "--rows", rows, "--list", "--out", str(tmp_path)) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "--rows: no row name in" in err, err
+    t0 = time.time()
+    assert cli("table3", "--seeds", "1000001", "--list", "--out", str(tmp_path)) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--seeds must be in [1, 1,000,000]" in err, err
+    assert time.time() - t0 < 30

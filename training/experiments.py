@@ -46,7 +46,7 @@ from pathlib import Path
 from typing import Any
 
 from alphatank.errors import BusyError
-from alphatank.files import FolderLock, write_text_atomic
+from alphatank.files import FolderLock, read_text, write_text_atomic
 from alphatank.sim.config import GameConfig, from_dict
 from alphatank.training.presets import (
     TrainConfig,
@@ -351,8 +351,10 @@ TABLE_KEYS = ("title", "description", "layout", "columns", "average", "heatmap",
 
 def load_tables(names: Sequence[str], experiments_dir: str | Path | None = None
                 ) -> list[Table]:
-    """The named tables (with their rows, in ``order``), every file checked."""
+    """The named tables (with their rows, in ``order``), every file checked; errors name
+    a file by its path in ``experiments_dir`` (``experiments/<table>/...`` when shipped)."""
     root = _root(experiments_dir)
+    where = "experiments" if experiments_dir is None else str(Path(experiments_dir))
     valid = table_names(experiments_dir)
     bad = [n for n in names if n not in valid]
     if bad:
@@ -362,11 +364,11 @@ def load_tables(names: Sequence[str], experiments_dir: str | Path | None = None
     for t in valid:
         for res in sorted(root.joinpath(t).iterdir(), key=lambda p: p.name):
             if res.name.endswith(".toml") and not res.name.startswith("_"):
-                source = f"experiments/{t}/{res.name}"
+                source = f"{where}/{t}/{res.name}"
                 raw[f"{t}/{res.name[:-5]}"] = (_read_toml(res, source), source)
     tables = []
     for t in names:
-        source = f"experiments/{t}/_table.toml"
+        source = f"{where}/{t}/_table.toml"
         data = _read_toml(root.joinpath(t, "_table.toml"), source)
         _keys(data, TABLE_KEYS, source)
         layout = _typed(data, "layout", str, source, "matrix")
@@ -391,7 +393,7 @@ def load_tables(names: Sequence[str], experiments_dir: str | Path | None = None
                                           f"table's columns: {names_seen} (and 'average')")
                 rows.append(row)
         if not rows:
-            raise ExperimentError(f"experiments/{t}: no row files")
+            raise ExperimentError(f"{where}/{t}: no row files")
         checks = tuple(_typed(data, "checks", list, source, []))
         for i, chk in enumerate(checks):
             if not isinstance(chk, dict) or chk.get("kind") not in CHECKS:
@@ -623,8 +625,9 @@ def make_plan(tables: Sequence[Table], out: str | Path, seeds: int = 1,
     """Every (row, seed) of ``tables`` as jobs in ``out``; rows with equal runs share one
     job. ``rows`` keeps only those row names (or ``table/row`` ids). The ``init_from`` of
     a run that will train is checked (not with ``report_only``, nor for finished runs)."""
-    if seeds < 1:
-        raise ExperimentError(f"--seeds must be >= 1, got {seeds}")
+    if not 1 <= seeds <= EVAL_SEED_BASE:  # the last training seed, seeds - 1, stays below
+        raise ExperimentError(f"--seeds must be in [1, {EVAL_SEED_BASE:,}] (training seeds "
+                              f"0..N-1 stay below the evaluation seeds), got {seeds}")
     if not budget_min > 0:
         raise ExperimentError(f"--budget must be > 0 minutes, got {budget_min}")
     if games < 1:
@@ -697,7 +700,47 @@ def _write_json(path: Path, data: Any) -> None:
 
 
 def read_json(path: Path) -> Any:
-    return json.loads(Path(path).read_text(encoding="utf-8"))
+    """A JSON file's contents; ValueError naming the file for one that cannot be read or
+    is not JSON (empty, or cut short)."""
+    text = read_text(path)
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        why = "empty" if not text.strip() else (f"not valid JSON (line {exc.lineno}, column "
+                                                f"{exc.colno}: {exc.msg})")
+        raise ValueError(f"{path}: {why}; the file is cut short or damaged") from None
+
+
+def damaged_results(jobs: Sequence[Job]) -> list[tuple[Job, Path, str]]:
+    """The ``done.json`` and evaluation files of ``jobs`` that exist but hold no JSON
+    object (emptied, cut short): (job, file, why naming the file), each file once."""
+    found: dict[Path, tuple[Job, Path, str]] = {}
+    for job in jobs:
+        for path in (job.done_file, *map(job.eval_file, job.evals)):
+            if path in found or not path.is_file():
+                continue
+            try:
+                data = read_json(path)
+            except ValueError as exc:
+                found[path] = (job, path, str(exc))
+                continue
+            if not isinstance(data, dict):
+                found[path] = (job, path, f"{path}: not a JSON object; the file is damaged")
+    return list(found.values())
+
+
+def set_aside(job: Job, path: Path) -> Path:
+    """Move a damaged result of ``job`` out of the way so that it is made again: an
+    evaluation file becomes ``<file>.damaged``, a damaged ``done.json`` takes its whole run
+    folder to ``<run>.damaged`` (its checkpoint kept; the run trains again from scratch).
+    Returns where it went (a free name: ``.damaged``, ``.damaged-2``, ...)."""
+    src = Path(job.run_dir) if path == job.done_file else path
+    dest, n = src.with_name(f"{src.name}.damaged"), 1
+    while dest.exists():
+        n += 1
+        dest = src.with_name(f"{src.name}.damaged-{n}")
+    src.rename(dest)
+    return dest
 
 
 def clone_cut(summary: dict[str, Any]) -> bool:

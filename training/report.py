@@ -158,12 +158,17 @@ def evaluated_rows(plan: Plan, table: Table) -> list[Row]:
 
 def reported_runs(path: Path) -> set[tuple[str, int]]:
     """(row name, seed) of every run with results in the report ``path``
-    (``<table>.json``); none when it is missing or unreadable."""
-    try:
-        return {(r["row"], int(run["seed"])) for r in read_json(path)["rows"]
-                for c in r["columns"].values() for run in c["per_seed"]}
-    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+    (``<table>.json``); none when it is missing. ValueError naming it when it cannot be
+    read or is not such a report (emptied, cut short): never taken for no report."""
+    if not path.exists():
         return set()
+    data = read_json(path)
+    try:
+        return {(r["row"], int(run["seed"])) for r in data["rows"]
+                for c in r["columns"].values() for run in c["per_seed"]}
+    except (ValueError, KeyError, TypeError, AttributeError):
+        raise ValueError(f"{path}: not a report of alphatank experiments (rows, columns, "
+                         "per_seed)") from None
 
 
 # ---- formatting -----------------------------------------------------------------------

@@ -11,9 +11,14 @@ import argparse
 import functools
 import shlex
 import sys
+from pathlib import Path
+from typing import TYPE_CHECKING
 
 from alphatank.commands.argtypes import budget_minutes
 from alphatank.files import check_folder
+
+if TYPE_CHECKING:
+    from alphatank.training.experiments import Plan
 
 CHOICES = ("table3", "table4", "sac", "league", "heldout", "all")
 
@@ -36,7 +41,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "evaluations (failed ones are tried again)")
     p.add_argument("--games", type=int, default=200,
                    help="evaluation games per cell (default: %(default)s)")
-    p.add_argument("--rows", default="", metavar="ROW,...",
+    p.add_argument("--rows", metavar="ROW,...",
                    help="only these rows (names or TABLE/ROW ids); their tables also show "
                         "every other row with results in DIR (made with the same settings)")
     p.add_argument("--steps", type=int, metavar="N",
@@ -72,13 +77,16 @@ def run(args: argparse.Namespace) -> int:
     from alphatank.training.experiments import (
         BUSY,
         ExperimentError,
+        Job,
         RunInterrupted,
         clone_cut,
+        damaged_results,
         estimate_minutes,
         execute,
         load_tables,
         make_plan,
         read_json,
+        set_aside,
         table_names,
     )
     from alphatank.training.stopping import StopFlag, StopRequested, stop_on_signals
@@ -88,6 +96,10 @@ def run(args: argparse.Namespace) -> int:
     if args.ray is not None and args.workers != 1:
         return _error("--workers and --ray: give one (with --ray the cluster's CPUs decide "
                       "how many runs train at once)")
+    rows = [r.strip() for r in (args.rows or "").split(",") if r.strip()]
+    if args.rows is not None and not rows:
+        return _error(f"--rows: no row name in {args.rows!r}; give ROW,... (row names or "
+                      "TABLE/ROW ids), or leave --rows out for every row")
     check_folder(args.out, "--out")
     try:
         names = table_names(args.experiments_dir)
@@ -99,17 +111,16 @@ def run(args: argparse.Namespace) -> int:
             return _error(f"unknown table {args.table!r}; choose one of "
                           f"{', '.join([*names, 'all'])}")
         tables = load_tables(wanted, args.experiments_dir)
-        rows = [r.strip() for r in args.rows.split(",") if r.strip()]
         planned = functools.partial(make_plan, tables, args.out, seeds=args.seeds,
                                     budget_min=args.budget, games=args.games,
                                     steps=args.steps, wandb=args.wandb)
         plan = planned(rows=rows, report_only=args.report_only)
     except (ExperimentError, ValueError) as exc:
         return _error(str(exc))
-    todo = [j for j in plan.jobs if not j.complete()]
     started = [j for j in plan.jobs if j.started()]
     if args.list:
-        _print_plan(plan, todo, args.workers, estimate_minutes)
+        _print_plan(plan, [j for j in plan.jobs if not j.complete()], args.workers,
+                    estimate_minutes)
         return 0
     if started and not (args.resume or args.report_only):
         return _error(f"{args.out} already holds {len(started)} of this plan's runs (e.g. "
@@ -118,7 +129,7 @@ def run(args: argparse.Namespace) -> int:
     from alphatank.extras import require
 
     require("train", "alphatank experiments")
-    from alphatank.training.report import evaluated_rows, reported_runs, write_report
+    from alphatank.training.report import evaluated_rows, reported_runs
 
     report = plan  # the reports: --rows, and every other row of their tables with results
     if rows:
@@ -130,15 +141,37 @@ def run(args: argparse.Namespace) -> int:
         except (ExperimentError, ValueError) as exc:
             return _error(str(exc))
         args.rows = ",".join(r.name for t in report.tables for r in t.rows)  # the command
+    damaged = damaged_results(report.jobs)  # a results file cut short: made again
+    if damaged and (args.report_only or not args.resume):
+        more = f" (and {len(damaged) - 1} more)" if len(damaged) > 1 else ""
+        return _error(f"{damaged[0][2]}{more}: --resume (without --report-only) sets such "
+                      "files aside and makes them again")
     for t in report.tables:  # a report never loses results it shows (made otherwise)
         coming = evaluated_rows(report, t) if args.report_only else t.rows
-        lost = sorted(reported_runs(report.out / f"{t.name}.json")
-                      - {(r.name, s) for r in coming for s in range(report.seeds)})
+        try:
+            shown = reported_runs(report.out / f"{t.name}.json")
+        except ValueError as exc:
+            return _error(f"--out {args.out}: {exc}; it says which results the new report "
+                          "must keep: restore it, or move it away to write it anew from "
+                          f"{report.out / 'runs'}")
+        lost = sorted(shown - {(r.name, s) for r in coming for s in range(report.seeds)})
         if lost:
             runs = ", ".join(f"{row} seed {seed}" for row, seed in lost)
             return _error(f"--out {args.out}: {t.name}.json reports results of {runs} that "
                           "this report would lack (made with other settings, e.g. --seeds: "
                           "see the command in it); give those settings, or another --out")
+    redo: dict[str, Job] = {}
+    for job, path, why in damaged:  # --resume: training or evaluating it again
+        if job.key in redo and not Path(job.run_dir).exists():
+            continue  # its run folder went aside with its damaged done.json
+        moved = set_aside(job, path)
+        print(f"{why}: set aside as {moved}; "
+              + ("the run trains again" if path == job.done_file else
+                 "the evaluation is played again"), file=sys.stderr)
+        redo[job.key] = job
+    planned_keys = {j.key for j in plan.jobs}
+    todo = [j for j in plan.jobs if not j.complete()] + [
+        j for k, j in redo.items() if k not in planned_keys]  # rows shown beside --rows
     command = _command(args)
     failed: dict[str, str] = {}
     if not args.report_only and todo:
@@ -171,22 +204,19 @@ def run(args: argparse.Namespace) -> int:
                 failed = execute(todo, args.workers, progress=not args.no_progress,
                                  on_done=on_done, runner=runner)
         except (KeyboardInterrupt, RunInterrupted, StopRequested) as exc:  # Ctrl-C, SIGTERM
-            print("interrupted: finished runs and evaluations are kept; --resume finishes "
-                  "the rest", file=sys.stderr)
-            return getattr(exc, "exit_code", stop.exit_code or 130)
+            code = getattr(exc, "exit_code", stop.exit_code or 130)
+            print("interrupted: finished runs and evaluations are kept (the tables show "
+                  "them); --resume finishes the rest", file=sys.stderr)
+            try:  # what finished before the signal; another Ctrl-C ends it here
+                return _write_reports(report, command, args.out) or code
+            except KeyboardInterrupt:
+                return code
         finally:
             if connection is not None:
                 connection.close()
-    for table in report.tables:
-        try:
-            data = write_report(report, table, command)
-        except OSError as exc:
-            return _error(f"cannot write the {table.name} report in {args.out}: {exc}")
-        status = ", ".join(f"{c['kind']}: " + {True: "met", False: "not met",
-                                               None: "not measurable"}[c["passed"]]
-                           for c in data["checks"])
-        print(f"{report.out / (table.name + '.md')}" + (f"  [{status}]" if status else "")
-              + (f"  ({len(data['missing'])} missing)" if data["missing"] else ""))
+    error = _write_reports(report, command, args.out)
+    if error:
+        return error
     if failed:
         print(f"{len(failed)} run(s) failed (their error.txt holds the traceback) or "
               f"busy (another command is training them):", file=sys.stderr)
@@ -199,9 +229,27 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _write_reports(report: Plan, command: str, out: str) -> int | None:
+    """Write every table of ``report`` from what its folder holds, a line each; the exit
+    status of a write that failed, else None."""
+    from alphatank.training.report import write_report
+
+    for table in report.tables:
+        try:
+            data = write_report(report, table, command)
+        except OSError as exc:
+            return _error(f"cannot write the {table.name} report in {out}: {exc}")
+        status = ", ".join(f"{c['kind']}: " + {True: "met", False: "not met",
+                                               None: "not measurable"}[c["passed"]]
+                           for c in data["checks"])
+        print(f"{report.out / (table.name + '.md')}" + (f"  [{status}]" if status else "")
+              + (f"  ({len(data['missing'])} missing)" if data["missing"] else ""))
+    return None
+
+
 # flags that change what is made, in the order a command line shows them
 RECORDED = (("--budget", "budget", 15.0), ("--seeds", "seeds", 1), ("--workers", "workers", 1),
-            ("--games", "games", 200), ("--steps", "steps", None), ("--rows", "rows", ""),
+            ("--games", "games", 200), ("--steps", "steps", None), ("--rows", "rows", None),
             ("--experiments-dir", "experiments_dir", None), ("--wandb", "wandb", "disabled"),
             ("--out", "out", "results"))
 
