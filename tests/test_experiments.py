@@ -706,3 +706,55 @@ def test_a_finished_rows_init_from_is_not_checked_when_it_only_reports(tmp_path,
     assert cli(*args[:3], "--out", str(tmp_path / "other"), "--rows", "c_warm", "--list") == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"c_warm.toml: run: init_from: {warm}: " in err, err
+
+
+TABLE3_AGENTS = {"smart": "ppo_vs_smart", "aggressive": "ppo_vs_aggressive",
+                 "dodge": "ppo_vs_dodge", "defensive": "ppo_vs_defensive",
+                 "team_2smart": "team_vs_2smart", "team_def": "team_vs_def",
+                 "team_def_2smart": "team_vs_def_2smart", "team_four_bots": "team_vs_four_bots"}
+# what a run is called and where it logs, not what it trains
+NOT_TRAINING = {"name", "description", "wandb", "project", "tensorboard", "keep_checkpoints"}
+
+
+@pytest.mark.parametrize("doc", ["README.md", "docs/results/README.md", "docs/training.md"])
+def test_the_docs_table3_commands_plan_the_runs_of_the_shipped_agents(doc):
+    """Each doc's block of Table 3 commands names every row with the README's seed counts
+    (3, four for the three-bot row, five for the four-bot row) and plans each shipped
+    agent's own run: its seed, budget (8 min for 1v1), step cap and every training
+    setting. (The README once gave `--budget 15` and no `--steps`.)"""
+    import argparse
+    import shlex
+
+    from alphatank.commands.experiments import add_arguments
+    from alphatank.game.seats import agent_path
+    from alphatank.training.checkpoint import load_checkpoint
+    from alphatank.training.experiments import LATER_SETTINGS
+
+    text = (Path(__file__).parents[1] / doc).read_text(encoding="utf-8")
+    blocks = [b.split("```")[0] for b in text.split("```bash\n")[1:]]
+    block = next(b for b in blocks if "experiments table3 --rows team_four_bots " in b)
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    defaults = {f.name: f.default_factory() if f.default_factory is not dataclasses.MISSING
+                else f.default for f in dataclasses.fields(TrainConfig)}
+    seeds, planned = {}, {}
+    for line in block.splitlines():
+        if line.startswith("alphatank experiments table3 "):
+            args = parser.parse_args(shlex.split(line.split("#")[0])[2:])
+            rows = args.rows.split(",")
+            plan = make_plan(load_tables([args.table]), args.out, args.seeds, args.budget,
+                             args.games, args.steps, rows=rows)
+            seeds.update(dict.fromkeys(rows, args.seeds))
+            planned.update({(j.rows[0].split("/")[1], j.seed): j.cfg for j in plan.jobs})
+    assert seeds == {**dict.fromkeys(TABLE3_AGENTS, 3), "team_def_2smart": 4,
+                     "team_four_bots": 5}
+    for row, agent in TABLE3_AGENTS.items():
+        saved = load_checkpoint(agent_path(agent)).meta["train_config"]
+        cfg = planned[row, saved["seed"]]
+        for spec in cfg["learners"] + saved["learners"]:  # added later; absent when off
+            for key, off in LATER_SETTINGS.items():
+                if spec["config"].get(key, off) == off:
+                    spec["config"].pop(key, None)
+        differ = {k for k in set(cfg) | set(saved) if cfg.get(k) != saved.get(k)
+                  and not (k not in saved and cfg[k] == defaults.get(k))}  # added later
+        assert differ <= NOT_TRAINING, (row, sorted(differ))
