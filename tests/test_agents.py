@@ -114,6 +114,33 @@ def test_export_strips_training_state_and_lists(tmp_path, capsys):
     assert all(f"vs {bot} " in cycle for bot in ("random", "aggressive", "defensive", "dodge"))
 
 
+def test_the_listing_shows_each_agent_s_training_seed(capsys):
+    """The seed column is the run's own ``seed`` (the README's shipped seeds: the defensive
+    row's best seed 2, the cycle agent's seed 1)."""
+    assert main(["agents"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].split()[:4] == ["agent", "scenario", "seed", "steps"]
+    rows = {line.split()[0]: line.split() for line in lines[1:]}
+    for name in shipped_agents():
+        assert rows[name][2] == str(load_checkpoint(agent_path(name)).train_config.seed)
+    assert rows["ppo_vs_defensive"][2] == "2" and rows["ppo_cycle_full"][2] == "1"
+
+
+def test_a_shipped_agent_s_saved_description_names_its_schedule():
+    """A row built on a preset inherited the preset's description: the fixed-order cycle
+    agent read "(adaptive)", the league agent "PPO vs smart bot". Their meta.json (not
+    hashed: it holds the weights' digests) says what they trained."""
+    for name in shipped_agents():
+        cfg = load_checkpoint(agent_path(name)).train_config
+        kind = cfg.schedule.get("kind")
+        if kind == "cycle":
+            mode = cfg.schedule.get("mode", "fixed")
+            other = "adaptive" if mode == "fixed" else "fixed"
+            assert mode in cfg.description and other not in cfg.description, name
+        elif kind == "league":
+            assert "league" in cfg.description.lower(), name
+
+
 TINY = {"ppo": ("vs_aggressive", PPOConfig(num_steps=16, update_epochs=1)),
         "sac": ("vs_aggressive", SACConfig(hidden=16, batch_size=16, start_steps=16,
                                            update_after=16, update_every=16,

@@ -2,10 +2,13 @@
 training, evaluation, md/csv/json, heatmap and curves; --resume redoes nothing finished;
 a failing row is reported while the other finishes; the shipped tables all load."""
 
+import argparse
 import csv
 import dataclasses
 import json
 import os
+import re
+import shlex
 import shutil
 import signal
 import threading
@@ -15,9 +18,13 @@ from pathlib import Path
 import pytest
 
 from alphatank.cli import main
+from alphatank.commands.experiments import add_arguments
+from alphatank.game.seats import agent_path
 from alphatank.training.aggregate import pool_runs
+from alphatank.training.checkpoint import load_checkpoint
 from alphatank.training.experiments import (
     EVAL_SEED_BASE,
+    LATER_SETTINGS,
     RunInterrupted,
     execute,
     load_tables,
@@ -518,7 +525,6 @@ def test_steps_reported_are_those_of_the_evaluated_checkpoint():
     assert trained_steps({"global_step": 512}) == 512  # a run from before saved_step
 
 
-
 @pytest.mark.parametrize("rate", ["nan", "inf", "0"])
 def test_a_row_planning_rate_must_be_a_finite_positive_number(tmp_path, rate):
     root = write_rows(tmp_path / "exp")
@@ -686,7 +692,6 @@ def test_a_signal_to_the_command_alone_stops_its_workers_runs_at_once(tmp_path, 
 def test_a_finished_rows_init_from_is_not_checked_when_it_only_reports(tmp_path, capsys):
     """A row trained from a checkpoint that is gone since: --report-only and --resume still
     report its finished run; a run still to train is refused, naming the row's file."""
-    from alphatank.game.seats import agent_path
 
     warm = tmp_path / "warm"
     shutil.copytree(agent_path("ppo_vs_smart"), warm)
@@ -819,3 +824,76 @@ def test_rows_without_a_name_and_seeds_past_the_limit_are_one_line(tmp_path, cap
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--seeds must be in [1, 1,000,000]" in err, err
     assert time.time() - t0 < 30
+
+
+TABLE3_AGENTS = {"smart": "ppo_vs_smart", "aggressive": "ppo_vs_aggressive",
+                 "dodge": "ppo_vs_dodge", "defensive": "ppo_vs_defensive",
+                 "team_2smart": "team_vs_2smart", "team_def": "team_vs_def",
+                 "team_def_2smart": "team_vs_def_2smart", "team_four_bots": "team_vs_four_bots"}
+# what a run is called and where it logs, not what it trains
+NOT_TRAINING = {"name", "description", "wandb", "project", "tensorboard", "keep_checkpoints"}
+
+
+def _assert_plans_agent(cfg: dict, agent: str) -> None:
+    """``cfg`` (a planned run) trains what shipped agent ``agent`` saved: only names and
+    logging differ, settings added later count as absent when off, and teachers' run
+    folders are compared by name (the output folder differs)."""
+    saved = load_checkpoint(agent_path(agent)).meta["train_config"]
+    defaults = {f.name: f.default_factory() if f.default_factory is not dataclasses.MISSING
+                else f.default for f in dataclasses.fields(TrainConfig)}
+    for spec in cfg["learners"] + saved["learners"]:  # added later; absent when off
+        for key, off in LATER_SETTINGS.items():
+            if spec["config"].get(key, off) == off:
+                spec["config"].pop(key, None)
+    for run in (cfg, saved):
+        teachers = (run.get("imitate") or {}).get("teachers") or {}
+        teachers.update({k: Path(v).name for k, v in teachers.items()})
+    differ = {k for k in set(cfg) | set(saved) if cfg.get(k) != saved.get(k)
+              and not (k not in saved and cfg[k] == defaults.get(k))}  # added later
+    assert differ <= NOT_TRAINING, (agent, sorted(differ))
+
+
+def _planned(command: str) -> tuple[argparse.Namespace, dict[tuple[str, int], dict]]:
+    """The arguments of ``alphatank experiments ...`` and its plan's runs by (row, seed)."""
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    args = parser.parse_args(shlex.split(command)[2:])
+    plan = make_plan(load_tables([args.table]), args.out, args.seeds, args.budget,
+                     args.games, args.steps, rows=args.rows.split(","))
+    return args, {(j.rows[0].split("/")[1], j.seed): j.cfg for j in plan.jobs}
+
+
+@pytest.mark.parametrize("doc", ["README.md", "docs/results/README.md", "docs/training.md"])
+def test_the_docs_table3_commands_plan_the_runs_of_the_shipped_agents(doc):
+    """Each doc's block of Table 3 commands names every row with the README's seed counts
+    (3, four for the three-bot row, five for the four-bot row) and plans each shipped
+    agent's own run: its seed, budget (8 min for 1v1), step cap and every training
+    setting. (The README once gave `--budget 15` and no `--steps`.)"""
+    text = (Path(__file__).parents[1] / doc).read_text(encoding="utf-8")
+    blocks = [b.split("```")[0] for b in text.split("```bash\n")[1:]]
+    block = next(b for b in blocks if "experiments table3 --rows team_four_bots " in b)
+    seeds, planned = {}, {}
+    for line in block.splitlines():
+        if line.startswith("alphatank experiments table3 "):
+            args, runs = _planned(line.split("#")[0])
+            seeds.update(dict.fromkeys(args.rows.split(","), args.seeds))
+            planned.update(runs)
+    assert seeds == {**dict.fromkeys(TABLE3_AGENTS, 3), "team_def_2smart": 4,
+                     "team_four_bots": 5}
+    for row, agent in TABLE3_AGENTS.items():
+        seed = load_checkpoint(agent_path(agent)).meta["train_config"]["seed"]
+        _assert_plans_agent(planned[row, seed], agent)
+
+
+def test_the_readme_table4_and_league_commands_plan_the_shipped_agents_runs():
+    """The README's cycle (Table 4) and distilled league commands plan the runs of
+    ``agent:ppo_cycle_full`` and ``agent:league`` (the cycle one once lacked `--steps
+    5000000`, which sets its phase length too)."""
+    text = (Path(__file__).parents[1] / "README.md").read_text(encoding="utf-8")
+    agents = {"cycle_fixed_full": "ppo_cycle_full", "league_distill": "league"}
+    found = re.findall(r"`(alphatank experiments (?:table4|league) --rows[^`]*)`", text)
+    assert len(found) == 2
+    for command in found:
+        args, runs = _planned(" ".join(command.split()))
+        seed = load_checkpoint(agent_path(agents[args.rows])).meta["train_config"]["seed"]
+        _assert_plans_agent(runs[args.rows, seed], agents[args.rows])

@@ -90,12 +90,13 @@ def _agent_meta(path: Path) -> dict[str, Any] | None:
 
 
 def agent_summary(path: str | Path) -> dict[str, Any]:
-    """Name, scenario, learners, training steps and time, and the recorded evaluation of
-    an agent folder (for ``alphatank agents``)."""
+    """Name, scenario, learners, training seed, steps and time, and the recorded
+    evaluation of an agent folder (for ``alphatank agents``)."""
     ckpt = load_checkpoint(path)
     rec = ckpt.meta.get("agent", {})
     prog = rec.get("progress", ckpt.meta.get("progress", {}))
     return {"name": Path(path).name, "scenario": ckpt.meta["scenario"].get("name", "?"),
             "learners": ", ".join(f"{s.name} ({s.algo})" for s in ckpt.learner_specs),
-            "steps": int(prog.get("global_step", 0)), "elapsed_s": float(prog.get("elapsed", 0)),
+            "seed": ckpt.train_config.seed, "steps": int(prog.get("global_step", 0)),
+            "elapsed_s": float(prog.get("elapsed", 0)),
             "description": rec.get("description", ""), "eval": rec.get("eval", {})}

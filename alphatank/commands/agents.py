@@ -44,7 +44,8 @@ def run(args: argparse.Namespace) -> int:
     if not names:
         print("no shipped agents")
         return 0
-    print(f"{'agent':20s} {'scenario':18s} {'steps':>10s} {'train s':>8s}  win rate (eval)")
+    print(f"{'agent':20s} {'scenario':18s} {'seed':>4s} {'steps':>10s} {'train s':>8s}  "
+          "win rate (eval)")
     for name in names:
         s = agent_summary(agent_path(name))
         rows = s["eval"] if isinstance(s["eval"], list) else [s["eval"]]
@@ -52,7 +53,8 @@ def run(args: argparse.Namespace) -> int:
         win = ", ".join((f"vs {_against(r)} " if len(rows) > 1 else "")
                         + f"{100 * r['win_rate']:.0f}% [{100 * r['ci95_low']:.0f}, "
                         f"{100 * r['ci95_high']:.0f}] of {r['games']}" for r in rows)
-        print(f"{name:20s} {s['scenario']:18s} {s['steps']:>10,d} {s['elapsed_s']:>8.0f}  {win}")
+        print(f"{name:20s} {s['scenario']:18s} {s['seed']:>4d} {s['steps']:>10,d} "
+              f"{s['elapsed_s']:>8.0f}  {win}")
     return 0
 
 
