@@ -52,12 +52,23 @@ def test_fragment_scaling_steps_worker_processes_a_fragment_each():
     assert rate > 0 and ratio > 0
 
 
+def test_lockstep_scaling_times_both_sides_and_counts_every_process():
+    """Two workers stepping in lockstep against one process, alternating: wall-clock
+    steps/s, steps per CPU-second of all three processes and the ratio of the two
+    wall-clock rates."""
+    from alphatank.commands.benchenv import lockstep_scaling
+
+    wall, cpu, ratio = lockstep_scaling("vs_random", 2, num_envs=2, steps=20, repeats=2)
+    assert wall > 0 and cpu > 0 and ratio > 0
+
+
 @pytest.mark.parametrize(("argv", "want"), [
     (["--steps", "0"], "argument --steps: must be an integer >= 1, got '0'"),
     (["--num-envs", "0"], "argument --num-envs: must be an integer in [1, "),
     (["--workers", "0"], "argument --workers: must be an integer >= 1, got '0'"),
+    (["--repeats", "0"], "argument --repeats: must be an integer >= 1, got '0'"),
     (["--scenarios", "nope"], "--scenarios: unknown scenario 'nope'"),
-], ids=["steps", "num-envs", "workers", "scenario"])
+], ids=["steps", "num-envs", "workers", "repeats", "scenario"])
 def test_benchenv_refuses_bad_settings_in_one_line(argv, want):
     """`python -m alphatank.commands.benchenv` (docs/environments.md) with a bad size or
     scenario: one line, exit 2, nothing measured (it ended in tracebacks)."""

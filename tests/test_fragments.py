@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from alphatank.cli import main
-from alphatank.envs.vector import SubprocVectorMatchEnv, VectorMatchEnv
+from alphatank.envs.fragments import merge_fragments
+from alphatank.envs.vector import SubprocVectorMatchEnv, VectorMatchEnv, _shm_room
 from alphatank.training.fragments import FrozenLearners
 from alphatank.training.hparams import MAPPOConfig, PPOConfig
 from alphatank.training.ppo import PPO
@@ -80,6 +81,51 @@ def test_worker_processes_give_each_block_its_own_fragment():
         np.testing.assert_array_equal(frag.next_obs[lo:hi], part.next_obs)
         steps += [(ep["step"], ep["env"]) for ep in part.episodes]
     assert [(ep["step"], ep["env"]) for ep in frag.episodes] == sorted(steps)
+
+
+def test_worker_fragments_through_shared_memory_keep_each_rollout_whole():
+    """Rollouts of 25, then 10 (the shared arrays have room to spare), then 40 steps (they
+    grow) with the env's extra inputs: each is its blocks' fragments stepped alone, and an
+    earlier fragment is not overwritten by the later rollouts."""
+    kw = {**KW, "inputs": ("state", "alive")}
+    sv = SubprocVectorMatchEnv("team_vs_bot", 5, seed=2, num_workers=2, **kw)
+    blocks = [VectorMatchEnv("team_vs_bot", hi - lo, seed=2, env_ids=range(lo, hi), **kw)
+              for lo, hi in ((0, 2), (2, 5))]
+    try:
+        policy = frozen(sv)
+        frags, obs = [], sv.reset(9)
+        for steps in (25, 10, 40):
+            frags.append(sv.rollout(policy, obs, steps))
+            obs = frags[-1].next_obs
+        kept = [{k: a.copy() for k, a in vars(f).items() if isinstance(a, np.ndarray)}
+                for f in frags]
+    finally:
+        sv.close()
+    parts = []
+    for block in blocks:
+        o = block.reset(9)
+        parts.append([])
+        for steps in (25, 10, 40):
+            parts[-1].append(block.rollout(policy, o, steps))
+            o = parts[-1][-1].next_obs
+    for k, frag in enumerate(frags):
+        ref = merge_fragments([p[k] for p in parts])
+        for name in ("obs", "actions", "logprobs", "values", "rewards", "terminated",
+                     "truncated", "bootstrap", "next_obs"):
+            np.testing.assert_array_equal(getattr(frag, name), getattr(ref, name))
+            np.testing.assert_array_equal(kept[k][name], getattr(ref, name))
+        for name in ("state", "alive"):
+            np.testing.assert_array_equal(frag.inputs[name], ref.inputs[name])
+            np.testing.assert_array_equal(frag.next_inputs[name], ref.next_inputs[name])
+        assert [(ep["step"], ep["env"], ep["length"], ep["winner"]) for ep in frag.episodes] \
+            == [(ep["step"], ep["env"], ep["length"], ep["winner"]) for ep in ref.episodes]
+        for ep, want in zip(frag.episodes, ref.episodes, strict=True):
+            np.testing.assert_array_equal(ep["return"], want["return"])
+    assert sum(len(f.episodes) for f in frags) > 0  # 75 steps of 20-tick games
+
+
+def test_shared_memory_room_is_read_from_dev_shm():
+    assert _shm_room(1) and not _shm_room(1 << 62)
 
 
 def tiny_cfg(name: str, **kw) -> TrainConfig:

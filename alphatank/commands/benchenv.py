@@ -11,16 +11,19 @@ microseconds per step as a ratio to the match tick and to the floor (lower is be
 the issue-14 target is ``x floor`` <= 2 for ``vs_smart``); the same with the observation
 and reward layers switched off (their own cost per step is the difference); and with
 ``workers`` processes (``SubprocVectorMatchEnv``, ``num_envs`` matches each): wall-clock
-steps/s, its ratio to one process's wall-clock steps/s (the scaling; needs that many idle
-cores), and steps per CPU-second of all processes together (parent + workers); and those
-workers acting whole rollouts (``train --fragments``: one call per worker per 150-step
-fragment, random actions) against one process doing the same. The
+steps/s, its ratio to one process's wall-clock steps/s (the scaling, from alternating runs
+of the two; needs that many idle cores), and steps per CPU-second of all processes
+together (parent + workers); and those workers acting whole rollouts (``train
+--fragments``: one call per worker per fragment of ``steps`` steps, random actions)
+against one process doing the same. The
 scaling's ceiling on this machine at this moment is measured once, on the first scenario:
 ``workers`` independent single-process envs side by side against one alone (no pipes, no
 shared memory, no waiting for each other). One env
 step = one tick of one match with every learner acting (random actions, drawn before
-timing). CPU-time figures are robust to other programs sharing the cores; wall-clock ones
-are not. Run alone: ``python -m alphatank.commands.benchenv``.
+timing). Every figure is the best of ``--repeats`` timed runs of ``--steps`` steps: short
+runs make the scaling figures noisy, so measure it with runs of a second or more
+(``--steps 1500 --repeats 5``). CPU-time figures are robust to other programs sharing the
+cores; wall-clock ones are not. Run alone: ``python -m alphatank.commands.benchenv``.
 """
 
 from __future__ import annotations
@@ -45,30 +48,65 @@ DEFAULT_SCENARIOS = ("vs_random", "vs_aggressive", "vs_defensive", "vs_dodge", "
                      "team", "mixed_teams")
 
 
-def _rates(env: Any, steps: int, seed: int, layers: bool = True, repeats: int = 3,
-           cpu: Callable[[], float] = time.process_time) -> tuple[float, float]:
-    """(wall-clock, CPU-time) env steps/s (num_envs x steps ticks) after a short warm-up;
-    each the best of ``repeats`` runs. ``cpu`` is the CPU clock (default: this process's
-    CPU time; worker processes need :func:`_cpu_clock`)."""
+def _prepare(env: Any, steps: int, seed: int, layers: bool = True) -> np.ndarray:
+    """Reset ``env``, warm it up (10 steps) and return its random actions for ``steps``
+    timed steps (drawn before timing). ``layers=False`` switches the observation and
+    reward layers off."""
     if not layers:
         core = env.core
         core.obs.build = lambda: core.obs.out
         core.tracker.step = lambda sl, *a: core.tracker.terms[sl]
     env.reset(seed)
     rng = np.random.default_rng(seed)
-    shape = (steps, env.num_envs, env.num_learners, 3)
-    actions = rng.integers(0, [3, 3, 2], size=shape)
+    actions = rng.integers(0, [3, 3, 2], size=(steps, env.num_envs, env.num_learners, 3))
     for k in range(10):
         env.step(actions[k % steps])
-    wall = cpu_rate = 0.0
-    for _ in range(repeats):
-        w0, c0 = time.perf_counter(), cpu()
-        for k in range(steps):
-            env.step(actions[k])
-        n = env.num_envs * steps
-        wall = max(wall, n / (time.perf_counter() - w0))
-        cpu_rate = max(cpu_rate, n / max(cpu() - c0, 1e-9))
-    return wall, cpu_rate
+    return actions
+
+
+def _timed(env: Any, actions: np.ndarray, cpu: Callable[[], float]) -> tuple[float, float]:
+    """(wall-clock, CPU-time) env steps/s of one run of ``actions``."""
+    w0, c0 = time.perf_counter(), cpu()
+    for a in actions:
+        env.step(a)
+    n = env.num_envs * len(actions)
+    return n / (time.perf_counter() - w0), n / max(cpu() - c0, 1e-9)
+
+
+def _rates(env: Any, steps: int, seed: int, layers: bool = True, repeats: int = 3,
+           cpu: Callable[[], float] = time.process_time) -> tuple[float, float]:
+    """(wall-clock, CPU-time) env steps/s (num_envs x steps ticks) after a short warm-up;
+    each the best of ``repeats`` runs. ``cpu`` is the CPU clock (default: this process's
+    CPU time; worker processes need :func:`_cpu_clock`)."""
+    actions = _prepare(env, steps, seed, layers)
+    runs = [_timed(env, actions, cpu) for _ in range(repeats)]
+    return max(w for w, _ in runs), max(c for _, c in runs)
+
+
+def lockstep_scaling(scenario: str, workers: int, num_envs: int = 16, steps: int = 150,
+                     seed: int = 0, observation: str = "paper", repeats: int = 3
+                     ) -> tuple[float, float, float]:
+    """``workers`` processes stepped in lockstep (``SubprocVectorMatchEnv``, ``num_envs``
+    matches each) against one process with ``num_envs`` matches, in alternating runs (so
+    both see the machine in the same state): the workers' wall-clock steps/s, their
+    steps per CPU-second of all processes (parent + workers) and the ratio of the best
+    wall-clock runs (the scaling)."""
+    one = VectorMatchEnv(scenario, num_envs, seed, observation)
+    many = SubprocVectorMatchEnv(scenario, num_envs * workers, seed, observation,
+                                 num_workers=workers)
+    try:
+        pids = [p.pid for p in many._procs]
+        clock = (_cpu_clock(pids) if os.path.exists(f"/proc/{pids[0]}/stat")
+                 else time.process_time)
+        acts_one, acts_many = _prepare(one, steps, seed), _prepare(many, steps, seed)
+        wall_one, wall_many, cpu_many = 0.0, 0.0, 0.0
+        for _ in range(repeats):
+            wall_one = max(wall_one, _timed(one, acts_one, time.process_time)[0])
+            w, c = _timed(many, acts_many, clock)
+            wall_many, cpu_many = max(wall_many, w), max(cpu_many, c)
+    finally:
+        many.close()
+    return wall_many, cpu_many, wall_many / wall_one
 
 
 def _cpu_clock(pids: Sequence[int]) -> Callable[[], float]:
@@ -204,7 +242,8 @@ def fragment_scaling(scenario: str, workers: int, num_envs: int = 16, steps: int
 
 def env_bench(scenarios: Sequence[str] = DEFAULT_SCENARIOS, observation: str = "paper",
               num_envs: int = 16, steps: int = 150, workers: int = 2, seed: int = 0,
-              floor: str | None = None, verbose: bool = True) -> dict[str, dict[str, float]]:
+              floor: str | None = None, verbose: bool = True, repeats: int = 3
+              ) -> dict[str, dict[str, float]]:
     """Measure every scenario; returns {scenario: {steps_per_s (per CPU-second),
     us_per_step, match_tick_us, over_match_tick, floor_us / over_floor (when the
     prototype is found), no_layers_steps_per_s, layers_us_per_step, workers_steps_per_s
@@ -215,8 +254,8 @@ def env_bench(scenarios: Sequence[str] = DEFAULT_SCENARIOS, observation: str = "
     proto = find_floor(floor)  # a wrong folder fails before anything is measured
     tick = match_tick_us(seed=seed)
     floor_us = floor_tick_us(proto, seed=seed) if proto is not None else None
-    ceiling = (independent_scaling(scenarios[0], workers, num_envs, steps, seed, observation)
-               if workers > 1 and scenarios else None)
+    ceiling = (independent_scaling(scenarios[0], workers, num_envs, steps, seed, observation,
+                                   repeats) if workers > 1 and scenarios else None)
     if verbose:
         where = f"pymunk floor {floor_us:.1f} us ({proto})" if floor_us else (
             "pymunk floor: prototype not found (--floor DIR)")
@@ -233,9 +272,10 @@ def env_bench(scenarios: Sequence[str] = DEFAULT_SCENARIOS, observation: str = "
               f"{'fragments':>9s} {'x 1 proc':>8s}")
     results: dict[str, dict[str, float]] = {}
     for name in scenarios:
-        wall_one, one = _rates(VectorMatchEnv(name, num_envs, seed, observation), steps, seed)
+        _, one = _rates(VectorMatchEnv(name, num_envs, seed, observation), steps, seed,
+                        repeats=repeats)
         _, bare = _rates(VectorMatchEnv(name, num_envs, seed, observation), steps, seed,
-                         layers=False)
+                         layers=False, repeats=repeats)
         us = 1e6 / one
         row = {"steps_per_s": round(one, 1), "us_per_step": round(us, 2),
                "match_tick_us": round(tick, 2), "over_match_tick": round(us / tick, 2),
@@ -245,21 +285,15 @@ def env_bench(scenarios: Sequence[str] = DEFAULT_SCENARIOS, observation: str = "
             row["floor_us"] = round(floor_us, 2)
             row["over_floor"] = round(us / floor_us, 2)
         if workers > 1:
-            env = SubprocVectorMatchEnv(name, num_envs * workers, seed, observation,
-                                        num_workers=workers)
-            try:
-                pids = [p.pid for p in env._procs]
-                clock = (_cpu_clock(pids) if os.path.exists(f"/proc/{pids[0]}/stat")
-                         else time.process_time)
-                multi, cpu = _rates(env, steps, seed, cpu=clock)
-            finally:
-                env.close()
+            multi, cpu, speedup = lockstep_scaling(name, workers, num_envs, steps, seed,
+                                                   observation, repeats)
             row["workers_steps_per_s"] = round(multi, 1)
             if ceiling is not None:
                 row["independent_speedup"] = round(ceiling, 2)
-            row["workers_speedup"] = round(multi / wall_one, 2)
+            row["workers_speedup"] = round(speedup, 2)
             row["workers_steps_per_cpu_s"] = round(cpu, 1)
-            frag, frag_x = fragment_scaling(name, workers, num_envs, steps, seed, observation)
+            frag, frag_x = fragment_scaling(name, workers, num_envs, steps, seed, observation,
+                                            repeats)
             row["fragments_steps_per_s"] = round(frag, 1)
             row["fragments_speedup"] = round(frag_x, 2)
         results[name] = row
@@ -282,6 +316,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--observation", default="paper", choices=list(OBS_KINDS))
     p.add_argument("--num-envs", type=match_count, default=16, help="matches per process")
     p.add_argument("--steps", type=positive_int, default=150, help="timed steps per run")
+    p.add_argument("--repeats", type=positive_int, default=3, help="timed runs of each "
+                   "measurement, the best kept (alternating runs for the scaling figures)")
     p.add_argument("--workers", type=positive_int, default=2, help="processes for the "
                    "shared-memory variant (1: skip it)")
     p.add_argument("--floor", metavar="DIR", help="folder of the shared pymunk prototype "
@@ -300,7 +336,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     try:
         env_bench(args.scenarios, args.observation, args.num_envs, args.steps, args.workers,
-                  floor=args.floor)
+                  floor=args.floor, repeats=args.repeats)
     except FileNotFoundError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

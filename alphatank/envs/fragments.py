@@ -17,7 +17,7 @@ agent-specific states) of every step, and the policy reads them.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -80,10 +80,40 @@ class Fragment:
         return self.obs.shape[0]
 
 
-def collect_fragment(env: ShardEnv, policy: RolloutPolicy, obs: np.ndarray,
-                     steps: int) -> Fragment:
+def fragment_specs(steps: int, n: int, L: int, D: int,
+                   input_shapes: Mapping[str, tuple[int, ...]]
+                   ) -> dict[str, tuple[tuple[int, ...], str]]:
+    """(shape, dtype) of each array of a fragment of ``steps`` steps of ``n`` envs x ``L``
+    learner seats x ``D`` features, ``input_shapes`` the env's extra inputs per seat:
+    ``obs`` and ``input:<name>`` carry one row more, the observations after the last step."""
+    specs = {"obs": ((steps + 1, n, L, D), "float32"), "actions": ((steps, n, L, 3), "int64"),
+             "terminated": ((steps, n), "bool"), "truncated": ((steps, n), "bool")}
+    for key in ("logprobs", "values", "rewards", "bootstrap"):
+        specs[key] = ((steps, n, L), "float32")
+    for name, shape in input_shapes.items():
+        specs[f"input:{name}"] = ((steps + 1, n, L, *shape), "float32")
+    return specs
+
+
+def fragment_of(arrays: Mapping[str, np.ndarray], steps: int,
+                episodes: list[dict[str, Any]]) -> Fragment:
+    """The :class:`Fragment` held by ``arrays`` (shaped as :func:`fragment_specs` says, or
+    with room for more steps: the first ``steps`` are used)."""
+    obs = arrays["obs"][:steps + 1]
+    ins = {k[6:]: a[:steps + 1] for k, a in arrays.items() if k.startswith("input:")}
+    return Fragment(obs=obs[:steps], next_obs=obs[steps],
+                    inputs={k: a[:steps] for k, a in ins.items()},
+                    next_inputs={k: a[steps] for k, a in ins.items()}, episodes=episodes,
+                    **{k: arrays[k][:steps] for k in ("actions", "logprobs", "values",
+                                                      "rewards", "terminated", "truncated",
+                                                      "bootstrap")})
+
+
+def collect_fragment(env: ShardEnv, policy: RolloutPolicy, obs: np.ndarray, steps: int,
+                     out: Mapping[str, np.ndarray] | None = None) -> Fragment:
     """Step ``env`` (already reset; ``obs`` its current observations) ``steps`` times with
-    ``policy``'s actions."""
+    ``policy``'s actions. ``out``: the arrays to write the fragment into (shaped as
+    :func:`fragment_specs` says, e.g. views of shared memory); new ones by default."""
     if steps < 1:
         raise ValueError(f"a fragment needs steps >= 1, got {steps}")
     n, L, D = env.num_envs, env.num_learners, env.obs_dim
@@ -91,17 +121,15 @@ def collect_fragment(env: ShardEnv, policy: RolloutPolicy, obs: np.ndarray,
     if obs.shape != (n, L, D):
         raise ValueError(f"observations of shape {obs.shape} for a shard of {n} envs x {L} "
                          f"learners x {D} features")
-    seen = np.empty((steps + 1, n, L, D), np.float32)  # the last row is next_obs
+    if out is None:
+        shapes = {name: a.shape[2:] for name, a in env.inputs.items()}
+        out = {k: np.empty(shape, dtype) for k, (shape, dtype)
+               in fragment_specs(steps, n, L, D, shapes).items()}
+    frag = fragment_of(out, steps, [])
+    frag.bootstrap.fill(0.0)
+    seen = out["obs"]
     seen[0] = obs
-    frag = Fragment(obs=seen[:steps], actions=np.empty((steps, n, L, 3), np.int64),
-                    logprobs=np.empty((steps, n, L), np.float32),
-                    values=np.empty((steps, n, L), np.float32),
-                    rewards=np.empty((steps, n, L), np.float32),
-                    terminated=np.empty((steps, n), bool), truncated=np.empty((steps, n), bool),
-                    bootstrap=np.zeros((steps, n, L), np.float32), next_obs=seen[steps])
-    ins = {name: np.empty((steps + 1, *a.shape), np.float32) for name, a in env.inputs.items()}
-    frag.inputs = {name: a[:steps] for name, a in ins.items()}
-    frag.next_inputs = {name: a[steps] for name, a in ins.items()}
+    ins = {name: out[f"input:{name}"] for name in env.inputs}
     final_obs = np.zeros((n, L, D), np.float32)
     finals = {name: np.zeros(a.shape, np.float32) for name, a in env.inputs.items()}
     policy.start(env.env_ids)
@@ -171,10 +199,15 @@ def merge_fragments(parts: Sequence[Fragment]) -> Fragment:
     arrays = {name: np.concatenate([getattr(p, name) for p in parts], axis=1)
               for name in ("obs", "actions", "logprobs", "values", "rewards", "terminated",
                            "truncated", "bootstrap")}
-    episodes = sorted((ep for p in parts for ep in p.episodes), key=lambda ep: ep["step"])
     return Fragment(**arrays, next_obs=np.concatenate([p.next_obs for p in parts]),
                     inputs={k: np.concatenate([p.inputs[k] for p in parts], axis=1)
                             for k in parts[0].inputs},
                     next_inputs={k: np.concatenate([p.next_inputs[k] for p in parts])
                                  for k in parts[0].next_inputs},
-                    episodes=episodes)
+                    episodes=merge_episodes([p.episodes for p in parts]))
+
+
+def merge_episodes(parts: Sequence[list[dict[str, Any]]]) -> list[dict[str, Any]]:
+    """The shards' episode records (shards in env-id order) in step order, shards in order
+    within a step (as stepping them together lists them)."""
+    return sorted((ep for p in parts for ep in p), key=lambda ep: ep["step"])

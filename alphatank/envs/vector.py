@@ -55,6 +55,7 @@ import atexit
 import contextlib
 import multiprocessing as mp
 import pickle
+import shutil
 import signal
 import traceback
 import weakref
@@ -85,6 +86,9 @@ from alphatank.envs.fragments import (
     RolloutPolicy,
     SplitRollout,
     collect_fragment,
+    fragment_of,
+    fragment_specs,
+    merge_episodes,
     merge_fragments,
 )
 from alphatank.envs.gym import single_learner_seat
@@ -354,6 +358,7 @@ class _Shared:
 
     def __init__(self, specs: dict[str, tuple[tuple[int, ...], str]],
                  names: dict[str, str] | None = None):
+        self.specs = specs
         self.mem: dict[str, shared_memory.SharedMemory] = {}
         self.arr: dict[str, np.ndarray] = {}
         for key, (shape, dtype) in specs.items():
@@ -378,6 +383,17 @@ class _Shared:
         self.mem.clear()
 
 
+def _shm_room(size: int) -> bool:
+    """Whether ``size`` more bytes of shared memory fit: /dev/shm (a tmpfs, 64 MB by
+    default in a container) has room for them and a tenth of its size to spare. Shared
+    memory past its end would kill the process that writes it (SIGBUS)."""
+    try:
+        usage = shutil.disk_usage("/dev/shm")
+    except OSError:  # no /dev/shm: not Linux, nothing to check
+        return True
+    return size + usage.total // 10 <= usage.free
+
+
 _STEP = b"s"  # the per-step command and its answer travel as raw bytes, not pickles
 
 
@@ -390,6 +406,7 @@ def _worker(conn: Any, kwargs: dict, lo: int, hi: int, specs: dict, names: dict)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
     shared = _Shared(specs, names)
+    frag: _Shared | None = None  # the parent's fragment arrays, once it sends them
     a = shared.arr
     try:
         env = VectorMatchEnv(num_envs=hi - lo, env_ids=range(lo, hi), **kwargs)
@@ -425,6 +442,14 @@ def _worker(conn: Any, kwargs: dict, lo: int, hi: int, specs: dict, names: dict)
                 conn.send(("ok", None))
             elif cmd == "rollout":  # (policy, obs, steps): the fragment goes by the pipe
                 conn.send(("ok", env.rollout(*arg)))
+            elif cmd == "rollout_shared":  # the fragment goes to the parent's shared arrays
+                policy, obs, steps, frag_specs, frag_names = arg
+                if frag is None or frag.names != frag_names:
+                    if frag is not None:
+                        frag.close(unlink=False)
+                    frag = _Shared(frag_specs, frag_names)
+                views = {k: v[:, lo:hi] for k, v in frag.arr.items()}
+                conn.send(("ok", collect_fragment(env, policy, obs, steps, views).episodes))
             elif cmd == "close":
                 conn.send(("ok", None))
                 break
@@ -433,6 +458,8 @@ def _worker(conn: Any, kwargs: dict, lo: int, hi: int, specs: dict, names: dict)
             conn.send(("error", f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}"))
     finally:
         shared.close(unlink=False)
+        if frag is not None:
+            frag.close(unlink=False)
         conn.close()
 
 
@@ -485,7 +512,8 @@ def _close_open_envs() -> None:
 
 class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
     """:class:`VectorMatchEnv` split over ``num_workers`` processes (shared-memory arrays,
-    same interface, bit-identical results for the same seed). Workers start with
+    same interface, bit-identical results for the same seed; rollout fragments too are
+    written to shared memory, where /dev/shm has room). Workers start with
     ``start_method`` ("spawn": safe next to torch threads; a script must then create the
     env under ``if __name__ == "__main__":``). Frozen policies and ``seat_policies`` are
     pickled to the workers."""
@@ -527,6 +555,10 @@ class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
         self._failed: str | None = None  # why a worker failed (the env closed then)
         self._opponent_names: set[str] = set()  # registered by add_opponent
         self._in_flight = False  # a rollout sent by rollout_start, not yet collected
+        # shared arrays the workers write fragments into (made by the first rollout that
+        # fits in /dev/shm, larger when a longer one comes), and the steps in flight
+        self._frag: _Shared | None = None
+        self._frag_steps = 0
         _OPEN_ENVS.add(self)
         atexit.unregister(_close_open_envs)  # registered last: run first
         atexit.register(_close_open_envs)
@@ -649,9 +681,31 @@ class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
         self.check_idle("rollout_start")
         if not self._started:
             raise RuntimeError("rollout() before reset()")
+        frag = self._fragment_arrays(steps)
         for conn, (lo, hi) in zip(self._conns, self._blocks, strict=True):
-            conn.send(("rollout", (policy, obs[lo:hi], steps)))
-        self._in_flight = True
+            if frag is None:
+                conn.send(("rollout", (policy, obs[lo:hi], steps)))
+            else:
+                conn.send(("rollout_shared", (policy, obs[lo:hi], steps, frag.specs,
+                                              frag.names)))
+        self._in_flight, self._frag_steps = True, steps if frag is not None else 0
+
+    def _fragment_arrays(self, steps: int) -> _Shared | None:
+        """Shared arrays with room for a fragment of ``steps`` steps of every env (kept
+        for the next rollouts), or None where /dev/shm has no room for them: the shards'
+        fragments then come by the pipes."""
+        if self._frag is not None and self._frag.arr["actions"].shape[0] >= steps:
+            return self._frag
+        specs = fragment_specs(steps, self.num_envs, self.num_learners, self.obs_dim,
+                               self.input_shapes)
+        size = sum(int(np.prod(shape)) * np.dtype(dtype).itemsize
+                   for shape, dtype in specs.values())
+        if not _shm_room(size):
+            return None
+        if self._frag is not None:
+            self._frag.close(unlink=True)
+        self._frag = _Shared(specs)
+        return self._frag
 
     def rollout_finish(self) -> Fragment:
         """The fragment of the rollout sent by :meth:`rollout_start`."""
@@ -660,7 +714,12 @@ class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
                 self.check_idle("rollout_finish")
             raise RuntimeError("rollout_finish() without rollout_start()")
         self._in_flight = False
-        return merge_fragments(self._gather())
+        parts = self._gather()
+        if not self._frag_steps:
+            return merge_fragments(parts)
+        # a copy: the next rollout writes the shared arrays while this one is learned from
+        arrays = {k: v[:self._frag_steps + 1].copy() for k, v in self._frag.arr.items()}
+        return fragment_of(arrays, self._frag_steps, merge_episodes(parts))
 
     @property
     def rollout_in_flight(self) -> bool:
@@ -686,6 +745,9 @@ class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
             if p.is_alive():
                 p.terminate()
         self._shared.close(unlink=True)
+        if self._frag is not None:
+            self._frag.close(unlink=True)
+            self._frag = None
 
     def __del__(self) -> None:
         if hasattr(self, "_closed"):
