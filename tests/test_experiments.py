@@ -428,6 +428,30 @@ def test_shipped_tables_load_and_plan(tmp_path):
     assert len(plan.jobs) == 2 * (8 + 35 + 3 + 9 + 6) - len(shared)
 
 
+def test_every_seed_of_a_plan_is_the_run_its_row_makes_for_that_seed_alone(tmp_path):
+    """A plan parses and checks each row once and derives its other seeds' runs from it:
+    every seed's settings (teachers' runs included), digest and run folder are those of
+    ``row_config`` for that seed alone; a run folder already there is found by its
+    digest, whatever its name."""
+    tables = load_tables(table_names())
+    plan = make_plan(tables, tmp_path, seeds=2, budget_min=2)
+    for row in (r for t in tables for r in t.rows):
+        for s in range(2):
+            job = plan.cells[(row.id, s)][0]
+            cfg = row_config(row, s, 2, refs=lambda name, s=s, table=row.table:
+                             plan.cells[(f"{table}/{name}", s)][0].run_dir)
+            named = {} if job.rows[0] == row.id else {"name": job.cfg["name"]}  # shared
+            assert job.cfg == {**cfg.to_dict(), **named}
+            assert job.key == run_digest(cfg, row.scenarios)
+            assert job.seed == s and job.run_dir == str(
+                tmp_path / "runs" / f"{job.rows[0].split('/')[1]}-s{s}-{job.key}")
+    job = plan.cells[("table3/smart", 1)][0]
+    (tmp_path / "runs" / f"renamed-{job.key}").mkdir(parents=True)
+    again = make_plan(tables[:1], tmp_path, seeds=2, budget_min=2)
+    assert again.cells[("table3/smart", 1)][0].run_dir == str(tmp_path / "runs" /
+                                                            f"renamed-{job.key}")
+
+
 def test_a_setting_added_later_keeps_the_digests_of_runs_made_before_it(tmp_path):
     # docs/results/table4_full.* was made before PPO had anchor_kl: its runs still match
     plan = make_plan(load_tables(["table4"]), tmp_path, seeds=3, budget_min=15,

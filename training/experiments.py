@@ -454,16 +454,10 @@ def row_config(row: Row, seed: int, budget_min: float, steps: int | None = None,
         raise ExperimentError(f"training seeds must be in [0, {EVAL_SEED_BASE}), got {seed}")
     total = int(steps) if steps else max(1, int(round(budget_min * row.steps_per_minute)))
     data = dict(row.run)
-    teachers = (data.get("imitate") or {}).get("teachers") or {}
-    named = [n for v in teachers.values() if (n := _row_ref(v)) is not None]
-    if named:
-        if refs is None:
-            raise ExperimentError(f"{row.source}: imitate.teachers names rows "
-                                  f"({', '.join(named)}): plan it with them")
-        data["imitate"] = {**data["imitate"], "teachers": {
-            k: v if (n := _row_ref(v)) is None else f"checkpoint:{refs(n)}"
-            for k, v in teachers.items()}}
-    data.update(name=f"{row.table}-{row.name}-s{seed}", seed=seed, total_steps=total,
+    teachers = _teachers(row, refs)
+    if teachers is not None:
+        data["imitate"] = {**data["imitate"], "teachers": teachers}
+    data.update(name=_run_name(row, seed), seed=seed, total_steps=total,
                 time_limit_s=float(budget_min) * 60.0, wandb=wandb, num_workers=1,
                 keep_checkpoints=1, eval_every=0, video_every=0)
     for path, frac in row.fractions.items():
@@ -489,6 +483,37 @@ def row_config(row: Row, seed: int, budget_min: float, steps: int | None = None,
         raise ExperimentError(msg if msg.startswith(row.source) else
                               f"{row.source}: {msg}") from None
     return cfg
+
+
+def _run_name(row: Row, seed: int) -> str:
+    return f"{row.table}-{row.name}-s{seed}"
+
+
+def _teachers(row: Row, refs: Callable[[str], str] | None) -> dict[str, Any] | None:
+    """The row's ``imitate.teachers`` with each ``row:NAME`` as ``checkpoint:`` that row's
+    run folder (``refs(NAME)``, which plans it); None when it names no row."""
+    teachers = (row.run.get("imitate") or {}).get("teachers") or {}
+    named = [n for v in teachers.values() if (n := _row_ref(v)) is not None]
+    if not named:
+        return None
+    if refs is None:
+        raise ExperimentError(f"{row.source}: imitate.teachers names rows "
+                              f"({', '.join(named)}): plan it with them")
+    return {k: v if (n := _row_ref(v)) is None else f"checkpoint:{refs(n)}"
+            for k, v in teachers.items()}
+
+
+def reseeded(data: dict[str, Any], row: Row, seed: int,
+             refs: Callable[[str], str] | None = None) -> dict[str, Any]:
+    """``row_config(row, seed, ..., refs).to_dict()`` from ``data``, that of the row for
+    another seed under the same budget: only the name, the seed and the teachers' run
+    folders differ, so a row is parsed and checked once, not for every seed. The tables
+    ``data`` holds are shared, not copied."""
+    out = {**data, "name": _run_name(row, seed), "seed": seed}
+    teachers = _teachers(row, refs)
+    if teachers is not None:
+        out["imitate"] = {**data["imitate"], "teachers": teachers}
+    return out
 
 
 def check_row_init_from(row: Row, cfg: TrainConfig) -> None:
@@ -537,15 +562,20 @@ LOGGING_SETTINGS = {"wandb": "disabled", "project": "alphatank", "tensorboard": 
 def run_digest(cfg: TrainConfig, scenarios: Sequence[str]) -> str:
     """Hash of what a run does (its settings without the name and where its metrics are
     logged, and its scenario mix)."""
-    data = {**cfg.to_dict(), **LOGGING_SETTINGS}
+    return settings_digest(cfg.to_dict(), scenarios)
+
+
+def settings_digest(data: dict[str, Any], scenarios: Sequence[str]) -> str:
+    """:func:`run_digest` of a run's settings as :meth:`TrainConfig.to_dict` gives them
+    (left unchanged)."""
+    data = {**data, **LOGGING_SETTINGS}
     data.pop("name")
     for key, off in LATER_RUN_SETTINGS.items():
         if data.get(key, off) == off:
             data.pop(key, None)
-    for spec in data["learners"]:
-        for key, off in LATER_SETTINGS.items():
-            if spec["config"].get(key, off) == off:
-                spec["config"].pop(key, None)
+    data["learners"] = [{**spec, "config": {k: v for k, v in spec["config"].items()
+                                            if k not in LATER_SETTINGS or v != LATER_SETTINGS[k]}}
+                        for spec in data["learners"]]
     return digest({"cfg": data, "scenarios": list(scenarios)})
 
 
@@ -648,9 +678,16 @@ def make_plan(tables: Sequence[Table], out: str | Path, seeds: int = 1,
         tables = [t for t in tables if t.rows]
     jobs: dict[str, Job] = {}
     cells: dict[tuple[str, int], tuple[Job, dict[str, EvalSpec]]] = {}
+    checked: dict[str, tuple[TrainConfig, dict[str, Any]]] = {}  # row id: its first seed's
+    made: dict[str, Path] = {}  # digest: the first run folder in out/runs ending -<digest>
+    if (out / "runs").is_dir():
+        for p in sorted((out / "runs").iterdir()):
+            if "-" in p.name:
+                made.setdefault(p.name.rpartition("-")[2], p)
 
     def job_for(row: Row, s: int, path: tuple[str, ...] = ()) -> tuple[Job, TrainConfig]:
-        """The job of ``row`` for seed ``s``, after the jobs of the rows it needs."""
+        """The job of ``row`` for seed ``s``, after the jobs of the rows it needs, and the
+        row's config as checked for its first seed (what its seeds share)."""
         needs: list[str] = []
 
         def ref(name: str) -> str:
@@ -665,14 +702,19 @@ def make_plan(tables: Sequence[Table], out: str | Path, seeds: int = 1,
             needs.append(job.key)
             return job.run_dir
 
-        cfg = row_config(row, s, budget_min, steps, wandb, ref)
-        d = run_digest(cfg, row.scenarios)
+        if row.id not in checked:  # a row is parsed and checked once, for its first seed
+            cfg = row_config(row, s, budget_min, steps, wandb, ref)
+            checked[row.id] = cfg, cfg.to_dict()
+            data = checked[row.id][1]
+        else:
+            cfg, first = checked[row.id]
+            data = reseeded(first, row, s, ref)
+        d = settings_digest(data, row.scenarios)
         job = jobs.get(d)
         if job is None:
-            found = sorted((out / "runs").glob(f"*-{d}")) if (out / "runs").is_dir() else []
-            run_dir = found[0] if found else out / "runs" / f"{row.name}-s{s}-{d}"
-            job = jobs[d] = Job(d, str(run_dir), cfg.to_dict(), list(row.scenarios), [], [],
-                                s, needs)
+            found = made.get(d)
+            run_dir = found or out / "runs" / f"{row.name}-s{s}-{d}"
+            job = jobs[d] = Job(d, str(run_dir), data, list(row.scenarios), [], [], s, needs)
             if not report_only and not job.done_file.is_file():
                 check_row_init_from(row, cfg)
         if row.id not in job.rows:
