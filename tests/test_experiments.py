@@ -738,8 +738,8 @@ def test_a_finished_rows_init_from_is_not_checked_when_it_only_reports(tmp_path,
 
 
 def test_a_damaged_results_file_is_named_and_resume_makes_it_again(made, tmp_path, capsys):
-    """An evaluation or done.json cut short: --report-only names it in one line (exit 2,
-    nothing written); --resume sets it aside, saying so, and plays that evaluation or
+    """An evaluation or done.json cut short: --list names it and counts its run to do;
+    --report-only names it in one line (exit 2, nothing written); --resume sets it aside, saying so, and plays that evaluation or
     trains that run again; nothing else is touched."""
     root, made_out, _ = made
     out = tmp_path / "out"
@@ -751,6 +751,11 @@ def test_a_damaged_results_file_is_named_and_resume_makes_it_again(made, tmp_pat
     cut.write_bytes(cut.read_bytes()[:100])
     (b_run / "done.json").write_text("")
     reports = {p.name: p.read_bytes() for p in out.glob("tiny.*")}
+    assert cli(*args, "--list") == 0  # named, and counted to do
+    listed = capsys.readouterr().out
+    assert f"tiny/a_random seed 0: damaged: {cut}: not valid JSON (line " in listed, listed
+    assert f"tiny/b_cycle seed 0: damaged: {b_run / 'done.json'}: empty; " in listed
+    assert "2 runs (1 seed(s)), 2 to do (2 damaged): about " in listed
     assert cli(*args, "--report-only") == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"{cut}: not valid JSON (line " in err, err

@@ -39,7 +39,7 @@ import shutil
 import time
 import tomllib
 import traceback
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -1046,11 +1046,16 @@ def execute(jobs: Sequence[Job], workers: int = 1, progress: bool = True,
     return failed
 
 
-def estimate_minutes(plan: Plan, jobs: Sequence[Job], workers: int) -> float:
+def estimate_minutes(plan: Plan, jobs: Sequence[Job], workers: int,
+                     damaged: Collection[Path] = ()) -> float:
     """Rough wall time of ``jobs``: the budget per run still to train plus ~1.5 min per
     evaluation of 200 games still to play (200 games of up to 1,200 ticks took 1-3 min on
-    a shared 2-core machine), spread over the workers."""
-    total = sum((0.0 if j.done_file.is_file() else plan.budget_min)
-                + 1.5 * sum(not j.eval_file(s).is_file() for s in j.evals)
-                * plan.games / DEFAULT_GAMES for j in jobs)
+    a shared 2-core machine), spread over the workers. Files in ``damaged`` are made again
+    (a run whose done.json is damaged trains and plays every evaluation again)."""
+    total = 0.0
+    for j in jobs:
+        trains = not j.done_file.is_file() or j.done_file in damaged
+        plays = sum(trains or not j.eval_file(s).is_file() or j.eval_file(s) in damaged
+                    for s in j.evals)
+        total += plan.budget_min * trains + 1.5 * plays * plan.games / DEFAULT_GAMES
     return total / max(1, workers)
