@@ -739,8 +739,9 @@ def test_a_finished_rows_init_from_is_not_checked_when_it_only_reports(tmp_path,
 
 def test_a_damaged_results_file_is_named_and_resume_makes_it_again(made, tmp_path, capsys):
     """An evaluation or done.json cut short: --list names it and counts its run to do;
-    --report-only names it in one line (exit 2, nothing written); --resume sets it aside, saying so, and plays that evaluation or
-    trains that run again; nothing else is touched."""
+    --report-only names it in one line (exit 2, nothing written); --resume sets it aside,
+    saying so, and plays that evaluation or trains that run again; nothing else is
+    touched."""
     root, made_out, _ = made
     out = tmp_path / "out"
     shutil.copytree(made_out, out)
@@ -774,6 +775,46 @@ def test_a_damaged_results_file_is_named_and_resume_makes_it_again(made, tmp_pat
     assert {p: p.stat().st_mtime_ns for p in kept} == kept
     data = json.loads((out / "tiny.json").read_text())
     assert not data["missing"] and all(r["columns"]["random"]["per_seed"] for r in data["rows"])
+
+
+def test_a_damaged_metrics_jsonl_is_named_and_resume_trains_its_run_again(made, tmp_path,
+                                                                          capsys):
+    """A finished run's metrics.jsonl (the learning curves) with a line that is not JSON:
+    --list and --report-only name it (exit 2, nothing written; the curves once left that
+    run out silently); --resume sets its run aside and trains it again. A damaged
+    checkpoint meta.json is named by the evaluation that reads it (a failed run, exit 1);
+    row.json is never read back."""
+    root, made_out, _ = made
+    out = tmp_path / "out"
+    shutil.copytree(made_out, out)
+    args = ["tiny", "--experiments-dir", str(root), "--out", str(out), "--steps", "512",
+            "--games", "4", "--budget", "2", "--no-progress"]
+    a_run, b_run = sorted((out / "runs").iterdir())
+    metrics = a_run / "metrics.jsonl"
+    metrics.write_text("not json\n" + metrics.read_text())
+    (b_run / "row.json").write_text("")
+    reports = {p.name: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    assert cli(*args, "--list") == 0
+    listed = capsys.readouterr().out
+    assert f"tiny/a_random seed 0: damaged: {metrics}, line 1: not a JSON row " in listed
+    assert "2 runs (1 seed(s)), 1 to do (1 damaged)" in listed
+    assert cli(*args, "--report-only") == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{metrics}, line 1: not a JSON row" in err, err
+    assert {p.name: p.read_bytes() for p in out.rglob("*") if p.is_file()} == reports
+    assert cli(*args, "--resume") == 0
+    err = capsys.readouterr().err
+    assert f"{metrics}, line 1: " in err and f"set aside as {a_run}.damaged; the run " \
+        "trains again" in err
+    assert Path(f"{a_run}.damaged", "metrics.jsonl").read_text().startswith("not json")
+    assert json.loads(metrics.read_text().splitlines()[0])["step"] > 0
+    assert (a_run / "done.json").is_file() and (b_run / "row.json").read_text() == ""
+    meta = Path(load_checkpoint(b_run).path) / "meta.json"
+    meta.write_text("[]")
+    next((b_run / "eval").iterdir()).unlink()
+    assert cli(*args, "--resume") == 1
+    err = capsys.readouterr().err
+    assert f"tiny/b_cycle seed 0: CheckpointError: {meta}: not an alphatank checkpoint" in err
 
 
 @pytest.mark.parametrize("size", [0, 60])

@@ -619,6 +619,15 @@ class Job:
     def done_file(self) -> Path:
         return Path(self.run_dir) / "done.json"
 
+    @property
+    def metrics_file(self) -> Path:
+        return Path(self.run_dir) / "metrics.jsonl"
+
+    def retrains(self, path: Path) -> bool:
+        """True for a file that only training the run again makes (done.json,
+        metrics.jsonl), False for an evaluation file."""
+        return path in (self.done_file, self.metrics_file)
+
     def eval_file(self, spec: EvalSpec) -> Path:
         return Path(self.run_dir) / "eval" / f"{spec.key}.json"
 
@@ -755,7 +764,11 @@ def read_json(path: Path) -> Any:
 
 def damaged_results(jobs: Sequence[Job]) -> list[tuple[Job, Path, str]]:
     """The ``done.json`` and evaluation files of ``jobs`` that exist but hold no JSON
-    object (emptied, cut short): (job, file, why naming the file), each file once."""
+    object (emptied, cut short), and the ``metrics.jsonl`` of a finished run that
+    :func:`~alphatank.training.logging.read_metrics` refuses (a line before the last that
+    is not JSON, not UTF-8): (job, file, why naming the file), each file once."""
+    from alphatank.training.logging import read_metrics
+
     found: dict[Path, tuple[Job, Path, str]] = {}
     for job in jobs:
         for path in (job.done_file, *map(job.eval_file, job.evals)):
@@ -768,15 +781,22 @@ def damaged_results(jobs: Sequence[Job]) -> list[tuple[Job, Path, str]]:
                 continue
             if not isinstance(data, dict):
                 found[path] = (job, path, f"{path}: not a JSON object; the file is damaged")
+        if job.done_file.is_file() and job.done_file not in found \
+                and job.metrics_file not in found:  # the learning curves read it
+            try:
+                read_metrics(job.run_dir)
+            except ValueError as exc:
+                found[job.metrics_file] = (job, job.metrics_file, str(exc))
     return list(found.values())
 
 
 def set_aside(job: Job, path: Path) -> Path:
     """Move a damaged result of ``job`` out of the way so that it is made again: an
-    evaluation file becomes ``<file>.damaged``, a damaged ``done.json`` takes its whole run
-    folder to ``<run>.damaged`` (its checkpoint kept; the run trains again from scratch).
-    Returns where it went (a free name: ``.damaged``, ``.damaged-2``, ...)."""
-    src = Path(job.run_dir) if path == job.done_file else path
+    evaluation file becomes ``<file>.damaged``, a damaged ``done.json`` or ``metrics.jsonl``
+    takes its whole run folder to ``<run>.damaged`` (its checkpoint kept; the run trains
+    again from scratch). Returns where it went (a free name: ``.damaged``, ``.damaged-2``,
+    ...)."""
+    src = Path(job.run_dir) if job.retrains(path) else path
     dest, n = src.with_name(f"{src.name}.damaged"), 1
     while dest.exists():
         n += 1
@@ -1051,10 +1071,11 @@ def estimate_minutes(plan: Plan, jobs: Sequence[Job], workers: int,
     """Rough wall time of ``jobs``: the budget per run still to train plus ~1.5 min per
     evaluation of 200 games still to play (200 games of up to 1,200 ticks took 1-3 min on
     a shared 2-core machine), spread over the workers. Files in ``damaged`` are made again
-    (a run whose done.json is damaged trains and plays every evaluation again)."""
+    (a run whose done.json or metrics.jsonl is damaged trains and plays every evaluation
+    again)."""
     total = 0.0
     for j in jobs:
-        trains = not j.done_file.is_file() or j.done_file in damaged
+        trains = not j.done_file.is_file() or any(map(j.retrains, damaged))
         plays = sum(trains or not j.eval_file(s).is_file() or j.eval_file(s) in damaged
                     for s in j.evals)
         total += plan.budget_min * trains + 1.5 * plays * plan.games / DEFAULT_GAMES

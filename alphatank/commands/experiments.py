@@ -162,10 +162,10 @@ def run(args: argparse.Namespace) -> int:
     redo: dict[str, Job] = {}
     for job, path, why in damaged:  # --resume: training or evaluating it again
         if job.key in redo and not Path(job.run_dir).exists():
-            continue  # its run folder went aside with its damaged done.json
+            continue  # its run folder went aside with its damaged done.json or metrics
         moved = set_aside(job, path)
         print(f"{why}: set aside as {moved}; "
-              + ("the run trains again" if path == job.done_file else
+              + ("the run trains again" if job.retrains(path) else
                  "the evaluation is played again"), file=sys.stderr)
         redo[job.key] = job
     planned_keys = {j.key for j in plan.jobs}
