@@ -428,6 +428,30 @@ def test_shipped_tables_load_and_plan(tmp_path):
     assert len(plan.jobs) == 2 * (8 + 35 + 3 + 9 + 6) - len(shared)
 
 
+def test_every_seed_of_a_plan_is_the_run_its_row_makes_for_that_seed_alone(tmp_path):
+    """A plan parses and checks each row once and derives its other seeds' runs from it:
+    every seed's settings (teachers' runs included), digest and run folder are those of
+    ``row_config`` for that seed alone; a run folder already there is found by its
+    digest, whatever its name."""
+    tables = load_tables(table_names())
+    plan = make_plan(tables, tmp_path, seeds=2, budget_min=2)
+    for row in (r for t in tables for r in t.rows):
+        for s in range(2):
+            job = plan.cells[(row.id, s)][0]
+            cfg = row_config(row, s, 2, refs=lambda name, s=s, table=row.table:
+                             plan.cells[(f"{table}/{name}", s)][0].run_dir)
+            named = {} if job.rows[0] == row.id else {"name": job.cfg["name"]}  # shared
+            assert job.cfg == {**cfg.to_dict(), **named}
+            assert job.key == run_digest(cfg, row.scenarios)
+            assert job.seed == s and job.run_dir == str(
+                tmp_path / "runs" / f"{job.rows[0].split('/')[1]}-s{s}-{job.key}")
+    job = plan.cells[("table3/smart", 1)][0]
+    (tmp_path / "runs" / f"renamed-{job.key}").mkdir(parents=True)
+    again = make_plan(tables[:1], tmp_path, seeds=2, budget_min=2)
+    assert again.cells[("table3/smart", 1)][0].run_dir == str(tmp_path / "runs" /
+                                                            f"renamed-{job.key}")
+
+
 def test_a_setting_added_later_keeps_the_digests_of_runs_made_before_it(tmp_path):
     # docs/results/table4_full.* was made before PPO had anchor_kl: its runs still match
     plan = make_plan(load_tables(["table4"]), tmp_path, seeds=3, budget_min=15,
@@ -714,9 +738,10 @@ def test_a_finished_rows_init_from_is_not_checked_when_it_only_reports(tmp_path,
 
 
 def test_a_damaged_results_file_is_named_and_resume_makes_it_again(made, tmp_path, capsys):
-    """An evaluation or done.json cut short: --report-only names it in one line (exit 2,
-    nothing written); --resume sets it aside, saying so, and plays that evaluation or
-    trains that run again; nothing else is touched."""
+    """An evaluation or done.json cut short: --list names it and counts its run to do;
+    --report-only names it in one line (exit 2, nothing written); --resume sets it aside,
+    saying so, and plays that evaluation or trains that run again; nothing else is
+    touched."""
     root, made_out, _ = made
     out = tmp_path / "out"
     shutil.copytree(made_out, out)
@@ -727,6 +752,11 @@ def test_a_damaged_results_file_is_named_and_resume_makes_it_again(made, tmp_pat
     cut.write_bytes(cut.read_bytes()[:100])
     (b_run / "done.json").write_text("")
     reports = {p.name: p.read_bytes() for p in out.glob("tiny.*")}
+    assert cli(*args, "--list") == 0  # named, and counted to do
+    listed = capsys.readouterr().out
+    assert f"tiny/a_random seed 0: damaged: {cut}: not valid JSON (line " in listed, listed
+    assert f"tiny/b_cycle seed 0: damaged: {b_run / 'done.json'}: empty; " in listed
+    assert "2 runs (1 seed(s)), 2 to do (2 damaged): about " in listed
     assert cli(*args, "--report-only") == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"{cut}: not valid JSON (line " in err, err
@@ -745,6 +775,46 @@ def test_a_damaged_results_file_is_named_and_resume_makes_it_again(made, tmp_pat
     assert {p: p.stat().st_mtime_ns for p in kept} == kept
     data = json.loads((out / "tiny.json").read_text())
     assert not data["missing"] and all(r["columns"]["random"]["per_seed"] for r in data["rows"])
+
+
+def test_a_damaged_metrics_jsonl_is_named_and_resume_trains_its_run_again(made, tmp_path,
+                                                                          capsys):
+    """A finished run's metrics.jsonl (the learning curves) with a line that is not JSON:
+    --list and --report-only name it (exit 2, nothing written; the curves once left that
+    run out silently); --resume sets its run aside and trains it again. A damaged
+    checkpoint meta.json is named by the evaluation that reads it (a failed run, exit 1);
+    row.json is never read back."""
+    root, made_out, _ = made
+    out = tmp_path / "out"
+    shutil.copytree(made_out, out)
+    args = ["tiny", "--experiments-dir", str(root), "--out", str(out), "--steps", "512",
+            "--games", "4", "--budget", "2", "--no-progress"]
+    a_run, b_run = sorted((out / "runs").iterdir())
+    metrics = a_run / "metrics.jsonl"
+    metrics.write_text("not json\n" + metrics.read_text())
+    (b_run / "row.json").write_text("")
+    reports = {p.name: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    assert cli(*args, "--list") == 0
+    listed = capsys.readouterr().out
+    assert f"tiny/a_random seed 0: damaged: {metrics}, line 1: not a JSON row " in listed
+    assert "2 runs (1 seed(s)), 1 to do (1 damaged)" in listed
+    assert cli(*args, "--report-only") == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{metrics}, line 1: not a JSON row" in err, err
+    assert {p.name: p.read_bytes() for p in out.rglob("*") if p.is_file()} == reports
+    assert cli(*args, "--resume") == 0
+    err = capsys.readouterr().err
+    assert f"{metrics}, line 1: " in err and f"set aside as {a_run}.damaged; the run " \
+        "trains again" in err
+    assert Path(f"{a_run}.damaged", "metrics.jsonl").read_text().startswith("not json")
+    assert json.loads(metrics.read_text().splitlines()[0])["step"] > 0
+    assert (a_run / "done.json").is_file() and (b_run / "row.json").read_text() == ""
+    meta = Path(load_checkpoint(b_run).path) / "meta.json"
+    meta.write_text("[]")
+    next((b_run / "eval").iterdir()).unlink()
+    assert cli(*args, "--resume") == 1
+    err = capsys.readouterr().err
+    assert f"tiny/b_cycle seed 0: CheckpointError: {meta}: not an alphatank checkpoint" in err
 
 
 @pytest.mark.parametrize("size", [0, 60])

@@ -39,7 +39,7 @@ import shutil
 import time
 import tomllib
 import traceback
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -454,16 +454,10 @@ def row_config(row: Row, seed: int, budget_min: float, steps: int | None = None,
         raise ExperimentError(f"training seeds must be in [0, {EVAL_SEED_BASE}), got {seed}")
     total = int(steps) if steps else max(1, int(round(budget_min * row.steps_per_minute)))
     data = dict(row.run)
-    teachers = (data.get("imitate") or {}).get("teachers") or {}
-    named = [n for v in teachers.values() if (n := _row_ref(v)) is not None]
-    if named:
-        if refs is None:
-            raise ExperimentError(f"{row.source}: imitate.teachers names rows "
-                                  f"({', '.join(named)}): plan it with them")
-        data["imitate"] = {**data["imitate"], "teachers": {
-            k: v if (n := _row_ref(v)) is None else f"checkpoint:{refs(n)}"
-            for k, v in teachers.items()}}
-    data.update(name=f"{row.table}-{row.name}-s{seed}", seed=seed, total_steps=total,
+    teachers = _teachers(row, refs)
+    if teachers is not None:
+        data["imitate"] = {**data["imitate"], "teachers": teachers}
+    data.update(name=_run_name(row, seed), seed=seed, total_steps=total,
                 time_limit_s=float(budget_min) * 60.0, wandb=wandb, num_workers=1,
                 keep_checkpoints=1, eval_every=0, video_every=0)
     for path, frac in row.fractions.items():
@@ -489,6 +483,37 @@ def row_config(row: Row, seed: int, budget_min: float, steps: int | None = None,
         raise ExperimentError(msg if msg.startswith(row.source) else
                               f"{row.source}: {msg}") from None
     return cfg
+
+
+def _run_name(row: Row, seed: int) -> str:
+    return f"{row.table}-{row.name}-s{seed}"
+
+
+def _teachers(row: Row, refs: Callable[[str], str] | None) -> dict[str, Any] | None:
+    """The row's ``imitate.teachers`` with each ``row:NAME`` as ``checkpoint:`` that row's
+    run folder (``refs(NAME)``, which plans it); None when it names no row."""
+    teachers = (row.run.get("imitate") or {}).get("teachers") or {}
+    named = [n for v in teachers.values() if (n := _row_ref(v)) is not None]
+    if not named:
+        return None
+    if refs is None:
+        raise ExperimentError(f"{row.source}: imitate.teachers names rows "
+                              f"({', '.join(named)}): plan it with them")
+    return {k: v if (n := _row_ref(v)) is None else f"checkpoint:{refs(n)}"
+            for k, v in teachers.items()}
+
+
+def reseeded(data: dict[str, Any], row: Row, seed: int,
+             refs: Callable[[str], str] | None = None) -> dict[str, Any]:
+    """``row_config(row, seed, ..., refs).to_dict()`` from ``data``, that of the row for
+    another seed under the same budget: only the name, the seed and the teachers' run
+    folders differ, so a row is parsed and checked once, not for every seed. The tables
+    ``data`` holds are shared, not copied."""
+    out = {**data, "name": _run_name(row, seed), "seed": seed}
+    teachers = _teachers(row, refs)
+    if teachers is not None:
+        out["imitate"] = {**data["imitate"], "teachers": teachers}
+    return out
 
 
 def check_row_init_from(row: Row, cfg: TrainConfig) -> None:
@@ -537,15 +562,20 @@ LOGGING_SETTINGS = {"wandb": "disabled", "project": "alphatank", "tensorboard": 
 def run_digest(cfg: TrainConfig, scenarios: Sequence[str]) -> str:
     """Hash of what a run does (its settings without the name and where its metrics are
     logged, and its scenario mix)."""
-    data = {**cfg.to_dict(), **LOGGING_SETTINGS}
+    return settings_digest(cfg.to_dict(), scenarios)
+
+
+def settings_digest(data: dict[str, Any], scenarios: Sequence[str]) -> str:
+    """:func:`run_digest` of a run's settings as :meth:`TrainConfig.to_dict` gives them
+    (left unchanged)."""
+    data = {**data, **LOGGING_SETTINGS}
     data.pop("name")
     for key, off in LATER_RUN_SETTINGS.items():
         if data.get(key, off) == off:
             data.pop(key, None)
-    for spec in data["learners"]:
-        for key, off in LATER_SETTINGS.items():
-            if spec["config"].get(key, off) == off:
-                spec["config"].pop(key, None)
+    data["learners"] = [{**spec, "config": {k: v for k, v in spec["config"].items()
+                                            if k not in LATER_SETTINGS or v != LATER_SETTINGS[k]}}
+                        for spec in data["learners"]]
     return digest({"cfg": data, "scenarios": list(scenarios)})
 
 
@@ -588,6 +618,15 @@ class Job:
     @property
     def done_file(self) -> Path:
         return Path(self.run_dir) / "done.json"
+
+    @property
+    def metrics_file(self) -> Path:
+        return Path(self.run_dir) / "metrics.jsonl"
+
+    def retrains(self, path: Path) -> bool:
+        """True for a file that only training the run again makes (done.json,
+        metrics.jsonl), False for an evaluation file."""
+        return path in (self.done_file, self.metrics_file)
 
     def eval_file(self, spec: EvalSpec) -> Path:
         return Path(self.run_dir) / "eval" / f"{spec.key}.json"
@@ -648,9 +687,16 @@ def make_plan(tables: Sequence[Table], out: str | Path, seeds: int = 1,
         tables = [t for t in tables if t.rows]
     jobs: dict[str, Job] = {}
     cells: dict[tuple[str, int], tuple[Job, dict[str, EvalSpec]]] = {}
+    checked: dict[str, tuple[TrainConfig, dict[str, Any]]] = {}  # row id: its first seed's
+    made: dict[str, Path] = {}  # digest: the first run folder in out/runs ending -<digest>
+    if (out / "runs").is_dir():
+        for p in sorted((out / "runs").iterdir()):
+            if "-" in p.name:
+                made.setdefault(p.name.rpartition("-")[2], p)
 
     def job_for(row: Row, s: int, path: tuple[str, ...] = ()) -> tuple[Job, TrainConfig]:
-        """The job of ``row`` for seed ``s``, after the jobs of the rows it needs."""
+        """The job of ``row`` for seed ``s``, after the jobs of the rows it needs, and the
+        row's config as checked for its first seed (what its seeds share)."""
         needs: list[str] = []
 
         def ref(name: str) -> str:
@@ -665,14 +711,19 @@ def make_plan(tables: Sequence[Table], out: str | Path, seeds: int = 1,
             needs.append(job.key)
             return job.run_dir
 
-        cfg = row_config(row, s, budget_min, steps, wandb, ref)
-        d = run_digest(cfg, row.scenarios)
+        if row.id not in checked:  # a row is parsed and checked once, for its first seed
+            cfg = row_config(row, s, budget_min, steps, wandb, ref)
+            checked[row.id] = cfg, cfg.to_dict()
+            data = checked[row.id][1]
+        else:
+            cfg, first = checked[row.id]
+            data = reseeded(first, row, s, ref)
+        d = settings_digest(data, row.scenarios)
         job = jobs.get(d)
         if job is None:
-            found = sorted((out / "runs").glob(f"*-{d}")) if (out / "runs").is_dir() else []
-            run_dir = found[0] if found else out / "runs" / f"{row.name}-s{s}-{d}"
-            job = jobs[d] = Job(d, str(run_dir), cfg.to_dict(), list(row.scenarios), [], [],
-                                s, needs)
+            found = made.get(d)
+            run_dir = found or out / "runs" / f"{row.name}-s{s}-{d}"
+            job = jobs[d] = Job(d, str(run_dir), data, list(row.scenarios), [], [], s, needs)
             if not report_only and not job.done_file.is_file():
                 check_row_init_from(row, cfg)
         if row.id not in job.rows:
@@ -713,7 +764,11 @@ def read_json(path: Path) -> Any:
 
 def damaged_results(jobs: Sequence[Job]) -> list[tuple[Job, Path, str]]:
     """The ``done.json`` and evaluation files of ``jobs`` that exist but hold no JSON
-    object (emptied, cut short): (job, file, why naming the file), each file once."""
+    object (emptied, cut short), and the ``metrics.jsonl`` of a finished run that
+    :func:`~alphatank.training.logging.read_metrics` refuses (a line before the last that
+    is not JSON, not UTF-8): (job, file, why naming the file), each file once."""
+    from alphatank.training.logging import read_metrics
+
     found: dict[Path, tuple[Job, Path, str]] = {}
     for job in jobs:
         for path in (job.done_file, *map(job.eval_file, job.evals)):
@@ -726,15 +781,22 @@ def damaged_results(jobs: Sequence[Job]) -> list[tuple[Job, Path, str]]:
                 continue
             if not isinstance(data, dict):
                 found[path] = (job, path, f"{path}: not a JSON object; the file is damaged")
+        if job.done_file.is_file() and job.done_file not in found \
+                and job.metrics_file not in found:  # the learning curves read it
+            try:
+                read_metrics(job.run_dir)
+            except ValueError as exc:
+                found[job.metrics_file] = (job, job.metrics_file, str(exc))
     return list(found.values())
 
 
 def set_aside(job: Job, path: Path) -> Path:
     """Move a damaged result of ``job`` out of the way so that it is made again: an
-    evaluation file becomes ``<file>.damaged``, a damaged ``done.json`` takes its whole run
-    folder to ``<run>.damaged`` (its checkpoint kept; the run trains again from scratch).
-    Returns where it went (a free name: ``.damaged``, ``.damaged-2``, ...)."""
-    src = Path(job.run_dir) if path == job.done_file else path
+    evaluation file becomes ``<file>.damaged``, a damaged ``done.json`` or ``metrics.jsonl``
+    takes its whole run folder to ``<run>.damaged`` (its checkpoint kept; the run trains
+    again from scratch). Returns where it went (a free name: ``.damaged``, ``.damaged-2``,
+    ...)."""
+    src = Path(job.run_dir) if job.retrains(path) else path
     dest, n = src.with_name(f"{src.name}.damaged"), 1
     while dest.exists():
         n += 1
@@ -1004,11 +1066,17 @@ def execute(jobs: Sequence[Job], workers: int = 1, progress: bool = True,
     return failed
 
 
-def estimate_minutes(plan: Plan, jobs: Sequence[Job], workers: int) -> float:
+def estimate_minutes(plan: Plan, jobs: Sequence[Job], workers: int,
+                     damaged: Collection[Path] = ()) -> float:
     """Rough wall time of ``jobs``: the budget per run still to train plus ~1.5 min per
     evaluation of 200 games still to play (200 games of up to 1,200 ticks took 1-3 min on
-    a shared 2-core machine), spread over the workers."""
-    total = sum((0.0 if j.done_file.is_file() else plan.budget_min)
-                + 1.5 * sum(not j.eval_file(s).is_file() for s in j.evals)
-                * plan.games / DEFAULT_GAMES for j in jobs)
+    a shared 2-core machine), spread over the workers. Files in ``damaged`` are made again
+    (a run whose done.json or metrics.jsonl is damaged trains and plays every evaluation
+    again)."""
+    total = 0.0
+    for j in jobs:
+        trains = not j.done_file.is_file() or any(map(j.retrains, damaged))
+        plays = sum(trains or not j.eval_file(s).is_file() or j.eval_file(s) in damaged
+                    for s in j.evals)
+        total += plan.budget_min * trains + 1.5 * plays * plan.games / DEFAULT_GAMES
     return total / max(1, workers)

@@ -119,8 +119,7 @@ def run(args: argparse.Namespace) -> int:
         return _error(str(exc))
     started = [j for j in plan.jobs if j.started()]
     if args.list:
-        _print_plan(plan, [j for j in plan.jobs if not j.complete()], args.workers,
-                    estimate_minutes)
+        _print_plan(plan, args.workers)
         return 0
     if started and not (args.resume or args.report_only):
         return _error(f"{args.out} already holds {len(started)} of this plan's runs (e.g. "
@@ -163,10 +162,10 @@ def run(args: argparse.Namespace) -> int:
     redo: dict[str, Job] = {}
     for job, path, why in damaged:  # --resume: training or evaluating it again
         if job.key in redo and not Path(job.run_dir).exists():
-            continue  # its run folder went aside with its damaged done.json
+            continue  # its run folder went aside with its damaged done.json or metrics
         moved = set_aside(job, path)
         print(f"{why}: set aside as {moved}; "
-              + ("the run trains again" if path == job.done_file else
+              + ("the run trains again" if job.retrains(path) else
                  "the evaluation is played again"), file=sys.stderr)
         redo[job.key] = job
     planned_keys = {j.key for j in plan.jobs}
@@ -264,7 +263,10 @@ def _command(args: argparse.Namespace) -> str:
     return " ".join(shlex.quote(p) for p in parts)
 
 
-def _print_plan(plan, todo, workers, estimate) -> None:  # noqa: ANN001
+def _print_plan(plan: Plan, workers: int) -> None:
+    """Rows, runs and the time the missing ones take; a run whose results file is damaged
+    (:func:`~alphatank.training.experiments.damaged_results`) is named and counted to do."""
+    from alphatank.training.experiments import damaged_results, estimate_minutes
     from alphatank.training.presets import TrainConfig, iteration_steps, planned_steps
 
     by_key = {j.key: j for j in plan.jobs}
@@ -284,5 +286,13 @@ def _print_plan(plan, todo, workers, estimate) -> None:  # noqa: ANN001
                   + (f"  (trains after {', '.join(after)})" if after else ""))
     print(f"steps: env steps per run, whole iterations (rollout_steps x num_envs), unless "
           f"the {plan.budget_min:g}-minute budget ends it first")
-    print(f"{len(plan.jobs)} runs ({plan.seeds} seed(s)), {len(todo)} to do: about "
-          f"{estimate(plan, todo, workers):.0f} min with {workers} worker(s)")
+    damaged = damaged_results(plan.jobs)
+    for job, _, why in damaged:
+        print(f"  {', '.join(job.rows)} seed {job.seed}: damaged: {why}; --resume sets it "
+              "aside and makes it again")
+    redo = {j.key for j, _, _ in damaged}
+    todo = [j for j in plan.jobs if not j.complete() or j.key in redo]
+    print(f"{len(plan.jobs)} runs ({plan.seeds} seed(s)), {len(todo)} to do"
+          + (f" ({len(redo)} damaged)" if redo else "") + f": about "
+          f"{estimate_minutes(plan, todo, workers, [p for _, p, _ in damaged]):.0f} min "
+          f"with {workers} worker(s)")
