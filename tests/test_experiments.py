@@ -777,6 +777,42 @@ def test_a_damaged_results_file_is_named_and_resume_makes_it_again(made, tmp_pat
     assert not data["missing"] and all(r["columns"]["random"]["per_seed"] for r in data["rows"])
 
 
+def test_a_results_file_without_what_the_report_reads_is_damaged(made, tmp_path, capsys):
+    """A done.json whose "summary" is not an object, an evaluation file without its
+    "draws" count (JSON objects both; the report once ended in a KeyError/TypeError
+    traceback): named by --list and --report-only (exit 2, nothing written) as a damaged
+    file is, and made again by --resume."""
+    root, made_out, _ = made
+    out = tmp_path / "out"
+    shutil.copytree(made_out, out)
+    args = ["tiny", "--experiments-dir", str(root), "--out", str(out), "--steps", "512",
+            "--games", "4", "--budget", "2", "--no-progress"]
+    a_run, b_run = sorted((out / "runs").iterdir())
+    done = a_run / "done.json"
+    done.write_text(json.dumps({**json.loads(done.read_text()), "summary": []}))
+    played = sorted((b_run / "eval").iterdir())[0]
+    played.write_text(json.dumps({k: v for k, v in json.loads(played.read_text()).items()
+                                  if k != "draws"}))
+    reports = {p.name: p.read_bytes() for p in out.glob("tiny.*")}
+    assert cli(*args, "--list") == 0
+    listed = capsys.readouterr().out
+    assert f"tiny/a_random seed 0: damaged: {done}: no \"summary\" object; the file is " \
+        "damaged; --resume" in listed, listed
+    assert f"tiny/b_cycle seed 0: damaged: {played}: no \"draws\" integer; " in listed
+    assert cli(*args, "--report-only") == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f'{done}: no "summary" object; ' in err, err
+    assert "(and 1 more)" in err
+    assert {p.name: p.read_bytes() for p in out.glob("tiny.*")} == reports
+    assert cli(*args, "--resume") == 0
+    err = capsys.readouterr().err
+    assert f"set aside as {a_run}.damaged; the run trains again" in err
+    assert f"set aside as {played}.damaged; the evaluation is played again" in err
+    assert isinstance(json.loads(done.read_text())["summary"], dict)
+    assert "draws" in json.loads(played.read_text())
+    assert not json.loads((out / "tiny.json").read_text())["missing"]
+
+
 def test_a_damaged_metrics_jsonl_is_named_and_resume_trains_its_run_again(made, tmp_path,
                                                                           capsys):
     """A finished run's metrics.jsonl (the learning curves) with a line that is not JSON:

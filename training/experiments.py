@@ -762,9 +762,37 @@ def read_json(path: Path) -> Any:
         raise ValueError(f"{path}: {why}; the file is cut short or damaged") from None
 
 
+# What the reports (training/report.py) read from a run's done.json and its evaluation
+# files without a default: key -> type, a dict for an object with these keys. A file
+# lacking one, or holding it of another type, is damaged; keys read with .get() are
+# optional. (summary.global_step is read for a run that saved no checkpoint.)
+_NUMBER = (int, float)
+DONE_KEYS: dict[str, Any] = {"summary": {"global_step": int}, "wall_s": _NUMBER,
+                             "stopped_by": str}
+EVAL_KEYS: dict[str, Any] = {**dict.fromkeys(("wins", "losses", "draws", "games"), int),
+                             "win_rate": _NUMBER, "opponent": str, "experiment": str,
+                             "spec": dict, "outcomes": list}
+_KIND_NAMES = {dict: "object", int: "integer", _NUMBER: "number", str: "string", list: "list"}
+
+
+def _lacks(data: Any, keys: dict[str, Any]) -> str | None:
+    """What JSON ``data`` lacks of ``keys`` (:data:`DONE_KEYS`, :data:`EVAL_KEYS`) in
+    words, e.g. ``no "summary" object``; None when nothing."""
+    if not isinstance(data, dict):
+        return "not a JSON object"
+    for key, kind in keys.items():
+        want = dict if isinstance(kind, dict) else kind
+        if not isinstance(data.get(key), want):
+            return f'no "{key}" {_KIND_NAMES[want]}'
+        if isinstance(kind, dict) and (inner := _lacks(data[key], kind)):
+            return f'{inner} in "{key}"'
+    return None
+
+
 def damaged_results(jobs: Sequence[Job]) -> list[tuple[Job, Path, str]]:
     """The ``done.json`` and evaluation files of ``jobs`` that exist but hold no JSON
-    object (emptied, cut short), and the ``metrics.jsonl`` of a finished run that
+    object (emptied, cut short) or one without what the reports read (:func:`_lacks`),
+    and the ``metrics.jsonl`` of a finished run that
     :func:`~alphatank.training.logging.read_metrics` refuses (a line before the last that
     is not JSON, not UTF-8): (job, file, why naming the file), each file once."""
     from alphatank.training.logging import read_metrics
@@ -779,8 +807,9 @@ def damaged_results(jobs: Sequence[Job]) -> list[tuple[Job, Path, str]]:
             except ValueError as exc:
                 found[path] = (job, path, str(exc))
                 continue
-            if not isinstance(data, dict):
-                found[path] = (job, path, f"{path}: not a JSON object; the file is damaged")
+            why = _lacks(data, DONE_KEYS if path == job.done_file else EVAL_KEYS)
+            if why:
+                found[path] = (job, path, f"{path}: {why}; the file is damaged")
         if job.done_file.is_file() and job.done_file not in found \
                 and job.metrics_file not in found:  # the learning curves read it
             try:
