@@ -66,35 +66,16 @@ def test_a_fragment_is_the_trajectory_of_its_actions_and_its_policy():
 
 
 def test_worker_processes_give_each_block_its_own_fragment():
-    sv = SubprocVectorMatchEnv("team_vs_bot", 5, seed=2, num_workers=2, **KW)
-    try:
-        policy = frozen(sv)
-        frag = sv.rollout(policy, sv.reset(9), 25)
-    finally:
-        sv.close()
-    steps = []
-    for lo, hi in ((0, 2), (2, 5)):  # the workers' blocks, stepped alone in this process
-        block = VectorMatchEnv("team_vs_bot", hi - lo, seed=2, env_ids=range(lo, hi), **KW)
-        part = block.rollout(policy, block.reset(9), 25)
-        for name in ("obs", "actions", "logprobs", "rewards", "terminated", "bootstrap"):
-            np.testing.assert_array_equal(getattr(frag, name)[:, lo:hi], getattr(part, name))
-        np.testing.assert_array_equal(frag.next_obs[lo:hi], part.next_obs)
-        steps += [(ep["step"], ep["env"]) for ep in part.episodes]
-    assert [(ep["step"], ep["env"]) for ep in frag.episodes] == sorted(steps)
-
-
-def test_worker_fragments_through_shared_memory_keep_each_rollout_whole():
-    """Rollouts of 25, then 10 (the shared arrays have room to spare), then 40 steps (they
-    grow) with the env's extra inputs: each is its blocks' fragments stepped alone, and an
-    earlier fragment is not overwritten by the later rollouts."""
-    kw = {**KW, "inputs": ("state", "alive")}
+    """Rollouts of 12, then 5 (the workers' shared arrays have room to spare), then 20
+    steps (they grow) with the env's extra inputs: each is its blocks' fragments stepped
+    alone in this process, episodes in step order, and an earlier fragment is not
+    overwritten by the later rollouts."""
+    kw = {"game_overrides": {"max_steps": 8}, "inputs": ("state", "alive")}
     sv = SubprocVectorMatchEnv("team_vs_bot", 5, seed=2, num_workers=2, **kw)
-    blocks = [VectorMatchEnv("team_vs_bot", hi - lo, seed=2, env_ids=range(lo, hi), **kw)
-              for lo, hi in ((0, 2), (2, 5))]
     try:
         policy = frozen(sv)
         frags, obs = [], sv.reset(9)
-        for steps in (25, 10, 40):
+        for steps in (12, 5, 20):
             frags.append(sv.rollout(policy, obs, steps))
             obs = frags[-1].next_obs
         kept = [{k: a.copy() for k, a in vars(f).items() if isinstance(a, np.ndarray)}
@@ -102,10 +83,11 @@ def test_worker_fragments_through_shared_memory_keep_each_rollout_whole():
     finally:
         sv.close()
     parts = []
-    for block in blocks:
+    for lo, hi in ((0, 2), (2, 5)):  # the workers' blocks
+        block = VectorMatchEnv("team_vs_bot", hi - lo, seed=2, env_ids=range(lo, hi), **kw)
         o = block.reset(9)
         parts.append([])
-        for steps in (25, 10, 40):
+        for steps in (12, 5, 20):
             parts[-1].append(block.rollout(policy, o, steps))
             o = parts[-1][-1].next_obs
     for k, frag in enumerate(frags):
@@ -117,11 +99,11 @@ def test_worker_fragments_through_shared_memory_keep_each_rollout_whole():
         for name in ("state", "alive"):
             np.testing.assert_array_equal(frag.inputs[name], ref.inputs[name])
             np.testing.assert_array_equal(frag.next_inputs[name], ref.next_inputs[name])
-        assert [(ep["step"], ep["env"], ep["length"], ep["winner"]) for ep in frag.episodes] \
-            == [(ep["step"], ep["env"], ep["length"], ep["winner"]) for ep in ref.episodes]
+        assert [(ep["step"], ep["env"], ep["length"]) for ep in frag.episodes] == sorted(
+            (ep["step"], ep["env"], ep["length"]) for ep in ref.episodes)
         for ep, want in zip(frag.episodes, ref.episodes, strict=True):
             np.testing.assert_array_equal(ep["return"], want["return"])
-    assert sum(len(f.episodes) for f in frags) > 0  # 75 steps of 20-tick games
+    assert sum(len(f.episodes) for f in frags) >= 5  # 37 steps of 8-tick games
 
 
 def test_shared_memory_room_is_read_from_dev_shm():
