@@ -57,6 +57,7 @@ import multiprocessing as mp
 import pickle
 import shutil
 import signal
+import sys
 import traceback
 import weakref
 from collections.abc import Mapping, Sequence
@@ -510,13 +511,27 @@ def _close_open_envs() -> None:
         env.close()
 
 
+def worker_context(start_method: str | None = None) -> Any:
+    """The multiprocessing context worker processes start in: ``start_method``, by default
+    "forkserver" where the platform has it, else "spawn" (both safe next to torch's
+    threads). The fork server imports this module, and torch when this process has, once;
+    each worker is then forked from it instead of importing them again (seconds a worker
+    on a slow machine)."""
+    if start_method is None:
+        start_method = "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
+    ctx = mp.get_context(start_method)
+    if start_method == "forkserver":  # no effect once this process's server runs
+        ctx.set_forkserver_preload([__name__, *(["torch"] if "torch" in sys.modules else [])])
+    return ctx
+
+
 class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
     """:class:`VectorMatchEnv` split over ``num_workers`` processes (shared-memory arrays,
     same interface, bit-identical results for the same seed; rollout fragments too are
     written to shared memory, where /dev/shm has room). Workers start with
-    ``start_method`` ("spawn": safe next to torch threads; a script must then create the
-    env under ``if __name__ == "__main__":``). Frozen policies and ``seat_policies`` are
-    pickled to the workers."""
+    ``start_method`` (:func:`worker_context`; with "forkserver" or "spawn" a script must
+    create the env under ``if __name__ == "__main__":``). Frozen policies and
+    ``seat_policies`` are pickled to the workers."""
 
     render_mode = None
 
@@ -525,7 +540,7 @@ class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
                  reward_overrides: dict | None = None, *, num_workers: int = 2,
                  seat_policies: Mapping[int, Policy] | None = None,
                  learner_seats: Sequence[int] | None = None,
-                 start_method: str = "spawn", inputs: Sequence[str] = (),
+                 start_method: str | None = None, inputs: Sequence[str] = (),
                  action_repeat: int = 1):
         if not 1 <= num_workers <= num_envs:
             raise ValueError(f"num_workers must be in 1..num_envs={num_envs}, "
@@ -541,7 +556,7 @@ class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
             specs[f"input:{name}"] = specs[f"final:{name}"] = ((E, L, *shape), "float32")
         self._shared = _Shared(specs)
         self.inputs = self._inputs()
-        ctx = mp.get_context(start_method)
+        ctx = worker_context(start_method)
         self._conns, self._procs = [], []
         for lo, hi in self._blocks:
             parent, child = ctx.Pipe()
@@ -581,9 +596,9 @@ class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
                     status, payload = conn.recv()
             except (EOFError, OSError):
                 status, payload = "error", (
-                    "the worker process exited without answering (with the 'spawn' start "
-                    "method a script must create the env under `if __name__ == "
-                    "\"__main__\":`)")
+                    "the worker process exited without answering (with the 'forkserver' "
+                    "and 'spawn' start methods a script must create the env under "
+                    "`if __name__ == \"__main__\":`)")
             if status == "error":
                 self._failed = payload.splitlines()[0]
                 self.close()
