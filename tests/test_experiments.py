@@ -102,6 +102,16 @@ def made(tmp_path_factory):
     return root, out, rc
 
 
+def copy_of_made(made, tmp_path) -> tuple[Path, list[str]]:
+    """A copy of the finished plan of :func:`made` to damage, and the arguments that
+    plan it."""
+    root, made_out, _ = made
+    out = tmp_path / "out"
+    shutil.copytree(made_out, out)
+    return out, ["tiny", "--experiments-dir", str(root), "--out", str(out), "--steps", "512",
+                 "--games", "4", "--budget", "2", "--no-progress"]
+
+
 def test_two_rows_train_evaluate_and_report(made):
     root, out, rc = made
     assert rc == 0
@@ -742,11 +752,7 @@ def test_a_damaged_results_file_is_named_and_resume_makes_it_again(made, tmp_pat
     --report-only names it in one line (exit 2, nothing written); --resume sets it aside,
     saying so, and plays that evaluation or trains that run again; nothing else is
     touched."""
-    root, made_out, _ = made
-    out = tmp_path / "out"
-    shutil.copytree(made_out, out)
-    args = ["tiny", "--experiments-dir", str(root), "--out", str(out), "--steps", "512",
-            "--games", "4", "--budget", "2", "--no-progress"]
+    out, args = copy_of_made(made, tmp_path)
     a_run, b_run = sorted((out / "runs").iterdir())
     cut = sorted((a_run / "eval").iterdir())[0]
     cut.write_bytes(cut.read_bytes()[:100])
@@ -782,11 +788,7 @@ def test_a_results_file_without_what_the_report_reads_is_damaged(made, tmp_path,
     "draws" count (JSON objects both; the report once ended in a KeyError/TypeError
     traceback): named by --list and --report-only (exit 2, nothing written) as a damaged
     file is, and made again by --resume."""
-    root, made_out, _ = made
-    out = tmp_path / "out"
-    shutil.copytree(made_out, out)
-    args = ["tiny", "--experiments-dir", str(root), "--out", str(out), "--steps", "512",
-            "--games", "4", "--budget", "2", "--no-progress"]
+    out, args = copy_of_made(made, tmp_path)
     a_run, b_run = sorted((out / "runs").iterdir())
     done = a_run / "done.json"
     done.write_text(json.dumps({**json.loads(done.read_text()), "summary": []}))
@@ -820,11 +822,7 @@ def test_a_damaged_metrics_jsonl_is_named_and_resume_trains_its_run_again(made, 
     run out silently); --resume sets its run aside and trains it again. A damaged
     checkpoint meta.json is named by the evaluation that reads it (a failed run, exit 1);
     row.json is never read back."""
-    root, made_out, _ = made
-    out = tmp_path / "out"
-    shutil.copytree(made_out, out)
-    args = ["tiny", "--experiments-dir", str(root), "--out", str(out), "--steps", "512",
-            "--games", "4", "--budget", "2", "--no-progress"]
+    out, args = copy_of_made(made, tmp_path)
     a_run, b_run = sorted((out / "runs").iterdir())
     metrics = a_run / "metrics.jsonl"
     metrics.write_text("not json\n" + metrics.read_text())
