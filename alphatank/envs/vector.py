@@ -354,6 +354,10 @@ class VectorMatchEnv(SplitRollout):
 
 # ---- worker processes ---------------------------------------------------------------
 
+def _nbytes(shape: tuple[int, ...], dtype: str) -> int:
+    return int(np.prod(shape)) * np.dtype(dtype).itemsize
+
+
 class _Shared:
     """Named shared-memory arrays of a subprocess vector env."""
 
@@ -363,7 +367,7 @@ class _Shared:
         self.mem: dict[str, shared_memory.SharedMemory] = {}
         self.arr: dict[str, np.ndarray] = {}
         for key, (shape, dtype) in specs.items():
-            size = max(1, int(np.prod(shape)) * np.dtype(dtype).itemsize)
+            size = max(1, _nbytes(shape, dtype))
             if names is None:
                 mem = shared_memory.SharedMemory(create=True, size=size)
             else:
@@ -713,9 +717,7 @@ class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
             return self._frag
         specs = fragment_specs(steps, self.num_envs, self.num_learners, self.obs_dim,
                                self.input_shapes)
-        size = sum(int(np.prod(shape)) * np.dtype(dtype).itemsize
-                   for shape, dtype in specs.values())
-        if not _shm_room(size):
+        if not _shm_room(sum(_nbytes(*spec) for spec in specs.values())):
             return None
         if self._frag is not None:
             self._frag.close(unlink=True)
