@@ -73,14 +73,12 @@ def _timed(env: Any, actions: np.ndarray, cpu: Callable[[], float]) -> tuple[flo
     return n / (time.perf_counter() - w0), n / max(cpu() - c0, 1e-9)
 
 
-def _rates(env: Any, steps: int, seed: int, layers: bool = True, repeats: int = 3,
-           cpu: Callable[[], float] = time.process_time) -> tuple[float, float]:
-    """(wall-clock, CPU-time) env steps/s (num_envs x steps ticks) after a short warm-up;
-    each the best of ``repeats`` runs. ``cpu`` is the CPU clock (default: this process's
-    CPU time; worker processes need :func:`_cpu_clock`)."""
+def _cpu_rate(env: Any, steps: int, seed: int, layers: bool = True, repeats: int = 3
+              ) -> float:
+    """Env steps per CPU-second of this process (num_envs x steps ticks) after a short
+    warm-up, the best of ``repeats`` runs."""
     actions = _prepare(env, steps, seed, layers)
-    runs = [_timed(env, actions, cpu) for _ in range(repeats)]
-    return max(w for w, _ in runs), max(c for _, c in runs)
+    return max(_timed(env, actions, time.process_time)[1] for _ in range(repeats))
 
 
 def lockstep_scaling(scenario: str, workers: int, num_envs: int = 16, steps: int = 150,
@@ -272,9 +270,9 @@ def env_bench(scenarios: Sequence[str] = DEFAULT_SCENARIOS, observation: str = "
               f"{'fragments':>9s} {'x 1 proc':>8s}")
     results: dict[str, dict[str, float]] = {}
     for name in scenarios:
-        _, one = _rates(VectorMatchEnv(name, num_envs, seed, observation), steps, seed,
+        one = _cpu_rate(VectorMatchEnv(name, num_envs, seed, observation), steps, seed,
                         repeats=repeats)
-        _, bare = _rates(VectorMatchEnv(name, num_envs, seed, observation), steps, seed,
+        bare = _cpu_rate(VectorMatchEnv(name, num_envs, seed, observation), steps, seed,
                          layers=False, repeats=repeats)
         us = 1e6 / one
         row = {"steps_per_s": round(one, 1), "us_per_step": round(us, 2),
