@@ -798,12 +798,12 @@ def test_a_results_file_without_what_the_report_reads_is_damaged(made, tmp_path,
     reports = {p.name: p.read_bytes() for p in out.glob("tiny.*")}
     assert cli(*args, "--list") == 0
     listed = capsys.readouterr().out
-    assert f"tiny/a_random seed 0: damaged: {done}: no \"summary\" object; the file is " \
-        "damaged; --resume" in listed, listed
-    assert f"tiny/b_cycle seed 0: damaged: {played}: no \"draws\" integer; " in listed
+    assert f"tiny/a_random seed 0: damaged: {done}: \"summary\" is not an object; the file " \
+        "is damaged; --resume" in listed, listed
+    assert f"tiny/b_cycle seed 0: damaged: {played}: no \"draws\" integer >= 0; " in listed
     assert cli(*args, "--report-only") == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and f'{done}: no "summary" object; ' in err, err
+    assert err.count("\n") == 1 and f'{done}: "summary" is not an object; ' in err, err
     assert "(and 1 more)" in err
     assert {p.name: p.read_bytes() for p in out.glob("tiny.*")} == reports
     assert cli(*args, "--resume") == 0
@@ -812,6 +812,59 @@ def test_a_results_file_without_what_the_report_reads_is_damaged(made, tmp_path,
     assert f"set aside as {played}.damaged; the evaluation is played again" in err
     assert isinstance(json.loads(done.read_text())["summary"], dict)
     assert "draws" in json.loads(played.read_text())
+    assert not json.loads((out / "tiny.json").read_text())["missing"]
+
+
+# a value of a_random's done.json or first evaluation the report reads (some only when
+# there), damaged, and what names it
+DAMAGES = {
+    "league": ("done.json", lambda d: d.update(league="ratings"),
+               '"league" is not a list of [name, mu, sigma, ordinal]'),
+    "saved_step": ("done.json", lambda d: d["summary"].update(saved_step="512"),
+                   '"saved_step" is not an integer in "summary"'),
+    "stopped": ("done.json", lambda d: d["summary"].update(stopped="time"),
+                '"stopped" is not an object in "summary"'),
+    "no_games": ("eval", lambda d: d.update(games=0, wins=0, losses=0, draws=0),
+                 '"games" is not an integer > 0'),
+    "negative": ("eval", lambda d: d.update(wins=-1, draws=d["draws"] + 1),
+                 '"wins" is not an integer >= 0'),
+    "sum": ("eval", lambda d: d.update(wins=d["games"] + 1),
+            '"wins" + "losses" + "draws" is not "games"'),
+    "opponent_kind": ("eval", lambda d: d.update(opponent_kind=["bot"]),
+                      '"opponent_kind" is not a string'),
+    "outcomes": ("eval", lambda d: d.update(outcomes=["draw", "lost", "draw", "draw"]),
+                 '"outcomes" is not a list of "win", "loss", "draw"'),
+}
+
+
+@pytest.mark.parametrize("damage", DAMAGES)
+def test_a_results_value_the_report_reads_of_the_wrong_kind_is_damaged(made, tmp_path, capsys,
+                                                                       damage):
+    """A value the report reads only when it is there (league, saved_step, stopped,
+    opponent_kind) of the wrong kind, or counts that are no games (none, negative, not
+    adding up), or an outcome that is none: the report once ended in a traceback
+    (TypeError, ZeroDivisionError, ValueError, KeyError; opponent_kind in a counts
+    table). Named by --list and --report-only (exit 2, nothing written) as a damaged file
+    is, with the key, and made again by --resume."""
+    which, spoil, why = DAMAGES[damage]
+    out, args = copy_of_made(made, tmp_path)
+    a_run = sorted((out / "runs").iterdir())[0]
+    path = a_run / "done.json" if which == "done.json" else sorted((a_run / "eval").iterdir())[0]
+    data = json.loads(path.read_text())
+    spoil(data)
+    path.write_text(json.dumps(data))
+    reports = {p.name: p.read_bytes() for p in out.glob("tiny.*")}
+    assert cli(*args, "--list") == 0
+    listed = capsys.readouterr().out
+    assert f"tiny/a_random seed 0: damaged: {path}: {why}; the file is damaged; " in listed, \
+        listed
+    assert cli(*args, "--report-only") == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{path}: {why}; the file is damaged: --resume" in err, err
+    assert {p.name: p.read_bytes() for p in out.glob("tiny.*")} == reports
+    assert cli(*args, "--resume") == 0
+    err = capsys.readouterr().err
+    assert f"{path}: {why}; the file is damaged: set aside as " in err, err
     assert not json.loads((out / "tiny.json").read_text())["missing"]
 
 

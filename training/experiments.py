@@ -763,36 +763,74 @@ def read_json(path: Path) -> Any:
 
 
 # What the reports (training/report.py) read from a run's done.json and its evaluation
-# files without a default: key -> type, a dict for an object with these keys. A file
-# lacking one, or holding it of another type, is damaged; keys read with .get() are
-# optional. (summary.global_step is read for a run that saved no checkpoint.)
-_NUMBER = (int, float)
-DONE_KEYS: dict[str, Any] = {"summary": {"global_step": int}, "wall_s": _NUMBER,
-                             "stopped_by": str}
-EVAL_KEYS: dict[str, Any] = {**dict.fromkeys(("wins", "losses", "draws", "games"), int),
-                             "win_rate": _NUMBER, "opponent": str, "experiment": str,
-                             "spec": dict, "outcomes": list}
-_KIND_NAMES = {dict: "object", int: "integer", _NUMBER: "number", str: "string", list: "list"}
+# files: key -> (a test of its value, what the test wants), a dict for an object with
+# these keys, a tuple of keys (checked after each of them) -> (a test of their values
+# together, what is wrong when it fails). A file whose value fails its test is damaged;
+# keys read with .get() or only when there pass when missing or null. (summary.global_step
+# is read for a run that saved no checkpoint.)
+KeyTest = tuple[Callable[..., bool], str]
 
 
-def _lacks(data: Any, keys: dict[str, Any]) -> str | None:
+def _value(kind: type | tuple[type, ...], noun: str, ok: Callable[[Any], bool] | None = None,
+           optional: bool = False) -> KeyTest:
+    """The test of a value of ``kind`` that ``ok`` accepts (``optional``: or none)."""
+    return (lambda v: (optional and v is None)
+            or (isinstance(v, kind) and (ok is None or ok(v)))), noun
+
+
+def _rated(rows: list[Any]) -> bool:
+    """True for league rows ``[name, mu, sigma, ordinal]``."""
+    return all(isinstance(r, list) and len(r) == 4 and isinstance(r[0], str)
+               and all(isinstance(x, int | float) for x in r[1:]) for r in rows)
+
+
+_COUNT = _value(int, "integer >= 0", lambda v: v >= 0)
+DONE_KEYS: dict[str, Any] = {
+    "summary": {"global_step": _value(int, "integer"),
+                "saved_step": _value(int, "integer", optional=True),
+                "stopped": _value(dict, "object", optional=True)},
+    "wall_s": _value((int, float), "number"), "stopped_by": _value(str, "string"),
+    "league": _value(list, "list of [name, mu, sigma, ordinal]", _rated, optional=True)}
+EVAL_KEYS: dict[str | tuple[str, ...], Any] = {
+    **dict.fromkeys(("wins", "losses", "draws"), _COUNT),
+    "games": _value(int, "integer > 0", lambda v: v > 0),
+    ("wins", "losses", "draws", "games"): (lambda w, lost, d, g: w + lost + d == g,
+                                           '"wins" + "losses" + "draws" is not "games"'),
+    "win_rate": _value((int, float), "number"), "opponent": _value(str, "string"),
+    "experiment": _value(str, "string"), "spec": _value(dict, "object"),
+    # the words of evaluate.OUTCOME_SCORE, which the ratings read (importing it would
+    # bring torch into --list)
+    "outcomes": _value(list, 'list of "win", "loss", "draw"',
+                       lambda v: all(o in ("win", "loss", "draw") for o in v)),
+    "opponent_kind": _value(str, "string", optional=True)}
+
+
+def _lacks(data: Any, keys: dict[Any, Any]) -> str | None:
     """What JSON ``data`` lacks of ``keys`` (:data:`DONE_KEYS`, :data:`EVAL_KEYS`) in
-    words, e.g. ``no "summary" object``; None when nothing."""
+    words, e.g. ``no "summary" object``, ``"games" is not an integer > 0``; None when
+    nothing."""
     if not isinstance(data, dict):
         return "not a JSON object"
     for key, kind in keys.items():
-        want = dict if isinstance(kind, dict) else kind
-        if not isinstance(data.get(key), want):
-            return f'no "{key}" {_KIND_NAMES[want]}'
-        if isinstance(kind, dict) and (inner := _lacks(data[key], kind)):
+        if isinstance(key, tuple):  # each of them passed its own test
+            test, wrong = kind
+            if not test(*(data[k] for k in key)):
+                return wrong
+            continue
+        value = data.get(key)
+        test, noun = _value(dict, "object") if isinstance(kind, dict) else kind
+        if not test(value):
+            return (f'no "{key}" {noun}' if value is None else
+                    f'"{key}" is not {"an" if noun[0] in "aeiou" else "a"} {noun}')
+        if isinstance(kind, dict) and (inner := _lacks(value, kind)):
             return f'{inner} in "{key}"'
     return None
 
 
 def damaged_results(jobs: Sequence[Job]) -> list[tuple[Job, Path, str]]:
     """The ``done.json`` and evaluation files of ``jobs`` that exist but hold no JSON
-    object (emptied, cut short) or one without what the reports read (:func:`_lacks`),
-    and the ``metrics.jsonl`` of a finished run that
+    object (emptied, cut short) or one without what the reports read, or with it of a
+    kind they cannot read (:func:`_lacks`), and the ``metrics.jsonl`` of a finished run that
     :func:`~alphatank.training.logging.read_metrics` refuses (a line before the last that
     is not JSON, not UTF-8): (job, file, why naming the file), each file once."""
     from alphatank.training.logging import read_metrics
