@@ -3,8 +3,10 @@ training, evaluation, md/csv/json, heatmap and curves; --resume redoes nothing f
 a failing row is reported while the other finishes; the shipped tables all load."""
 
 import argparse
+import contextlib
 import csv
 import dataclasses
+import io
 import json
 import os
 import re
@@ -222,6 +224,7 @@ def test_a_failing_row_is_reported_and_the_other_finishes(tmp_path, capsys):
     err = capsys.readouterr().err
     assert rc == 1
     assert "tiny/b_cycle seed 0" in err and "egocentric" in err
+    assert "--resume only plays" not in err  # a run that failed to train trains again
     broken = next(out.glob("runs/b_cycle-*"))
     assert "Traceback" in (broken / "error.txt").read_text()
     good = next(out.glob("runs/a_random-*"))
@@ -902,6 +905,70 @@ def test_a_damaged_metrics_jsonl_is_named_and_resume_trains_its_run_again(made, 
     assert cli(*args, "--resume") == 1
     err = capsys.readouterr().err
     assert f"tiny/b_cycle seed 0: CheckpointError: {meta}: not an alphatank checkpoint" in err
+
+
+@pytest.fixture(scope="module")
+def checkpoint_failed(made, tmp_path_factory):
+    """A copy of :func:`made` whose a_random run lost its evaluations and whose checkpoint
+    was cut short, after a --resume that tried to evaluate it: (out, arguments, the
+    checkpoint file, the run, what the command printed on stderr)."""
+    out, args = copy_of_made(made, tmp_path_factory.mktemp("failed"))
+    run = sorted((out / "runs").iterdir())[0]
+    ppo = Path(load_checkpoint(run).path) / "ppo.pt"
+    ppo.write_bytes(ppo.read_bytes()[:200])
+    for p in (run / "eval").iterdir():
+        p.unlink()
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        assert cli(*args, "--resume") == 1
+    return out, args, ppo, run, err.getvalue()
+
+
+def test_a_failure_several_evaluations_gave_is_said_once(checkpoint_failed):
+    """Both evaluations of a run fail to load its damaged checkpoint: the summary, the
+    last line of error.txt and the report give the failure once, with the number of
+    evaluations (it was said once per evaluation, "X; X")."""
+    out, _, ppo, run, err = checkpoint_failed
+    why = (f"CheckpointError: {ppo}: corrupt or truncated (SHA-256 differs from the one "
+           f"recorded in meta.json; size 200 bytes) (2 evaluations)")
+    assert f"tiny/a_random seed 0: {why} ({run}/error.txt)" in err, err
+    assert err.count("SHA-256 differs") == 1
+    assert (run / "error.txt").read_text().splitlines()[-1] == why
+    assert json.loads((out / "tiny.json").read_text())["missing"] == [
+        f"tiny/a_random seed 0: {why}"]
+
+
+def test_the_plan_names_the_runs_whose_last_attempt_failed(checkpoint_failed, capsys):
+    """--list names a run still to do whose last attempt failed, and why (it was only
+    counted to do)."""
+    _, args, ppo, _, _ = checkpoint_failed
+    assert cli(*args, "--list") == 0
+    listed = capsys.readouterr().out
+    assert f"tiny/a_random seed 0: last attempt failed: CheckpointError: {ppo}: corrupt or " \
+        "truncated (SHA-256 differs" in listed, listed
+    assert "b_cycle seed 0: last" not in listed and "2 runs (1 seed(s)), 1 to do:" in listed
+
+
+def test_a_finished_run_whose_checkpoint_fails_says_how_to_train_it_again(
+        made, checkpoint_failed, tmp_path, capsys):
+    """--resume only plays a finished run's evaluations again, from its damaged
+    checkpoint: the summary and --list say so and how to train it again (move the run
+    away, then --resume), which then trains it and plays its evaluations."""
+    failed_out, args, _, run, err = checkpoint_failed
+    hint = (f"; --resume only plays its evaluations again (the run is finished: it has "
+            f"done.json): if its checkpoint is damaged or missing, move {run} away (e.g. to "
+            f"{run}.damaged), then --resume trains the run again")
+    assert f"({run}/error.txt){hint}\n" in err, err
+    assert cli(*args, "--list") == 0
+    assert hint in capsys.readouterr().out
+    out, args = copy_of_made((made[0], failed_out, None), tmp_path)
+    run = out / "runs" / run.name
+    run.rename(f"{run}.damaged")
+    assert cli(*args, "--resume") == 0
+    assert "2 runs, 1 to do" in capsys.readouterr().out
+    assert (run / "done.json").is_file() and len(list((run / "eval").iterdir())) == 2
+    assert not (run / "error.txt").exists()
+    assert not json.loads((out / "tiny.json").read_text())["missing"]
 
 
 @pytest.mark.parametrize("size", [0, 60])

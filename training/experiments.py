@@ -39,6 +39,7 @@ import shutil
 import time
 import tomllib
 import traceback
+from collections import Counter
 from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
@@ -993,19 +994,49 @@ def _failure(exc: Exception) -> Failure:
 
 
 def record_failures(job: Job, failures: Sequence[Failure]) -> str | None:
-    """Write the tracebacks to ``<run_dir>/error.txt`` (removed when there are none);
-    the failures in one line, or None."""
+    """Write the tracebacks to ``<run_dir>/error.txt`` (removed when there are none),
+    then the failures in one line, which is returned (None when there are none): each
+    line once, one that several evaluations gave with their number, ``X (2
+    evaluations)``."""
     err = Path(job.run_dir) / "error.txt"
     if not failures:
         if err.exists():
             err.unlink()
         return None
+    counts = Counter(line for line, _ in failures)
+    line = "; ".join(f"{x} ({n} evaluations)" if n > 1 else x for x, n in counts.items())
     try:
         err.parent.mkdir(parents=True, exist_ok=True)
-        err.write_text("\n".join(tb for _, tb in failures), encoding="utf-8")
+        err.write_text("\n".join(tb for _, tb in failures) + f"\n{line}\n", encoding="utf-8")
     except OSError:
         pass
-    return "; ".join(line for line, _ in failures)
+    return line
+
+
+def last_failure(job: Job) -> str | None:
+    """The one line of the failures of ``job``'s last attempt: the last line of its
+    ``error.txt`` (:func:`record_failures`), or None when it has none."""
+    try:
+        text = (Path(job.run_dir) / "error.txt").read_text(encoding="utf-8", errors="replace")
+    except OSError:  # none (or none to read)
+        return None
+    lines = [ln for ln in text.splitlines() if ln.strip()]
+    return lines[-1] if lines else "failed"
+
+
+CHECKPOINT = "CheckpointError: "  # a failure's line when a checkpoint did not load or fit
+# (training.checkpoint.CheckpointError: importing it would bring torch into --list)
+
+
+def retrain_hint(job: Job, failure: str) -> str:
+    """What to do when ``failure`` (one line) says the checkpoint of ``job``, a finished
+    run, did not load: ``--resume`` plays its evaluations again from that checkpoint, it
+    does not train the run again; '' for other failures."""
+    if CHECKPOINT not in failure or not job.done_file.is_file():
+        return ""
+    return (f"; --resume only plays its evaluations again (the run is finished: it has "
+            f"done.json): if its checkpoint is damaged or missing, move {job.run_dir} away "
+            f"(e.g. to {job.run_dir}.damaged), then --resume trains the run again")
 
 
 def run_job(job: Job) -> tuple[str, str | None, float]:

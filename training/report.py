@@ -37,6 +37,7 @@ from alphatank.training.experiments import (
     Row,
     Table,
     clone_cut,
+    last_failure,
     read_json,
 )
 
@@ -135,10 +136,9 @@ def collect(plan: Plan, table: Table) -> list[RowResult]:
         for s in range(plan.seeds):
             job, specs = plan.cells[(row.id, s)]
             rr.run_dirs[s] = job.run_dir
-            err = Path(job.run_dir) / "error.txt"
-            if err.is_file():
-                lines = [ln for ln in err.read_text(encoding="utf-8").splitlines() if ln.strip()]
-                rr.errors[s] = lines[-1] if lines else "failed"
+            failure = last_failure(job)
+            if failure is not None:
+                rr.errors[s] = failure
             if job.done_file.is_file():
                 rr.runs[s] = read_json(job.done_file)
             for name, spec in specs.items():

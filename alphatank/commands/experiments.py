@@ -86,6 +86,7 @@ def run(args: argparse.Namespace) -> int:
         load_tables,
         make_plan,
         read_json,
+        retrain_hint,
         set_aside,
         table_names,
     )
@@ -221,9 +222,10 @@ def run(args: argparse.Namespace) -> int:
               f"busy (another command is training them):", file=sys.stderr)
         by_key = {j.key: j for j in plan.jobs}
         for key, err in failed.items():
-            where = "busy" if err.startswith(BUSY) else f"{by_key[key].run_dir}/error.txt"
-            print(f"  {', '.join(by_key[key].rows)} seed {by_key[key].seed}: {err} "
-                  f"({where})", file=sys.stderr)
+            job = by_key[key]
+            where = "busy" if err.startswith(BUSY) else f"{job.run_dir}/error.txt"
+            print(f"  {', '.join(job.rows)} seed {job.seed}: {err} ({where})"
+                  + retrain_hint(job, err), file=sys.stderr)
         return 1
     return 0
 
@@ -265,8 +267,14 @@ def _command(args: argparse.Namespace) -> str:
 
 def _print_plan(plan: Plan, workers: int) -> None:
     """Rows, runs and the time the missing ones take; a run whose results file is damaged
-    (:func:`~alphatank.training.experiments.damaged_results`) is named and counted to do."""
-    from alphatank.training.experiments import damaged_results, estimate_minutes
+    (:func:`~alphatank.training.experiments.damaged_results`) is named and counted to do,
+    one still to do whose last attempt failed is named with its failure."""
+    from alphatank.training.experiments import (
+        damaged_results,
+        estimate_minutes,
+        last_failure,
+        retrain_hint,
+    )
     from alphatank.training.presets import TrainConfig, iteration_steps, planned_steps
 
     by_key = {j.key: j for j in plan.jobs}
@@ -292,6 +300,11 @@ def _print_plan(plan: Plan, workers: int) -> None:
               "aside and makes it again")
     redo = {j.key for j, _, _ in damaged}
     todo = [j for j in plan.jobs if not j.complete() or j.key in redo]
+    for job in todo:
+        failure = last_failure(job)
+        if failure is not None:
+            print(f"  {', '.join(job.rows)} seed {job.seed}: last attempt failed: {failure}"
+                  + retrain_hint(job, failure))
     print(f"{len(plan.jobs)} runs ({plan.seeds} seed(s)), {len(todo)} to do"
           + (f" ({len(redo)} damaged)" if redo else "") + f": about "
           f"{estimate_minutes(plan, todo, workers, [p for _, p, _ in damaged]):.0f} min "
