@@ -31,6 +31,7 @@ soon as it exists, so an interrupted command resumes (``resume=True``) where it 
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import json
@@ -1005,11 +1006,8 @@ def record_failures(job: Job, failures: Sequence[Failure]) -> str | None:
         return None
     counts = Counter(line for line, _ in failures)
     line = "; ".join(f"{x} ({n} evaluations)" if n > 1 else x for x, n in counts.items())
-    try:
-        err.parent.mkdir(parents=True, exist_ok=True)
-        err.write_text("\n".join(tb for _, tb in failures) + f"\n{line}\n", encoding="utf-8")
-    except OSError:
-        pass
+    with contextlib.suppress(OSError):  # the failure is still returned and reported
+        write_text_atomic(err, "\n".join(tb for _, tb in failures) + f"\n{line}\n")
     return line
 
 
