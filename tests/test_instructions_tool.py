@@ -80,3 +80,37 @@ def test_team_scenarios_step_the_engine_and_refuse_one_env(capsys, monkeypatch):
         tool.main(["--scenario", "team_vs_bot", "--envs", "0"])
     assert exc.value.code == 2
     assert "--envs 0" in capsys.readouterr().err
+
+
+@pytest.mark.skipif(shutil.which("valgrind") is None, reason="valgrind is not installed")
+def test_l2_run_reads_cachegrinds_totals_with_this_machines_l2(tmp_path):
+    """``--l2``'s geometry is what valgrind simulates as the last level, and the summary
+    read back holds the instructions valgrind printed and the three L2 miss counts."""
+    size, ways, line = tool.l2_geometry()
+    assert size >= 64 * 1024 and size % ways == 0 and ways > 0 and line in (32, 64, 128)
+    out = tmp_path / "cachegrind.out"
+    run = subprocess.run(["valgrind", "--tool=cachegrind", "--cache-sim=yes",
+                          "--branch-sim=no", f"--LL={size},{ways},{line}",
+                          f"--cachegrind-out-file={out}", "/bin/ls", str(ROOT)],
+                         capture_output=True, text=True, check=True)
+    assert f"desc: LL cache: {size} B, {line} B, {ways}-way associative" in " ".join(
+        out.read_text().split())  # simulated as given, not the host's L3 valgrind finds
+    totals = tool.cachegrind_summary(out)
+    refs = int(re.search(r"I\s+refs:\s*([\d,]+)", run.stderr).group(1).replace(",", ""))
+    assert totals["Ir"] == refs
+    assert all(0 <= totals[k] <= totals["Ir"] for k in tool.L2_EVENTS)
+    assert totals["DLmr"] <= totals["D1mr"] and totals["DLmr"] > 0
+
+
+def test_a_cut_valgrind_file_is_named(tmp_path):
+    out = tmp_path / "cachegrind.out"
+    out.write_text("events: Ir I1mr ILmr Dr D1mr DLmr Dw D1mw DLmw\nfl=x\n")
+    with pytest.raises(ValueError, match="cachegrind.out: no summary line"):
+        tool.cachegrind_summary(out)
+
+
+def test_l2_and_objects_exclude_each_other(capsys):
+    with pytest.raises(SystemExit) as exc:
+        tool.main(["--l2", "--objects"])
+    assert exc.value.code == 2
+    assert "not allowed with argument" in capsys.readouterr().err

@@ -2,7 +2,7 @@
 on the machine do not move, for comparing two versions of the code on a noisy machine.
 
     python tools/instructions.py [--scenario vs_smart] [--envs 16] [--steps 100]
-                                 [--observation paper] [--objects] [--floor]
+                                 [--observation paper] [--objects | --l2] [--floor]
                                  [--json FILE]
 
 Runs this file twice under ``valgrind --tool=callgrind`` (no cache simulation), each run
@@ -19,6 +19,11 @@ pymunk prototype (``shared/bench/proto``, driven as ``floor_ratio.py`` drives it
 bare 1v1 match tick (no bots, observations or rewards; driven as ``alphatank bench``
 drives it), 1,000 and 2,000 ticks each, and gives both the match tick and the env step as
 ratios to the prototype's: the issue-14 ratios in instructions.
+``--l2`` runs ``valgrind --tool=cachegrind`` instead, its last level set to one core's L2
+(read from sysfs; 1 MiB, 16-way when it cannot be), and adds the L2 misses per step
+(instruction fetches, data reads and writes) beside the instructions: the memory traffic
+that instruction counts miss. A batched env whose matches together overflow the L2 runs
+slower than its instructions say, and by how much depends on the shared L3's state.
 
 Counts repeat to about 0.1% (hash seed fixed), where wall or CPU time on a shared
 2-core VM scatter by 20% or more. Instructions are not time: a change that saves
@@ -41,6 +46,7 @@ import tempfile
 from pathlib import Path
 
 WARMUP = 50
+L2_EVENTS = ("ILmr", "DLmr", "DLmw")  # cachegrind's last-level misses: fetch, read, write
 FLOOR, TICK = "floor", "tick"  # the child's names for the prototype's and a match's tick
 FLOOR_TICKS = 1000
 
@@ -101,25 +107,61 @@ def child_command(args: argparse.Namespace, scenario: str, envs: int, steps: int
     return cmd, env
 
 
+def l2_geometry() -> tuple[int, int, int]:
+    """(size in bytes, ways, line bytes) of one core's L2, from sysfs; 1 MiB, 16 ways, 64
+    bytes where sysfs does not say."""
+    folder = Path("/sys/devices/system/cpu/cpu0/cache")
+    for index in sorted(folder.glob("index*")):
+        try:
+            if (index / "level").read_text().strip() != "2":
+                continue
+            size = (index / "size").read_text().strip().upper()
+            scale = {"K": 1024, "M": 1024 ** 2}.get(size[-1:], 1)
+            return (int(size.rstrip("KM")) * scale,
+                    int((index / "ways_of_associativity").read_text()),
+                    int((index / "coherency_line_size").read_text()))
+        except (OSError, ValueError):
+            break
+    return 1024 ** 2, 16, 64
+
+
+def cachegrind_summary(out: Path) -> dict[str, int]:
+    """Event totals of a cachegrind file (its ``events:`` names, its ``summary:`` line)."""
+    events: list[str] = []
+    for line in out.read_text(encoding="utf-8", errors="replace").splitlines():
+        if line.startswith("events:"):
+            events = line.split()[1:]
+        elif line.startswith("summary:"):
+            return dict(zip(events, map(int, line.split()[1:]), strict=True))
+    raise ValueError(f"{out}: no summary line; the valgrind run did not finish")
+
+
 def count(args: argparse.Namespace, scenario: str, envs: int, steps: int, folder: Path
-          ) -> tuple[int, Path]:
-    """Instructions of one child run of ``steps`` timed steps, and its callgrind file."""
-    out = folder / f"callgrind.{scenario}.{steps}.out"
+          ) -> tuple[dict[str, int], Path]:
+    """Event totals of one child run of ``steps`` timed steps (``Ir``, the instructions;
+    with ``--l2`` cachegrind's other events too), and its valgrind file."""
+    out = folder / f"valgrind.{scenario}.{steps}.out"
     cmd, env = child_command(args, scenario, envs, steps)
-    cmd = ["valgrind", "--tool=callgrind", "--cache-sim=no", f"--callgrind-out-file={out}",
-           *cmd]
-    run = subprocess.run(cmd, env=env, capture_output=True, text=True, check=False)
+    if args.l2:
+        size, ways, line = l2_geometry()
+        tool = ["--tool=cachegrind", "--cache-sim=yes", "--branch-sim=no",
+                f"--LL={size},{ways},{line}", f"--cachegrind-out-file={out}"]
+    else:
+        tool = ["--tool=callgrind", "--cache-sim=no", f"--callgrind-out-file={out}"]
+    run = subprocess.run(["valgrind", *tool, *cmd], env=env, capture_output=True, text=True,
+                         check=False)
     found = re.search(r"Collected\s*:\s*(\d+)", run.stderr)
-    if run.returncode != 0 or found is None:
+    if run.returncode != 0 or (found is None and not args.l2):
         sys.exit(f"instructions: the valgrind run failed (exit {run.returncode}):\n"
                  + run.stderr[-2000:])
-    return int(found.group(1)), out
+    return (cachegrind_summary(out) if args.l2 else {"Ir": int(found.group(1))}), out
 
 
 def measure(args: argparse.Namespace, scenario: str, envs: int, steps: int
             ) -> tuple[float, list[int], dict[str, float]]:
     """Instructions per step (runs of ``steps`` and twice as many, the difference over
-    ``steps x max(envs, 1)``), both runs' totals, and the per-object split (``--objects``)."""
+    ``steps x max(envs, 1)``), both runs' totals, and the per-object split (``--objects``)
+    or, with ``--l2``, the L2 misses per step of each of :data:`L2_EVENTS`."""
     divisor = steps * max(envs, 1)
     # A first run fills numba's cache of compiled kernels for the CPU valgrind presents
     # (not this machine's), so that both counted runs load them, not the first compiling.
@@ -132,12 +174,23 @@ def measure(args: argparse.Namespace, scenario: str, envs: int, steps: int
         if args.objects:
             a, b = by_object(short_out), by_object(long_out)
             objects = {k: (b.get(k, 0) - a.get(k, 0)) / divisor for k in set(a) | set(b)}
-    return (long - short) / divisor, [short, long], objects
+        elif args.l2:
+            objects = {k: (long[k] - short[k]) / divisor for k in L2_EVENTS}
+    return (long["Ir"] - short["Ir"]) / divisor, [short["Ir"], long["Ir"]], objects
 
 
 def report(title: str, per_step: float, objects: dict[str, float]) -> None:
-    """One figure, then its split per object (each over 0.1% of it), largest first."""
+    """One figure, then its split per object (each over 0.1% of it), largest first, or
+    its L2 misses (``objects`` keyed by :data:`L2_EVENTS`)."""
     print(title)
+    if set(objects) == set(L2_EVENTS):
+        misses = sum(objects.values())
+        print(f"  {misses:12,.0f}  L2 misses per step ({1000 * misses / per_step:.2f} per "
+              "1,000 instructions): " + ", ".join(
+                  f"{objects[k]:,.0f} {what}" for k, what in
+                  zip(L2_EVENTS, ("instruction fetch", "data read", "data write"),
+                      strict=True)))
+        return
     for name, n in sorted(objects.items(), key=lambda kv: -kv[1]):
         if abs(n) >= 0.001 * per_step:
             print(f"  {n:12,.0f}  {100 * n / per_step:5.1f}%  {name}")
@@ -180,8 +233,12 @@ def main(argv: list[str] | None = None) -> None:
                    help="timed steps of the shorter run; the longer runs twice as many")
     p.add_argument("--observation", default=None, help="observation kind (default: the "
                    "scenario's)")
-    p.add_argument("--objects", action="store_true",
-                   help="also split the count per shared object")
+    how = p.add_mutually_exclusive_group()
+    how.add_argument("--objects", action="store_true",
+                     help="also split the count per shared object")
+    how.add_argument("--l2", action="store_true",
+                     help="count with cachegrind, its last level one core's L2, and also "
+                     "give the L2 misses per step")
     p.add_argument("--floor", action="store_true",
                    help="also count the bare pymunk prototype's 1v1 tick (the floor) and a "
                    "bare 1v1 match tick")
@@ -216,9 +273,10 @@ def main(argv: list[str] | None = None) -> None:
     report(f"{args.scenario}, {what}: {per_step:,.0f} instructions per env step "
            f"({runs[0]:,} and {runs[1]:,} in runs of {args.steps} and {2 * args.steps} "
            "steps)", per_step, objects)
+    split = "l2_misses" if args.l2 else "per_object"  # the JSON key of each split
     figures = {"scenario": args.scenario, "envs": args.envs, "steps": args.steps,
                "observation": args.observation, "instructions_per_step": per_step,
-               "instructions": runs, "per_object": objects}
+               "instructions": runs, split: objects}
     if args.floor:
         floor, _, floor_objects = measure(args, FLOOR, 0, FLOOR_TICKS)
         report(f"bare pymunk floor, 1v1: {floor:,.0f} instructions per tick; the env step "
@@ -226,9 +284,10 @@ def main(argv: list[str] | None = None) -> None:
         tick, _, tick_objects = measure(args, TICK, 0, FLOOR_TICKS)
         report(f"bare match tick, 1v1: {tick:,.0f} instructions per tick, "
                f"{tick / floor:.2f}x the floor", tick, tick_objects)
-        figures.update(floor_per_tick=floor, over_floor=per_step / floor,
-                       floor_per_object=floor_objects, match_tick=tick,
-                       match_tick_over_floor=tick / floor, match_tick_per_object=tick_objects)
+        figures.update({"floor_per_tick": floor, "over_floor": per_step / floor,
+                        f"floor_{split}": floor_objects, "match_tick": tick,
+                        "match_tick_over_floor": tick / floor,
+                        f"match_tick_{split}": tick_objects})
     if args.json is not None:
         from alphatank.files import write_text_atomic
         write_text_atomic(args.json, json.dumps(figures, indent=2) + "\n")
