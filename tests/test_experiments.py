@@ -837,6 +837,11 @@ DAMAGES = {
                       '"opponent_kind" is not a string'),
     "outcomes": ("eval", lambda d: d.update(outcomes=["draw", "lost", "draw", "draw"]),
                  '"outcomes" is not a list of "win", "loss", "draw"'),
+    "outcomes_count": ("eval", lambda d: d.update(outcomes=d["outcomes"][:-1]),
+                       '"outcomes" do not match "wins", "losses", "draws"'),
+    "bool_count": ("eval", lambda d: d.update(wins=bool(d["wins"]) or True,
+                                              losses=d["games"] - 1, draws=0),
+                   '"wins" is not an integer >= 0'),
 }
 
 
@@ -845,9 +850,9 @@ def test_a_results_value_the_report_reads_of_the_wrong_kind_is_damaged(made, tmp
                                                                        damage):
     """A value the report reads only when it is there (league, saved_step, stopped,
     opponent_kind) of the wrong kind, or counts that are no games (none, negative, not
-    adding up), or an outcome that is none: the report once ended in a traceback
-    (TypeError, ZeroDivisionError, ValueError, KeyError; opponent_kind in a counts
-    table). Named by --list and --report-only (exit 2, nothing written) as a damaged file
+    adding up, a JSON true), or outcomes that are none or do not match the counts: the
+    report once ended in a traceback (TypeError, ZeroDivisionError, ValueError, KeyError;
+    opponent_kind in a counts table) or read them. Named by --list and --report-only (exit 2, nothing written) as a damaged file
     is, with the key, and made again by --resume."""
     which, spoil, why = DAMAGES[damage]
     out, args = copy_of_made(made, tmp_path)

@@ -775,9 +775,12 @@ KeyTest = tuple[Callable[..., bool], str]
 
 def _value(kind: type | tuple[type, ...], noun: str, ok: Callable[[Any], bool] | None = None,
            optional: bool = False) -> KeyTest:
-    """The test of a value of ``kind`` that ``ok`` accepts (``optional``: or none)."""
+    """The test of a value of ``kind`` that ``ok`` accepts (``optional``: or none); JSON
+    ``true``/``false`` are no numbers here."""
+    kinds = kind if isinstance(kind, tuple) else (kind,)
     return (lambda v: (optional and v is None)
-            or (isinstance(v, kind) and (ok is None or ok(v)))), noun
+            or (isinstance(v, kind) and not (isinstance(v, bool) and bool not in kinds)
+                and (ok is None or ok(v)))), noun
 
 
 def _rated(rows: list[Any]) -> bool:
@@ -804,6 +807,9 @@ EVAL_KEYS: dict[str | tuple[str, ...], Any] = {
     # bring torch into --list)
     "outcomes": _value(list, 'list of "win", "loss", "draw"',
                        lambda v: all(o in ("win", "loss", "draw") for o in v)),
+    ("outcomes", "wins", "losses", "draws"): (
+        lambda o, w, lost, d: [o.count("win"), o.count("loss"), o.count("draw")] == [w, lost, d],
+        '"outcomes" do not match "wins", "losses", "draws"'),
     "opponent_kind": _value(str, "string", optional=True)}
 
 
