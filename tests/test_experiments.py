@@ -852,8 +852,9 @@ def test_a_results_value_the_report_reads_of_the_wrong_kind_is_damaged(made, tmp
     opponent_kind) of the wrong kind, or counts that are no games (none, negative, not
     adding up, a JSON true), or outcomes that are none or do not match the counts: the
     report once ended in a traceback (TypeError, ZeroDivisionError, ValueError, KeyError;
-    opponent_kind in a counts table) or read them. Named by --list and --report-only (exit 2, nothing written) as a damaged file
-    is, with the key, and made again by --resume."""
+    opponent_kind in a counts table) or read them. Named by --list and --report-only
+    (exit 2, nothing written) as a damaged file is, with the key, and made again by
+    --resume."""
     which, spoil, why = DAMAGES[damage]
     out, args = copy_of_made(made, tmp_path)
     a_run = sorted((out / "runs").iterdir())[0]
