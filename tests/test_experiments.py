@@ -823,6 +823,8 @@ def test_a_results_file_without_what_the_report_reads_is_damaged(made, tmp_path,
 DAMAGES = {
     "league": ("done.json", lambda d: d.update(league="ratings"),
                '"league" is not a list of [name, mu, sigma, ordinal]'),
+    "league_bool": ("done.json", lambda d: d.update(league=[["a", 25.0, True, 1.0]]),
+                    '"league" is not a list of [name, mu, sigma, ordinal]'),
     "saved_step": ("done.json", lambda d: d["summary"].update(saved_step="512"),
                    '"saved_step" is not an integer in "summary"'),
     "stopped": ("done.json", lambda d: d["summary"].update(stopped="time"),

@@ -786,7 +786,8 @@ def _value(kind: type | tuple[type, ...], noun: str, ok: Callable[[Any], bool] |
 def _rated(rows: list[Any]) -> bool:
     """True for league rows ``[name, mu, sigma, ordinal]``."""
     return all(isinstance(r, list) and len(r) == 4 and isinstance(r[0], str)
-               and all(isinstance(x, int | float) for x in r[1:]) for r in rows)
+               and all(isinstance(x, int | float) and not isinstance(x, bool) for x in r[1:])
+               for r in rows)
 
 
 _COUNT = _value(int, "integer >= 0", lambda v: v >= 0)
