@@ -25,7 +25,7 @@ def test_objects_split_the_whole_count(tmp_path):
                          capture_output=True, text=True, check=True)
     collected = int(re.search(r"Collected\s*:\s*(\d+)", run.stderr).group(1))
     split = tool.by_object(out)
-    assert sum(split.values()) == collected
+    assert sum(split.values()) == collected == tool.valgrind_summary(out)["Ir"]
     assert any(name.startswith("libc.so") for name in split)
     assert all("/" not in name for name in split)
     assert split["ls"] > 0
@@ -95,7 +95,7 @@ def test_l2_run_reads_cachegrinds_totals_with_this_machines_l2(tmp_path):
                          capture_output=True, text=True, check=True)
     assert f"desc: LL cache: {size} B, {line} B, {ways}-way associative" in " ".join(
         out.read_text().split())  # simulated as given, not the host's L3 valgrind finds
-    totals = tool.cachegrind_summary(out)
+    totals = tool.valgrind_summary(out)
     refs = int(re.search(r"I\s+refs:\s*([\d,]+)", run.stderr).group(1).replace(",", ""))
     assert totals["Ir"] == refs
     assert all(0 <= totals[k] <= totals["Ir"] for k in tool.L2_EVENTS)
@@ -106,7 +106,7 @@ def test_a_cut_valgrind_file_is_named(tmp_path):
     out = tmp_path / "cachegrind.out"
     out.write_text("events: Ir I1mr ILmr Dr D1mr DLmr Dw D1mw DLmw\nfl=x\n")
     with pytest.raises(ValueError, match="cachegrind.out: no summary line"):
-        tool.cachegrind_summary(out)
+        tool.valgrind_summary(out)
 
 
 def test_l2_and_objects_exclude_each_other(capsys):

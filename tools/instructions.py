@@ -125,8 +125,9 @@ def l2_geometry() -> tuple[int, int, int]:
     return 1024 ** 2, 16, 64
 
 
-def cachegrind_summary(out: Path) -> dict[str, int]:
-    """Event totals of a cachegrind file (its ``events:`` names, its ``summary:`` line)."""
+def valgrind_summary(out: Path) -> dict[str, int]:
+    """Event totals of a callgrind or cachegrind file (its ``events:`` names, its
+    ``summary:`` line)."""
     events: list[str] = []
     for line in out.read_text(encoding="utf-8", errors="replace").splitlines():
         if line.startswith("events:"):
@@ -150,11 +151,12 @@ def count(args: argparse.Namespace, scenario: str, envs: int, steps: int, folder
         tool = ["--tool=callgrind", "--cache-sim=no", f"--callgrind-out-file={out}"]
     run = subprocess.run(["valgrind", *tool, *cmd], env=env, capture_output=True, text=True,
                          check=False)
-    found = re.search(r"Collected\s*:\s*(\d+)", run.stderr)
-    if run.returncode != 0 or (found is None and not args.l2):
-        sys.exit(f"instructions: the valgrind run failed (exit {run.returncode}):\n"
-                 + run.stderr[-2000:])
-    return (cachegrind_summary(out) if args.l2 else {"Ir": int(found.group(1))}), out
+    try:
+        if run.returncode != 0:
+            raise ValueError(f"exit {run.returncode}")
+        return valgrind_summary(out), out
+    except (OSError, ValueError) as exc:
+        sys.exit(f"instructions: the valgrind run failed ({exc}):\n" + run.stderr[-2000:])
 
 
 def measure(args: argparse.Namespace, scenario: str, envs: int, steps: int
