@@ -915,6 +915,14 @@ def test_a_damaged_metrics_jsonl_is_named_and_resume_trains_its_run_again(made, 
     assert f"tiny/b_cycle seed 0: CheckpointError: {meta}: not an alphatank checkpoint" in err
 
 
+def retrain_hint(run: Path) -> str:
+    """What the summary, --list and the report add to the failure of ``run``, a finished
+    run whose checkpoint did not load."""
+    return (f"; --resume only plays its evaluations again (the run is finished: it has "
+            f"done.json): if its checkpoint is damaged or missing, move {run} away (e.g. to "
+            f"{run}.damaged), then --resume trains the run again")
+
+
 @pytest.fixture(scope="module")
 def checkpoint_failed(made, tmp_path_factory):
     """A copy of :func:`made` whose a_random run lost its evaluations and whose checkpoint
@@ -943,7 +951,7 @@ def test_a_failure_several_evaluations_gave_is_said_once(checkpoint_failed):
     assert err.count("SHA-256 differs") == 1
     assert (run / "error.txt").read_text().splitlines()[-1] == why
     assert json.loads((out / "tiny.json").read_text())["missing"] == [
-        f"tiny/a_random seed 0: {why}"]
+        f"tiny/a_random seed 0: {why}{retrain_hint(run)}"]
 
 
 def test_the_plan_names_the_runs_whose_last_attempt_failed(checkpoint_failed, capsys):
@@ -960,13 +968,15 @@ def test_the_plan_names_the_runs_whose_last_attempt_failed(checkpoint_failed, ca
 def test_a_finished_run_whose_checkpoint_fails_says_how_to_train_it_again(
         made, checkpoint_failed, tmp_path, capsys):
     """--resume only plays a finished run's evaluations again, from its damaged
-    checkpoint: the summary and --list say so and how to train it again (move the run
-    away, then --resume), which then trains it and plays its evaluations."""
+    checkpoint: the summary, --list and the report's missing runs say so and how to train
+    it again (move the run away, then --resume), which then trains it and plays its
+    evaluations."""
     failed_out, args, _, run, err = checkpoint_failed
-    hint = (f"; --resume only plays its evaluations again (the run is finished: it has "
-            f"done.json): if its checkpoint is damaged or missing, move {run} away (e.g. to "
-            f"{run}.damaged), then --resume trains the run again")
+    hint = retrain_hint(run)
     assert f"({run}/error.txt){hint}\n" in err, err
+    section = (failed_out / "tiny.md").read_text().split("## Missing or failed\n")[1]
+    assert section.count(hint) == 1 and "- tiny/a_random seed 0: CheckpointError: " \
+        in section, section
     assert cli(*args, "--list") == 0
     assert hint in capsys.readouterr().out
     out, args = copy_of_made((made[0], failed_out, None), tmp_path)

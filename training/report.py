@@ -39,6 +39,7 @@ from alphatank.training.experiments import (
     clone_cut,
     last_failure,
     read_json,
+    retrain_hint,
 )
 
 
@@ -458,7 +459,9 @@ def write_report(plan: Plan, table: Table, command: str = "") -> dict[str, Any]:
     checks = run_checks(table, results)
     league = ratings(results)
     figs = _figures(plan, table, results)
-    missing = [f"{rr.row.id} seed {s}" + (f": {rr.errors[s]}" if s in rr.errors else "")
+    missing = [f"{rr.row.id} seed {s}"
+               + (f": {rr.errors[s]}" + retrain_hint(plan.cells[(rr.row.id, s)][0],
+                                                     rr.errors[s]) if s in rr.errors else "")
                for rr in results for s in range(plan.seeds)
                if s not in rr.runs or any(s not in rr.evals.get(c.name, {})
                                           for c in rr.columns)]
