@@ -80,6 +80,25 @@ def test_damaged_metrics_skip_a_cut_line_and_foreign_rows_or_fail_in_one_line(tm
     assert err.count("\n") == 1 and f"{run / 'metrics.jsonl'}: not a UTF-8 text file" in err
 
 
+@pytest.mark.parametrize(("key", "value"), [
+    ("charts/win_rate", '"high"'), ("charts/win_rate", "null"), ("charts/win_rate", "[0.5, 1]"),
+    ("charts/episode_return", '{"a": 1}'), ("charts/elapsed_s", "true")])
+def test_a_logged_row_with_a_value_that_is_not_a_number_fails_in_one_line(tmp_path, capsys,
+                                                                         key, value):
+    """A logged row (an int ``step``) holds numbers: a string, null, list, object or
+    true/false in it names the file, line and key, exit 2, no figure (it was drawn, strings
+    as categories, or a traceback or numpy's words)."""
+    run = fake_run(tmp_path / "run", n=3)
+    with open(run / "metrics.jsonl", "a") as f:
+        f.write(f'{{"step": 4000, "charts/win_rate": 0.5, "{key}": {value}}}\n')
+    out = tmp_path / "c.png"
+    assert main(["plot", str(run), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f'{run / "metrics.jsonl"}, line 4: "{key}" is not a ' \
+        f"number, got {value}; a metrics.jsonl row holds numbers" in err, err
+    assert not out.exists()
+
+
 def test_row_curves_and_heatmap(tmp_path):
     runs = [fake_run(tmp_path / f"r-s{s}") for s in range(3)]
     fig = plot_row_curves([("row A", runs), ("row B", runs[:1])])

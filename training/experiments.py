@@ -841,7 +841,8 @@ def damaged_results(jobs: Sequence[Job]) -> list[tuple[Job, Path, str]]:
     object (emptied, cut short) or one without what the reports read, or with it of a
     kind they cannot read (:func:`_lacks`), and the ``metrics.jsonl`` of a finished run that
     :func:`~alphatank.training.logging.read_metrics` refuses (a line before the last that
-    is not JSON, not UTF-8): (job, file, why naming the file), each file once."""
+    is not JSON or a row value that is not a number, not UTF-8): (job, file, why naming
+    the file), each file once."""
     from alphatank.training.logging import read_metrics
 
     found: dict[Path, tuple[Job, Path, str]] = {}

@@ -121,7 +121,7 @@ def read_metrics(run_dir: str | Path) -> list[dict[str, float]]:
     :func:`rewind_metrics` keeps, JSON objects with an int ``step``; a last line cut short
     by a crash and rows not logged here (no ``step``) are skipped. ValueError naming the
     file for one that is not UTF-8 text, and the line for one before the last that is not
-    JSON (a damaged file)."""
+    JSON, or a row with a value that is not a number (a damaged file)."""
     path = Path(run_dir) / "metrics.jsonl"
     if not path.is_file():
         return []
@@ -138,6 +138,11 @@ def read_metrics(run_dir: str | Path) -> list[dict[str, float]]:
             raise ValueError(f"{path}, line {n}: not a JSON row ({exc.msg}); a metrics.jsonl "
                              "holds one JSON object per line") from None
         if isinstance(row, dict) and isinstance(row.get("step"), int):
+            wrong = next((k for k, v in row.items() if type(v) not in (int, float)), None)
+            if wrong is not None:  # what the curves read: numbers, as Logger.log wrote them
+                raise ValueError(f'{path}, line {n}: "{wrong}" is not a number, got '
+                                 f"{json.dumps(row[wrong])[:40]}; a metrics.jsonl row holds "
+                                 "numbers")
             rows.append(row)
     return rows
 
