@@ -29,9 +29,14 @@ def run(args: argparse.Namespace) -> int:
         print(f"alphatank plot: error: -o must name a .png file, got {args.out!r}",
               file=sys.stderr)
         return 2
+    if labels is not None and len(labels) != len(args.runs):
+        print(f"alphatank plot: error: --labels: {len(labels)} label(s) for {len(args.runs)} "
+              f"run(s); give one per run", file=sys.stderr)
+        return 2
     for run_dir in args.runs:
         if not Path(run_dir).is_dir():
-            print(f"alphatank plot: error: {run_dir}: no such run folder", file=sys.stderr)
+            what = "a file, not a run folder" if Path(run_dir).exists() else "no such run folder"
+            print(f"alphatank plot: error: {run_dir}: {what}", file=sys.stderr)
             return 2
     check_writable(args.out, "-o")  # an InputError: alphatank.cli prints it, exit 2
     try:
