@@ -482,6 +482,8 @@ CASES = [
     ("plot-labels-count", ["plot", "{run}", "{run}", "--labels", "a"],
      ["--labels: 1 label(s) for 2 run(s); give one per run"]),
     ("plot-run-file", ["plot", "{good_txt}"], ["{good_txt}: a file, not a run folder"]),
+    ("agents-export-under-file", ["agents", "export", "{run}", "{good_txt}/agent"],
+     ["dest: {good_txt}/agent: {good_txt} is a file, not a folder"]),
     ("train-config-binary", ["train", "--config", "{binary_toml}"], ["{binary_toml}", "UTF-8"]),
     ("train-config-toml", ["train", "--config", "{syntax_toml}"],
      ["{syntax_toml}", "invalid TOML"]),

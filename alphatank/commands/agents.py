@@ -28,7 +28,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Bad input raises InputError or OSError, reported by :func:`alphatank.cli.main`."""
     if args.action == "export":
+        from alphatank.files import check_folder
         from alphatank.game.seats import checkpoint_source
+        check_folder(args.dest, "dest")
         from alphatank.training.agents import export_agent
         record = {"description": args.description, "commands": list(args.commands)}
         if args.eval:
