@@ -726,6 +726,17 @@ def test_record_overwrites_a_replay_only_with_force(tmp_path, capsys):
     assert old.read_bytes() != b"old" and video.stat().st_size > 0
 
 
+def test_record_refuses_a_map_beside_a_scenario(tmp_path, capsys):
+    """--map picks the map for --seats: beside --scenario it was ignored (the match played
+    on the scenario's map, even for a map that does not exist); refused, no video made."""
+    video = tmp_path / "m.mp4"
+    rc, out, err = _run_main(main, ["record", "--scenario", "vs_smart", "--map", "nowhere",
+                                    "--max-steps", "5", "-o", str(video)], capsys)
+    _check(rc, out, err, ["--map picks the map for --seats; a --scenario plays on its own map "
+                          "(give either --scenario or --map, not both)"])
+    assert rc == 2 and not video.exists()
+
+
 def test_maps_lists_shipped_folders(capsys):
     assert main(["maps"]) == 0
     out = capsys.readouterr().out

@@ -167,10 +167,14 @@ def lineup_scenario(scenario: str | None = None, seats: str | None = None,
                     default_seats: str = "human:wasd,bot:smart") -> Scenario:
     """The scenario a command line asks for: ``scenario`` (name or .toml path) or a
     ``seats`` list on ``map_name`` (default: battlefield for 2 seats, arena4 up to 4,
-    arena8 beyond); ``game`` overrides either's [game] table."""
+    arena8 beyond; ScenarioError with ``scenario``); ``game`` overrides either's [game]
+    table."""
     game = dict(game or {})
     if scenario and seats:
         raise ScenarioError("give either --scenario or --seats, not both")
+    if scenario and map_name:
+        raise ScenarioError("--map picks the map for --seats; a --scenario plays on its own "
+                            "map (give either --scenario or --map, not both)")
     if scenario:
         sc = load_scenario(scenario)
         if game:
