@@ -313,6 +313,8 @@ CASES = [
      ["seats[0].team: must be printable (no control characters), got 'A\\x00'"]),
     ("record-scenario-missing", ["record", "--scenario", "{dir}/none.toml"],
      ["none.toml", "no such scenario file"]),
+    ("record-scenario-folder", ["record", "--scenario", "{emptydir}"],
+     ["{emptydir}: a folder, not a scenario file"]),
     ("record-scenario-empty", ["record", "--scenario", "{empty_toml}"],
      ["{empty_toml}", "name"]),
     ("record-scenario-binary", ["record", "--scenario", "{binary_toml}"],

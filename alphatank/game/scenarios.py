@@ -214,7 +214,8 @@ def load_scenario(name_or_path: str | Path | Scenario) -> Scenario:
     path = Path(name_or_path)
     if path.suffix == ".toml" or path.exists():
         if not path.is_file():
-            raise ScenarioError(f"{path}: no such scenario file")
+            raise ScenarioError(f"{path}: " + ("a folder, not a scenario file" if path.is_dir()
+                                               else "no such scenario file"))
         try:
             text = read_text(path)
         except ValueError as exc:
