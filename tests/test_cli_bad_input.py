@@ -739,6 +739,16 @@ def test_record_refuses_a_map_beside_a_scenario(tmp_path, capsys):
     assert rc == 2 and not video.exists()
 
 
+@pytest.mark.parametrize(("seats", "why"), [("human,random", "needs a player at the keyboard"),
+                                            ("learner,random", "is a learner seat")])
+def test_arena_refuses_a_seat_before_its_header(capsys, seats, why):
+    """A seat the arena cannot play: the error is the only line (the header of the games
+    it would play was printed first)."""
+    rc, out, err = _run_main(main, ["arena", "--seats", seats], capsys)
+    _check(rc, out, err, [why])
+    assert rc == 2 and out == ""
+
+
 def test_maps_lists_shipped_folders(capsys):
     assert main(["maps"]) == 0
     out = capsys.readouterr().out

@@ -57,12 +57,13 @@ def run(args: argparse.Namespace) -> int:
         hooks.append(RenderHook(renderer))
         no_window = (DisplayUnavailable,)
     pairs = len(seats) * (len(seats) - 1) // 2
-    print(f"arena: {len(seats)} seats, {pairs} pairs x {args.games} games on "
-          f"{where} (preset {args.preset}, max {cfg.max_steps} ticks)", flush=True)
+    header = (f"arena: {len(seats)} seats, {pairs} pairs x {args.games} games on {where} "
+              f"(preset {args.preset}, max {cfg.max_steps} ticks)")
     t0 = time.perf_counter()
-    try:
+    try:  # the header once the seats pass their checks: a bad one is the only line
         result = run_arena(seats, args.map, args.games, seed=args.seed, preset=args.preset,
-                           game=overrides, hooks=hooks)
+                           game=overrides, hooks=hooks,
+                           on_start=lambda: print(header, flush=True))
     except no_window as exc:
         print(f"alphatank arena: error: --render: {exc}", file=sys.stderr)
         return 2
