@@ -52,6 +52,7 @@ from alphatank.training.ppo import (
     mlp,
     np_sample,
     run_folded,
+    sample_into,
 )
 from alphatank.training.stopping import check_interrupt
 
@@ -286,21 +287,11 @@ class MAPPO(OnPolicyPlumbing, MAPPOActing):
         t = buf.step
         x = self._actor_input(obs, self.seat_of, update=True)
         s = self._critic_input(state, x, update=True)
-        logits = self.actor_np.forward(x)
-        values = self.critic_np.forward(s)[:, 0]
-        row = buf.np
-        if masks is not None:
-            masks = np.asarray(masks, dtype=bool)
-            logits[~masks] = MASKED_LOGIT
-            if buf.masks is not None:
-                row["masks"][t] = masks
-        actions, logprob = np_sample(logits, self.nvec, self.np_rng)
-        row["obs"][t] = x
+        values = self.critic_np.forward(s)[:, 0]  # normalised (value_norm units)
+        actions = sample_into(buf, x, self.actor_np.forward(x), values, masks, self.nvec,
+                              self.np_rng)
         if self.states_np is not None:
             self.states_np[t] = s
-        row["actions"][t] = actions
-        row["logprobs"][t] = logprob
-        row["values"][t] = values  # normalised (value_norm units)
         live = self._alive(obs, alive)
         self._alive_now = live if live is not None else np.ones(self.num_streams, bool)
         return actions

@@ -235,6 +235,26 @@ def np_sample(logits: np.ndarray, nvec: tuple[int, ...], rng: np.random.Generato
     return actions, logprob
 
 
+def sample_into(buf: RolloutBuffer, x: np.ndarray, logits: np.ndarray, values: np.ndarray,
+                masks: np.ndarray | None, nvec: tuple[int, ...], rng: np.random.Generator
+                ) -> np.ndarray:
+    """Actions (B, len(nvec)) sampled from ``logits`` (the choices ``masks`` forbids masked
+    in place), with the step's row of ``buf`` written: inputs ``x``, masks, actions, their
+    log-probabilities and ``values``."""
+    t, row = buf.step, buf.np
+    if masks is not None:
+        masks = np.asarray(masks, dtype=bool)
+        logits[~masks] = MASKED_LOGIT
+        if buf.masks is not None:
+            row["masks"][t] = masks
+    actions, logprob = np_sample(logits, nvec, rng)
+    row["obs"][t] = x
+    row["actions"][t] = actions
+    row["logprobs"][t] = logprob
+    row["values"][t] = values
+    return actions
+
+
 class FrozenPPO:
     """A PPO learner's acting side frozen for one rollout acted elsewhere
     (:mod:`alphatank.training.fragments`): its numpy network and observation statistics."""
@@ -318,18 +338,7 @@ class PPO(OnPolicyPlumbing):
             buf.np["anchor_logits"][t] = ref
         x = self.obs_norm(obs, update=True)
         logits, values = self.mirror.forward(x)
-        row = buf.np
-        if masks is not None:
-            masks = np.asarray(masks, dtype=bool)
-            logits[~masks] = MASKED_LOGIT
-            if buf.masks is not None:
-                row["masks"][t] = masks
-        actions, logprob = np_sample(logits, self.nvec, self.np_rng)
-        row["obs"][t] = x
-        row["actions"][t] = actions
-        row["logprobs"][t] = logprob
-        row["values"][t] = values
-        return actions
+        return sample_into(buf, x, logits, values, masks, self.nvec, self.np_rng)
 
     def observe(self, next_obs: np.ndarray, rewards: np.ndarray, terminated: np.ndarray,
                 truncated: np.ndarray, final_obs: np.ndarray | None = None,
