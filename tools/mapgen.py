@@ -20,7 +20,7 @@ from fractions import Fraction
 from pathlib import Path
 
 from alphatank.cli import Parser, broken_pipe_exit
-from alphatank.commands.argtypes import scale
+from alphatank.commands.argtypes import given, scale
 from alphatank.errors import InputError, one_line
 from alphatank.files import check_folder, check_writable, write_text_atomic
 from alphatank.mapgen import (
@@ -297,14 +297,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("generate", help="write one seeded map")
     _add_gen_options(p, lists=False)
-    p.add_argument("-o", "--output", help="map file to write (default: print the map)")
+    p.add_argument("-o", "--output", type=given, help="map file to write (default: print the map)")
     p.add_argument("--name", help="map name (default: the output file's stem)")
     p.set_defaults(run=cmd_generate)
 
     p = sub.add_parser("batch", help="write COUNT maps with consecutive seeds")
     _add_gen_options(p, lists=True)
     p.add_argument("--count", type=int, required=True, help="number of maps")
-    p.add_argument("--out", required=True, help="folder to write into")
+    p.add_argument("--out", type=given, required=True, help="folder to write into")
     p.add_argument("--split", type=float,
                    help="train share, e.g. 0.8: writes OUT/train and OUT/test (every 5th map "
                         "held out)")
@@ -313,7 +313,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("variants", help="write every map with its turned and flipped images "
                                         "(data augmentation for training maps)")
     p.add_argument("maps", nargs="+", metavar="MAP", help="map files, folders or shipped names")
-    p.add_argument("--out", required=True, help="folder to write into")
+    p.add_argument("--out", type=given, required=True, help="folder to write into")
     p.add_argument("--force", action="store_true", help="overwrite existing files")
     p.set_defaults(run=cmd_variants)
 
@@ -326,7 +326,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("preview", help="print the map and draw it to a PNG")
     p.add_argument("map", help="map file or shipped name")
-    p.add_argument("--png", help="PNG to write (default: NAME.png in the current folder)")
+    p.add_argument("--png", type=given,
+                   help="PNG to write (default: NAME.png in the current folder)")
     p.add_argument("--no-png", action="store_true", help="ASCII only")
     p.add_argument("--fire", action="store_true", help="mark lines of fire between spawns")
     p.add_argument("--teams", help="team of each slot, e.g. AABB (default: halves A and B)")
@@ -335,7 +336,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(run=cmd_preview)
 
     p = sub.add_parser("edit", help="paint a map in a pygame window")
-    p.add_argument("map", help="map file to edit (created on first save if missing)")
+    p.add_argument("map", type=given, help="map file to edit (created on first save if missing)")
     p.add_argument("--size", default="11x11", help="ROWSxCOLS of a new map (default 11x11)")
     p.add_argument("--cell-px", type=int, help="pixels per cell on screen")
     p.set_defaults(run=cmd_edit)

@@ -8,6 +8,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+from alphatank.commands.argtypes import given
 from alphatank.errors import InputError
 
 
@@ -15,10 +16,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest="action")
     sub.add_parser("list", help="list the shipped agents (the default)")
     ex = sub.add_parser("export", help="write a checkpoint as an agent folder (weights only)")
-    ex.add_argument("checkpoint", help="checkpoint folder or run folder (its latest save)")
-    ex.add_argument("dest", help="agent folder to write (e.g. alphatank/data/agents/NAME)")
+    ex.add_argument("checkpoint", type=given,
+                    help="checkpoint folder or run folder (its latest save)")
+    ex.add_argument("dest", type=given,
+                    help="agent folder to write (e.g. alphatank/data/agents/NAME)")
     ex.add_argument("--description", default="", help="one line about the agent")
-    ex.add_argument("--eval", metavar="FILE.json",
+    ex.add_argument("--eval", type=given, metavar="FILE.json",
                     help="an `alphatank eval --json` file of this checkpoint, recorded with "
                          "the agent (its rows are checked)")
     ex.add_argument("--command", dest="commands", action="append", default=[], metavar="TEXT",

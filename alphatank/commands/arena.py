@@ -8,7 +8,7 @@ import argparse
 import sys
 import time
 
-from alphatank.commands.argtypes import positive_int, seed, window_fps
+from alphatank.commands.argtypes import given, positive_int, seed, window_fps
 from alphatank.game.arena import arena_scenario, run_arena
 from alphatank.game.lineup import spec_seat
 from alphatank.game.scenarios import ScenarioError
@@ -23,7 +23,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="comma-separated seats, each a bot NAME[:KEY=VALUE...][@WEAKNESS], "
                         "checkpoint:PATH or agent:NAME, e.g. 'smart,smart:ricochet=false,"
                         "random@0.5,checkpoint:runs/ppo' (default: %(default)s)")
-    p.add_argument("--map", default="maze",
+    p.add_argument("--map", type=given, default="maze",
                    help="shipped map or map folder (e.g. test), or a .txt map or folder path; "
                         "a folder's games draw their map by seed (default: %(default)s)")
     p.add_argument("--games", type=positive_int, default=20,

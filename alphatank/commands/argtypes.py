@@ -10,6 +10,14 @@ from collections.abc import Callable
 from alphatank.sim.config import ACTION_REPEAT_MAX, MATCHES_MAX
 
 
+def given(text: str) -> str:
+    """A file or folder path, or a name (a map, a scenario, an agent): not empty (``""``
+    read as none, or as the current folder)."""
+    if not text:
+        raise argparse.ArgumentTypeError("is empty; give a name or a path")
+    return text
+
+
 def positive_int(text: str) -> int:
     """An integer >= 1."""
     try:

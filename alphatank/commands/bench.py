@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from alphatank.commands.argtypes import match_count, positive_int
+from alphatank.commands.argtypes import given, match_count, positive_int
 from alphatank.commands.benchfloor import find_floor, floor_us_per_tick
 from alphatank.commands.benchsoak import DEFAULT_SOAK_SCENARIOS, check_soak_steps, soak
 from alphatank.errors import InputError, one_line
@@ -32,13 +32,13 @@ if TYPE_CHECKING:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--map", default="maze", help="map name or path (default: maze)")
+    p.add_argument("--map", type=given, default="maze", help="map name or path (default: maze)")
     p.add_argument("--ticks", type=positive_int, default=5000,
                    help="ticks per run (default: 5000)")
     p.add_argument("--repeats", type=positive_int, default=5,
                    help="runs per setting; median ticks/s, best run for the floor ratio")
     p.add_argument("--preset", default="paper", help="game preset (paper, long_range)")
-    p.add_argument("--floor", metavar="DIR",
+    p.add_argument("--floor", type=given, metavar="DIR",
                    help="folder of the bare pymunk prototype (sim_core.py, maze_0.txt) to "
                         "compare with (default: the nearest shared/bench/proto above the "
                         "project or the working folder; skipped when there is none)")
@@ -69,7 +69,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--sac", action="store_true",
                    help="also measure one SAC gradient step against its bare-torch floor, and "
                         "SAC training steps/s per update-to-data ratio")
-    p.add_argument("--json", metavar="FILE", help="write the figures as JSON")
+    p.add_argument("--json", type=given, metavar="FILE", help="write the figures as JSON")
     p.add_argument("--soak", action="store_true",
                    help="instead: soak test, --steps random-action env steps over --scenarios "
                         "with RSS sampled; fails on memory growth or NaN (see benchsoak)")

@@ -8,7 +8,7 @@ import argparse
 import time
 from pathlib import Path
 
-from alphatank.commands.argtypes import budget_minutes, positive_int
+from alphatank.commands.argtypes import budget_minutes, given, positive_int
 from alphatank.errors import InputError
 from alphatank.extras import require
 from alphatank.files import check_folder, write_text_atomic
@@ -16,7 +16,7 @@ from alphatank.files import check_folder, write_text_atomic
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--name", help="run name (default: demo-<date>-<time>)")
-    p.add_argument("--runs", default="runs", help="folder of runs (default: runs)")
+    p.add_argument("--runs", type=given, default="runs", help="folder of runs (default: runs)")
     p.add_argument("--minutes", type=budget_minutes, default=8.0,
                    help="training budget in minutes, at most a week (default: 8; the whole "
                         "job stays < 10)")

@@ -15,7 +15,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from alphatank.commands.argtypes import match_count, positive_int, seed
+from alphatank.commands.argtypes import given, match_count, positive_int, seed
 from alphatank.errors import InputError, as_input_error
 from alphatank.files import check_writable, write_text_atomic
 
@@ -25,7 +25,7 @@ if TYPE_CHECKING:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("checkpoints", nargs="+", metavar="CHECKPOINT",
+    p.add_argument("checkpoints", nargs="+", type=given, metavar="CHECKPOINT",
                    help="checkpoint folder(s) or run folder(s) (their latest save), also as "
                         "checkpoint:PATH, agent:NAME for a shipped agent, or bot:NAME "
                         "(with --scenario) for a bot in the learner seats: its win rate in "
@@ -34,10 +34,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="comma-separated bots to play (e.g. smart,aggressive,dodge,defensive); "
                         "default: the opponents of each checkpoint's scenario")
     p.add_argument("--games", type=positive_int, default=100, help="games per row (default: 100)")
-    p.add_argument("--scenario", help="play in this scenario instead of the checkpoint's own")
+    p.add_argument("--scenario", type=given,
+                   help="play in this scenario instead of the checkpoint's own")
     p.add_argument("--team", help="team the checkpoint plays, one with a learner seat in the "
                                   "scenario (default: its first learner's)")
-    p.add_argument("--map", metavar="NAME|FOLDER",
+    p.add_argument("--map", type=given, metavar="NAME|FOLDER",
                    help="play on other maps: a shipped map, a shipped folder such as 'test', "
                         "a .txt file or a folder of maps")
     p.add_argument("--weakness", type=float, help="bot weakness 0..1 (default: as trained)")
@@ -52,8 +53,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="also measure cooperation in the same games: share of won games in "
                         "which every teammate hit an enemy, kills in crossfire, hits per "
                         "seat (written to FILE.team.json with --json)")
-    p.add_argument("--csv", metavar="FILE", help="also write the rows as CSV")
-    p.add_argument("--json", metavar="FILE",
+    p.add_argument("--csv", type=given, metavar="FILE", help="also write the rows as CSV")
+    p.add_argument("--json", type=given, metavar="FILE",
                    help="also write the rows as JSON (with every game's outcome)")
     p.add_argument("--ratings", action="store_true",
                    help="also print an openskill table rating checkpoints and opponents "

@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from alphatank.commands.argtypes import budget_minutes
+from alphatank.commands.argtypes import budget_minutes, given
 from alphatank.files import check_folder
 
 if TYPE_CHECKING:
@@ -34,7 +34,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", type=int, default=1, metavar="W",
                    help="runs trained at once, one process each (default: %(default)s; "
                         "2 fills a 2-core machine)")
-    p.add_argument("--out", default="results", metavar="DIR",
+    p.add_argument("--out", type=given, default="results", metavar="DIR",
                    help="where runs, tables and figures go (default: %(default)s)")
     p.add_argument("--resume", action="store_true",
                    help="reuse what DIR already holds and finish only the missing runs and "
@@ -55,7 +55,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="write the tables from what DIR holds, training nothing (refused "
                         "where a table in DIR shows results this one would lack: rows made "
                         "with other settings)")
-    p.add_argument("--experiments-dir", metavar="DIR",
+    p.add_argument("--experiments-dir", type=given, metavar="DIR",
                    help="read tables and rows from this folder instead of the shipped ones")
     p.add_argument("--wandb", default="disabled", choices=("disabled", "offline", "online"),
                    help="wandb mode of the runs (default: %(default)s; metrics.jsonl is "

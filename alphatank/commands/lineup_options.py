@@ -5,18 +5,18 @@ from __future__ import annotations
 
 import argparse
 
-from alphatank.commands.argtypes import seed
+from alphatank.commands.argtypes import given, seed
 from alphatank.game.lineup import Lineup, build_lineup, lineup_scenario
 from alphatank.game.seats import SEAT_HELP
 from alphatank.ui.render import DEFAULT_OVERLAYS
 
 
 def add_lineup_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--scenario", help="scenario name or .toml path (e.g. mixed_teams)")
-    p.add_argument("--map", help="map for --seats (default: battlefield for 2 seats, "
+    p.add_argument("--scenario", type=given, help="scenario name or .toml path (e.g. mixed_teams)")
+    p.add_argument("--map", type=given, help="map for --seats (default: battlefield for 2 seats, "
                                  "arena4 up to 4, arena8 up to 8)")
     p.add_argument("--seats", help=SEAT_HELP)
-    p.add_argument("--checkpoint", metavar="SEAT",
+    p.add_argument("--checkpoint", type=given, metavar="SEAT",
                    help="who plays the scenario's learner seats: a checkpoint or run folder, "
                         "checkpoint:PATH, agent:NAME or bot:NAME")
     p.add_argument("--stand-in", default="smart",

@@ -13,7 +13,7 @@ import argparse
 import os
 import sys
 
-from alphatank.commands.argtypes import positive_int, scale, window_fps
+from alphatank.commands.argtypes import given, positive_int, scale, window_fps
 from alphatank.commands.lineup_options import add_lineup_arguments, lineup_from_args
 from alphatank.errors import one_line
 from alphatank.files import check_writable
@@ -29,7 +29,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="frames per second, 1 to 1000 (default: 60)")
     p.add_argument("--scale", type=scale,
                    help="window scale, 0.1 to 8 times the map's size (default: fit the screen)")
-    p.add_argument("--save-replay", metavar="FILE",
+    p.add_argument("--save-replay", type=given, metavar="FILE",
                    help="save each match as a replay: FILE (refused if it exists, unless "
                         "--force), then FILE-2, FILE-3, ... (an existing one is skipped)")
     p.add_argument("--force", action="store_true", help="overwrite an existing --save-replay")

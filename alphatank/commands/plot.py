@@ -7,12 +7,14 @@ import argparse
 import sys
 from pathlib import Path
 
+from alphatank.commands.argtypes import given
 from alphatank.files import check_writable
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("runs", nargs="+", metavar="RUN", help="run folder(s) (with metrics.jsonl)")
-    p.add_argument("-o", "--out", metavar="FILE.png", default="curves.png",
+    p.add_argument("runs", nargs="+", type=given, metavar="RUN",
+                   help="run folder(s) (with metrics.jsonl)")
+    p.add_argument("-o", "--out", type=given, metavar="FILE.png", default="curves.png",
                    help="the figure to write (default: %(default)s)")
     p.add_argument("--labels", metavar="A,B,...",
                    help="legend labels, one per run (default: the folder names)")

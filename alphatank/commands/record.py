@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 
 from alphatank.commands.argtypes import (
+    given,
     non_negative_float,
     positive_int,
     scale,
@@ -28,10 +29,10 @@ from alphatank.ui.video import VideoRecorder, check_outputs, record_episode
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_lineup_arguments(p)
-    p.add_argument("-o", "--out", default="match.mp4",
+    p.add_argument("-o", "--out", type=given, default="match.mp4",
                    help="MP4 to write (default: match.mp4)")
-    p.add_argument("--gif", metavar="FILE", help="also write a GIF (half size, 15 fps)")
-    p.add_argument("--replay", metavar="FILE",
+    p.add_argument("--gif", type=given, metavar="FILE", help="also write a GIF (half size, 15 fps)")
+    p.add_argument("--replay", type=given, metavar="FILE",
                    help="also save the match as a replay file (refused if it exists, unless "
                         "--force)")
     p.add_argument("--force", action="store_true", help="overwrite an existing --replay")

@@ -13,7 +13,7 @@ import os
 import sys
 import time
 
-from alphatank.commands.argtypes import positive_int, replay_speed
+from alphatank.commands.argtypes import given, positive_int, replay_speed
 from alphatank.errors import one_line
 from alphatank.files import check_distinct
 from alphatank.ui.render import DEFAULT_OVERLAYS, DisplayUnavailable, parse_overlays
@@ -30,11 +30,11 @@ from alphatank.ui.video import VideoRecorder, check_outputs, record_episode
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("file", help="replay file (.npz) from `play --save-replay` or "
-                                "`record --replay`")
-    p.add_argument("--record", metavar="OUT.mp4", help="render the replay to an MP4")
-    p.add_argument("--gif", metavar="FILE", help="render the replay to a GIF (with --record: "
-                                                 "as well as the MP4)")
+    p.add_argument("file", type=given,
+                   help="replay file (.npz) from `play --save-replay` or `record --replay`")
+    p.add_argument("--record", type=given, metavar="OUT.mp4", help="render the replay to an MP4")
+    p.add_argument("--gif", type=given, metavar="FILE",
+                   help="render the replay to a GIF (with --record: as well as the MP4)")
     p.add_argument("--render", action="store_true", help="play it back in a window")
     p.add_argument("--speed", type=replay_speed, default=1.0,
                    help="playback speed for --render, 0.05 to 50 (default: 1, real time)")

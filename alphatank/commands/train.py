@@ -17,6 +17,7 @@ from typing import Any
 from alphatank.cluster import ENV_RUNNER_TIMEOUT_S
 from alphatank.commands.argtypes import (
     action_repeat,
+    given,
     in_range,
     match_count,
     non_negative_int,
@@ -63,12 +64,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     what = p.add_argument_group("what to train")
     what.add_argument("--preset", help=f"training preset (default: {DEFAULT_PRESET}); one of "
                       f"{preset_names()}")
-    what.add_argument("--config", metavar="FILE.toml",
+    what.add_argument("--config", type=given, metavar="FILE.toml",
                       help="a run file (the format of the presets; --print-config writes one)")
-    what.add_argument("--scenario", metavar="NAME|FILE",
+    what.add_argument("--scenario", type=given, metavar="NAME|FILE",
                       help="play this scenario instead (learners that do not fit its learner "
                            "seats become one learner per seat, of the first learner's kind)")
-    what.add_argument("--map", metavar="NAME|FOLDER",
+    what.add_argument("--map", type=given, metavar="NAME|FOLDER",
                       help="override the scenario's map: a shipped map, a shipped folder such "
                            "as 'train' (16 training maps), a .txt file or a folder of maps")
     what.add_argument("--schedule", metavar="|".join(SCHEDULES),
@@ -79,7 +80,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     what.add_argument("--curriculum", nargs="?", const=True, metavar="START:END[:SHAPE]",
                       help="raise the bots' weakness (probability of acting per tick) over "
                            "the run; default 0.1:0.8, shape linear or sigmoid")
-    what.add_argument("--init-from", metavar="CHECKPOINT",
+    what.add_argument("--init-from", type=given, metavar="CHECKPOINT",
                       help="warm start: every learner starts from the PPO learner of this "
                            "checkpoint (a run or checkpoint folder, or agent:NAME, e.g. a 1v1 "
                            "agent for a team run; new inputs start at zero weight)")
@@ -103,8 +104,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     run = p.add_argument_group("run settings")
     run.add_argument("--name", help="run name; the run lives in <runs>/<name> "
                                     "(default: the preset's or the file's name)")
-    run.add_argument("--runs", help="folder of runs (default: runs)")
-    run.add_argument("--resume", metavar="DIR",
+    run.add_argument("--runs", type=given, help="folder of runs (default: runs)")
+    run.add_argument("--resume", type=given, metavar="DIR",
                      help="continue the run saved in DIR (a run folder or a checkpoint)")
     run.add_argument("--total-steps", type=positive_int,
                      help="env steps to train in total, rounded up to a whole iteration "
