@@ -497,6 +497,14 @@ CASES = [
     ("plot-run-file", ["plot", "{good_txt}"], ["{good_txt}: a file, not a run folder"]),
     ("agents-export-under-file", ["agents", "export", "{run}", "{good_txt}/agent"],
      ["dest: {good_txt}/agent: {good_txt} is a file, not a folder"]),
+    ("agents-export-eval-missing", ["agents", "export", "{run}", "{dir}/agent_e",
+                                    "--eval", "{missing}"],
+     ["--eval: {missing}: cannot read: No such file or directory; give the `alphatank eval "
+      "--json` file of the exported checkpoint"]),
+    ("agents-export-eval-not-json", ["agents", "export", "{run}", "{dir}/agent_e",
+                                     "--eval", "{good_txt}"],
+     ["--eval: {good_txt}: not JSON (Expecting value at line 1 column 1); give the "
+      "`alphatank eval --json` file"]),
     ("train-config-binary", ["train", "--config", "{binary_toml}"], ["{binary_toml}", "UTF-8"]),
     ("train-config-toml", ["train", "--config", "{syntax_toml}"],
      ["{syntax_toml}", "invalid TOML"]),

@@ -69,13 +69,20 @@ ROW_NUMBERS = ("win_rate", "ci95_low", "ci95_high", "games")  # what the listing
 def _eval_of(path: str, checkpoint: str) -> Any:
     """The rows of an ``alphatank eval --json`` file for the agent exported from
     ``checkpoint``: each an evaluation row of that very checkpoint, else InputError."""
+    from alphatank.files import read_text
     from alphatank.game.seats import checkpoint_source
     from alphatank.training.checkpoint import CheckpointError, resolve_checkpoint_dir
 
+    want = "give the `alphatank eval --json` file of the exported checkpoint"
     try:
-        data = json.loads(Path(path).read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise InputError(f"--eval: {path}: {exc}") from None
+        text = read_text(path)  # ValueError naming the file: unreadable, or not UTF-8
+    except ValueError as exc:
+        raise InputError(f"--eval: {exc}; {want}") from None
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise InputError(f"--eval: {path}: not JSON ({exc.msg} at line {exc.lineno} column "
+                         f"{exc.colno}); {want}") from None
 
     def folder(spec: str) -> Path:
         return resolve_checkpoint_dir(checkpoint_source(spec)).resolve()
