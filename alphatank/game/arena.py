@@ -79,10 +79,12 @@ class ArenaResult:
 
 def arena_scenario(first: str, second: str, map_name: str, preset: str = "paper",
                    game: Mapping[str, Any] | None = None) -> Scenario:
-    """The two-seat scenario of an arena game: ``first`` is team A, ``second`` team B."""
+    """The two-seat scenario of an arena game: ``first`` is team A, ``second`` team B
+    (map errors name ``--map``, the flag that gives ``map_name``)."""
     seats = [spec_seat(first, "A").to_dict(), spec_seat(second, "B").to_dict()]
     return parse_scenario({"name": "arena", "map": map_name, "preset": preset,
-                           "game": dict(game or {}), "seats": seats}, source="arena")
+                           "game": dict(game or {}), "seats": seats}, source="arena",
+                          map_label="--map")
 
 
 def run_arena(seats: Sequence[str], map_name: str = "maze", games: int = 20, seed: int = 0,

@@ -236,16 +236,20 @@ def load_scenario(name_or_path: str | Path | Scenario) -> Scenario:
 
 
 def parse_scenario(data: dict[str, Any], source: str = "<dict>",
-                   base: Path | None = None, check_paths: bool = True) -> Scenario:
+                   base: Path | None = None, check_paths: bool = True,
+                   map_label: str | None = None) -> Scenario:
     """Validate a scenario mapping (as read from TOML); errors name ``source`` and field.
     Each seat gets its kind's check (bot names, options and their types, checkpoint
     folders, ...); checkpoint seat paths are resolved against ``base`` first, like maps,
     and not checked when ``check_paths`` is False (a scenario stored in a checkpoint, whose
-    opponents' folders may since have moved)."""
+    opponents' folders may since have moved). ``map_label`` names the map in its errors
+    (``--map`` for a scenario made from command-line flags; default ``SOURCE: map``)."""
     if not isinstance(data, dict):
         raise ScenarioError(f"{source}: a scenario must be a table, got {type(data).__name__}")
 
     def fail(where: str, msg: str) -> ScenarioError:
+        if where == "map" and map_label is not None:
+            return ScenarioError(f"{map_label}: {msg}")
         return ScenarioError(f"{source}: {where}: {msg}")
 
     unknown = sorted(set(data) - set(_TOP_KEYS))
@@ -354,14 +358,14 @@ def _checked(sources: tuple[str, ...], fail: Any, key: str = "map") -> tuple[str
 def seats_scenario(seats: str, map_name: str, game: dict[str, Any] | None = None,
                    preset: str = "paper", name: str = "custom") -> Scenario:
     """A scenario from a ``--seats`` list (see :mod:`alphatank.game.seats`) on
-    ``map_name``; errors name the seat and the allowed values."""
+    ``map_name``; errors name the seat (or ``--map``) and the allowed values."""
     try:
         tables = parse_seat_list(seats)
     except SeatError as exc:
         raise ScenarioError(str(exc)) from None
     data = {"name": name, "map": map_name, "preset": preset, "seats": tables,
             "game": dict(game or {})}
-    return parse_scenario(data, source="--seats")
+    return parse_scenario(data, source="--seats", map_label="--map")
 
 
 def _is_checkpoint_seat(data: Any) -> bool:
