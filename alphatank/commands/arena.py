@@ -5,6 +5,7 @@ sides, as a win/draw/loss matrix with Wilson 95% intervals and an openskill leag
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 
@@ -32,12 +33,24 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--preset", default="paper", help="game preset (paper, long_range)")
     p.add_argument("--max-steps", type=positive_int, default=None,
                    help="ticks before a game is a draw (default: the preset's)")
-    p.add_argument("--render", action="store_true", help="show every game in a window")
+    p.add_argument("--render", action="store_true",
+                   help="show every game in a window (refused without a display)")
     p.add_argument("--fps", type=window_fps, default=60.0,
                    help="frame rate with --render, 1 to 1000 (default: 60)")
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.render:  # a window that would show nothing is refused before any game
+        from alphatank.ui.render import DisplayUnavailable, init_display
+
+        try:
+            if os.environ.get("SDL_VIDEODRIVER") == "dummy":
+                raise DisplayUnavailable("SDL_VIDEODRIVER=dummy shows nothing")
+            init_display()
+        except DisplayUnavailable as exc:
+            print(f"alphatank arena: error: --render: {exc}; run it on a desktop session, "
+                  "or leave out --render", file=sys.stderr)
+            return 2
     seats = [s.strip() for s in args.seats.split(",") if s.strip()]
     overrides = {} if args.max_steps is None else {"max_steps": args.max_steps}
     for s in seats:  # bad input raises an InputError: one line from alphatank.cli
