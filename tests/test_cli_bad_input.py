@@ -95,6 +95,8 @@ def files(tmp_path_factory) -> dict[str, str]:
     put("rundraw.toml", 'scenario = "vs_random"\n[rewards]\nteam_draw = 5\nteam_loss = -5\n')
     put("runname.toml", 'name = "../../escaped"\nscenario = "vs_random"\n')
     put("runmap.toml", run + 'map = "nowhere"\n')
+    put("rundesc.toml", run + 'description = "two\\nlines"\n')
+    put("descnl.toml", SCENARIO.replace('map = "open"', 'description = "a\\tb"\nmap = "open"'))
     put("runinit.toml", run + 'init_from = "agent:nobody"\n')
     put("runobs.toml", run + 'observation = "egocentric_fulll"\n')
     put("runimitate.toml", run + 'imitate = { bot = "smrt" }\n')
@@ -324,6 +326,8 @@ CASES = [
      ["{emptydir}: a folder, not a scenario file"]),
     ("record-scenario-empty", ["record", "--scenario", "{empty_toml}"],
      ["{empty_toml}", "name"]),
+    ("record-scenario-description", ["record", "--scenario", "{descnl_toml}"],
+     ["{descnl_toml}: description: must be printable (no control characters), got 'a\\tb'"]),
     ("record-scenario-binary", ["record", "--scenario", "{binary_toml}"],
      ["{binary_toml}", "UTF-8"]),
     ("record-friendly-fire", ["record", "--scenario", "{ff_toml}"],
@@ -511,6 +515,9 @@ CASES = [
                                      "--eval", "{good_txt}"],
      ["--eval: {good_txt}: not JSON (Expecting value at line 1 column 1); give the "
       "`alphatank eval --json` file"]),
+    ("agents-export-description", ["agents", "export", "{run}", "{dir}/agent_d",
+                                   "--description", "a\nb"],
+     ["--description: must be printable (no control characters), got 'a\\nb'"]),
     ("train-config-binary", ["train", "--config", "{binary_toml}"], ["{binary_toml}", "UTF-8"]),
     ("train-config-toml", ["train", "--config", "{syntax_toml}"],
      ["{syntax_toml}", "invalid TOML"]),
@@ -537,6 +544,9 @@ CASES = [
      ["{runscenario_toml}: scenario: unknown scenario 'vs_nobody'", "vs_random"]),
     ("train-config-map", ["train", "--config", "{runmap_toml}"],
      ["{runmap_toml}: map:", "unknown map 'nowhere'", "battlefield"]),
+    ("train-config-description", ["train", "--config", "{rundesc_toml}", "--print-config"],
+     ["{rundesc_toml}: description: must be printable (no control characters), got "
+      "'two\\nlines'"]),
     ("train-config-init-from", ["train", "--config", "{runinit_toml}"],
      ["{runinit_toml}: init_from: unknown agent 'nobody'", "ppo_vs_smart"]),
     ("train-config-observation", ["train", "--config", "{runobs_toml}"],

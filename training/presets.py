@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from alphatank.files import read_text
-from alphatank.sim.config import ACTION_REPEAT_MAX, MATCHES_MAX
+from alphatank.sim.config import ACTION_REPEAT_MAX, MATCHES_MAX, printable_problem
 from alphatank.training.algorithms import ALGORITHMS, get_algorithm
 from alphatank.training.fields import (
     FieldError,
@@ -172,6 +172,8 @@ class TrainConfig:
             raise FieldError("TrainConfig", "name", f"must be letters, digits, '_', '.' or "
                              f"'-', not starting with '.' (it names the run's folder), got "
                              f"{self.name!r}")
+        if why := printable_problem(self.description):  # one line of `train --list`
+            raise FieldError("TrainConfig", "description", why)
         for spec in self.learners:
             if not isinstance(spec, LearnerSpec):
                 raise FieldError("TrainConfig", "learners", f"must hold LearnerSpecs, got "

@@ -33,6 +33,10 @@ def run(args: argparse.Namespace) -> int:
     if args.action == "export":
         from alphatank.files import check_folder
         from alphatank.game.seats import checkpoint_source
+        from alphatank.sim.config import printable_problem
+
+        if why := printable_problem(args.description):
+            raise InputError(f"--description: {why}")
         check_folder(args.dest, "dest")
         from alphatank.training.agents import export_agent
         record = {"description": args.description, "commands": list(args.commands)}

@@ -58,6 +58,7 @@ from alphatank.sim.config import (
     RewardConfig,
     from_dict,
     game_config,
+    printable_problem,
 )
 from alphatank.sim.mapspec import (
     MapError,
@@ -261,6 +262,8 @@ def parse_scenario(data: dict[str, Any], source: str = "<dict>",
     description = data.get("description", "")
     if not isinstance(description, str):
         raise fail("description", "must be a string")
+    if why := printable_problem(description):
+        raise fail("description", why)
     preset = data.get("preset", "paper")
     if preset not in PRESETS:
         raise fail("preset", f"unknown preset {preset!r}; valid: {sorted(PRESETS)}")

@@ -60,6 +60,12 @@ def name_problem(value: Any, max_len: int = TEAM_NAME_MAX) -> str | None:
         return f"must be a non-empty string, got {value!r}"
     if len(value) > max_len:
         return f"must be at most {max_len} characters, got {len(value):,}"
+    return printable_problem(value)
+
+
+def printable_problem(value: str) -> str | None:
+    """Why the string ``value`` cannot be one line of text (a name, a description): a
+    control character (a newline, a tab, a NUL), else None."""
     if not value.isprintable():
         return f"must be printable (no control characters), got {value!r}"
     return None
