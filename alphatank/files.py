@@ -65,6 +65,8 @@ def check_writable(path: str | Path, label: str, overwrite: bool = True) -> None
     """InputError ``label: path: why`` unless a file can be written at ``path`` (missing
     folders are made when it is): asked before a long job whose result would be lost.
     With ``overwrite=False`` an existing file is refused too (the command's ``--force``)."""
+    if not str(path):  # Path("") is the working folder
+        raise InputError(f"{label}: is empty; give a file name")
     p = Path(path)
     if p.is_dir():
         raise InputError(f"{label}: {path}: is a folder; give a file name in it")

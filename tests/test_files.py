@@ -120,6 +120,8 @@ def test_output_paths_are_checked_before_the_work(tmp_path):
     check_folder(tmp_path / "runs" / "more", "--runs")
     with pytest.raises(InputError, match=r"^--json: .*: is a folder"):
         check_writable(tmp_path, "--json")
+    with pytest.raises(InputError, match=r"^--json: is empty; give a file name$"):
+        check_writable("", "--json")  # not the working folder
     with pytest.raises(InputError, match=r"^--csv: .*f\.txt/out\.csv: .*f\.txt is a file"):
         check_writable(tmp_path / "f.txt" / "out.csv", "--csv")
     with pytest.raises(InputError, match=r"^--runs: .*f\.txt: is a file, not a folder"):
