@@ -39,11 +39,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--max-frames", type=positive_int, help="stop after this many frames")
 
 
+def _no_display(why: str) -> int:
+    print("alphatank play: " + NO_DISPLAY_HELP.format(
+        verb="play", why=f" ({why})", instead="play headless and get a video with "
+        "`alphatank record`"), file=sys.stderr)
+    return 2
+
+
 def run(args: argparse.Namespace) -> int:
     if os.environ.get("SDL_VIDEODRIVER") == "dummy" and not args.headless_test:
-        print("alphatank play: " + NO_DISPLAY_HELP.format(why=" (SDL_VIDEODRIVER=dummy)"),
-              file=sys.stderr)
-        return 2
+        return _no_display("SDL_VIDEODRIVER=dummy")
     if args.save_replay:
         check_writable(args.save_replay, "--save-replay", overwrite=args.force)
     try:
@@ -64,9 +69,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         report = session.run(max_frames=args.max_frames)
     except DisplayUnavailable as exc:
-        print("alphatank play: " + NO_DISPLAY_HELP.format(why=f" ({exc})"),
-              file=sys.stderr)
-        return 2
+        return _no_display(str(exc))
     wins: dict[str, int] = {}
     for ep in report.episodes:
         key = ep.winner or ("draw" if ep.done else "unfinished")  # quit or restarted

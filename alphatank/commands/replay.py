@@ -82,11 +82,16 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _no_display(why: str) -> int:
+    print("alphatank replay: " + NO_DISPLAY_HELP.format(
+        verb="replay FILE --render", why=f" ({why})",
+        instead="render it to a video with `--record OUT.mp4` or `--gif FILE`"), file=sys.stderr)
+    return 2
+
+
 def _render(replay: Replay, args: argparse.Namespace, overlays: tuple[str, ...]) -> int:
     if os.environ.get("SDL_VIDEODRIVER") == "dummy" and not args.headless_test:
-        print("alphatank replay: " + NO_DISPLAY_HELP.format(why=" (SDL_VIDEODRIVER=dummy)"),
-              file=sys.stderr)
-        return 2
+        return _no_display("SDL_VIDEODRIVER=dummy")
     tick_hz = replay.game_config().tick_hz
     labels = replay.labels or [str(i) for i in range(len(replay.teams))]  # seats from 0
     session = PlaySession(fps=tick_hz * args.speed, overlays=overlays, verbose=False,
@@ -95,6 +100,5 @@ def _render(replay: Replay, args: argparse.Namespace, overlays: tuple[str, ...])
     try:
         session.run(max_frames=args.max_frames, caption=f"AlphaTank replay: {args.file}")
     except DisplayUnavailable as exc:
-        print("alphatank replay: " + NO_DISPLAY_HELP.format(why=f" ({exc})"), file=sys.stderr)
-        return 2
+        return _no_display(str(exc))
     return 0

@@ -32,10 +32,11 @@ from alphatank.ui.render import (
 )
 from alphatank.ui.replay import ReplayRecorder
 
-NO_DISPLAY_HELP = ("no display available for an interactive window{why}. Run `alphatank play` "
+# The verb's one line when no window can show: format with the verb, why, and what to do
+# instead (headless).
+NO_DISPLAY_HELP = ("no display available for an interactive window{why}. Run `alphatank {verb}` "
                    "on a desktop session (set DISPLAY or WAYLAND_DISPLAY and unset "
-                   "SDL_VIDEODRIVER=dummy), or play headless and get a video with "
-                   "`alphatank record` instead.")
+                   "SDL_VIDEODRIVER=dummy), or {instead} instead.")
 
 
 def summary_lines(match: Match, lineup_labels: Sequence[str], shots: np.ndarray
