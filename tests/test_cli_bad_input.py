@@ -769,6 +769,16 @@ def test_record_overwrites_a_replay_only_with_force(tmp_path, capsys):
     assert old.read_bytes() != b"old" and video.stat().st_size > 0
 
 
+def test_replay_render_without_a_display_is_refused_before_any_video(files, tmp_path, capsys):
+    """--render with no display: the refusal is the only line, before the header and before
+    a --gif beside it is written (it was written, then the window refused, exit 2)."""
+    gif = tmp_path / "r.gif"
+    rc, out, err = _run_main(main, ["replay", files["good_npz"], "--gif", str(gif), "--render"],
+                             capsys)
+    _check(rc, out, err, ["replay: no display available", "SDL_VIDEODRIVER=dummy"])
+    assert rc == 2 and out == "" and not gif.exists()
+
+
 def test_record_refuses_a_map_beside_a_scenario(tmp_path, capsys):
     """--map picks the map for --seats: beside --scenario it was ignored (the match played
     on the scenario's map, even for a map that does not exist); refused, no video made."""

@@ -16,7 +16,12 @@ import time
 from alphatank.commands.argtypes import given, positive_int, replay_speed
 from alphatank.errors import one_line
 from alphatank.files import check_distinct
-from alphatank.ui.render import DEFAULT_OVERLAYS, DisplayUnavailable, parse_overlays
+from alphatank.ui.render import (
+    DEFAULT_OVERLAYS,
+    DisplayUnavailable,
+    init_display,
+    parse_overlays,
+)
 from alphatank.ui.replay import (
     Replay,
     ReplayError,
@@ -55,6 +60,13 @@ def run(args: argparse.Namespace) -> int:
     except (ReplayError, ValueError) as exc:
         print(f"alphatank replay: error: {one_line(exc)}", file=sys.stderr)
         return 2
+    if args.render and not args.headless_test:  # refused before the header or any video
+        try:
+            if os.environ.get("SDL_VIDEODRIVER") == "dummy":
+                raise DisplayUnavailable("SDL_VIDEODRIVER=dummy")
+            init_display()
+        except DisplayUnavailable as exc:
+            return _no_display(str(exc))
     who = ", ".join(f"{t}:{s}" for t, s in zip(replay.teams, replay.seats, strict=False))
     print(f"{args.file}: {replay.scenario or 'match'} on {replay.map_name}, "
           f"{replay.ticks} ticks, seats [{who}], recorded result: "
@@ -90,8 +102,6 @@ def _no_display(why: str) -> int:
 
 
 def _render(replay: Replay, args: argparse.Namespace, overlays: tuple[str, ...]) -> int:
-    if os.environ.get("SDL_VIDEODRIVER") == "dummy" and not args.headless_test:
-        return _no_display("SDL_VIDEODRIVER=dummy")
     tick_hz = replay.game_config().tick_hz
     labels = replay.labels or [str(i) for i in range(len(replay.teams))]  # seats from 0
     session = PlaySession(fps=tick_hz * args.speed, overlays=overlays, verbose=False,
