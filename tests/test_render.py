@@ -252,9 +252,10 @@ def test_without_a_display_human_mode_and_play_are_refused_not_silent(tmp_path):
     assert ("DisplayUnavailable: render_mode='human' needs a display (no display: SDL fell "
             "back to its 'offscreen' video driver" in res.stderr), res.stderr[-600:]
     res = subprocess.run([sys.executable, "-m", "alphatank.cli", "play", "--seats",
-                          "smart,random"], capture_output=True, text=True, env=env,
+                          "human,random"], capture_output=True, text=True, env=env,
                          timeout=120, cwd=tmp_path)
     assert res.returncode == 2 and "play: no display available" in res.stderr
+    assert res.stdout == ""  # refused before the keys of a player who cannot play
     assert "'offscreen' video driver" in res.stderr
 
 

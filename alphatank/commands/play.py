@@ -18,7 +18,7 @@ from alphatank.commands.lineup_options import add_lineup_arguments, lineup_from_
 from alphatank.errors import one_line
 from alphatank.files import check_writable
 from alphatank.ui.human import HUMAN_ORDER
-from alphatank.ui.render import DisplayUnavailable, parse_overlays
+from alphatank.ui.render import DisplayUnavailable, init_display, parse_overlays
 from alphatank.ui.replay import check_replay_room
 from alphatank.ui.session import NO_DISPLAY_HELP, PlaySession
 
@@ -47,8 +47,13 @@ def _no_display(why: str) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    if os.environ.get("SDL_VIDEODRIVER") == "dummy" and not args.headless_test:
-        return _no_display("SDL_VIDEODRIVER=dummy")
+    if not args.headless_test:  # refused before the keyboard lines, as arena's --render is
+        try:
+            if os.environ.get("SDL_VIDEODRIVER") == "dummy":
+                raise DisplayUnavailable("SDL_VIDEODRIVER=dummy")
+            init_display()
+        except DisplayUnavailable as exc:
+            return _no_display(str(exc))
     if args.save_replay:
         check_writable(args.save_replay, "--save-replay", overwrite=args.force)
     try:
