@@ -65,6 +65,7 @@ def files(tmp_path_factory) -> dict[str, str]:
     put("nulteam.toml", 'name = "nul"\nmap = "open"\n[[seats]]\nteam = "A\\u0000"\n'
                         'controller = "bot"\nbot = "smart"\n[[seats]]\nteam = "B"\n'
                         'controller = "bot"\nbot = "random"\n')
+    put("nbspteam.toml", SCENARIO.replace('team = "A"', 'team = "A\\u00a0B"'))
     put("binary.txt", bytes(range(256)) * 4)
     put("latin1.txt", "name: caf\xe9\n\n#####\n#1.2#\n#####\n".encode("latin-1"))
     put("utf16.txt", "name: x\n\n#####\n#1.2#\n#####\n".encode("utf-16"))
@@ -306,7 +307,7 @@ CASES = [
                           "--replay", "{dir}/./s.mp4"],
      ["--out and --replay name the same file ({dir}/./s.mp4): one would overwrite the other"]),
     ("replay-team-nul", ["replay", "{teamnul_npz}"],
-     ["meta.teams[0]: must be printable (no control characters), got 'A\\x00'"]),
+     ["meta.teams[0]: must be printable, got 'A\\x00': U+0000 is a control character"]),
     ("replay-long-label", ["replay", "{longlabel_npz}"],
      ["meta.labels[0]: must be at most 4096 characters, got 5,000"]),
     ("replay-header-bomb", ["replay", "{bomb_npz}"],
@@ -324,7 +325,10 @@ CASES = [
     ("play-replay-room", ["play", "--headless-test", "--scenario", "{longgame_toml}",
                           "--save-replay", "{dir}/long.npz"], ["--save-replay: a game of up to"]),
     ("record-team-nul", ["record", "--scenario", "{nulteam_toml}"],
-     ["seats[0].team: must be printable (no control characters), got 'A\\x00'"]),
+     ["seats[0].team: must be printable, got 'A\\x00': U+0000 is a control character"]),
+    ("record-team-nbsp", ["record", "--scenario", "{nbspteam_toml}"],
+     ["seats[0].team: must be printable, got 'A\\xa0B': U+00A0 NO-BREAK SPACE is a space "
+      "other than ' '"]),
     ("record-scenario-missing", ["record", "--scenario", "{dir}/none.toml"],
      ["none.toml", "no such scenario file"]),
     ("record-scenario-folder", ["record", "--scenario", "{emptydir}"],
@@ -332,7 +336,8 @@ CASES = [
     ("record-scenario-empty", ["record", "--scenario", "{empty_toml}"],
      ["{empty_toml}", "name"]),
     ("record-scenario-description", ["record", "--scenario", "{descnl_toml}"],
-     ["{descnl_toml}: description: must be printable (no control characters), got 'a\\tb'"]),
+     ["{descnl_toml}: description: must be printable, got 'a\\tb': U+0009 is a control "
+      "character"]),
     ("record-scenario-binary", ["record", "--scenario", "{binary_toml}"],
      ["{binary_toml}", "UTF-8"]),
     ("record-friendly-fire", ["record", "--scenario", "{ff_toml}"],
@@ -522,7 +527,11 @@ CASES = [
       "`alphatank eval --json` file"]),
     ("agents-export-description", ["agents", "export", "{run}", "{dir}/agent_d",
                                    "--description", "a\nb"],
-     ["--description: must be printable (no control characters), got 'a\\nb'"]),
+     ["--description: must be printable, got 'a\\nb': U+000A is a control character"]),
+    ("agents-export-description-rlo", ["agents", "export", "{run}", "{dir}/agent_d",
+                                       "--description", "a\u202eb"],
+     ["--description: must be printable, got 'a\\u202eb': U+202E RIGHT-TO-LEFT OVERRIDE is "
+      "not printable"]),
     ("train-config-binary", ["train", "--config", "{binary_toml}"], ["{binary_toml}", "UTF-8"]),
     ("train-config-toml", ["train", "--config", "{syntax_toml}"],
      ["{syntax_toml}", "invalid TOML"]),
@@ -550,8 +559,8 @@ CASES = [
     ("train-config-map", ["train", "--config", "{runmap_toml}"],
      ["{runmap_toml}: map:", "unknown map 'nowhere'", "battlefield"]),
     ("train-config-description", ["train", "--config", "{rundesc_toml}", "--print-config"],
-     ["{rundesc_toml}: description: must be printable (no control characters), got "
-      "'two\\nlines'"]),
+     ["{rundesc_toml}: description: must be printable, got 'two\\nlines': U+000A is a "
+      "control character"]),
     ("train-config-init-from", ["train", "--config", "{runinit_toml}"],
      ["{runinit_toml}: init_from: unknown agent 'nobody'", "ppo_vs_smart"]),
     ("train-config-observation", ["train", "--config", "{runobs_toml}"],

@@ -17,6 +17,7 @@ import math
 import numbers
 import types
 import typing
+import unicodedata
 from dataclasses import dataclass, field, fields
 from typing import Any, TypeVar
 
@@ -63,12 +64,20 @@ def name_problem(value: Any, max_len: int = TEAM_NAME_MAX) -> str | None:
     return printable_problem(value)
 
 
+_NOT_PRINTABLE = {"Cc": "a control character", "Zs": "a space other than ' '",
+                  "Zl": "a line break", "Zp": "a line break"}
+
+
 def printable_problem(value: str) -> str | None:
-    """Why the string ``value`` cannot be one line of text (a name, a description): a
-    control character (a newline, a tab, a NUL), else None."""
-    if not value.isprintable():
-        return f"must be printable (no control characters), got {value!r}"
-    return None
+    """Why the string ``value`` cannot be one line of text (a name, a description): its
+    first character that ``str.isprintable`` refuses (a control character such as a newline,
+    a tab or a NUL, a space other than ' ', a line break, a format character), else None."""
+    bad = next((c for c in value if not c.isprintable()), None)
+    if bad is None:
+        return None
+    char = f"U+{ord(bad):04X} {unicodedata.name(bad, '')}".rstrip()
+    what = _NOT_PRINTABLE.get(unicodedata.category(bad), "not printable")
+    return f"must be printable, got {value!r}: {char} is {what}"
 
 
 def check_value(kinds: tuple[type, ...], value: Any, rng: tuple[Any, Any] | None = None
