@@ -241,9 +241,10 @@ def test_a_human_mode_env_opens_its_window_on_the_first_render_only():
 def test_without_a_display_human_mode_and_play_are_refused_not_silent(tmp_path):
     """With no display and no SDL_VIDEODRIVER, pygame quietly falls back to its offscreen
     driver: a human-mode env would crawl at 30 fps showing nothing and `alphatank play`
-    would wait for keys on an invisible window. Both refuse in one line instead."""
+    would wait for keys on an invisible window. Both refuse in one line instead (without
+    XDG_RUNTIME_DIR, libwayland's own "error: XDG_RUNTIME_DIR is invalid" came first)."""
     env = {k: v for k, v in os.environ.items()
-           if k not in ("SDL_VIDEODRIVER", "DISPLAY", "WAYLAND_DISPLAY")}
+           if k not in ("SDL_VIDEODRIVER", "DISPLAY", "WAYLAND_DISPLAY", "XDG_RUNTIME_DIR")}
     code = ("import gymnasium, alphatank.envs\n"
             "gymnasium.make('AlphaTank/VsSmart-v0', render_mode='human')\n")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
@@ -254,9 +255,14 @@ def test_without_a_display_human_mode_and_play_are_refused_not_silent(tmp_path):
     res = subprocess.run([sys.executable, "-m", "alphatank.cli", "play", "--seats",
                           "human,random"], capture_output=True, text=True, env=env,
                          timeout=120, cwd=tmp_path)
-    assert res.returncode == 2 and "play: no display available" in res.stderr
-    assert res.stdout == ""  # refused before the keys of a player who cannot play
+    assert res.returncode == 2 and res.stderr.startswith("alphatank play: no display available")
+    assert res.stderr.count("\n") == 1 and res.stdout == ""  # not even the players' keys
     assert "'offscreen' video driver" in res.stderr
+    res = subprocess.run([sys.executable, "-m", "alphatank.cli", "arena", "--render"],
+                         capture_output=True, text=True, env=env, timeout=120, cwd=tmp_path)
+    assert res.returncode == 2 and res.stdout == ""
+    assert res.stderr.startswith("alphatank arena: error: --render: no display: SDL fell back")
+    assert res.stderr.count("\n") == 1
 
 
 def test_a_long_first_word_is_cut_to_fit_in_a_few_renders():

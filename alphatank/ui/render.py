@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import math
 import os
+import sys
+import tempfile
 import time
 from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING, Any
@@ -69,12 +71,36 @@ class DisplayUnavailable(RuntimeError):
 HEADLESS_DRIVERS = ("dummy", "offscreen")  # SDL video drivers whose windows show nothing
 
 
+def _display_init_held() -> bytes:
+    """``pygame.display.init()`` with file descriptor 2 held: what SDL, or a library it
+    probed, wrote there (libwayland's "error: XDG_RUNTIME_DIR is invalid ..." with no
+    display at all)."""
+    if sys.stderr is not None:  # None when Python started without a stderr
+        sys.stderr.flush()
+    try:
+        saved = os.dup(2)
+    except OSError:  # no stderr to hold
+        pygame.display.init()
+        return b""
+    with tempfile.TemporaryFile() as said:
+        os.dup2(said.fileno(), 2)
+        try:
+            pygame.display.init()
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+        said.seek(0)
+        return said.read()
+
+
 def init_display() -> None:
     """Initialise pygame's display, or raise DisplayUnavailable: when it cannot, or when SDL
     fell back to a video driver that shows nothing and ``SDL_VIDEODRIVER`` did not ask for
-    it (with no display, pygame quietly picks ``offscreen``: a window would never show)."""
+    it (with no display, pygame quietly picks ``offscreen``: a window would never show).
+    What SDL printed on the way is passed on, unless refused: the refusal is then the one
+    line."""
     try:
-        pygame.display.init()
+        said = _display_init_held()
     except pygame.error as exc:
         raise DisplayUnavailable(f"cannot open a window: {exc}") from exc
     driver = pygame.display.get_driver()
@@ -82,6 +108,8 @@ def init_display() -> None:
         pygame.display.quit()
         raise DisplayUnavailable(f"no display: SDL fell back to its {driver!r} video "
                                  "driver, which shows nothing")
+    if said:
+        os.write(2, said)
 
 
 def open_window(size: tuple[int, int], caption: str = "AlphaTank") -> pygame.Surface:
