@@ -210,12 +210,13 @@ def side_kind(seats: Sequence[Seat], idx: Sequence[int]) -> str:
 
 def with_map(sc: Scenario, map_name: str | None) -> Scenario:
     """``sc`` played on ``map_name`` (a shipped map or folder such as ``test``, a .txt
-    path or a folder of maps); None keeps its own."""
+    path or a folder of maps); None keeps its own. Map errors name ``--map``."""
     if map_name is None:
         return sc
     from alphatank.game.scenarios import parse_scenario
 
-    return parse_scenario({**sc.to_dict(), "map": map_name}, f"{sc.source} (map {map_name!r})")
+    return parse_scenario({**sc.to_dict(), "map": map_name}, f"{sc.source} (map {map_name!r})",
+                          map_label="--map")
 
 
 def evaluate_checkpoint(checkpoint: str | Path | Checkpoint, opponents: Sequence[str | None],

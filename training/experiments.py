@@ -245,7 +245,7 @@ def _column(data: Any, source: str) -> Column:
         try:
             with_map(load_scenario("vs_random"), col.map)
         except ValueError as exc:
-            raise ExperimentError(f"{source}: map: {str(exc).rpartition(': map: ')[2]}") \
+            raise ExperimentError(f"{source}: map: {str(exc).removeprefix('--map: ')}") \
                 from None
     if col.bot is not None:
         from alphatank.game.scenarios import bot_names
