@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 from alphatank.commands.argtypes import given, match_count, positive_int, seed
 from alphatank.errors import InputError, as_input_error
-from alphatank.files import check_writable, write_text_atomic
+from alphatank.files import check_distinct, check_writable, write_text_atomic
 
 if TYPE_CHECKING:
     from alphatank.training.checkpoint import Checkpoint
@@ -94,6 +94,7 @@ def run(args: argparse.Namespace) -> int:
         if path:
             check_writable(path, label)
     team_json = team_json_path(args.json) if args.json and args.team_stats else None
+    check_distinct({"--csv": args.csv, "--json": args.json, "--team-stats": team_json})
     results = []
     try:
         game = parse_game("--game", args.game)
