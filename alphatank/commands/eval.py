@@ -30,14 +30,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "checkpoint:PATH, agent:NAME for a shipped agent, or bot:NAME "
                         "(with --scenario) for a bot in the learner seats: its win rate in "
                         "the same games, beside an agent's")
-    p.add_argument("--vs", default="",
+    p.add_argument("--vs",
                    help="comma-separated bots to play (e.g. smart,aggressive,dodge,defensive); "
                         "default: the opponents of each checkpoint's scenario")
     p.add_argument("--games", type=positive_int, default=100, help="games per row (default: 100)")
     p.add_argument("--scenario", type=given,
                    help="play in this scenario instead of the checkpoint's own")
-    p.add_argument("--team", help="team the checkpoint plays, one with a learner seat in the "
-                                  "scenario (default: its first learner's)")
+    p.add_argument("--team", type=given,
+                   help="team the checkpoint plays, one with a learner seat in the scenario "
+                        "(default: its first learner's)")
     p.add_argument("--map", type=given, metavar="NAME|FOLDER",
                    help="play on other maps: a shipped map, a shipped folder such as 'test', "
                         "a .txt file or a folder of maps")
@@ -85,7 +86,10 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("--pool needs two or more checkpoints (e.g. the seeds of one set-up)")
     if args.weakness is not None and not 0.0 <= args.weakness <= 1.0:
         raise InputError(f"--weakness must be in [0, 1], got {args.weakness}")
-    opponents = [b.strip() for b in args.vs.split(",") if b.strip()] or [None]
+    opponents = [b.strip() for b in (args.vs or "").split(",") if b.strip()] or [None]
+    if args.vs is not None and opponents == [None]:  # read as none: the scenario's bots
+        raise InputError(f"--vs: no bot named in {args.vs!r}; give comma-separated bots, "
+                         "e.g. smart,dodge")
     from alphatank.bots.registry import BOT_NAMES
     unknown = [b for b in opponents if b is not None and b not in BOT_NAMES]
     if unknown:
