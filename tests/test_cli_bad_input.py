@@ -232,7 +232,9 @@ CASES = [
     ("maps-empty-path", ["maps", ""], ["''", "empty map name or path"]),
     ("maps-wrong-kind", ["maps", "{good_npz}"], ["{good_npz}", "UTF-8"]),
     # bench
-    ("bench-map", ["bench", "--map", "{missing}"], ["{missing}", "no such map file"]),
+    ("bench-map", ["bench", "--map", "{missing}"], ["--map: {missing}: no such map file"]),
+    ("bench-map-unknown", ["bench", "--map", "nowhere"],
+     ["bench: error: --map: nowhere: unknown map 'nowhere'", "battlefield"]),
     ("bench-map-room", ["bench", "--ticks", "10", "--repeats", "1", "--map", "{small_txt}"],
      ["--map", "'small' has room for 3 tanks", "4v4 (8 tanks)"]),
     ("bench-json-folder", ["bench", "--json", "{dir}"], ["--json", "is a folder"]),

@@ -108,7 +108,10 @@ def run(args: argparse.Namespace) -> int:
     if args.soak:
         return _soak(args)
     floor = find_floor(args.floor)  # a wrong --floor: one line from alphatank.cli
-    spec = load_map(args.map)
+    try:
+        spec = load_map(args.map)
+    except MapError as exc:
+        raise InputError(f"--map: {exc}") from None
     if spec.tank_room(8) < 8:
         raise MapError(f"map {spec.name!r} has room for {spec.tank_room(8)} tanks; the bench "
                        "plays 1v1 and 4v4 (8 tanks)", f"--map {args.map}")
