@@ -231,6 +231,7 @@ CASES = [
     ("maps-folder", ["maps", "{emptydir}"], ["{emptydir}: folder holds no .txt maps"]),
     ("maps-empty-path", ["maps", ""], ["''", "empty map name or path"]),
     ("maps-wrong-kind", ["maps", "{good_npz}"], ["{good_npz}", "UTF-8"]),
+    ("maps-device", ["maps", os.devnull], [f"{os.devnull}: not a file (a device or pipe)"]),
     # bench
     ("bench-map", ["bench", "--map", "{missing}"], ["--map: {missing}: no such map file"]),
     ("bench-map-unknown", ["bench", "--map", "nowhere"],

@@ -331,7 +331,8 @@ def load_map(name_or_path: str | Path) -> MapSpec:
         if path.is_dir():
             raise MapError("is a folder, not a map file (.txt)", str(path))
         if not path.is_file():
-            raise MapError("no such map file", str(path))
+            raise MapError("not a file (a device or pipe)" if path.exists() else
+                           "no such map file", str(path))
         try:
             text = read_text(path)
         except ValueError as exc:
