@@ -107,6 +107,10 @@ def files(tmp_path_factory) -> dict[str, str]:
     put("binary.npz", bytes(range(256)) * 8)
     (d / "emptydir").mkdir()
     out["emptydir"] = str(d / "emptydir")
+    for name, latest in (("latest_empty", b""), ("latest_binary", bytes(range(256)))):
+        (d / name).mkdir()
+        (d / name / "latest").write_bytes(latest)
+        out[name] = str(d / name)
 
     # A real replay, then spoiled copies.
     from alphatank.game.lineup import build_lineup
@@ -442,6 +446,10 @@ CASES = [
      ["argument --json: is empty"]),
     ("eval-missing", ["eval", "{missing}"], ["{missing}", "no such checkpoint"]),
     ("eval-empty-dir", ["eval", "{emptydir}"], ["{emptydir}", "not a checkpoint"]),
+    ("eval-latest-empty", ["eval", "{latest_empty}"],
+     ["{latest_empty}/latest: is empty; it names the run's latest save"]),
+    ("eval-latest-binary", ["eval", "{latest_binary}"],
+     ["{latest_binary}/latest: not a UTF-8 text file"]),
     ("eval-file", ["eval", "{good_txt}"], ["{good_txt}", "got a file"]),
     ("eval-truncated", ["eval", "{ckpt_cut}"], ["{ckpt_cut}", "invalid JSON"]),
     ("eval-version", ["eval", "{ckpt_v99}"], ["version 99"]),

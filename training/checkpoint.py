@@ -35,7 +35,7 @@ import numpy as np
 import torch
 
 from alphatank.errors import InputError
-from alphatank.files import check_folder, write_text_atomic
+from alphatank.files import check_folder, read_text, write_text_atomic
 from alphatank.game.observe import OBS_KINDS
 from alphatank.game.scenarios import Scenario, ScenarioError, parse_scenario, team_misfit
 from alphatank.game.seats import agent_path
@@ -206,7 +206,14 @@ def resolve_checkpoint_dir(path: str | Path) -> Path:
         return p
     latest = p / "latest"
     if latest.is_file():
-        target = p / latest.read_text(encoding="utf-8").strip()
+        try:
+            name = read_text(latest).strip()
+        except ValueError as exc:
+            raise CheckpointError(str(exc)) from None
+        if not name:  # read as the run folder itself
+            raise CheckpointError(f"{latest}: is empty; it names the run's latest save "
+                                  "(checkpoints/step_N)")
+        target = p / name
         moved = sorted(target.parent.glob(f".{target.name}.old-*/meta.json"))
         if not target.exists() and moved:  # killed while re-saving this tag
             return moved[-1].parent
