@@ -5,7 +5,6 @@ sides, as a win/draw/loss matrix with Wilson 95% intervals and an openskill leag
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 
@@ -41,12 +40,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     if args.render:  # a window that would show nothing is refused before any game
-        from alphatank.ui.render import DisplayUnavailable, init_display
+        from alphatank.ui.render import DisplayUnavailable, window_display
 
         try:
-            if os.environ.get("SDL_VIDEODRIVER") == "dummy":
-                raise DisplayUnavailable("SDL_VIDEODRIVER=dummy shows nothing")
-            init_display()
+            window_display()
         except DisplayUnavailable as exc:
             print(f"alphatank arena: error: --render: {exc}; run it on a desktop session, "
                   "or leave out --render", file=sys.stderr)

@@ -10,7 +10,6 @@ quits from the pause or end screen. The session itself is :mod:`alphatank.ui.ses
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 
 from alphatank.commands.argtypes import given, positive_int, scale, window_fps
@@ -18,7 +17,7 @@ from alphatank.commands.lineup_options import add_lineup_arguments, lineup_from_
 from alphatank.errors import one_line
 from alphatank.files import check_writable
 from alphatank.ui.human import HUMAN_ORDER
-from alphatank.ui.render import DisplayUnavailable, init_display, parse_overlays
+from alphatank.ui.render import DisplayUnavailable, parse_overlays, window_display
 from alphatank.ui.replay import check_replay_room
 from alphatank.ui.session import NO_DISPLAY_HELP, PlaySession
 
@@ -49,9 +48,7 @@ def _no_display(why: str) -> int:
 def run(args: argparse.Namespace) -> int:
     if not args.headless_test:  # refused before the keyboard lines, as arena's --render is
         try:
-            if os.environ.get("SDL_VIDEODRIVER") == "dummy":
-                raise DisplayUnavailable("SDL_VIDEODRIVER=dummy")
-            init_display()
+            window_display()
         except DisplayUnavailable as exc:
             return _no_display(str(exc))
     if args.save_replay:

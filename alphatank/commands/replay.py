@@ -9,7 +9,6 @@ R restart, V/T/B overlays).
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 
@@ -19,8 +18,8 @@ from alphatank.files import check_distinct
 from alphatank.ui.render import (
     DEFAULT_OVERLAYS,
     DisplayUnavailable,
-    init_display,
     parse_overlays,
+    window_display,
 )
 from alphatank.ui.replay import (
     Replay,
@@ -62,9 +61,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     if args.render and not args.headless_test:  # refused before the header or any video
         try:
-            if os.environ.get("SDL_VIDEODRIVER") == "dummy":
-                raise DisplayUnavailable("SDL_VIDEODRIVER=dummy")
-            init_display()
+            window_display()
         except DisplayUnavailable as exc:
             return _no_display(str(exc))
     who = ", ".join(f"{t}:{s}" for t, s in zip(replay.teams, replay.seats, strict=False))

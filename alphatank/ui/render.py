@@ -112,6 +112,15 @@ def init_display() -> None:
         os.write(2, said)
 
 
+def window_display() -> None:
+    """:func:`init_display` for a window a person must see (``play``, ``replay --render``,
+    ``arena --render``): ``SDL_VIDEODRIVER=dummy`` is refused too, where ``init_display``
+    takes it as asked for (automated tests of ``render_mode="human"``)."""
+    if os.environ.get("SDL_VIDEODRIVER") == "dummy":
+        raise DisplayUnavailable("SDL_VIDEODRIVER=dummy shows nothing")
+    init_display()
+
+
 def open_window(size: tuple[int, int], caption: str = "AlphaTank") -> pygame.Surface:
     """Initialise pygame's display (:func:`init_display`) and open a window, or raise
     DisplayUnavailable."""
