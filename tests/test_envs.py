@@ -193,6 +193,32 @@ def test_overrides_that_break_a_setting_are_named_as_overrides():
         TankBattleEnv("vs_smart", reward_overrides={"victory": "x"})
 
 
+@pytest.mark.parametrize("make, match", [
+    (lambda: TankBattleEnv("vs_smart", game_overrides="max_steps=600"),
+     r"^game_overrides must be a dict, e\.g\. \{'max_steps': 600\}, got str"),
+    (lambda: TankBattleEnv("vs_smart", game_overrides={1: 2}),
+     r"^game_overrides: keys must be setting names \(strings\).*got \[1\]"),
+    (lambda: TankBattleEnv("vs_smart", reward_overrides=[("victory", 1)]),
+     r"^reward_overrides must be a dict, e\.g\. \{'victory': 2\.0\}, got list"),
+    (lambda: TankBattleEnv("team_vs_bot", seat_policies=[NoopPolicy()]),
+     r"^seat_policies must be a dict, e\.g\. \{1: .*make_bot.*got list"),
+    (lambda: TankBattleEnv("team_vs_bot", seat_policies={"0": NoopPolicy()}),
+     r"^seat_policies: keys must be seat indices \(ints\).*got \['0'\]"),
+    (lambda: TankBattleEnv("team_vs_bot", seat_policies={True: NoopPolicy()}),
+     r"^seat_policies: keys must be seat indices \(ints\).*got \[True\]"),
+    (lambda: parallel.parallel_env(scenario="team", game_overrides=["max_steps"]),
+     r"^game_overrides must be a dict"),
+])
+def test_mapping_arguments_of_the_wrong_shape_are_named(make, match):
+    with pytest.raises(TypeError, match=match):
+        make()
+
+
+def test_an_empty_observation_kind_is_refused_not_read_as_the_default():
+    with pytest.raises(ScenarioError, match=r"^observation '' is not one of \['paper'"):
+        TankBattleEnv("vs_smart", observation="")
+
+
 @pytest.mark.parametrize("bad, why", [(1.7, "must be an integer"), ("abc", "must be an integer"),
                                       (0, r"must be in \[1, ")])
 def test_max_cycles_is_checked_by_its_own_name(bad, why):

@@ -204,8 +204,8 @@ def test_make_vector_env_picks_the_variant():
     env = make_vector_env("vs_random", 2, seed=0)
     assert isinstance(env, VectorMatchEnv)
     for bad in (0, -1, 3):
-        with pytest.raises(ValueError, match=rf"^num_workers must be in 1\.\.num_envs=2, got "
-                                             rf"{bad}"):
+        with pytest.raises(ValueError, match=rf"^num_workers must be a whole number in "
+                                             rf"1\.\.num_envs=2, got {bad}"):
             make_vector_env("vs_random", 2, seed=0, num_workers=bad)
     sub = make_vector_env("vs_random", 2, seed=0, num_workers=2)
     try:
@@ -314,6 +314,35 @@ def test_batch_policies_act_in_batches_and_the_others_one_by_one():
     assert (batch.single, batch.batched, batch.calls) == (0, 15, 5)  # 3 matches a call
 
 
+@pytest.mark.parametrize("bad", [2.0, "2", None, True])
+def test_num_envs_and_num_workers_that_are_not_whole_numbers_are_named(bad):
+    with pytest.raises(ValueError, match=rf"^num_envs must be a whole number in 1\.\.4096 .*"
+                                         rf"got {bad!r}"):
+        VectorMatchEnv("vs_random", bad)
+    with pytest.raises(ValueError, match=rf"^num_envs must be a whole number .*got {bad!r}"):
+        SubprocVectorMatchEnv("vs_random", bad, num_workers=1)
+    with pytest.raises(ValueError, match=rf"^num_workers must be a whole number in "
+                                         rf"1\.\.num_envs=2, got {bad!r}"):
+        SubprocVectorMatchEnv("vs_random", 2, num_workers=bad)
+
+
+@pytest.mark.parametrize("seats, match", [
+    ([0, 0], r"learner_seats names seat\(s\) \[0\] more than once"),
+    ([0.0], r"learner_seats \[0\.0\] are not learner seats"),
+    (0, r"learner_seats must be a list of seat indices, got 0"),
+])
+def test_learner_seats_that_are_not_distinct_seat_indices_are_named(seats, match):
+    with pytest.raises(ScenarioError, match=rf"{match}; its learner seats: \[0, 1, 2, 3\]"):
+        VectorMatchEnv("team", 1, learner_seats=seats)
+
+
+def test_inputs_given_as_one_string_are_named():
+    with pytest.raises(ValueError, match=r"^inputs must be a list of input names, got the "
+                                         r"string 'alive' \(e\.g\. \['alive'\]\)"):
+        VectorMatchEnv("vs_random", 1, inputs="alive")
+
+
 def test_a_set_of_more_matches_than_memory_allows_is_refused():
-    with pytest.raises(ValueError, match=r"num_envs must be in 1\.\.4096 .*0\.5 MB.*got 4097"):
+    with pytest.raises(ValueError, match=r"num_envs must be a whole number in 1\.\.4096 .*0\.5 MB"
+                                         r".*got 4097"):
         VectorMatchEnv("vs_random", 4097)

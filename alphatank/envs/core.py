@@ -165,6 +165,65 @@ def check_benched(scenario: Scenario, driven: Sequence[int], seats: Sequence[int
     return out
 
 
+def check_num_envs(num_envs: Any) -> int:
+    """``num_envs`` as an int; ValueError unless a whole number in 1..MATCHES_MAX."""
+    value, why = check_value((int,), num_envs, (1, MATCHES_MAX))
+    if why:
+        raise ValueError(f"num_envs must be a whole number in 1..{MATCHES_MAX} (each match "
+                         f"holds about 0.5 MB), got {num_envs!r}")
+    return value
+
+
+def check_mapping(value: Any, what: str, key: type, example: str) -> dict:
+    """``value`` (None: empty) as a dict; TypeError naming the argument ``what`` unless a
+    mapping whose keys are ``key`` (str: setting names; int: seat indices)."""
+    if value is None:
+        return {}
+    if not isinstance(value, Mapping):
+        raise TypeError(f"{what} must be a dict, e.g. {example}, got "
+                        f"{type(value).__name__} {value!r}")
+    bad = [k for k in value if check_value((key,), k)[1]]
+    if bad:
+        keys = "setting names (strings)" if key is str else "seat indices (ints)"
+        raise TypeError(f"{what}: keys must be {keys}, e.g. {example}, got {bad!r}")
+    return dict(value)
+
+
+def check_overrides(overrides: Any, what: str) -> dict[str, Any]:
+    """``what`` (game_overrides / reward_overrides; None: none) checked by
+    :func:`check_mapping`."""
+    example = "{'max_steps': 600}" if what == "game_overrides" else "{'victory': 2.0}"
+    return check_mapping(overrides, what, str, example)
+
+
+def check_seat_policies(seat_policies: Any) -> dict[int, Policy]:
+    """``seat_policies`` (None: none) checked by :func:`check_mapping` (the policies
+    themselves by :func:`check_policy` where the seats are known)."""
+    return check_mapping(seat_policies, "seat_policies", int,
+                         "{1: alphatank.bots.make_bot('smart')}")
+
+
+def check_learner_seats(sc: Scenario, seats: Any) -> list[int] | None:
+    """``seats`` (the learner seats a vector env drives; None: all) as a list of ints;
+    ScenarioError unless distinct learner seats of ``sc``."""
+    if seats is None:
+        return None
+    allowed = f"its learner seats: {sc.learner_seats}"
+    if isinstance(seats, str) or not isinstance(seats, Iterable):
+        raise ScenarioError(f"{sc.source}: learner_seats must be a list of seat indices, got "
+                            f"{seats!r}; {allowed}")
+    seats = list(seats)
+    strays = [s for s in seats if check_value((int,), s)[1] or s not in sc.learner_seats]
+    if strays:
+        raise ScenarioError(f"{sc.source}: learner_seats {strays} are not learner seats; "
+                            f"{allowed}")
+    twice = sorted({int(s) for s in seats if seats.count(s) > 1})
+    if twice:
+        raise ScenarioError(f"{sc.source}: learner_seats names seat(s) {twice} more than "
+                            f"once; {allowed}")
+    return [int(s) for s in seats]
+
+
 def check_action_repeat(k: Any) -> None:
     """ValueError unless ``k`` is a whole number of ticks in 1..ACTION_REPEAT_MAX."""
     if check_value((int,), k, (1, ACTION_REPEAT_MAX))[1]:
@@ -185,17 +244,16 @@ class MatchSet:
                  seat_policies: Mapping[int, Policy] | None = None,
                  env_ids: Sequence[int] | None = None, action_repeat: int = 1):
         sc = self.scenario = load_scenario(scenario)
-        if not 1 <= num_envs <= MATCHES_MAX:
-            raise ValueError(f"num_envs must be in 1..{MATCHES_MAX} (each match holds about "
-                             f"0.5 MB), got {num_envs}")
+        num_envs = check_num_envs(num_envs)
         check_action_repeat(action_repeat)
         self.action_repeat = int(action_repeat)
         self.num_envs = E = num_envs
         self.env_ids = list(range(E)) if env_ids is None else list(env_ids)
-        self.game = sc.game_config(**dict(game_overrides or {}))
-        self.reward_cfg = sc.reward_config(**dict(reward_overrides or {}))
+        self.game = sc.game_config(**check_overrides(game_overrides, "game_overrides"))
+        self.reward_cfg = sc.reward_config(**check_overrides(reward_overrides,
+                                                             "reward_overrides"))
         self.specs = sc.map_specs()
-        self.kind = observation or sc.observation
+        self.kind = sc.observation if observation is None else observation
         if self.kind not in OBS_KINDS:
             raise ScenarioError(f"observation {self.kind!r} is not one of {list(OBS_KINDS)}")
         self.teams = sc.teams
@@ -204,7 +262,7 @@ class MatchSet:
         for s in self.driven:
             if not 0 <= s < n:
                 raise ScenarioError(f"{sc.source}: driven seat {s} out of range 0..{n - 1}")
-        self.seat_policies = dict(seat_policies or {})
+        self.seat_policies = check_seat_policies(seat_policies)
         for s, policy in self.seat_policies.items():
             if s in self.driven or not 0 <= s < n:
                 raise ScenarioError(f"{sc.source}: seat_policies names seat {s}; allowed: "

@@ -60,6 +60,7 @@ from alphatank.envs.core import (
     check_actions,
     check_policy,
     check_reset_options,
+    check_seat_policies,
 )
 from alphatank.game.observe import ObsLayout
 from alphatank.game.rewards import TERMS
@@ -91,7 +92,8 @@ def single_learner_seat(sc: Scenario, learner_seat: int | None,
     if seat not in learners:
         raise ScenarioError(f"{sc.source}: learner_seat {seat} is not a learner seat; "
                             f"learner seats: {learners}")
-    orphans = [s for s in learners if s != seat and s not in (seat_policies or {})]
+    policies = check_seat_policies(seat_policies)
+    orphans = [s for s in learners if s != seat and s not in policies]
     if orphans and opponent_policy is None:
         raise ScenarioError(
             f"{sc.source}: learner seats {orphans} have no controller: pass "

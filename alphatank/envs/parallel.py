@@ -49,6 +49,7 @@ from alphatank.envs.core import (
     MatchSet,
     action_space,
     check_actions,
+    check_overrides,
 )
 from alphatank.envs.ids import ENV_VERSION
 from alphatank.game.observe import ObsLayout
@@ -78,7 +79,7 @@ class TankBattleParallelEnv(ParallelEnv):
                                 "agents are a scenario's controller = \"learner\" seats); "
                                 "watch a bots-only scenario with VectorMatchEnv or "
                                 "`alphatank record --scenario`")
-        overrides = dict(game_overrides or {})
+        overrides = check_overrides(game_overrides, "game_overrides")
         if max_cycles is not None:
             steps = next(f for f in dataclasses.fields(GameConfig) if f.name == "max_steps")
             max_cycles, why = check_value((int,), max_cycles, steps.metadata["range"])

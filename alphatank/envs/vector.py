@@ -77,6 +77,9 @@ from alphatank.envs.core import (
     check_benched,
     check_bot_names,
     check_env_opponents,
+    check_learner_seats,
+    check_num_envs,
+    check_overrides,
     check_policy,
     check_reset_options,
     check_weakness,
@@ -95,8 +98,8 @@ from alphatank.envs.fragments import (
 from alphatank.envs.gym import single_learner_seat
 from alphatank.game.observe import ObsLayout
 from alphatank.game.rewards import TERMS
-from alphatank.game.scenarios import Scenario, ScenarioError, load_scenario
-from alphatank.sim.config import check_seed
+from alphatank.game.scenarios import Scenario, load_scenario
+from alphatank.sim.config import check_seed, check_value
 from alphatank.sim.policy import Policy
 
 
@@ -125,17 +128,17 @@ class VectorMatchEnv(SplitRollout):
                  env_ids: Sequence[int] | None = None, inputs: Sequence[str] = (),
                  action_repeat: int = 1):
         self.scenario = sc = load_scenario(scenario)
-        strays = [s for s in (learner_seats or ()) if s not in sc.learner_seats]
-        if strays:
-            raise ScenarioError(f"{sc.source}: learner_seats {strays} are not learner seats; "
-                                f"its learner seats: {sc.learner_seats}")
+        learner_seats = check_learner_seats(sc, learner_seats)
+        if isinstance(inputs, str):
+            raise ValueError(f"inputs must be a list of input names, got the string {inputs!r} "
+                             f"(e.g. [{inputs!r}])")
         self.core = MatchSet(self.scenario, num_envs, observation=observation,
                              game_overrides=game_overrides, reward_overrides=reward_overrides,
                              driven=learner_seats, seat_policies=seat_policies,
                              env_ids=env_ids, action_repeat=action_repeat)
         core = self.core
         self.action_repeat = core.action_repeat
-        self.num_envs = num_envs
+        self.num_envs = num_envs = core.num_envs
         self.num_learners = L = len(core.driven)
         self.learner_seats = list(core.driven)
         self.learner_teams = [self.scenario.seats[s].team for s in core.driven]
@@ -546,9 +549,11 @@ class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
                  learner_seats: Sequence[int] | None = None,
                  start_method: str | None = None, inputs: Sequence[str] = (),
                  action_repeat: int = 1):
-        if not 1 <= num_workers <= num_envs:
-            raise ValueError(f"num_workers must be in 1..num_envs={num_envs}, "
-                             f"got {num_workers}")
+        num_envs = check_num_envs(num_envs)
+        num_workers, why = check_value((int,), num_workers, (1, num_envs))
+        if why:
+            raise ValueError(f"num_workers must be a whole number in 1..num_envs={num_envs}, "
+                             f"got {num_workers!r}")
         kwargs = self._plan_shards(scenario, num_envs, num_workers, seed, observation,
                                    game_overrides, reward_overrides, seat_policies,
                                    learner_seats, inputs, action_repeat)
@@ -819,13 +824,13 @@ class TankBattleVectorEnv(VectorEnv):
             raise ValueError("render_mode needs the matches in this process: num_workers=1")
         self.engine: VectorMatchEnv | SubprocVectorMatchEnv = make_vector_env(
             sc, num_envs, 0, num_workers, observation=observation,
-            game_overrides=dict(game_overrides or {}) or None,
-            reward_overrides=dict(reward_overrides or {}) or None,
+            game_overrides=check_overrides(game_overrides, "game_overrides") or None,
+            reward_overrides=check_overrides(reward_overrides, "reward_overrides") or None,
             seat_policies=seat_policies, learner_seats=[seat])
         if opponent_policy is not None:
             self.engine.set_opponent_policy(opponent_policy)
         self.scenario, self.learner_seat = sc, seat
-        self.num_envs = num_envs
+        self.num_envs = num_envs = self.engine.num_envs
         self.render_mode = render_mode
         self.single_observation_space = self.engine.observation_space
         self.single_action_space = self.engine.action_space
