@@ -233,6 +233,16 @@ def test_max_cycles_and_a_different_max_steps_are_refused_together():
     assert env.core.game.max_steps == 5
 
 
+def test_the_spaces_of_an_unknown_agent_name_the_agents():
+    env = parallel.parallel_env(scenario="team")
+    agents = r"\['tank_0', 'tank_1', 'tank_2', 'tank_3'\]"
+    for space in (env.observation_space, env.action_space):
+        with pytest.raises(KeyError, match=rf"'nope' is not an agent of this env; its agents: "
+                                           rf"{agents}"):
+            space("nope")
+    assert env.action_space("tank_0") == env.action_space("tank_3")
+
+
 def test_keep_dead_agents_must_be_a_bool():
     with pytest.raises(ScenarioError, match="^keep_dead_agents: must be true or false, got 'no'"):
         parallel.parallel_env(scenario="team", keep_dead_agents="no")

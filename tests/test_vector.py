@@ -324,6 +324,13 @@ def test_num_envs_and_num_workers_that_are_not_whole_numbers_are_named(bad):
     with pytest.raises(ValueError, match=rf"^num_workers must be a whole number in "
                                          rf"1\.\.num_envs=2, got {bad!r}"):
         SubprocVectorMatchEnv("vs_random", 2, num_workers=bad)
+    from alphatank.envs.ray_vector import RayVectorMatchEnv  # refused before Ray starts
+
+    with pytest.raises(ValueError, match=rf"^num_envs must be a whole number .*got {bad!r}"):
+        RayVectorMatchEnv("vs_random", bad, num_runners=1)
+    with pytest.raises(ValueError, match=rf"^num_runners \(env runners\) must be a whole "
+                                         rf"number in 1\.\.num_envs=2, got {bad!r}"):
+        RayVectorMatchEnv("vs_random", 2, num_runners=bad)
 
 
 @pytest.mark.parametrize("seats, match", [

@@ -121,10 +121,17 @@ class TankBattleParallelEnv(ParallelEnv):
         return self.core.global_state.layout
 
     def observation_space(self, agent: str) -> spaces.Box:
-        return self._obs_spaces[agent]
+        return self._obs_spaces[self._agent(agent)]
 
     def action_space(self, agent: str) -> spaces.MultiDiscrete:
-        return self._act_spaces[agent]
+        return self._act_spaces[self._agent(agent)]
+
+    def _agent(self, agent: str) -> str:
+        """``agent``; KeyError naming it and the env's agents unless one of them."""
+        if agent not in self._slot:
+            raise KeyError(f"{agent!r} is not an agent of this env; its agents: "
+                           f"{self.possible_agents}")
+        return agent
 
     def reset(self, seed: int | None = None, options: dict | None = None
               ) -> tuple[dict[str, np.ndarray], dict[str, dict]]:

@@ -51,6 +51,7 @@ from alphatank.envs.core import (
     check_benched,
     check_bot_names,
     check_env_opponents,
+    check_num_envs,
     check_policy,
     check_weakness,
     opponent_entry,
@@ -58,6 +59,7 @@ from alphatank.envs.core import (
 from alphatank.envs.fragments import Fragment, RolloutPolicy, SplitRollout, merge_fragments
 from alphatank.envs.vector import ShardedEnv, VectorMatchEnv
 from alphatank.game.scenarios import Scenario
+from alphatank.sim.config import check_value
 from alphatank.sim.policy import Policy
 
 DEFAULT_MAX_RESTARTS = 3
@@ -154,9 +156,11 @@ class RayVectorMatchEnv(ShardedEnv, SplitRollout):
                  step_timeout_s: float = ENV_RUNNER_TIMEOUT_S, action_repeat: int = 1):
         from alphatank.cluster import connect
 
-        if not 1 <= num_runners <= num_envs:
-            raise ValueError(f"env runners must be in 1..num_envs={num_envs}, got "
-                             f"{num_runners}")
+        num_envs = check_num_envs(num_envs)
+        num_runners, why = check_value((int,), num_runners, (1, num_envs))
+        if why:
+            raise ValueError(f"num_runners (env runners) must be a whole number in "
+                             f"1..num_envs={num_envs}, got {num_runners!r}")
         if max_restarts < 0:
             raise ValueError(f"max_restarts must be >= 0, got {max_restarts}")
         if not step_timeout_s > 0:
