@@ -281,7 +281,8 @@ def evaluate_learners(learners: dict[str, Any], observation: dict[str, Any],
                         driven=driven, action_repeat=observation["action_repeat"])
         if core.obs_dim != int(observation["obs_dim"]):
             raise ValueError(f"{source}: expects {observation['obs_dim']} observation "
-                             f"features; scenario {sc.name!r} gives {core.obs_dim} "
+                             f"features; scenario {sc.name!r} on map {sc.map!r} gives "
+                             f"{core.obs_dim} "
                              f"(different map walls, tank count or observation kind)"
                              + (f"; it fits {trained_as}" if trained_as else ""))
         for seat in driven:
