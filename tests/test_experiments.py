@@ -332,6 +332,27 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
         assert capsys.readouterr().err.count("\n") == 1
 
 
+@pytest.mark.parametrize("name", ["runs", "figures", "tiny.md"])
+def test_a_file_or_folder_where_out_writes_is_one_line_before_training(tmp_path, capsys,
+                                                                       name):
+    """A file named like --out's runs/ or figures/ folder failed every run (each naming
+    an error.txt it could not write) or the report after the training, and a folder named
+    like a report the report after the training; one line naming it, exit 2, nothing
+    trained."""
+    root, out = write_rows(tmp_path / "exp"), tmp_path / "out"
+    out.mkdir()
+    if name.endswith(".md"):
+        (out / name).mkdir()
+    else:
+        (out / name).write_text("")
+    assert cli("tiny", "--experiments-dir", str(root), "--out", str(out), "--steps", "64",
+               "--games", "1", "--no-progress") == 2
+    cap = capsys.readouterr()
+    assert cap.out == "" and cap.err.count("\n") == 1, cap.err
+    assert f"{out / name}" in cap.err and ("is a file" in cap.err or "is a folder" in cap.err)
+    assert [p.name for p in out.iterdir()] == [name]
+
+
 def test_a_bad_row_outside_rows_is_one_line_when_the_report_is_planned(tmp_path, capsys):
     """--rows reports every row of its tables with results: those plans read every row, and
     a bad one raised a traceback (they were outside the error handler); one line, exit 2."""

@@ -101,7 +101,8 @@ def run(args: argparse.Namespace) -> int:
     if args.rows is not None and not rows:
         return _error(f"--rows: no row name in {args.rows!r}; give ROW,... (row names or "
                       "TABLE/ROW ids), or leave --rows out for every row")
-    check_folder(args.out, "--out")
+    for folder in ("", "runs", "figures"):  # a file where a folder goes fails every run
+        check_folder(Path(args.out, folder), "--out")
     try:
         names = table_names(args.experiments_dir)
         if args.table == "all":
@@ -147,6 +148,11 @@ def run(args: argparse.Namespace) -> int:
         return _error(f"{damaged[0][2]}{more}: --resume (without --report-only) sets such "
                       "files aside and makes them again")
     for t in report.tables:  # a report never loses results it shows (made otherwise)
+        folder = next((p for p in (report.out / f"{t.name}.{x}" for x in ("md", "csv"))
+                       if p.is_dir()), None)
+        if folder is not None:
+            return _error(f"--out {args.out}: {folder} is a folder; the {t.name} report is "
+                          "written there: move it away")
         coming = evaluated_rows(report, t) if args.report_only else t.rows
         try:
             shown = reported_runs(report.out / f"{t.name}.json")
