@@ -407,6 +407,18 @@ def test_the_plan_lists_the_steps_each_run_trains(tmp_path, capsys):
         capsys.readouterr().out
 
 
+@pytest.mark.parametrize(("workers", "minutes"), [(1, 26), (2, 13), (100, 13)])
+def test_the_estimate_is_at_least_the_longest_run(tmp_path, capsys, workers, minutes):
+    """A run trains on one worker: the estimate spread the plan over more workers than it
+    has runs (2 runs of a 10-minute budget and 3 minutes of games each: 'about 0 min with
+    100 worker(s)')."""
+    root = write_rows(tmp_path / "exp")
+    assert cli("tiny", "--experiments-dir", str(root), "--out", str(tmp_path / "out"),
+               "--budget", "10", "--workers", str(workers), "--list") == 0
+    assert capsys.readouterr().out.splitlines()[-1] == (
+        f"2 runs (1 seed(s)), 2 to do: about {minutes} min with {workers} worker(s)")
+
+
 def test_shipped_tables_load_and_plan(tmp_path):
     names = table_names()
     assert names == ["table3", "table4", "sac", "league", "heldout"]

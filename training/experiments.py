@@ -1174,13 +1174,13 @@ def estimate_minutes(plan: Plan, jobs: Sequence[Job], workers: int,
                      damaged: Collection[Path] = ()) -> float:
     """Rough wall time of ``jobs``: the budget per run still to train plus ~1.5 min per
     evaluation of 200 games still to play (200 games of up to 1,200 ticks took 1-3 min on
-    a shared 2-core machine), spread over the workers. Files in ``damaged`` are made again
-    (a run whose done.json or metrics.jsonl is damaged trains and plays every evaluation
-    again)."""
-    total = 0.0
+    a shared 2-core machine), spread over the workers, and at least the longest job (a
+    job runs on one worker). Files in ``damaged`` are made again (a run whose done.json or
+    metrics.jsonl is damaged trains and plays every evaluation again)."""
+    minutes = []
     for j in jobs:
         trains = not j.done_file.is_file() or any(map(j.retrains, damaged))
         plays = sum(trains or not j.eval_file(s).is_file() or j.eval_file(s) in damaged
                     for s in j.evals)
-        total += plan.budget_min * trains + 1.5 * plays * plan.games / DEFAULT_GAMES
-    return total / max(1, workers)
+        minutes.append(plan.budget_min * trains + 1.5 * plays * plan.games / DEFAULT_GAMES)
+    return max(sum(minutes) / max(1, workers), max(minutes, default=0.0))
