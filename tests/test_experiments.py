@@ -605,6 +605,17 @@ def test_a_row_planning_rate_must_be_a_finite_positive_number(tmp_path, rate):
         load_tables(["tiny"], root)
 
 
+@pytest.mark.parametrize("value", ["nan", "inf", "-5", "150"])
+def test_a_rows_paper_figure_must_be_a_percent(tmp_path, value):
+    """A paper figure of nan or 150 was shown as 'paper nan%' and compared by the checks."""
+    root = write_rows(tmp_path / "exp")
+    row = root / "tiny" / "a_random.toml"
+    row.write_text(row.read_text().replace("random = 50", f"random = {value}"))
+    with pytest.raises(ValueError, match=r"a_random\.toml: paper\.random: needs a number in "
+                                         r"\[0, 100\] \(percent\), got"):
+        load_tables(["tiny"], root)
+
+
 def test_a_rows_run_observation_and_imitate_are_checked_when_it_is_planned(tmp_path):
     """Before anything trains, not when the row's run starts after the others."""
     root = write_rows(tmp_path / "exp")

@@ -313,8 +313,9 @@ def _row(table: str, name: str, data: dict[str, Any], source: str,
     scenarios = _typed(data, "scenarios", list, source, [])
     paper = _typed(data, "paper", dict, source, {})
     for k, v in paper.items():
-        if not isinstance(v, int | float) or isinstance(v, bool):
-            raise ExperimentError(f"{source}: paper.{k}: needs a number (percent), got {v!r}")
+        if not isinstance(v, int | float) or isinstance(v, bool) or not 0 <= v <= 100:
+            raise ExperimentError(f"{source}: paper.{k}: needs a number in [0, 100] (percent), "
+                                  f"got {v!r}")
     fractions = _typed(data, "budget_fractions", dict, source, {})
     for k, v in fractions.items():
         if not isinstance(v, int | float) or isinstance(v, bool) or not 0 < v <= 1:
