@@ -1050,6 +1050,20 @@ def test_a_damaged_table_json_is_named_not_taken_for_no_report(made, tmp_path, c
     assert {p.name: p.read_bytes() for p in out.glob("tiny.*")} == reports
 
 
+def test_a_report_without_results_leaves_no_figure_of_an_earlier_one(made, tmp_path):
+    """The runs moved away (as the report's own hints say) and the report written anew:
+    its figures showed the earlier results still (they were left, unlinked, in figures/)."""
+    out, args = copy_of_made(made, tmp_path)
+    assert sorted(p.name for p in (out / "figures").iterdir()) == ["tiny_curves.png",
+                                                                    "tiny_heatmap.png"]
+    (out / "runs").rename(tmp_path / "runs.old")
+    (out / "tiny.json").rename(tmp_path / "tiny.json.old")
+    assert cli(*args, "--report-only") == 0
+    assert list((out / "figures").iterdir()) == []
+    md = (out / "tiny.md").read_text()
+    assert "## Figures" not in md and "- tiny/a_random seed 0" in md
+
+
 def test_an_interrupted_command_writes_the_tables_of_what_finished(tmp_path, capsys):
     """SIGINT while a row trains: exit 130, and the tables show the rows that finished
     (the docs: the tables are rewritten after every command)."""

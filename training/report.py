@@ -432,11 +432,12 @@ def _figures(plan: Plan, table: Table, results: list[RowResult]) -> dict[str, Pa
     from alphatank.training.plots import plot_heatmap, plot_row_curves
 
     figs: dict[str, Path] = {}
+    paths = {name: plan.out / "figures" / f"{table.name}_{name}.png"
+             for name in ("curves", "heatmap")}
     groups = [(rr.row.title, [rr.run_dirs[s] for s in sorted(rr.runs)]) for rr in results]
     if any(runs for _, runs in groups):
-        path = plan.out / "figures" / f"{table.name}_curves.png"
-        plot_row_curves(groups, path, title=f"{table.title}: training win rate")
-        figs["curves"] = path
+        plot_row_curves(groups, paths["curves"], title=f"{table.title}: training win rate")
+        figs["curves"] = paths["curves"]
     if table.heatmap:
         cols = [c.name for c in table.columns] + (["average"] if table.average else [])
         labels = [c.label for c in table.columns] + (["Average"] if table.average else [])
@@ -445,10 +446,12 @@ def _figures(plan: Plan, table: Table, results: list[RowResult]) -> dict[str, Pa
         paper = np.array([[np.nan if rr.paper_value(c) is None else rr.paper_value(c)
                            for c in cols] for rr in results])
         if not np.isnan(ours).all():
-            path = plan.out / "figures" / f"{table.name}_heatmap.png"
-            plot_heatmap(ours, [rr.row.title for rr in results], labels, path,
+            plot_heatmap(ours, [rr.row.title for rr in results], labels, paths["heatmap"],
                          title=table.title, paper=paper)
-            figs["heatmap"] = path
+            figs["heatmap"] = paths["heatmap"]
+    for name, path in paths.items():  # one of an earlier report showed other results
+        if name not in figs:
+            path.unlink(missing_ok=True)
     return figs
 
 
