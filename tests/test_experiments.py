@@ -38,6 +38,7 @@ from alphatank.training.experiments import (
     table_names,
 )
 from alphatank.training.presets import TrainConfig
+from alphatank.training.report import RowResult, run_checks
 
 RUN = """
 [run]
@@ -1048,6 +1049,43 @@ def test_a_damaged_table_json_is_named_not_taken_for_no_report(made, tmp_path, c
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"{table}: " in err and "move it away" in err, err
     assert {p.name: p.read_bytes() for p in out.glob("tiny.*")} == reports
+
+
+def test_best_average_is_not_met_before_every_specialist_has_an_average(tmp_path):
+    """A row above the specialists with results was reported "met" while another
+    specialist had none yet (failed, or not run: --rows), and a row without results made
+    the check "NOT met" though another row could still meet it."""
+    root = write_rows(tmp_path / "exp")
+    (root / "tiny" / "c_spec.toml").write_text(
+        (root / "tiny" / "a_random.toml").read_text().replace("order = 1", "order = 3"))
+    with open(root / "tiny" / "_table.toml", "a") as f:
+        f.write('[[checks]]\nkind = "best_average"\nrows = ["b_cycle"]\n'
+                'against = ["a_random", "c_spec"]\n[[checks]]\nkind = "best_average"\n'
+                'rows = ["a_random", "b_cycle"]\nagainst = ["c_spec"]\n')
+    table = load_tables(["tiny"], root)[0]
+
+    def results(rates: dict[str, float]) -> list[RowResult]:
+        return [RowResult(row, table.row_columns(row), evals={
+            c.name: {0: {"wins": round(rates[row.name] * 10), "losses": 0,
+                         "draws": 10 - round(rates[row.name] * 10), "games": 10}}
+            for c in table.row_columns(row)} if row.name in rates else {})
+            for row in table.rows]
+
+    def best_average(rates: dict[str, float]) -> bool | None:
+        return run_checks(table, results(rates))[1]["passed"]
+
+    assert best_average({"a_random": 0.2, "b_cycle": 0.5}) is None
+    assert best_average({"a_random": 0.2, "b_cycle": 0.5, "c_spec": 0.4}) is True
+    assert best_average({"a_random": 0.2, "b_cycle": 0.5, "c_spec": 0.6}) is False
+    assert best_average({"a_random": 0.6, "b_cycle": 0.5}) is False
+    assert best_average({"a_random": 0.2, "c_spec": 0.3}) is None
+    # a_random below c_spec, b_cycle not measured yet: it may still be above
+    assert run_checks(table, results({"a_random": 0.2, "c_spec": 0.4}))[2]["passed"] is None
+    assert run_checks(table, results({"a_random": 0.2, "b_cycle": 0.3, "c_spec": 0.4})
+                      )[2]["passed"] is False
+    check = run_checks(table, results({"a_random": 0.2, "b_cycle": 0.5}))[1]
+    assert check["details"] == ["Cycle: average 50.0% vs best specialist 20.0% - so far (no "
+                                "average yet of c_spec)"]
 
 
 def test_a_report_without_results_leaves_no_figure_of_an_earlier_one(made, tmp_path):

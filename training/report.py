@@ -346,9 +346,10 @@ def run_checks(table: Table, results: list[RowResult]) -> list[dict[str, Any]]:
             passed = _all(verdicts)
             text = "every cell with a paper figure is at or above it"
         elif kind == "best_average":
-            specs = [by_name[n] for n in chk.get("against", []) if n in by_name]
-            best = max((rr.ours("average") for rr in specs if rr.ours("average") is not None),
-                       default=None)
+            theirs = {n: by_name[n].ours("average") if n in by_name else None
+                      for n in chk.get("against", [])}
+            best = max((x for x in theirs.values() if x is not None), default=None)
+            unmeasured = [n for n, x in theirs.items() if x is None]
             above = chk.get("above")
             verdicts = []
             for name in chk.get("rows", []):
@@ -358,11 +359,14 @@ def run_checks(table: Table, results: list[RowResult]) -> list[dict[str, Any]]:
                     verdicts.append(None)
                     continue
                 ok = mine > best and (above is None or mine > above)
-                verdicts.append(ok)
+                # above the specialists measured: not yet above those without an average
+                verdicts.append(None if ok and unmeasured else ok)
                 details.append(f"{rr.row.title}: average {mine:.1f}% vs best specialist "
                                f"{best:.1f}%" + (f", target > {above:g}%" if above else "")
-                               + (" - yes" if ok else " - no"))
-            passed = True if any(v is True for v in verdicts) else _all(verdicts)
+                               + (" - no" if not ok else " - yes" if not unmeasured else
+                                  f" - so far (no average yet of {', '.join(unmeasured)})"))
+            passed = (True if any(v is True for v in verdicts) else  # some row: any
+                      None if not verdicts or None in verdicts else False)
             text = (f"some row of {chk.get('rows', [])} averages above every specialist"
                     + (f" and above {above:g}%" if above else ""))
         elif kind == "within":
