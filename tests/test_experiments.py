@@ -354,6 +354,28 @@ def test_a_file_or_folder_where_out_writes_is_one_line_before_training(tmp_path,
     assert [p.name for p in out.iterdir()] == [name]
 
 
+@pytest.mark.parametrize(("check", "why"), [
+    ('kind = "best_average"\nrows = ["b_cycle"]\nagainst = ["a_randm"]',
+     "checks[1].against: no row 'a_randm' in the table; rows: ['a_random', 'b_cycle']"),
+    ('kind = "within"\nrow = "b_cycl"\nspecialists = { random = "a_random" }',
+     "checks[1].row: no row 'b_cycl'"),
+    ('kind = "within"\nrow = "b_cycle"\nspecialists = { randm = "a_random" }',
+     "checks[1].specialists: no column 'randm' in the table; columns: ['random', 'dodge', "
+     "'average']"),
+    ('kind = "gap"\ncolumns = ["random", "dodg"]', "checks[1].columns: no column 'dodg'"),
+    ('kind = "beats_paper"\nrows = ["nosuch"]', "checks[1].rows: no row 'nosuch'")])
+def test_a_check_naming_no_row_or_column_of_its_table_is_one_line(tmp_path, capsys, check,
+                                                                  why):
+    """A misspelt name left a check "not measurable" for ever (or, in best_average's
+    against, dropped that specialist from the comparison)."""
+    root = write_rows(tmp_path / "exp")
+    with open(root / "tiny" / "_table.toml", "a") as f:
+        f.write(f"\n[[checks]]\n{check}\n")
+    assert cli("tiny", "--experiments-dir", str(root), "--list") == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"tiny/_table.toml: {why}" in err, err
+
+
 def test_a_bad_row_outside_rows_is_one_line_when_the_report_is_planned(tmp_path, capsys):
     """--rows reports every row of its tables with results: those plans read every row, and
     a bad one raised a traceback (they were outside the error handler); one line, exit 2."""

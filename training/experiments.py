@@ -416,6 +416,8 @@ def load_tables(names: Sequence[str], experiments_dir: str | Path | None = None
                 if not test(value):
                     raise ExperimentError(f"{source}: checks[{i}].{key}: must be {wants}, "
                                           f"got {value!r}")
+            _check_names(chk, f"{source}: checks[{i}]", [r.name for r in rows],
+                         [*names_seen, "average"])
         tables.append(Table(t, _typed(data, "title", str, source, t),
                             _typed(data, "description", str, source, ""), layout, columns,
                             tuple(sorted(rows, key=lambda r: (r.order, r.name))),
@@ -423,6 +425,26 @@ def load_tables(names: Sequence[str], experiments_dir: str | Path | None = None
                             bool(_typed(data, "heatmap", bool, source, False)), checks,
                             bool(_typed(data, "paper_average", bool, source, True))))
     return tables
+
+
+def _check_names(chk: dict[str, Any], where: str, rows: Sequence[str],
+                 columns: Sequence[str]) -> None:
+    """ExperimentError naming ``where`` unless the rows and columns ``chk`` names are the
+    table's ``rows`` and ``columns`` (a check naming another stays unmeasurable)."""
+    named = {"rows": chk.get("rows", []), "against": chk.get("against", []),
+             "row": [chk["row"]] if "row" in chk else [],
+             "specialists": list(chk.get("specialists", {}).values())}
+    for key, names in named.items():
+        for name in names:
+            if name not in rows:
+                raise ExperimentError(f"{where}.{key}: no row {name!r} in the table; rows: "
+                                      f"{sorted(rows)}")
+    for key, names in (("columns", chk.get("columns", [])),
+                       ("specialists", list(chk.get("specialists", {})))):
+        for name in names:
+            if name not in columns:
+                raise ExperimentError(f"{where}.{key}: no column {name!r} in the table; "
+                                      f"columns: {list(columns)}")
 
 
 # ---- a row's run for one seed and budget ---------------------------------------------
