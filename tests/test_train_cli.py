@@ -85,6 +85,8 @@ def test_scenario_flag_refits_learners_of_the_first_kind(capsys, tmp_path):
     (["--scenario", "nowhere"], "--scenario: unknown scenario 'nowhere'"),
     (["--hp", "ppo.gamma=2"], "--hp ppo.gamma: must be in [0, 1], got 2.0"),
     (["--hp", "sac.tau=0.1"], "--hp sac.*: this run has no sac learner"),
+    (["--hp", "ppo.anchor_kl=0.5"], "--hp: 'ppo': anchor_kl = 0.5 needs a warm "
+                                    "start to pull towards (an imitate table or init_from)"),
     (["--preset", "nope"], "unknown training preset 'nope'"),
     (["--config", "missing.toml"], "missing.toml: no such run file"),
     (["--config", "x.toml", "--preset", "demo"], "--config and --preset: give one"),

@@ -371,7 +371,10 @@ def with_hp(cfg: TrainConfig, overrides: dict[str, dict[str, Any]], num_learners
                              f"use {', '.join(present)})")
     specs = tuple(dataclasses.replace(
         s, config=dataclasses.replace(s.config, **overrides.get(s.algo, {}))) for s in specs)
-    return dataclasses.replace(cfg, learners=specs)
+    try:
+        return dataclasses.replace(cfg, learners=specs)
+    except FieldError as exc:  # a rule across settings, e.g. anchor_kl without a warm start
+        raise ValueError(f"--hp: {exc.problem}") from None
 
 
 # ---- run files ----------------------------------------------------------------------------
