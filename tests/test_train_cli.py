@@ -438,3 +438,29 @@ def test_iteration_steps_are_the_trainers(tmp_path, preset, changes):
         tr.env.close()
         tr.logger.close()
         tr.lock.release()
+
+
+def test_a_resume_whose_metrics_are_not_text_is_one_line_naming_the_file(capsys, tmp_path):
+    """A metrics.jsonl that is not UTF-8 (a damaged disk, a binary copied over it) stopped
+    the resume with a bare "'utf-8' codec can't decode byte 0xff ..." naming no file: it is
+    one line naming it, as `alphatank plot` says, the file and the checkpoint left as
+    they were; once the file is text again the run resumes."""
+    runs, run = tmp_path / "runs", tmp_path / "tiny.toml"
+    run.write_text(TINY_RUN)
+    assert main(["train", "--config", str(run), "--runs", str(runs), "--no-progress"]) == 0
+    capsys.readouterr()
+    metrics = runs / "tiny" / "metrics.jsonl"
+    damaged = metrics.read_bytes() + b"\xff\xfe garbage\n"
+    metrics.write_bytes(damaged)
+    argv = ["train", "--resume", str(runs / "tiny"), "--total-steps", "64", "--no-progress"]
+    assert main(argv) == 2
+    cap = capsys.readouterr()
+    assert cap.out == "" and cap.err.count("\n") == 1, cap.err
+    assert cap.err.startswith(f"alphatank train: error: {metrics}: not a UTF-8 text file "), \
+        cap.err
+    assert metrics.read_bytes() == damaged
+    assert load_checkpoint(runs / "tiny").meta["progress"]["global_step"] == 32
+    metrics.write_bytes(damaged.replace(b"\xff\xfe", b""))  # one line of junk: dropped
+    assert main(argv) == 0
+    assert load_checkpoint(runs / "tiny").meta["progress"]["global_step"] == 64
+    assert "garbage" not in metrics.read_text()

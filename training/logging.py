@@ -10,6 +10,7 @@ rewritten without them (atomically) and TensorBoard hides them (``purge_step``).
 
 from __future__ import annotations
 
+import io
 import json
 import math
 import os
@@ -95,22 +96,21 @@ class RunLogger:
 
 def rewind_metrics(path: str | Path, step: int) -> int:
     """Drop the rows of a ``metrics.jsonl`` logged after ``step`` (and a line cut short by
-    a crash), rewriting the file atomically; returns how many rows were dropped."""
+    a crash), rewriting the file atomically; returns how many rows were dropped.
+    ValueError naming the file for one that is not UTF-8 text (left as it is)."""
     path = Path(path)
     if not path.is_file():
         return 0
     keep, dropped = [], 0
-    with open(path, encoding="utf-8") as f:
-        for line in f:
-            try:
-                row = json.loads(line)
-            except json.JSONDecodeError:
-                row = None
-            if isinstance(row, dict) and isinstance(row.get("step"), int) and \
-                    row["step"] <= step:
-                keep.append(line if line.endswith("\n") else line + "\n")
-            elif line.strip():
-                dropped += 1
+    for line in io.StringIO(read_text(path), newline=None):  # lines as open() reads them
+        try:
+            row = json.loads(line)
+        except json.JSONDecodeError:
+            row = None
+        if isinstance(row, dict) and isinstance(row.get("step"), int) and row["step"] <= step:
+            keep.append(line if line.endswith("\n") else line + "\n")
+        elif line.strip():
+            dropped += 1
     if dropped:
         write_text_atomic(path, "".join(keep))
     return dropped
