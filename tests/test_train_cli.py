@@ -87,6 +87,10 @@ def test_scenario_flag_refits_learners_of_the_first_kind(capsys, tmp_path):
     (["--hp", "sac.tau=0.1"], "--hp sac.*: this run has no sac learner"),
     (["--hp", "ppo.anchor_kl=0.5"], "--hp: 'ppo': anchor_kl = 0.5 needs a warm "
                                     "start to pull towards (an imitate table or init_from)"),
+    (["--workers", "3", "--num-envs", "2"], "--workers: 3 worker processes for 2 matches; "
+                                            "at most one per match"),
+    (["--preset", "demo", "--num-envs", "1"], "presets/demo.toml: num_workers: 2 worker "
+                                              "processes for 1 matches; at most one per match"),
     (["--preset", "nope"], "unknown training preset 'nope'"),
     (["--config", "missing.toml"], "missing.toml: no such run file"),
     (["--config", "x.toml", "--preset", "demo"], "--config and --preset: give one"),
@@ -464,3 +468,21 @@ def test_a_resume_whose_metrics_are_not_text_is_one_line_naming_the_file(capsys,
     assert main(argv) == 0
     assert load_checkpoint(runs / "tiny").meta["progress"]["global_step"] == 64
     assert "garbage" not in metrics.read_text()
+
+
+def test_a_resume_with_more_workers_than_matches_names_the_flag(capsys, tmp_path):
+    """--workers above the run's matches read "num_workers must be a whole number in
+    1..num_envs=2, got 3", naming no flag: it is one line naming --workers (the new-run
+    form: test_bad_flags_are_one_line_errors), the run left as it was."""
+    runs, run = tmp_path / "runs", tmp_path / "tiny.toml"
+    run.write_text(TINY_RUN)
+    assert main(["train", "--config", str(run), "--runs", str(runs), "--no-progress"]) == 0
+    capsys.readouterr()
+    metrics = (runs / "tiny" / "metrics.jsonl").read_text()
+    assert main(["train", "--resume", str(runs / "tiny"), "--total-steps", "64",
+                 "--workers", "3", "--no-progress"]) == 2
+    assert capsys.readouterr().err == ("alphatank train: error: --workers: 3 worker processes "
+                                       "for 2 matches; at most one per match (fewer --workers "
+                                       "or more --num-envs)\n")
+    assert (runs / "tiny" / "metrics.jsonl").read_text() == metrics
+    assert load_checkpoint(runs / "tiny").meta["progress"]["global_step"] == 32

@@ -188,6 +188,17 @@ def _with_run_settings(cfg: TrainConfig, args: argparse.Namespace, name: str | N
         raise ValueError(f"{flag}: {exc.problem}") from None
 
 
+def _check_workers(cfg: TrainConfig, args: argparse.Namespace, field: str) -> None:
+    """Refuse more env worker processes than matches (each process steps at least one),
+    naming --workers, or ``field`` (where the run's own count comes from) when it was not
+    given. A --ray run steps its matches in env runners instead."""
+    if args.ray is None and cfg.num_workers > cfg.num_envs:
+        where = "--workers" if args.workers is not None else field
+        raise ValueError(f"{where}: {cfg.num_workers} worker processes for {cfg.num_envs} "
+                         f"matches; at most one per match (fewer --workers or more "
+                         f"--num-envs)")
+
+
 def _learners_label(cfg: TrainConfig) -> str:
     algos = [s.algo for s in cfg.learners] or ["ppo"]
     if len(set(algos)) == 1:
@@ -260,6 +271,7 @@ def build_run(args: argparse.Namespace) -> TrainConfig:
         f"presets/{args.preset or DEFAULT_PRESET}.toml"
     cfg = load_run(args.config) if args.config else get_preset(args.preset or DEFAULT_PRESET)
     cfg = _with_run_settings(cfg, args, args.name)
+    _check_workers(cfg, args, f"{source}: num_workers")
     from alphatank.game.scenarios import load_scenario
     scenario, label = (args.scenario, "--scenario") if args.scenario is not None else \
         (cfg.scenario, f"{source}: scenario")
@@ -377,6 +389,7 @@ def _run(args: argparse.Namespace, progress: bool, stack: contextlib.ExitStack) 
                                  f"resumed run keeps them (its normalisers and rollouts hold "
                                  f"one stream per match)")
             cfg = _with_run_settings(saved, args)
+            _check_workers(cfg, args, "--workers")
             if args.print_config:
                 print(run_toml(cfg), end="")
                 return 0
