@@ -174,6 +174,12 @@ BAD = [
      r"bad\.toml: rewards\.victory: needs a float, got 'big'"),
     ("scenario = 'vs_smart'\ngame = 3\n", r"bad\.toml: game: needs a table, got 3"),
     ("scenario = 'vs_smart\n", r"bad\.toml: invalid TOML"),
+    # wandb refused these with a traceback once the run had started
+    ("scenario = 'vs_smart'\nproject = 'me/tanks'\n",
+     r"bad\.toml: project: must be a wandb project name: at most 128 characters, none of "
+     r"/ \\ # \? % :, got 'me/tanks'"),
+    ("scenario = 'vs_smart'\nwandb = 'online'\nproject = '" + "p" * 129 + "'\n",
+     r"bad\.toml: project: must be a wandb project name"),
 ]
 
 
@@ -191,3 +197,11 @@ def test_unknown_preset_and_missing_file_are_named(tmp_path):
         get_preset("nope")
     with pytest.raises(ValueError, match="missing.toml: no such run file"):
         load_run(tmp_path / "missing.toml")
+
+
+def test_a_project_name_is_checked_only_for_a_run_that_logs_to_wandb(tmp_path):
+    """Runs without wandb never used their project: such a run file (and its checkpoints)
+    still loads."""
+    path = tmp_path / "quiet.toml"
+    path.write_text("scenario = 'vs_smart'\nwandb = 'disabled'\nproject = 'me/tanks'\n")
+    assert load_run(path).project == "me/tanks"

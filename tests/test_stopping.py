@@ -19,6 +19,7 @@ import torch
 
 from alphatank.commands.train import report
 from alphatank.envs.vector import VectorMatchEnv
+from alphatank.errors import InputError
 from alphatank.training.checkpoint import load_checkpoint
 from alphatank.training.logging import RunLogger, rewind_metrics
 from alphatank.training.ppo import PPOConfig
@@ -388,18 +389,23 @@ def test_a_fresh_run_starts_its_metrics_afresh_and_a_resumed_one_appends(tmp_pat
     assert rows == [[16], [16, 32]]
 
 
-def test_a_logger_that_fails_to_start_leaves_its_metrics_file_closed(tmp_path):
-    """wandb refusing the run (here a resumed run's id it cannot take) left
-    ``metrics.jsonl`` open, for the garbage collector to close ('unclosed file')."""
-    import wandb
-
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", ResourceWarning)
-        with pytest.raises(wandb.errors.UsageError, match="Run ID cannot contain"):
-            RunLogger(tmp_path, {}, "bad", wandb_mode="offline", run_id="bad/id")
-        gc.collect()
-    assert (tmp_path / "metrics.jsonl").is_file()
-    assert not [w for w in caught if "metrics.jsonl" in str(w.message)]
+def test_a_logger_that_wandb_refuses_is_one_line_and_leaves_no_metrics_file(tmp_path):
+    """wandb refusing the run (here a run id it cannot take, or a project name; online
+    without `wandb login` alike) left ``metrics.jsonl`` open, for the garbage collector to
+    close ('unclosed file'); then its error was a traceback (wandb.errors.UsageError) and a
+    new run's folder kept an empty metrics.jsonl. It is one InputError line naming wandb's
+    mode and cause; the metrics file is made only once wandb has started."""
+    for kw, cause in (({"run_id": "bad/id"}, "Run ID cannot contain"),
+                      ({"project": "me/tanks"}, "Invalid project name 'me/tanks'")):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", ResourceWarning)
+            with pytest.raises(InputError, match=f"^wandb offline: {cause}.* \\(--wandb "
+                                                 "offline logs without an account\\)$") as info:
+                RunLogger(tmp_path, {}, "bad", wandb_mode="offline", **kw)
+            gc.collect()
+        assert "\n" not in str(info.value)
+        assert not (tmp_path / "metrics.jsonl").exists()
+        assert not [w for w in caught if "metrics.jsonl" in str(w.message)]
 
 
 def test_rewind_metrics_drops_rows_after_the_step_and_a_torn_line(tmp_path):

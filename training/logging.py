@@ -15,11 +15,11 @@ import json
 import math
 import os
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 
-from alphatank.errors import MissingPackageError
+from alphatank.errors import InputError, MissingPackageError, one_line
 from alphatank.files import read_text, write_text_atomic
 from alphatank.training.presets import WANDB_MODES
 
@@ -48,8 +48,7 @@ class RunLogger:
         self.run_dir.mkdir(parents=True, exist_ok=True)
         self.rewound = (rewind_metrics(self.run_dir / "metrics.jsonl", resume_step)
                         if resume_step is not None else 0)
-        mode = "w" if resume_step is None else "a"
-        self._jsonl = open(self.run_dir / "metrics.jsonl", mode, encoding="utf-8")  # noqa: SIM115
+        self._jsonl: IO[str] | None = None
         self.wandb_run = None
         self.run_id = run_id
         self.tb = None
@@ -57,13 +56,21 @@ class RunLogger:
             if wandb_mode != "disabled":
                 import wandb
                 os.environ.setdefault("WANDB_SILENT", "true")
-                self.wandb_run = wandb.init(project=project, name=name, dir=str(self.run_dir),
-                                            mode=wandb_mode, config=config, id=run_id,
-                                            resume="allow" if run_id else None, reinit=True)
+                try:
+                    self.wandb_run = wandb.init(
+                        project=project, name=name, dir=str(self.run_dir), mode=wandb_mode,
+                        config=config, id=run_id, resume="allow" if run_id else None,
+                        reinit=True)
+                except wandb.errors.Error as exc:  # e.g. online without `wandb login`
+                    raise InputError(f"wandb {wandb_mode}: {one_line(exc)} (--wandb "
+                                     "offline logs without an account)") from None
                 self.run_id = self.wandb_run.id
             if tensorboard:
                 self.tb = SummaryWriter(str(self.run_dir / "tensorboard"), purge_step=None
                                         if resume_step is None else resume_step + 1)
+            # last: a run that wandb refused leaves no metrics file behind
+            mode = "w" if resume_step is None else "a"
+            self._jsonl = open(self.run_dir / "metrics.jsonl", mode, encoding="utf-8")  # noqa: SIM115
         except BaseException:  # wandb or TensorBoard failed: close what was opened
             self.close()
             raise
@@ -86,7 +93,8 @@ class RunLogger:
             self.wandb_run.log({key: wandb.Video(str(path), format="mp4")}, step=int(step))
 
     def close(self) -> None:
-        self._jsonl.close()
+        if self._jsonl is not None:
+            self._jsonl.close()
         if self.wandb_run is not None:
             self.wandb_run.finish()
             self.wandb_run = None

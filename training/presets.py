@@ -35,6 +35,7 @@ from alphatank.training.stopping import TIME_LIMIT_MAX_S
 from alphatank.training.tomlwriter import dumps
 
 WANDB_MODES = ("offline", "online", "disabled")
+WANDB_PROJECT_BANNED = "/\\#?%:"  # characters wandb refuses in a project name
 BOT_POOL = ("random", "aggressive", "defensive", "dodge")  # the cycle of paper 4.3
 CYCLE_INTERVAL = 100_000  # env steps per opponent when a cycle is set from the command line
 DEFAULT_ROLLOUT_STEPS = 512  # vector steps per iteration when no learner asks for a length
@@ -174,6 +175,11 @@ class TrainConfig:
                              f"{self.name!r}")
         if why := printable_problem(self.description):  # one line of `train --list`
             raise FieldError("TrainConfig", "description", why)
+        if self.wandb != "disabled" and (len(self.project) > 128 or any(
+                c in self.project for c in WANDB_PROJECT_BANNED)):  # wandb would refuse it
+            raise FieldError("TrainConfig", "project", f"must be a wandb project name: at most "
+                             f"128 characters, none of {' '.join(WANDB_PROJECT_BANNED)}, got "
+                             f"{self.project!r}")
         for spec in self.learners:
             if not isinstance(spec, LearnerSpec):
                 raise FieldError("TrainConfig", "learners", f"must hold LearnerSpecs, got "
