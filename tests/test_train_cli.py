@@ -486,3 +486,19 @@ def test_a_resume_with_more_workers_than_matches_names_the_flag(capsys, tmp_path
                                        "or more --num-envs)\n")
     assert (runs / "tiny" / "metrics.jsonl").read_text() == metrics
     assert load_checkpoint(runs / "tiny").meta["progress"]["global_step"] == 32
+
+
+def test_a_rollout_that_is_not_whole_learner_rollouts_names_the_run_file(capsys, tmp_path):
+    """rollout_steps that are not a multiple of a learner's num_steps were refused once the
+    trainer was made, in a line naming neither the file nor num_steps: it is the run file's
+    rollout_steps, with the learners' num_steps after --hp, before anything runs."""
+    run = tmp_path / "r.toml"
+    run.write_text('scenario = "vs_aggressive"\nrollout_steps = 100\n')
+    argv = ["train", "--config", str(run), "--runs", str(tmp_path / "runs"), "--no-progress"]
+    assert main([*argv, "--print-config"]) == 2
+    assert capsys.readouterr().err == (
+        f"alphatank train: error: {run}: rollout_steps: 100 must be a multiple of every "
+        "learner's rollout length, num_steps ({'ppo': 512})\n")
+    assert main([*argv, "--print-config", "--hp", "ppo.num_steps=50"]) == 0
+    assert "rollout_steps = 100" in capsys.readouterr().out
+    assert not (tmp_path / "runs").exists()

@@ -317,7 +317,13 @@ def build_run(args: argparse.Namespace) -> TrainConfig:
     except ValueError as exc:
         raise ValueError(f"schedule: {exc}") from None
     hp_items = [("--hp", t) for t in args.hp] + [("--ppo", args.ppo), ("--sac", args.sac)]
-    return with_hp(cfg, parse_hp(hp_items), n)
+    cfg = with_hp(cfg, parse_hp(hp_items), n)
+    wants = {s.name: s.config.num_steps for s in run_learners(cfg, n)
+             if hasattr(s.config, "num_steps")}
+    if cfg.rollout_steps and any(cfg.rollout_steps % k for k in wants.values()):
+        raise ValueError(f"{source}: rollout_steps: {cfg.rollout_steps} must be a multiple of "
+                         f"every learner's rollout length, num_steps ({wants})")
+    return cfg
 
 
 def run(args: argparse.Namespace) -> int:
