@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import torch
 
+from alphatank.commands.train import report
 from alphatank.game.scenarios import load_scenario
 from alphatank.training.fields import FieldError
 from alphatank.training.hparams import ImitateConfig, MAPPOConfig, imitate_config
@@ -181,12 +182,17 @@ def test_dagger_rounds_refit_the_clone_on_its_own_states_the_same_way_every_time
     assert runs[0].learners["ppo"].obs_norm.rms.count > plain.learners["ppo"].obs_norm.rms.count
 
 
-def test_the_time_limit_cuts_the_demonstrations(tmp_path):
+def test_the_time_limit_cuts_the_demonstrations(tmp_path, capsys):
     cfg = run_config("cut", imitate={"steps": 10**6}, time_limit_s=1.0, total_steps=10**6)
     tr = Trainer(cfg, tmp_path / "cut", progress=False)
     out = tr.train()
     assert out["stopped"]["reason"] == "time limit" and out["elapsed_s"] < 10
     assert (tmp_path / "cut" / "latest").exists()
+    # a resume under the same limit would be cut again: the summary says to lengthen it
+    assert report(out) == 0
+    said = capsys.readouterr().out
+    assert "the cloning takes longer than the time limit" in said
+    assert "longer --time-limit" in said and f"--resume {tmp_path / 'cut'}" in said
 
 
 def test_a_run_stopped_while_cloning_clones_again_on_resume_as_if_never_stopped(tmp_path):

@@ -488,6 +488,16 @@ def _one_line_warnings() -> Iterator[None]:
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
 
 
+def _clone_cut(stopped: dict[str, Any]) -> str:
+    """How a run stopped during its behaviour cloning goes on. The cloning starts again whole
+    on resume, so one cut by the time limit is cut again by the same limit."""
+    if stopped["reason"] != "time limit":
+        return "before the cloning ended, which starts again on resume"
+    return ("before the cloning ended: the cloning takes longer than the time limit and "
+            "starts again whole on resume, so give the resume a longer --time-limit, or the "
+            "run fewer imitate steps")
+
+
 def report(summary: dict[str, Any]) -> int:
     """Print a finished (or stopped) run's summary; returns the exit code."""
     run_dir = Path(summary["run_dir"])
@@ -503,8 +513,7 @@ def report(summary: dict[str, Any]) -> int:
                f"collected again on resume" if "dropped_steps" in stopped else
                f"cut the iteration after {stopped['cut_steps']:,} steps; its matches restart on "
                f"resume" if "cut_steps" in stopped else
-               "before the cloning ended, which starts again on resume"
-               if "clone_pending" in stopped else "at an iteration end")
+               _clone_cut(stopped) if "clone_pending" in stopped else "at an iteration end")
         print(f"stopped by {stopped['reason']}: saved step {done:,} ({how}); continue with "
               f"alphatank train --resume {run_dir}")
     print(f"run {run_dir}: {done:,} steps, {summary['episodes']:,} episodes, "
