@@ -71,10 +71,6 @@ def test_stateful_term_functions():
         pytest.approx(-0.2), 0.0]
     assert R.rotation(np.array([89.9, 90.0]), cfg).tolist() == [0, -3.0]
     assert R.streak(np.array([0, 4, 2]), np.array([True, True, False])).tolist() == [1, 5, 0]
-    closer, farther = R.bullet_progress(np.array([5.0, 5.0, np.nan, 5.0]),
-                                        np.array([4.0, 6.0, 1.0, np.nan]))
-    assert closer.tolist() == [True, False, False, False]
-    assert farther.tolist() == [False, True, False, False]
 
 
 # ---- in real matches ----------------------------------------------------------------

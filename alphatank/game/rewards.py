@@ -137,13 +137,6 @@ def path_min_distance(pts: Sequence[Sequence[float]], targets: Sequence[Sequence
     return math.sqrt(best)
 
 
-def bullet_progress(prev: np.ndarray, now: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(closer, farther) masks of bullets whose distance to the nearest enemy fell / rose
-    since the previous tick. NaN marks "no distance" (bullet not alive on that tick, or no
-    live enemy), so fresh and finished bullets compare neither way."""
-    return now < prev, now > prev
-
-
 def streak(count: np.ndarray, condition: np.ndarray) -> np.ndarray:
     """Consecutive-tick counter: +1 while ``condition`` holds, 0 when it breaks."""
     return np.where(condition, count + 1, 0)
@@ -405,10 +398,10 @@ class RewardTracker:
 
     def _progress(self, sl: slice, batch: StateBatch, terms: np.ndarray) -> None:
         """bullet_close / bullet_away: each live bullet of a rewarded seat closer to /
-        farther from its nearest live enemy than on the previous tick
-        (:func:`bullet_progress` of every slot, compiled:
-        :func:`~alphatank.game.kernels.progress_counts`). A slot is only ever re-fired
-        after a tick in which it was inactive (NaN), so fresh bullets never compare."""
+        farther from its nearest live enemy than on the previous tick, every slot at once
+        (compiled: :func:`~alphatank.game.kernels.progress_counts`). NaN marks "no
+        distance" (slot inactive, or no live enemy), and a slot is only ever re-fired
+        after a tick in which it was inactive, so fresh bullets never compare."""
         v = self._progress_views(sl, batch, terms)
         progress_counts(v.bullet_xy, v.tank_xy, v.alive, v.act, self.rw_enemy, v.prev,
                         self.capacity, self._progress_w, v.out)
