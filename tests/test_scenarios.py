@@ -18,9 +18,9 @@ from alphatank.game.scenarios import (
     Seat,
     load_scenario,
     parse_scenario,
-    seat_policy,
     shipped_scenarios,
 )
+from alphatank.game.seats import make_controller
 from alphatank.sim.config import RewardConfig
 from alphatank.sim.policy import NOOP
 
@@ -173,12 +173,12 @@ def test_map_folder_is_sampled_per_episode_and_reported(tmp_path):
     assert a == [env.core.map_name(e) for e in range(4)]
 
 
-def test_seat_policy_resolves_controllers():
-    assert seat_policy(Seat("A", "learner")) is None
-    human = seat_policy(Seat("A", "human", keys="wasd"))
+def test_make_controller_resolves_controllers():
+    assert make_controller(Seat("A", "learner")) is None
+    human = make_controller(Seat("A", "human", keys="wasd"))
     assert isinstance(human, NoopPolicy)
     assert np.array_equal(human.act(None, 0), NOOP)
-    bot = seat_policy(Seat("B", "bot", bot="smart", weakness=0.5), seed=1)
+    bot = make_controller(Seat("B", "bot", bot="smart", weakness=0.5), seed=1)
     assert hasattr(bot, "act") and hasattr(bot, "reset")
 
 

@@ -46,7 +46,6 @@ from alphatank.game.rewards import check_team_outcome
 from alphatank.game.seats import (
     Seat,
     SeatError,
-    make_controller,
     parse_seat_list,
     parse_seat_table,
     resolve,
@@ -70,11 +69,10 @@ from alphatank.sim.mapspec import (
 from alphatank.sim.policy import NoopPolicy
 
 __all__ = ["NoopPolicy", "Scenario", "ScenarioError", "Seat", "bot_names", "load_scenario",
-           "parse_scenario", "seat_policy", "seats_scenario", "shipped_scenarios"]
+           "parse_scenario", "seats_scenario", "shipped_scenarios"]
 _TOP_KEYS = ("name", "description", "map", "map_texts", "preset", "observation", "game",
              "rewards", "seats")
 TEXT = "text:"  # a map source holding the map itself: "text:NAME\nTEXT" (map_texts)
-seat_policy = make_controller  # the name earlier releases used
 
 
 class ScenarioError(InputError, ValueError):
