@@ -33,8 +33,8 @@ from alphatank.training.experiments import (
     make_plan,
     mixed_env,
     row_config,
-    run_digest,
     run_job,
+    settings_digest,
     table_names,
 )
 from alphatank.training.presets import TrainConfig
@@ -511,7 +511,7 @@ def test_every_seed_of_a_plan_is_the_run_its_row_makes_for_that_seed_alone(tmp_p
                              plan.cells[(f"{table}/{name}", s)][0].run_dir)
             named = {} if job.rows[0] == row.id else {"name": job.cfg["name"]}  # shared
             assert job.cfg == {**cfg.to_dict(), **named}
-            assert job.key == run_digest(cfg, row.scenarios)
+            assert job.key == settings_digest(cfg.to_dict(), row.scenarios)
             assert job.seed == s and job.run_dir == str(
                 tmp_path / "runs" / f"{job.rows[0].split('/')[1]}-s{s}-{job.key}")
     job = plan.cells[("table3/smart", 1)][0]
@@ -535,7 +535,7 @@ def test_a_setting_added_later_keeps_the_digests_of_runs_made_before_it(tmp_path
     spec = cfg.learners[0]
     on = cfg.with_overrides(learners=(type(spec)(spec.name, spec.algo, spec.seats, config=
                                                  type(spec.config)(anchor_kl=0.1)),))
-    assert run_digest(on, ()) != run_digest(cfg, ())
+    assert settings_digest(on.to_dict(), ()) != settings_digest(cfg.to_dict(), ())
 
 
 STUDENT = 'title = "Student"\norder = 3\n' + RUN.format(

@@ -584,15 +584,10 @@ LATER_RUN_SETTINGS = {"action_repeat": 1}
 LOGGING_SETTINGS = {"wandb": "disabled", "project": "alphatank", "tensorboard": False}
 
 
-def run_digest(cfg: TrainConfig, scenarios: Sequence[str]) -> str:
-    """Hash of what a run does (its settings without the name and where its metrics are
-    logged, and its scenario mix)."""
-    return settings_digest(cfg.to_dict(), scenarios)
-
-
 def settings_digest(data: dict[str, Any], scenarios: Sequence[str]) -> str:
-    """:func:`run_digest` of a run's settings as :meth:`TrainConfig.to_dict` gives them
-    (left unchanged)."""
+    """Hash of what a run does, from its settings as :meth:`TrainConfig.to_dict` gives
+    them (left unchanged; the name and where its metrics are logged left out) and its
+    scenario mix."""
     data = {**data, **LOGGING_SETTINGS}
     data.pop("name")
     for key, off in LATER_RUN_SETTINGS.items():
