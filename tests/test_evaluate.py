@@ -11,15 +11,16 @@ import torch
 from alphatank.bots import make_bot
 from alphatank.cli import main
 from alphatank.commands import eval as eval_cmd
+from alphatank.envs.core import MatchSet
 from alphatank.game.scenarios import parse_scenario
 from alphatank.stats import wilson_interval
 from alphatank.training.evaluate import (
     EvalResult,
     evaluate_checkpoint,
-    evaluate_policies,
     evaluate_stand_in,
     format_table,
     game_seed,
+    play_games,
     rate_games,
     results_league,
     row_opponents,
@@ -43,6 +44,14 @@ def duel(max_steps: int) -> object:
 def bots(w: float) -> dict:
     return {0: make_bot("aggressive", weakness=w, seed=1),
             1: make_bot("aggressive", weakness=w, seed=2)}
+
+
+def evaluate_policies(sc, policies: dict, team: str, games: int, seed: int = 0,
+                      num_envs: int = 8) -> EvalResult:
+    """Count games of ``sc`` whose learner seats are filled by ``policies``."""
+    core = MatchSet(sc, min(num_envs, games), driven=[], seat_policies=policies)
+    return play_games(core, team, games, seed, None,
+                      EvalResult(name=sc.name, opponent=core.describe_opponents(0)))
 
 
 def test_idle_bots_draw_every_game_exactly():

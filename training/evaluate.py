@@ -29,7 +29,6 @@ from alphatank.envs.core import MatchSet
 from alphatank.files import write_text_atomic
 from alphatank.game.scenarios import Scenario, Seat, load_scenario, team_misfit
 from alphatank.sim.config import MATCHES_MAX
-from alphatank.sim.policy import Policy
 from alphatank.stats import League, wilson_interval
 from alphatank.training.checkpoint import Checkpoint, load_checkpoint
 from alphatank.training.streams import GameStreams
@@ -389,18 +388,6 @@ def evaluate_stand_in(bot: str, scenario: str | Scenario, opponents: Sequence[st
         if watch is not None:
             res.team_stats = watch.summary()
     return results
-
-
-def evaluate_policies(scenario: str | Scenario, policies: dict[int, Policy], team: str,
-                      games: int = 100, seed: int = 0, num_envs: int = 8,
-                      name: str = "") -> EvalResult:
-    """Count games of a scenario whose learner seats are filled by ``policies`` (any
-    Policy: bots, checkpoints, ...); bot seats play as the scenario says."""
-    sc = load_scenario(scenario)
-    core = MatchSet(sc, max(1, min(num_envs, games)), driven=[], seat_policies=policies)
-    res = EvalResult(name=name or sc.name, opponent=core.describe_opponents(0),
-                     sides=("Opponent", "Opponent"))
-    return play_games(core, team, games, seed, None, res)
 
 
 def header(results: Sequence[EvalResult]) -> tuple[str, ...]:
