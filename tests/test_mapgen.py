@@ -15,11 +15,10 @@ from alphatank.mapgen import (
     ascii_art,
     generate,
     generate_from,
-    is_symmetric,
     map_variants,
     map_warnings,
 )
-from alphatank.mapgen.generate import image, lines_clear
+from alphatank.mapgen.generate import image, lines_clear, transform
 from alphatank.sim.grid import components, open_sides
 from alphatank.sim.mapspec import MapError, load_map, map_text, parse_map
 
@@ -27,6 +26,26 @@ ROOT = Path(__file__).resolve().parents[1]
 _spec = importlib.util.spec_from_file_location("mapgen_cli", ROOT / "tools" / "mapgen.py")
 cli = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(cli)
+
+
+def is_symmetric(spec, symmetry: str) -> bool:
+    """Whether walls, zones and spawn slots (slot i <-> i + n//2, an odd last slot on the
+    axis) are symmetric."""
+    shape = spec.walls.shape
+    if not np.array_equal(spec.walls, transform(spec.walls, symmetry)):
+        return False
+    for cells in (spec.buffs, spec.debuffs):
+        if {image(c, shape, symmetry) for c in cells} != set(cells):
+            return False
+    n = len(spec.spawns)
+    if sorted(spec.spawns) != list(range(1, n + 1)):
+        return False
+    for slot, cell in spec.spawns.items():
+        mate = slot + n // 2 if slot <= n // 2 else slot - n // 2 if slot <= 2 * (n // 2) else slot
+        if spec.spawns[mate] != image(cell, shape, symmetry):
+            return False
+    return True
+
 
 # (rows, cols), spawns, zones: sizes odd and even, square and not; an odd spawn count sits
 # on the axis (mirror needs odd cols, rotation odd rows and cols).

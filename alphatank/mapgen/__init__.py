@@ -7,7 +7,6 @@ from alphatank.mapgen.generate import (
     MapGenError,
     generate,
     generate_from,
-    is_symmetric,
     map_variants,
 )
 from alphatank.mapgen.lint import MapWarning, ascii_art, check_map, describe, map_warnings
@@ -15,4 +14,4 @@ from alphatank.mapgen.model import EditorModel
 
 __all__ = ["ALGORITHMS", "SYMMETRIES", "EditorModel", "GenOptions", "MapGenError",
            "MapWarning", "ascii_art", "check_map", "describe", "generate", "generate_from",
-           "is_symmetric", "map_variants", "map_warnings"]
+           "map_variants", "map_warnings"]

@@ -227,24 +227,6 @@ def map_variants(spec: MapSpec) -> list[MapSpec]:
     return out
 
 
-def is_symmetric(spec: MapSpec, symmetry: str) -> bool:
-    """Walls, zones and spawn slots (slot i <-> i + n//2, an odd last slot on the axis)."""
-    shape = spec.walls.shape
-    if not np.array_equal(spec.walls, transform(spec.walls, symmetry)):
-        return False
-    for cells in (spec.buffs, spec.debuffs):
-        if {image(c, shape, symmetry) for c in cells} != set(cells):
-            return False
-    n = len(spec.spawns)
-    if sorted(spec.spawns) != list(range(1, n + 1)):
-        return False
-    for slot, cell in spec.spawns.items():
-        mate = slot + n // 2 if slot <= n // 2 else slot - n // 2 if slot <= 2 * (n // 2) else slot
-        if spec.spawns[mate] != image(cell, shape, symmetry):
-            return False
-    return True
-
-
 # ---- grid helpers -------------------------------------------------------------------------
 
 def _touches(a: np.ndarray, b: np.ndarray, rr: np.ndarray, cc: np.ndarray) -> np.ndarray:
