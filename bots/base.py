@@ -208,8 +208,9 @@ class Bot:
         gx, gy = centers[me]
         return gx, gy
 
-    def enemies(self, match: Match, seat: int) -> list[int]:
-        """Live tanks on other teams (a handful: plain Python is cheapest)."""
+    def enemies(self, match: Match) -> list[int]:
+        """Live tanks on teams other than this bot's seat's (its foes, found at reset; a
+        handful: plain Python is cheapest)."""
         alive = match.alive
         return [k for k in self._foes if alive[k]]
 
@@ -228,7 +229,7 @@ class Bot:
     def engage(self, match: Match, seat: int) -> Engagement | None:
         """Nearest live enemy with both positions, its distance and this tank's heading;
         None when no enemy is left."""
-        target = self.nearest(match, seat, self.enemies(match, seat))
+        target = self.nearest(match, seat, self.enemies(match))
         if target < 0:
             return None
         rows = match.world.tank_rows()
@@ -286,21 +287,18 @@ class Bot:
         a tank-wide leg clips corners the thin segment's bounding box never reaches."""
         return self.sight(match).clear(x0, y0, x1, y1, radius)
 
-    def shot_hits(self, match: Match, seat: int, heading: float | None = None,
-                  hit_radius: float | None = None, exact: bool = True
+    def shot_hits(self, match: Match, seat: int, exact: bool = True
                   ) -> tuple[bool, np.ndarray]:
         """Predict a bullet fired now (ricochets included): (first tank it reaches is an
         enemy, the predicted path). Teammates in the way make it False. ``exact=False``
         uses the cheaper search-grade prediction (see ``predict_path``)."""
         w = match.world
         x, y, a = w.tank_rows()[seat][:3]
-        a = a if heading is None else heading
         d = self.muzzle_offset
         path = predict_path(w, x + math.cos(a) * d, y + math.sin(a) * d, a, exact=exact)
         others = np.flatnonzero(match.alive)
         others = others[others != seat]
-        k = path_hits(path, match.tank_xy[others], self.hit_radius if hit_radius is None
-                      else hit_radius)
+        k = path_hits(path, match.tank_xy[others], self.hit_radius)
         if k < 0:
             return False, path
         return bool(match.team_index[others[k]] != match.team_index[seat]), path

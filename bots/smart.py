@@ -81,7 +81,7 @@ class SmartBot(Bot):
     # ---- decision -------------------------------------------------------------------
 
     def decide(self, match: Match, seat: int) -> tuple[int, int, int]:
-        foes = self.enemies(match, seat)
+        foes = self.enemies(match)
         if not foes:
             return NONE, STOP, 0
         rows = match.world.tank_rows()  # few tanks: plain Python beats numpy here
