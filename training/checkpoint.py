@@ -339,15 +339,14 @@ class Checkpoint:
             raise CheckpointError(f"{file}: corrupt or truncated (SHA-256 differs from the one "
                                   f"recorded in meta.json; size {file.stat().st_size} bytes)")
 
-    def load_learner(self, name: str, num_streams: int | None = None,
-                     weights_only: bool = False, seed: int = 0) -> Any:
-        """A learner rebuilt from its spec with this checkpoint's state (``num_streams``
-        default: one env's worth, one stream per seat it drives)."""
+    def load_learner(self, name: str, weights_only: bool = False) -> Any:
+        """A learner rebuilt from its spec with this checkpoint's state (one env's worth of
+        streams: one per seat it drives)."""
         specs = {s.name: s for s in self.learner_specs}
         if name not in specs:
             raise CheckpointError(f"{self.path}: no learner {name!r}; learners: {list(specs)}")
         spec = specs[name]
-        learner = make_learner(spec, self.obs_dim, num_streams or len(spec.seats), seed,
+        learner = make_learner(spec, self.obs_dim, len(spec.seats), 0,
                                input_dims=self.meta.get("input_dims"))
         state = self.state(name)
         try:
@@ -735,8 +734,8 @@ class LivePolicy(NetworkPolicy):
     """In-memory learners of a running training (videos, evaluation during training)."""
 
     def __init__(self, learners: dict[str, Any], observation: dict[str, Any],
-                 learner: str | None = None, deterministic: bool = False):
-        super().__init__(observation, list(learners), learner, deterministic, "training")
+                 learner: str | None = None):
+        super().__init__(observation, list(learners), learner, False, "training")
         self.learners = learners
 
     def get_learner(self, name: str) -> Any:
@@ -746,13 +745,12 @@ class LivePolicy(NetworkPolicy):
 class CheckpointPolicy(NetworkPolicy):
     """A checkpoint's learners as a Policy (all weights loaded and checked up front)."""
 
-    def __init__(self, ckpt: Checkpoint, learner: str | None = None,
-                 deterministic: bool = False):
-        super().__init__(ckpt.meta["observation"], ckpt.learner_names(), learner,
-                         deterministic, str(ckpt.path), ckpt.trained_as, ckpt.trained_teams)
+    def __init__(self, ckpt: Checkpoint, deterministic: bool = False):
+        super().__init__(ckpt.meta["observation"], ckpt.learner_names(), None, deterministic,
+                         str(ckpt.path), ckpt.trained_as, ckpt.trained_teams)
         self.ckpt = ckpt
-        wanted = [learner] if learner is not None else ckpt.learner_names()
-        self.learners = {name: ckpt.load_learner(name, weights_only=True) for name in wanted}
+        self.learners = {name: ckpt.load_learner(name, weights_only=True)
+                         for name in ckpt.learner_names()}
 
     def get_learner(self, name: str) -> Any:
         return self.learners[name]
@@ -761,10 +759,9 @@ class CheckpointPolicy(NetworkPolicy):
         return f"CheckpointPolicy({str(self.ckpt.path)!r}, learners={list(self.learners)})"
 
 
-def load_policy(path: str | Path, learner: str | None = None,
-                deterministic: bool = False) -> CheckpointPolicy:
+def load_policy(path: str | Path, deterministic: bool = False) -> CheckpointPolicy:
     """A checkpoint (directory, or a run directory's latest) as a Policy for any seat."""
-    return CheckpointPolicy(load_checkpoint(path), learner, deterministic)
+    return CheckpointPolicy(load_checkpoint(path), deterministic)
 
 
 # ---- the line-up's "checkpoint" and "agent" controller kinds (alphatank.game.seats) ----

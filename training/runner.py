@@ -478,9 +478,9 @@ class Trainer:
                 self._payload())
         return {n: copy.deepcopy(self.learners[n].state_dict()) for n in fixed}
 
-    def policy(self, deterministic: bool = False) -> LivePolicy:
+    def policy(self) -> LivePolicy:
         """The current learners as a Policy (for videos and matches in any seat)."""
-        return LivePolicy(self.learners, self.observation_meta, deterministic=deterministic)
+        return LivePolicy(self.learners, self.observation_meta)
 
     # ---- the loop ---------------------------------------------------------------------
 
