@@ -26,9 +26,9 @@ NVEC = (3, 3, 2)  # rotate, move, fire — the one action layout (RULES.md)
 MASKED_LOGIT = -1e8  # exp() of this is exactly 0 in float32, and 0 * it stays finite
 
 
-def layer_init(layer: nn.Linear, std: float = math.sqrt(2), bias: float = 0.0) -> nn.Linear:
+def layer_init(layer: nn.Linear, std: float = math.sqrt(2)) -> nn.Linear:
     nn.init.orthogonal_(layer.weight, std)
-    nn.init.constant_(layer.bias, bias)
+    nn.init.constant_(layer.bias, 0.0)
     return layer
 
 
