@@ -20,18 +20,18 @@ _SETTERS = ("scipy_openblas_set_num_threads64_", "scipy_openblas_set_num_threads
             "openblas_set_num_threads64_", "openblas_set_num_threads")
 
 
-def limit_threads(torch_threads: int = 1, blas_threads: int = 1) -> bool:
-    """Set torch's intra-op threads and numpy's OpenBLAS pool size (also exported as
-    ``OPENBLAS_NUM_THREADS`` for processes started later). Returns whether numpy's
-    bundled OpenBLAS was found and capped."""
+def limit_threads(torch_threads: int = 1) -> bool:
+    """Set torch's intra-op threads and cap numpy's OpenBLAS pool at one thread (also
+    exported as ``OPENBLAS_NUM_THREADS`` for processes started later). Returns whether
+    numpy's bundled OpenBLAS was found and capped."""
     torch.set_num_threads(torch_threads)
-    os.environ["OPENBLAS_NUM_THREADS"] = str(blas_threads)
+    os.environ["OPENBLAS_NUM_THREADS"] = "1"
     libs = Path(np.__file__).resolve().parent.parent / "numpy.libs"
     for lib in sorted(libs.glob("*openblas*")):
         handle = ctypes.CDLL(str(lib))
         for name in _SETTERS:
             setter = getattr(handle, name, None)
             if setter is not None:
-                setter(ctypes.c_int(blas_threads))
+                setter(ctypes.c_int(1))
                 return True
     return False
