@@ -86,11 +86,12 @@ class RunLogger:
             for k, v in clean.items():
                 self.tb.add_scalar(k, v, int(step))
 
-    def video(self, path: str | Path, step: int, key: str = "media/match") -> None:
-        """Attach an MP4 already written to disk."""
+    def video(self, path: str | Path, step: int) -> None:
+        """Attach an MP4 already written to disk (as ``media/match``)."""
         if self.wandb_run is not None:
             import wandb
-            self.wandb_run.log({key: wandb.Video(str(path), format="mp4")}, step=int(step))
+            self.wandb_run.log({"media/match": wandb.Video(str(path), format="mp4")},
+                               step=int(step))
 
     def close(self) -> None:
         if self._jsonl is not None:
@@ -155,17 +156,18 @@ def read_metrics(run_dir: str | Path) -> list[dict[str, float]]:
     return rows
 
 
-def plot_learning_curve(run_dir: str | Path, out: str | Path | None = None,
+def plot_learning_curve(run_dir: str | Path,
                         evals: list[tuple[int, float, float, float]] | None = None) -> Path:
-    """PNG of the win rate (last-100-episode window, per opponent when there are several;
-    ``eval/win_rate`` points and ``evals`` = (step, rate, ci_low, ci_high) with their
-    intervals) and the episode return against env steps."""
+    """``learning_curve.png`` in ``run_dir``: the win rate (last-100-episode window, per
+    opponent when there are several; ``eval/win_rate`` points and ``evals`` = (step,
+    rate, ci_low, ci_high) with their intervals) and the episode return against env
+    steps."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     rows = read_metrics(run_dir)
-    out = Path(out) if out else Path(run_dir) / "learning_curve.png"
+    out = Path(run_dir) / "learning_curve.png"
     keys = {k for r in rows for k in r}
     per_opp = sorted(k for k in keys if k.startswith("charts/win_rate_vs/"))
     lines = sorted(k for k in keys if k.startswith("charts/win_rate") and
