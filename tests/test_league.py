@@ -167,3 +167,22 @@ def test_league_trains_against_bots_and_its_own_snapshots(tmp_path):
 def deque_of(items):
     from collections import deque
     return deque(items)
+
+
+def test_league_snapshots_of_a_mappo_team_play_the_bot_team(tmp_path):
+    """A MAPPO learner driving both seats of a team: its snapshots (one learner for the two
+    bot seats) play the other team (the first snapshot raised 'num_streams (1) must be a
+    multiple of num_seats (2)')."""
+    from alphatank.training.hparams import MAPPOConfig
+
+    cfg = TrainConfig("lg", "team_vs_bot", total_steps=512, num_envs=2, wandb="disabled",
+                      game={"max_steps": 40}, checkpoint_every=0,
+                      schedule={"kind": "league", "bots": ["random"], "weaknesses": [1.0],
+                                "snapshot_every": 256, "snapshots": 2},
+                      learners=(LearnerSpec("team", "mappo", (0, 1),
+                                            MAPPOConfig(num_steps=64, update_epochs=1)),))
+    tr = Trainer(cfg, tmp_path / "run", progress=False)
+    tr.train()
+    lg = tr.schedule
+    assert list(lg.pool) == ["self@0", "self@256"]
+    assert sum(len(r) for n, r in lg.results.items() if n.startswith("self@")) > 0

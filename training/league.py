@@ -152,7 +152,9 @@ class LeagueSchedule(OpponentSchedule):
 
         tr = self.trainer
         spec = tr.specs[0]
-        learner = make_learner(spec, tr.D, 1, self.seed, input_dims=tr.input_dims)
+        # one stream per seat the learner drives (MAPPO needs its seat count's streams)
+        learner = make_learner(spec, tr.D, len(spec.seats), self.seed,
+                               input_dims=tr.input_dims)
         learner.load_state_dict(frozen_state(tr.learners[spec.name].state_dict()),
                                 weights_only=True)
         name = f"self@{step}"
