@@ -12,7 +12,7 @@ from alphatank.bots import make_bot
 from alphatank.cli import main
 from alphatank.commands import eval as eval_cmd
 from alphatank.envs.core import MatchSet
-from alphatank.game.scenarios import parse_scenario
+from alphatank.game.scenarios import load_scenario, parse_scenario
 from alphatank.stats import wilson_interval
 from alphatank.training.evaluate import (
     EvalResult,
@@ -299,3 +299,25 @@ def test_an_evaluation_seed_is_checked_by_name():
         game_seed(-1, 0)
     assert game_seed(np.int64(7), 3) == game_seed(7, 3)
 
+
+
+def test_a_checkpoint_plays_maps_with_fewer_walls_as_its_seat_does():
+    """An agent trained with room for 11 wall rectangles (battlefield) on arena4 (fewer):
+    evaluation pads its observation as play and arena do, and plays the very games its
+    checkpoint seat plays (it was refused: 'expects 236 observation features ... gives
+    215'); a map with more walls than its room says so."""
+    from alphatank.training.checkpoint import agent_path, load_policy
+    from alphatank.training.evaluate import with_map
+
+    path = agent_path("ppo_vs_smart")
+    res = evaluate_checkpoint(path, [None], games=2, seed=4, map_name="arena4",
+                              deterministic=True, num_envs=2)[0]
+    seat = evaluate_policies(with_map(load_scenario("vs_smart"), "arena4"),
+                             {0: load_policy(path, deterministic=True)}, "A", games=2, seed=4,
+                             num_envs=2)
+    assert res.games == 2 and (res.outcomes, res.lengths) == (seat.outcomes, seat.lengths)
+    with pytest.raises(ValueError, match=r"gives 256 \(its maps have up to 15 wall rectangles; "
+                                         r"its 'paper' observation has room for 11\)"):
+        evaluate_checkpoint(path, [None], games=1, map_name="maze")
+    with pytest.raises(ValueError, match=r"\(the match has 4 tanks; it trained with 2\)"):
+        evaluate_checkpoint(path, [None], games=1, scenario="team_vs_bot")

@@ -275,14 +275,15 @@ def evaluate_learners(learners: dict[str, Any], observation: dict[str, Any],
         sc = dataclasses.replace(base, seats=tuple(seats))
         driven = [i for i, s in enumerate(seats) if s.controller == "learner"]
         n_env = max(1, min(num_envs, games, MATCHES_MAX))  # the games are the same
+        room = tuple(int(observation[k]) for k in ("max_walls", "max_buffs", "max_debuffs"))
         core = MatchSet(sc, n_env, observation=observation["kind"],
                         game_overrides=game_overrides, reward_overrides=reward_overrides,
-                        driven=driven, action_repeat=observation["action_repeat"])
+                        driven=driven, action_repeat=observation["action_repeat"],
+                        slots=room)  # maps with fewer walls or zones: padded as trained
         if core.obs_dim != int(observation["obs_dim"]):
             raise ValueError(f"{source}: expects {observation['obs_dim']} observation "
                              f"features; scenario {sc.name!r} on map {sc.map!r} gives "
-                             f"{core.obs_dim} "
-                             f"(different map walls, tank count or observation kind)"
+                             f"{core.obs_dim} ({observation_misfit(observation, core)})"
                              + (f"; it fits {trained_as}" if trained_as else ""))
         for seat in driven:
             misfit = team_misfit(trained_teams, seat_learner, sc.teams, seat)
@@ -305,6 +306,25 @@ def evaluate_learners(learners: dict[str, Any], observation: dict[str, Any],
         if watch is not None:
             res.team_stats = watch.summary()
     return results
+
+
+def observation_misfit(observation: dict[str, Any], core: MatchSet) -> str:
+    """Why ``core``'s observations are not those of a policy trained with ``observation``
+    (its meta): the tank count, or the walls or zones of the maps beyond its room."""
+    from alphatank.game.observe import slot_counts
+
+    tanks, kind = int(observation["tanks"]), observation["kind"]
+    walls, buffs, debuffs = slot_counts(core.game, core.specs)
+    why = []
+    if core.n != tanks:
+        why.append(f"the match has {core.n} tanks; it trained with {tanks}")
+    if kind == "paper" and walls > int(observation["max_walls"]):
+        why.append(f"its maps have up to {walls} wall rectangles; its 'paper' observation "
+                   f"has room for {observation['max_walls']}")
+    if buffs > int(observation["max_buffs"]) or debuffs > int(observation["max_debuffs"]):
+        why.append(f"its maps have up to {buffs} buff and {debuffs} debuff zones; it has "
+                   f"room for {observation['max_buffs']} and {observation['max_debuffs']}")
+    return "; ".join(why) or "its observation has another layout"
 
 
 def learner_team(base: Scenario, team: str | None) -> str:

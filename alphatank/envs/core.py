@@ -235,14 +235,17 @@ class MatchSet:
     """``num_envs`` matches of a scenario; the caller drives ``driven`` seats (default:
     the scenario's learner seats) and the set plays every other seat. With
     ``action_repeat`` k each :meth:`step` holds the driven seats' actions for k ticks
-    (fewer when the match ends first) while the other seats act every tick."""
+    (fewer when the match ends first) while the other seats act every tick. ``slots``
+    (walls, buff zones, debuff zones) pads the observations to at least that room, as a
+    policy trained with it sees maps with fewer."""
 
     def __init__(self, scenario: str | Scenario, num_envs: int = 1, *,
                  observation: str | None = None, game_overrides: Mapping | None = None,
                  reward_overrides: Mapping | None = None,
                  driven: Sequence[int] | None = None,
                  seat_policies: Mapping[int, Policy] | None = None,
-                 env_ids: Sequence[int] | None = None, action_repeat: int = 1):
+                 env_ids: Sequence[int] | None = None, action_repeat: int = 1,
+                 slots: tuple[int, int, int] = (0, 0, 0)):
         sc = self.scenario = load_scenario(scenario)
         num_envs = check_num_envs(num_envs)
         check_action_repeat(action_repeat)
@@ -278,7 +281,8 @@ class MatchSet:
         self.bot_override: list[str] | None = None
         self.weakness: float | None = None
         self.benched: tuple[int, ...] = ()  # seats out of every next episode (set_benched)
-        walls, buffs, debuffs = slot_counts(self.game, self.specs)
+        walls, buffs, debuffs = (max(int(a), int(b)) for a, b in
+                                 zip(slot_counts(self.game, self.specs), slots, strict=True))
         self.batch = StateBatch(self.game, n, E, walls, buffs, debuffs)
         self.obs = ObservationBuilder(self.kind, self.batch, self.teams, self.driven,
                                       team_flags=sc.team_mode)
