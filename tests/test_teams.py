@@ -253,3 +253,19 @@ def test_warm_start_from_a_1v1_run(tmp_path, capsys):
     assert _train(tmp_path, "--config", str(cfg), "--name", "w2", "--init-from",
                   "agent:nobody") == 2
     assert "unknown agent 'nobody'; shipped agents:" in capsys.readouterr().err
+
+
+def test_a_checkpoint_in_a_match_of_another_tank_count_is_told_so_before_the_map():
+    """A 4-tank team agent in a 1v1 on a map with more walls than its room: the tank count
+    fits no map, so that is what it is told (it was told the map's walls, and on a map
+    with room then the tank count)."""
+    from alphatank.training.checkpoint import agent_path
+
+    pol = load_policy(agent_path("team_vs_2smart"))
+    sc = parse_scenario({"name": "t", "map": "maze", "seats": [
+        {"team": "A", "controller": "learner"}, {"team": "B", "controller": "bot",
+                                                 "bot": "random"}]})
+    core = MatchSet(sc, 1, driven=[], seat_policies={0: pol})
+    with pytest.raises(CheckpointError, match=r"seat 0 of this match \(2 tanks, teams \['A', "
+                       r"'B'\]\) gives \d+; it fits seats of matches with 4 tanks"):
+        core.reset_env(0, 1)

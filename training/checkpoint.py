@@ -624,7 +624,7 @@ class NetworkPolicy:
                 if row is not None:
                     return bank, row
         bank = _Bank(self.kind, match, seat, (walls, *self.slots[1:]), self.team_flags)
-        if bank.builder.layout.size != self.obs_dim:
+        if bank.builder.layout.size != self.obs_dim or match.n != self.n_tanks:
             raise CheckpointError(
                 f"{self.source}: expects {self.obs_dim} observation features "
                 f"({self.kind}, {self.n_tanks} tanks); seat {seat} of this match "
@@ -645,13 +645,15 @@ class NetworkPolicy:
         per_match = self._seats.setdefault(match, {})
         walls, buffs, debuffs = self.slots
         need, nb, nd = slot_counts(match.cfg, [match.spec])
-        if self.kind == "paper" and need > walls:
+        # another tank count fits no map: _row says so instead of naming the map's room
+        fits = match.n == self.n_tanks
+        if fits and self.kind == "paper" and need > walls:
             raise CheckpointError(
                 f"{self.source}: trained with room for {walls} wall rectangles in its "
                 f"'paper' observation; map {match.spec.name!r} has {need}"
                 + (f" (it fits maps like those of {self.trained_as})" if self.trained_as
                    else ""))
-        if nb > buffs or nd > debuffs:
+        if fits and (nb > buffs or nd > debuffs):
             raise CheckpointError(
                 f"{self.source}: trained with room for {buffs} buff and {debuffs} "
                 f"debuff zones; map {match.spec.name!r} has {nb} and {nd}")
