@@ -169,6 +169,8 @@ def test_eval_pool_adds_up_the_rows_against_each_opponent(capsys):
     counts = [x.split("|")[3:6] for x in rows.splitlines() if x.startswith("| bot:")]
     w, lo, d = (sum(int(c[k]) for c in counts) for k in range(3))
     assert f"(2 rows): {w}/{lo}/{d} (W/L/D) of 12 games" in line and "permutation p = " in line
+    # the legend says how to read p whatever its value (it read "(small: ...)" after p = 1)
+    assert line.endswith("(a small p says the rows differ more than chance)")
     assert main(["eval", "bot:smart", "--scenario", "vs_aggressive", "--pool"]) == 2
     assert "--pool needs two or more checkpoints" in capsys.readouterr().err
 

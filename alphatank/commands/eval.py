@@ -232,4 +232,4 @@ def print_pooled(results: Sequence[EvalResult]) -> None:
               f"{pool.games} games, {100 * pool.rate:.1f}% [{100 * lo:.1f}, {100 * hi:.1f}]; "
               f"the rows' win rates spread by {100 * pool.spread:.1f} points (sd), their "
               f"games' luck alone gives {100 * pool.noise:.1f}: permutation p = "
-              f"{pool.p_text} (small: the rows differ more than chance)")
+              f"{pool.p_text} (a small p says the rows differ more than chance)")
