@@ -179,4 +179,16 @@ def test_warm_start_from_a_1v1_checkpoint(tmp_path):
     tr2 = Trainer(mixed, tmp_path / "mixed", progress=False)
     assert set(tr2.warm_start) == {"ppo"}
     assert torch.equal(tr2.learners["ppo"].net.actor[2].weight, src_w)
+    # Its checkpoint (SAC first) seeds a run from its PPO learner, the first PPO one.
+    tr2.train()
+    ppo = PPO(env.obs_dim, 2)
+    warm_start_from_checkpoint(ppo, tmp_path / "mixed", env.layout, 1)
+    assert torch.equal(ppo.net.actor[2].weight, tr2.learners["ppo"].net.actor[2].weight)
+    sac_only = TrainConfig("sac_only", "vs_defensive", total_steps=2, num_envs=1,
+                           wandb="disabled", checkpoint_every=0,
+                           learners=(LearnerSpec("sac", "sac", (0,)),))
+    Trainer(sac_only, tmp_path / "sac_only", progress=False).train()
+    with pytest.raises(ValueError, match=r"no PPO learner to warm-start from; its learners: "
+                                         r"\[\('sac', 'sac'\)\]"):
+        warm_start_from_checkpoint(ppo, tmp_path / "sac_only", env.layout, 1)
 

@@ -195,19 +195,16 @@ def checkpoint_layout(ckpt: Any, learner: str) -> tuple[ObsLayout, int]:
 
 
 def warm_start_from_checkpoint(learner: Any, path: str | Path, dst_layout: ObsLayout,
-                               dst_mates: int, source: str | None = None) -> dict[str, int]:
-    """:func:`warm_start` from the PPO learner ``source`` (default: the first) of the
-    checkpoint (or run directory's latest) at ``path``."""
+                               dst_mates: int) -> dict[str, int]:
+    """:func:`warm_start` from the first PPO learner of the checkpoint (or run directory's
+    latest) at ``path`` (e.g. the PPO side of a SAC vs PPO run)."""
     from alphatank.training.checkpoint import load_checkpoint
 
     ckpt = load_checkpoint(path)
-    specs = {s.name: s for s in ckpt.learner_specs}
-    name = source or next(iter(specs))
-    if name not in specs:
-        raise ValueError(f"{ckpt.path}: no learner {name!r}; learners: {list(specs)}")
-    if specs[name].algo != "ppo":
-        raise ValueError(f"{ckpt.path}: learner {name!r} is {specs[name].algo}; warm start "
-                         f"reads PPO learners")
+    name = next((s.name for s in ckpt.learner_specs if s.algo == "ppo"), None)
+    if name is None:
+        raise ValueError(f"{ckpt.path}: no PPO learner to warm-start from; its learners: "
+                         f"{[(s.name, s.algo) for s in ckpt.learner_specs]}")
     # A file that does not fit its own saved config is damaged: its error names the tensor
     # and both shapes (a hidden-size mismatch found below is then a real one).
     ckpt.load_learner(name, weights_only=True)
