@@ -163,6 +163,7 @@ def test_a_resumed_run_in_fragments_goes_on_as_the_uninterrupted_one(tmp_path):
 
 @pytest.mark.parametrize(("preset", "message"), [
     ("sac_vs_aggressive", "acted by PPO and MAPPO learners only"),
+    ("sac_vs_ppo", "this run has ['sac (sac)'] (SAC acts step by step)"),
     ("team_ppo_vs_ppo", "self-play swaps opponents"),
 ])
 def test_what_fragments_cannot_carry_is_one_line(tmp_path, capsys, preset, message):
@@ -172,6 +173,8 @@ def test_what_fragments_cannot_carry_is_one_line(tmp_path, capsys, preset, messa
     assert code == 2
     last = capsys.readouterr().err.strip().splitlines()[-1]
     assert "fragments: " in last and message in last
+    # SAC has no rollout: it is not also reported as one of the wrong length
+    assert "rollout must be" not in last
 
 
 @pytest.mark.parametrize("flag", ["--fragments", "--overlap"])

@@ -89,7 +89,7 @@ def fragment_problems(learners: Mapping[str, Any], rollout_steps: int, *, masks:
     if other:
         out.append(f"fragments are acted by PPO and MAPPO learners only; this run has "
                    f"{other} (SAC acts step by step)")
-    lengths = {n: lr.rollout_steps for n, lr in learners.items()}
+    lengths = {n: lr.rollout_steps for n, lr in learners.items() if lr.algo in ALGOS}
     if any(k != rollout_steps for k in lengths.values()):
         out.append(f"every learner's rollout must be the iteration ({rollout_steps} steps); "
                    f"they are {lengths}")
