@@ -210,7 +210,7 @@ class SAC:
         self.generator = torch.Generator().manual_seed(seed)
         self.rng = np.random.default_rng(seed)
         self.obs_norm = ObsNormalizer(obs_dim, cfg.norm_obs, cfg.obs_clip)
-        self.replay = ReplayBuffer(min(cfg.buffer_size, 10**9), obs_dim, act_dim)
+        self.replay = ReplayBuffer(cfg.buffer_size, obs_dim, act_dim)
         self.mirror = NumpyActor(self.actor)
         self.transitions = 0
         self.since_update = 0
