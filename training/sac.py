@@ -17,7 +17,7 @@ import torch
 import torch.nn.functional as F  # noqa: N812
 from torch import nn
 
-from alphatank.training.buffers import ReplayBuffer
+from alphatank.training.buffers import ReplayBuffer, check_memory
 from alphatank.training.hparams import SACConfig
 from alphatank.training.normalize import ObsNormalizer
 from alphatank.training.ppo import NVEC
@@ -211,6 +211,10 @@ class SAC:
         self.rng = np.random.default_rng(seed)
         self.obs_norm = ObsNormalizer(obs_dim, cfg.norm_obs, cfg.obs_clip)
         self.replay = ReplayBuffer(cfg.buffer_size, obs_dim, act_dim)
+        # a gradient step's sampled observations and the networks' activations (about)
+        check_memory(4 * cfg.batch_size * (2 * obs_dim + 16 * cfg.hidden),
+                     f"a gradient step of batch_size = {cfg.batch_size:,} transitions x "
+                     f"{obs_dim} inputs", "lower batch_size")
         self.mirror = NumpyActor(self.actor)
         self.transitions = 0
         self.since_update = 0
