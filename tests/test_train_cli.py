@@ -502,3 +502,22 @@ def test_a_rollout_that_is_not_whole_learner_rollouts_names_the_run_file(capsys,
     assert main([*argv, "--print-config", "--hp", "ppo.num_steps=50"]) == 0
     assert "rollout_steps = 100" in capsys.readouterr().out
     assert not (tmp_path / "runs").exists()
+
+
+def test_the_learners_replay_buffers_must_fit_together(capsys, tmp_path):
+    """Each SAC replay buffer was checked alone against the memory available (allocated
+    lazily, the first takes none of it yet): two buffers of 60% each passed and would have
+    filled the machine hours into the run. Now the second is refused before the run starts."""
+    from alphatank.training.buffers import available_memory
+
+    avail = available_memory()
+    if avail is None:
+        pytest.skip("no MemAvailable on this system")
+    size = int(0.6 * avail / (4 * (2 * 201 + 3 + 2)))  # over half of it per buffer
+    assert main(["train", "--preset", "sac_vs_sac", "--num-envs", "1", "--runs",
+                 str(tmp_path), "--wandb", "disabled", "--no-progress", "--hp",
+                 f"sac.buffer_size={size}"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"buffer_size = {size:,}" in err[0], err
+    assert "besides the" in err[0] and "lower buffer_size" in err[0], err
+    assert not (tmp_path / "sac_vs_sac").exists()

@@ -9,6 +9,8 @@ truncation is bootstrapped with ``V(final_obs)`` stored in ``bootstrap[t]``.
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -84,14 +86,33 @@ def available_memory() -> int | None:
     return None
 
 
+_reserved: list[int] = []  # bytes promised to buffers checked in an open memory_budget()
+
+
+@contextlib.contextmanager
+def memory_budget() -> Iterator[None]:
+    """Buffers checked inside (a run's learners) share the memory available: each check
+    counts what the ones before it will take once filled."""
+    _reserved.append(0)
+    try:
+        yield
+    finally:
+        _reserved.pop()
+
+
 def check_memory(nbytes: int, what: str, fix: str) -> None:
     """ValueError (``what`` needs ..., then ``fix``) before allocating ``nbytes`` when the
     machine has less memory available (a buffer allocated lazily would fill it hours into
-    the run)."""
+    the run), less what earlier buffers of the open :func:`memory_budget` take."""
     avail = available_memory()
-    if avail is not None and nbytes > avail:
+    taken = _reserved[-1] if _reserved else 0
+    if avail is not None and nbytes > avail - taken:
+        besides = (f" besides the {taken / 2**30:,.1f} GiB of the learners' buffers before "
+                   "it" if taken else "")
         raise ValueError(f"{what} needs {nbytes / 2**30:,.1f} GiB; this machine has "
-                         f"{avail / 2**30:,.1f} GiB available: {fix}")
+                         f"{max(avail - taken, 0) / 2**30:,.1f} GiB available{besides}: {fix}")
+    if _reserved:
+        _reserved[-1] += nbytes
 
 
 class RolloutBuffer:

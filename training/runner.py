@@ -58,6 +58,7 @@ from alphatank.files import FolderLock, missing_folders, remove_empty_folders
 from alphatank.game.lineup import check_seats_fit
 from alphatank.game.observe import slot_counts
 from alphatank.game.scenarios import Scenario
+from alphatank.training.buffers import memory_budget
 from alphatank.training.checkpoint import (
     Checkpoint,
     CheckpointError,
@@ -243,10 +244,11 @@ class Trainer:
             raise ValueError(f"the learners need env inputs {missing}, which this env does not "
                              f"supply (it supplies {sorted(supplied)})")
         self.input_dims = {x: int(np.prod(supplied[x], dtype=np.int64)) for x in self.inputs}
-        self.learners = {spec.name: make_learner(spec, self.D, self.E * len(spec.seats),
-                                                 derive_seed(cfg.seed, k), mask_dim,
-                                                 self.input_dims)
-                         for k, spec in enumerate(specs)}
+        with memory_budget():  # the learners' buffers fit together
+            self.learners = {spec.name: make_learner(spec, self.D, self.E * len(spec.seats),
+                                                     derive_seed(cfg.seed, k), mask_dim,
+                                                     self.input_dims)
+                             for k, spec in enumerate(specs)}
         wants = {n: lr.rollout_steps for n, lr in self.learners.items() if lr.rollout_steps}
         self.rollout_steps = (cfg.rollout_steps or max(wants.values(), default=0)
                               or DEFAULT_ROLLOUT_STEPS)
