@@ -103,12 +103,16 @@ def test_mappo_checkpoint_plays_in_eval_arena_and_play_seats(team_runs):
     assert main(["eval", str(run), "--games", "2", "--num-envs", "2"]) == 0
 
 
-def test_a_checkpoint_of_another_team_size_says_what_fits(team_runs):
-    pol = load_policy(team_runs / "full")
-    sc = parse_scenario({"name": "t", "map": "arena4", "seats": [
+def one_vs_random(policy, map_name: str) -> MatchSet:
+    """A 1v1 on ``map_name`` with ``policy`` in seat 0 against the random bot."""
+    sc = parse_scenario({"name": "t", "map": map_name, "seats": [
         {"team": "A", "controller": "learner"}, {"team": "B", "controller": "bot",
                                                  "bot": "random"}]})
-    core = MatchSet(sc, 1, driven=[], seat_policies={0: pol})
+    return MatchSet(sc, 1, driven=[], seat_policies={0: policy})
+
+
+def test_a_checkpoint_of_another_team_size_says_what_fits(team_runs):
+    core = one_vs_random(load_policy(team_runs / "full"), "arena4")
     with pytest.raises(CheckpointError, match=r"gives 226.*fits seats of matches with 4 tanks"
                                               r".*'team_vs_bot'"):
         core.reset_env(0, 1)
@@ -261,11 +265,7 @@ def test_a_checkpoint_in_a_match_of_another_tank_count_is_told_so_before_the_map
     with room then the tank count)."""
     from alphatank.training.checkpoint import agent_path
 
-    pol = load_policy(agent_path("team_vs_2smart"))
-    sc = parse_scenario({"name": "t", "map": "maze", "seats": [
-        {"team": "A", "controller": "learner"}, {"team": "B", "controller": "bot",
-                                                 "bot": "random"}]})
-    core = MatchSet(sc, 1, driven=[], seat_policies={0: pol})
+    core = one_vs_random(load_policy(agent_path("team_vs_2smart")), "maze")
     with pytest.raises(CheckpointError, match=r"seat 0 of this match \(2 tanks, teams \['A', "
                        r"'B'\]\) gives \d+; it fits seats of matches with 4 tanks"):
         core.reset_env(0, 1)
