@@ -13,6 +13,7 @@ host, ``ray start --address HOST:PORT`` on the others; docs/distributed.md).
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import socket
@@ -61,23 +62,46 @@ class Connection:
 
 
 PROBE_TIMEOUT_S = 5.0
+# the client preface of HTTP/2 (gRPC) and an empty SETTINGS frame
+H2_PREFACE = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n" + bytes([0, 0, 0, 4, 0, 0, 0, 0, 0])
 ENV_RUNNER_TIMEOUT_S = 60.0  # an env runner silent this long on one call is hung: restart it
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
 def _reachable(address: str) -> None:
-    """Fail fast (ClusterError) when nothing listens at ``HOST:PORT``: Ray itself keeps
-    retrying for minutes. Other address forms (``auto``, ``ray://...``) go to Ray as
-    they are."""
-    host, sep, port = address.rpartition(":")
-    if not sep or not host or not port.isdigit() or "/" in address:
+    """Fail fast (ClusterError) when ``HOST:PORT`` is malformed, nothing listens there, or
+    what listens is not a Ray head's GCS port (a gRPC server: it answers an HTTP/2
+    preface with a SETTINGS frame; the dashboard's 8265 does not): Ray itself keeps
+    retrying for minutes. Forms without a port (``auto``) and ``ray://...`` go to Ray as
+    they are; so does any address when ``RAY_USE_TLS`` is on (the port speaks TLS)."""
+    if ":" not in address or "://" in address:
         return
+    host, _, port = address.rpartition(":")
+    host = host.strip("[]")
+    if not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise ClusterError(f"--ray {address}: not HOST:PORT (a head node's GCS port, "
+                           f"e.g. 10.0.0.5:6379); --ray without ADDRESS starts a local "
+                           f"instance")
     try:
-        socket.create_connection((host.strip("[]"), int(port)), PROBE_TIMEOUT_S).close()
+        with socket.create_connection((host, int(port)), PROBE_TIMEOUT_S) as sock:
+            if os.environ.get("RAY_USE_TLS", "0").lower() in ("1", "true"):
+                return
+            sock.settimeout(PROBE_TIMEOUT_S)
+            sock.sendall(H2_PREFACE)
+            head = b""
+            with contextlib.suppress(OSError):  # a timeout or a reset: not gRPC either
+                while len(head) < 9 and (chunk := sock.recv(9 - len(head))):
+                    head += chunk
     except OSError as exc:
         raise ClusterError(f"--ray {address}: nothing answers there ({exc.strerror or exc}); "
                            f"start a head node with `ray start --head --port {port}` "
                            f"(docs/distributed.md)") from None
+    if len(head) < 9 or head[3] != 0x04:  # the server's first frame is its SETTINGS
+        got = f": it answered {head[:9]!r}" if head else ""
+        raise ClusterError(f"--ray {address}: that port is not a Ray cluster's (it does not "
+                           f"speak gRPC{got}); give the GCS port that `ray start --head` "
+                           f"printed (6379 unless --port said otherwise; the dashboard's "
+                           f"8265 is not it)")
 
 
 def ray_module(feature: str) -> Any:

@@ -8,6 +8,7 @@ extra the commands name it."""
 from __future__ import annotations
 
 import hashlib
+import http.server
 import json
 import os
 import re
@@ -26,7 +27,7 @@ import pytest
 ray = pytest.importorskip("ray")
 
 from alphatank.cli import main  # noqa: E402
-from alphatank.cluster import connect  # noqa: E402
+from alphatank.cluster import _reachable, connect  # noqa: E402
 from alphatank.envs.ray_vector import RayVectorMatchEnv, RolloutLost  # noqa: E402
 from alphatank.envs.vector import SubprocVectorMatchEnv  # noqa: E402
 from alphatank.training.hparams import PPOConfig  # noqa: E402
@@ -103,6 +104,27 @@ def test_a_wrong_address_is_one_line(tmp_path):
     assert last.startswith("alphatank train: error: --ray 127.0.0.1:") and "ray start" in last
 
 
+def test_a_port_that_is_not_rays_or_no_port_is_one_line_at_once(tmp_path, capsys):
+    """A web server (the dashboard's 8265 by mistake) kept Ray retrying for minutes; an
+    empty host printed Ray's traceback."""
+    class Quiet(http.server.BaseHTTPRequestHandler):
+        def log_message(self, *args) -> None:
+            pass
+
+    server = http.server.HTTPServer(("127.0.0.1", 0), Quiet)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    try:
+        for address, says in [(f"127.0.0.1:{server.server_port}", "not a Ray cluster's"),
+                              (":6379", "not HOST:PORT")]:
+            t0 = time.monotonic()
+            assert main(["train", "--runs", str(tmp_path), *TINY, "--ray", address]) == 2
+            err = capsys.readouterr().err.strip().splitlines()
+            assert len(err) == 1 and says in err[0] and time.monotonic() - t0 < 30, err
+            assert not ray.is_initialized() and not any(tmp_path.iterdir())
+    finally:
+        server.shutdown()
+
+
 def test_an_env_runner_timeout_without_ray_is_one_line(tmp_path, capsys):
     """(A bad value is a usage error: test_train_cli's
     test_bad_counts_are_usage_errors_before_anything_runs.)"""
@@ -116,6 +138,7 @@ def cluster():
     before = signal.getsignal(signal.SIGTERM)
     conn = connect(num_cpus=2)
     assert conn.local and conn.cpus == 2
+    _reachable(conn.address)  # the GCS port passes the probe of --ray ADDRESS
     yield conn
     conn.close()
     assert not ray.is_initialized()
