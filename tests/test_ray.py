@@ -382,6 +382,22 @@ def test_two_row_experiment_as_ray_tasks_and_resume(cluster, tmp_path, capsys):
     assert {p: p.stat().st_mtime_ns for p in kept} == kept and evals[0].is_file()
 
 
+def test_ctrl_c_stops_an_experiment_on_ray_at_once(cluster, tmp_path, capsys):
+    """Ray's wait ran the handler only when a task ended (here after the 1-minute budget)
+    and then raised a SystemError traceback."""
+    from test_experiments import write_rows
+
+    args = ["experiments", "tiny", "--experiments-dir", str(write_rows(tmp_path / "exp")),
+            "--out", str(tmp_path / "out"), "--steps", "100000", "--games", "2", "--budget",
+            "1", "--no-progress", "--ray"]
+    threading.Timer(4, os.kill, (os.getpid(), signal.SIGINT)).start()
+    t0 = time.monotonic()
+    assert main(args) == 130
+    assert time.monotonic() - t0 < 30
+    assert "interrupted: finished runs and evaluations are kept" in capsys.readouterr().err
+    assert not list((tmp_path / "out").glob("runs/*/done.json"))
+
+
 HIDE_RAY = "import sys; sys.modules['ray'] = None; from alphatank.cli import main; " \
            "raise SystemExit(main(sys.argv[1:]))"
 

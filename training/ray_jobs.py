@@ -65,6 +65,25 @@ def eval_task(job: Job, spec: EvalSpec, cwd: str,
     return eval_step(job, spec), time.time() - t0
 
 
+WAIT_S = 0.5  # how long one ray.wait blocks: Ray runs signal handlers only as it returns
+
+
+def _wait(ray: Any, refs: list[Any]) -> list[Any]:
+    """The refs of ``refs`` that are ready, at least one. Waits ``WAIT_S`` at a time so
+    that Ctrl-C and SIGTERM act at once (a wait for a task of a 15-minute row ran the
+    handler when the task ended), and raises what a handler raised (Ray 2.60 returns
+    from ``wait`` with it set, as a SystemError caused by it)."""
+    while True:
+        try:
+            ready, _ = ray.wait(refs, num_returns=1, timeout=WAIT_S)
+        except SystemError as exc:
+            if exc.__cause__ is None:
+                raise
+            raise exc.__cause__ from None
+        if ready:
+            return ready
+
+
 def run_on_ray(jobs: Sequence[Job], finish: Callable[[Job, str | None, float], None],
                max_retries: int = MAX_RETRIES) -> None:
     """Submit every missing training run and evaluation of ``jobs`` to the connected
@@ -98,7 +117,7 @@ def run_on_ray(jobs: Sequence[Job], finish: Callable[[Job, str | None, float], N
         pending.update(dict.fromkeys(refs, job.key))
     try:
         while pending:
-            ready, _ = ray.wait(list(pending), num_returns=1)
+            ready = _wait(ray, list(pending))
             for ref in ready:
                 key = pending.pop(ref)
                 try:
