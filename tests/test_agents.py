@@ -66,7 +66,8 @@ def test_the_shipped_agents_hold_the_inference_keys_and_only_known_extras():
 def test_an_egocentric_agent_plays_a_map_with_more_walls_than_it_trained_on():
     # ppo_cycle_full trained on battlefield and open (11 and 4 wall rectangles); maze has
     # 15. Its observation has no wall block, so it plays there; a paper agent says why not.
-    for name, want in (("ppo_cycle_full", None), ("ppo_vs_smart", "room for 11 wall")):
+    paper = "15 wall rectangles; its 'paper' observation has room for 11"
+    for name, want in (("ppo_cycle_full", None), ("ppo_vs_smart", paper)):
         sc = lineup_scenario(seats=f"smart,agent:{name}", map_name="maze")
         assert len(sc.map_specs()[0].wall_rects) == 15
         lineup = build_lineup(sc)

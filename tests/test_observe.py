@@ -19,6 +19,7 @@ from alphatank.game.observe import (
     ObservationBuilder,
     StateBatch,
     constant,
+    room_misfit,
     slot_counts,
 )
 from alphatank.game.scenarios import load_scenario, parse_scenario
@@ -655,3 +656,16 @@ def test_constant_operands_are_read_only_and_give_the_scalars_results():
     d = np.random.default_rng(1).random(8)
     mask = d > 0.5
     assert np.array_equal(np.where(mask, d, inf), np.where(mask, d, np.inf))
+
+
+def test_room_misfit_names_each_overflow_and_walls_only_for_the_paper_kind():
+    """Maps beyond an observation's padded room: walls count for the 'paper' kind only
+    (the others read walls through rays), zones for every kind; a map that fits is fine."""
+    room, maps = (11, 1, 1), "map 'm' has"
+    assert room_misfit("paper", room, (11, 1, 0), maps) == []
+    assert room_misfit("paper", room, (15, 1, 1), maps) == [
+        "map 'm' has 15 wall rectangles; its 'paper' observation has room for 11"]
+    assert room_misfit("egocentric_full", room, (15, 1, 1), maps) == []
+    assert room_misfit("egocentric_full", room, (4, 1, 2), maps) == [
+        "map 'm' has 1 buff and 2 debuff zones; it has room for 1 and 1"]
+    assert len(room_misfit("paper", room, (12, 2, 0), maps)) == 2

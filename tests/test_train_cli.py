@@ -223,8 +223,7 @@ def test_a_scenario_seat_that_does_not_fit_is_refused_before_the_run_folder(caps
              "expects 236 observation features (paper, 2 tanks); seat 1 of this match "
              "(3 tanks, teams ['A', 'B', 'B']) gives"),
             ("maze", f'name = "maze"\nmap = "maze"\n{seats}',
-             "trained with room for 11 wall rectangles in its 'paper' observation; map "
-             "'maze' has 15")):
+             "map 'maze' has 15 wall rectangles; its 'paper' observation has room for 11")):
         scenario = tmp_path / f"{name}.toml"
         scenario.write_text(text)
         runs = tmp_path / f"runs_{name}"

@@ -638,28 +638,20 @@ class NetworkPolicy:
         return bank, 0
 
     def reset(self, match: Any, seat: int, seed: int | None = None) -> None:
-        from alphatank.game.observe import slot_counts
+        from alphatank.game.observe import room_misfit, slot_counts
 
         name = self.name_for_seat(seat)
         learner = self.get_learner(name)
         per_match = self._seats.setdefault(match, {})
-        walls, buffs, debuffs = self.slots
-        need, nb, nd = slot_counts(match.cfg, [match.spec])
+        need = slot_counts(match.cfg, [match.spec])
         # another tank count fits no map: _row says so instead of naming the map's room
-        fits = match.n == self.n_tanks
-        if fits and self.kind == "paper" and need > walls:
+        why = room_misfit(self.kind, self.slots, need, f"map {match.spec.name!r} has")
+        if match.n == self.n_tanks and why:
             raise CheckpointError(
-                f"{self.source}: trained with room for {walls} wall rectangles in its "
-                f"'paper' observation; map {match.spec.name!r} has {need}"
+                f"{self.source}: {'; '.join(why)}"
                 + (f" (it fits maps like those of {self.trained_as})" if self.trained_as
                    else ""))
-        if fits and (nb > buffs or nd > debuffs):
-            raise CheckpointError(
-                f"{self.source}: trained with room for {buffs} buff and {debuffs} "
-                f"debuff zones; map {match.spec.name!r} has {nb} and {nd}")
-        # Only the paper kind has a wall block; the others read the walls through rays
-        # and routes, so any map's walls fit.
-        bank, row = self._row(match, seat, per_match.get(seat), max(walls, need))
+        bank, row = self._row(match, seat, per_match.get(seat), max(self.slots[0], need[0]))
         bank.owners[row] = weakref.ref(match)
         num_seats = getattr(learner, "num_seats", None)  # learners with seat ids (MAPPO)
         sid = None if num_seats is None else self.seat_id(match, seat, name, num_seats)

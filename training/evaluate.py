@@ -311,19 +311,13 @@ def evaluate_learners(learners: dict[str, Any], observation: dict[str, Any],
 def observation_misfit(observation: dict[str, Any], core: MatchSet) -> str:
     """Why ``core``'s observations are not those of a policy trained with ``observation``
     (its meta): the tank count, or the walls or zones of the maps beyond its room."""
-    from alphatank.game.observe import slot_counts
+    from alphatank.game.observe import room_misfit, slot_counts
 
-    tanks, kind = int(observation["tanks"]), observation["kind"]
-    walls, buffs, debuffs = slot_counts(core.game, core.specs)
-    why = []
-    if core.n != tanks:
-        why.append(f"the match has {core.n} tanks; it trained with {tanks}")
-    if kind == "paper" and walls > int(observation["max_walls"]):
-        why.append(f"its maps have up to {walls} wall rectangles; its 'paper' observation "
-                   f"has room for {observation['max_walls']}")
-    if buffs > int(observation["max_buffs"]) or debuffs > int(observation["max_debuffs"]):
-        why.append(f"its maps have up to {buffs} buff and {debuffs} debuff zones; it has "
-                   f"room for {observation['max_buffs']} and {observation['max_debuffs']}")
+    tanks = int(observation["tanks"])
+    why = [f"the match has {core.n} tanks; it trained with {tanks}"] if core.n != tanks else []
+    room = [observation[k] for k in ("max_walls", "max_buffs", "max_debuffs")]
+    why += room_misfit(observation["kind"], room, slot_counts(core.game, core.specs),
+                       "its maps have up to")
     return "; ".join(why) or "its observation has another layout"
 
 

@@ -479,6 +479,23 @@ def slot_counts(cfg: GameConfig, specs: Sequence[MapSpec]) -> tuple[int, int, in
     return walls, buffs, debuffs
 
 
+def room_misfit(kind: str, room: Sequence[int], need: Sequence[int], maps: str) -> list[str]:
+    """Why maps needing ``need`` (wall rectangles, buff and debuff zones; ``maps`` names
+    them: "map 'maze' has", "its maps have up to") overflow an observation of ``kind``
+    padded to ``room``; empty when they fit. Only the 'paper' kind has a wall block: the
+    others read any map's walls through rays and routes."""
+    walls, buffs, debuffs = (int(v) for v in room)
+    n_walls, n_buffs, n_debuffs = need
+    why = []
+    if kind == "paper" and n_walls > walls:
+        why.append(f"{maps} {n_walls} wall rectangles; its 'paper' observation has room "
+                   f"for {walls}")
+    if n_buffs > buffs or n_debuffs > debuffs:
+        why.append(f"{maps} {n_buffs} buff and {n_debuffs} debuff zones; it has room for "
+                   f"{buffs} and {debuffs}")
+    return why
+
+
 class ObservationBuilder:
     """Builds the observations of ``observers`` (seat indices) in every match of a
     :class:`StateBatch`: ``build()`` returns the internal (E, L, obs_dim) float32 buffer."""
