@@ -442,6 +442,17 @@ def test_the_estimate_is_at_least_the_longest_run(tmp_path, capsys, workers, min
         f"2 runs (1 seed(s)), 2 to do: about {minutes} min with {workers} worker(s)")
 
 
+def test_list_with_ray_does_not_claim_one_worker(tmp_path, capsys):
+    """--list --ray does not connect, so it cannot know the cluster's CPUs: it gives the
+    one-CPU time and says the cluster shares it out (it said 'with 1 worker(s)')."""
+    root = write_rows(tmp_path / "exp")
+    assert cli("tiny", "--experiments-dir", str(root), "--out", str(tmp_path / "out"),
+               "--budget", "10", "--ray", "--list") == 0
+    assert capsys.readouterr().out.splitlines()[-1] == (
+        "2 runs (1 seed(s)), 2 to do: about 26 min on one CPU, shared out over the Ray "
+        "cluster's CPUs (the run says how many)")
+
+
 def test_shipped_tables_load_and_plan(tmp_path):
     names = table_names()
     assert names == ["table3", "table4", "sac", "league", "heldout"]

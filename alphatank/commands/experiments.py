@@ -121,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
         return _error(str(exc))
     started = [j for j in plan.jobs if j.started()]
     if args.list:
-        _print_plan(plan, args.workers)
+        _print_plan(plan, None if args.ray is not None else args.workers)
         return 0
     if started and not (args.resume or args.report_only):
         return _error(f"{args.out} already holds {len(started)} of this plan's runs (e.g. "
@@ -271,8 +271,9 @@ def _command(args: argparse.Namespace) -> str:
     return " ".join(shlex.quote(p) for p in parts)
 
 
-def _print_plan(plan: Plan, workers: int) -> None:
-    """Rows, runs and the time the missing ones take; a run whose results file is damaged
+def _print_plan(plan: Plan, workers: int | None) -> None:
+    """Rows, runs and the time the missing ones take on ``workers`` (None: a Ray cluster,
+    whose CPUs --list does not connect to count); a run whose results file is damaged
     (:func:`~alphatank.training.experiments.damaged_results`) is named and counted to do,
     one still to do whose last attempt failed is named with its failure."""
     from alphatank.training.experiments import (
@@ -311,7 +312,8 @@ def _print_plan(plan: Plan, workers: int) -> None:
         if failure is not None:
             print(f"  {', '.join(job.rows)} seed {job.seed}: last attempt failed: {failure}"
                   + retrain_hint(job, failure))
+    minutes = estimate_minutes(plan, todo, workers or 1, [p for _, p, _ in damaged])
     print(f"{len(plan.jobs)} runs ({plan.seeds} seed(s)), {len(todo)} to do"
-          + (f" ({len(redo)} damaged)" if redo else "") + f": about "
-          f"{estimate_minutes(plan, todo, workers, [p for _, p, _ in damaged]):.0f} min "
-          f"with {workers} worker(s)")
+          + (f" ({len(redo)} damaged)" if redo else "") + f": about {minutes:.0f} min "
+          + (f"with {workers} worker(s)" if workers else
+             "on one CPU, shared out over the Ray cluster's CPUs (the run says how many)"))
