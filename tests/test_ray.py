@@ -188,6 +188,20 @@ def test_env_runners_match_worker_processes_and_a_killed_one_comes_back(cluster)
         # the restarted runner has its opponent settings back: the same games again
         np.testing.assert_array_equal(rv.reset(11), sv.reset(11))
         assert same_steps(30) >= 1
+        # killed between calls and back before the next: the runner itself says it lost
+        # its matches, and the note names that (it read 'RayTaskError(RolloutLost)')
+        pid = ray.get(rv.runners[1].pid.remote())
+        os.kill(pid, signal.SIGKILL)
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            try:
+                if ray.get(rv.runners[1].pid.remote()) != pid:
+                    break
+            except ray.exceptions.RayActorError:
+                time.sleep(0.1)
+        with pytest.raises(RolloutLost, match=r"env runner 1 \(envs 2-4\) was lost \(it died "
+                                              r"between calls\); Ray restarted it \(restart 2,"):
+            rv.step(act)
     finally:
         rv.close()
         sv.close()

@@ -254,7 +254,7 @@ class RayVectorMatchEnv(ShardedEnv, SplitRollout):
         ray = self._ray
         lo, hi = self._blocks[k]
         what = f"env runner {k} (envs {lo}-{hi - 1})"
-        cause = (type(exc).__name__ if isinstance(exc, RolloutLost) else str(exc)
+        cause = ("it died between calls" if isinstance(exc, RolloutLost) else str(exc)
                  if isinstance(exc, TimeoutError) else
                  f"{type(exc).__name__}: {str(exc).strip().splitlines()[0]}")
         calls = self._replay_order(k)
