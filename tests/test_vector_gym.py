@@ -202,6 +202,8 @@ def test_multi_learner_scenario_drives_one_seat_like_the_single_env():
 def test_rgb_array_render_gives_one_frame_per_env():
     v = vec(num_envs=2, render_mode="rgb_array")
     assert v.render_mode == "rgb_array" and v.metadata["render_fps"] == 30
+    with pytest.raises(RuntimeError, match=r"^render\(\) before reset\(\)"):
+        v.render()  # not zip()'s ValueError over no matches
     v.reset(seed=0)
     frames = v.render()
     assert len(frames) == 2 and frames[0].shape == (770, 770, 3) and frames[0].dtype == np.uint8

@@ -922,6 +922,7 @@ class TankBattleVectorEnv(VectorEnv):
         from alphatank.ui.render import Renderer
 
         core = self.engine.core
+        core.first_match("render()")  # RuntimeError before a reset (or after unpickling)
         while len(self._renderers) < self.num_envs:
             self._renderers.append(Renderer(self.render_mode, fps=self.metadata["render_fps"]))
         return tuple(r.render(m, c) for r, m, c in
