@@ -212,6 +212,13 @@ def test_benching_checks_the_seats():
         env.set_benched([0])
     with pytest.raises(ValueError, match="leaves a team with no tank"):
         env.set_benched([2, 3, 4])
+    # neither truncated (2.5 benched seat 2) nor read digit by digit ("23": seats 2, 3)
+    for seats, why in (([2.5], r"indices \(integers\), got \[2\.5\]"),
+                       ("23", "a list of seat indices, got '23'"),
+                       (2, "a list of seat indices, got 2"), ([True], r"got \[True\]")):
+        with pytest.raises(ValueError, match=f"{why}; bot seats: \\[2, 3, 4\\]"):
+            env.set_benched(seats)
+    assert env.core.benched == ()
     with pytest.raises(ValueError, match="fewer seats at each level"):
         LineupCurriculum(levels=[[2], [2, 3], []])
     with pytest.raises(ValueError, match="end with the full line-up"):

@@ -154,6 +154,14 @@ def check_benched(scenario: Scenario, driven: Sequence[int], seats: Sequence[int
     (not a learner seat in ``driven``) and that every team keeps a seat; ValueError
     names what is allowed."""
     bots = [i for i, s in enumerate(scenario.seats) if s.controller == "bot" and i not in driven]
+    if isinstance(seats, str) or not isinstance(seats, Iterable):
+        raise ValueError(f"{scenario.name}: seats to bench must be a list of seat indices, got "
+                         f"{seats!r}; bot seats: {bots}")
+    seats = list(seats)
+    strays = [s for s in seats if check_value((int,), s)[1]]
+    if strays:
+        raise ValueError(f"{scenario.name}: seats to bench must be seat indices (integers), "
+                         f"got {strays!r}; bot seats: {bots}")
     out = tuple(sorted({int(s) for s in seats}))
     bad = [s for s in out if s not in bots]
     if bad:
