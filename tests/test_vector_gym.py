@@ -14,6 +14,7 @@ from gymnasium.vector import AutoresetMode
 
 import alphatank.envs as envs
 from alphatank.envs import TankBattleVectorEnv, VectorMatchEnv
+from alphatank.envs.vector import episode_seed
 from alphatank.game.scenarios import NoopPolicy, ScenarioError
 
 SHORT = {"max_steps": 40}
@@ -122,6 +123,27 @@ def test_same_results_as_the_engine_and_its_worker_processes_and_closed_is_said(
         assert np.array_equal(obs[:, 0], local[1 + 5 * k])
         assert np.array_equal(rew[:, 0], local[2 + 5 * k])
     assert all(np.array_equal(a, b) for a, b in zip(local, remote, strict=True))
+
+
+def test_make_vec_takes_max_episode_steps_as_make_does():
+    """``make_vec(id, max_episode_steps=N)`` (also what an id registered with a limit
+    passes) truncates each sub-env as ``make(id, max_episode_steps=N)``'s TimeLimit."""
+    v = vec(num_envs=2, max_episode_steps=30)
+    single = gym.make("AlphaTank/VsRandom-v0", max_episode_steps=30)
+    obs, _ = v.reset(seed=4)
+    one, _ = single.reset(seed=episode_seed(4, 1, 0))
+    for t in range(30):
+        obs, rew, term, trunc, info = v.step(np.ones((2, 3), dtype=np.int64))
+        one, r, te, tr, _ = single.step(np.ones(3, dtype=np.int64))
+        ended = info["final_obs"][1] if t == 29 else obs[1]
+        assert np.array_equal(ended, one) and rew[1] == np.float32(r)
+        assert (term[1], trunc[1]) == (te, tr) == (False, t == 29)
+    assert info["final_info"]["length"].tolist() == [30, 30]
+    shorter = vec(num_envs=1, max_episode_steps=30, game_overrides={"max_steps": 20})
+    assert shorter.engine.core.game.max_steps == 20  # the lower limit ends the episode
+    with pytest.raises(ScenarioError, match=r"^max_episode_steps: must be in \[1, 10000000\], "
+                                            r"got 0$"):
+        vec(max_episode_steps=0)
 
 
 def test_unseeded_resets_draw_fresh_episodes():

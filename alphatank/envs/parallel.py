@@ -35,7 +35,6 @@ Version history
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Mapping
 from typing import Any
 
@@ -50,12 +49,13 @@ from alphatank.envs.core import (
     action_space,
     check_actions,
     check_overrides,
+    check_step_limit,
 )
 from alphatank.envs.ids import ENV_VERSION
 from alphatank.game.observe import ObsLayout
 from alphatank.game.rewards import TERMS
 from alphatank.game.scenarios import Scenario, ScenarioError, load_scenario
-from alphatank.sim.config import GameConfig, check_seed, check_value
+from alphatank.sim.config import check_seed, check_value
 from alphatank.sim.policy import Policy
 from alphatank.ui.modes import RENDER_MODES, check_render_mode
 
@@ -81,10 +81,7 @@ class TankBattleParallelEnv(ParallelEnv):
                                 "`alphatank record --scenario`")
         overrides = check_overrides(game_overrides, "game_overrides")
         if max_cycles is not None:
-            steps = next(f for f in dataclasses.fields(GameConfig) if f.name == "max_steps")
-            max_cycles, why = check_value((int,), max_cycles, steps.metadata["range"])
-            if why:
-                raise ScenarioError(f"max_cycles: {why}")
+            max_cycles = check_step_limit(max_cycles, "max_cycles")
             if overrides.get("max_steps", max_cycles) != max_cycles:
                 raise ScenarioError(f"max_cycles {max_cycles} and game_overrides.max_steps "
                                     f"{overrides['max_steps']!r} set the same setting "

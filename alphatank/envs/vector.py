@@ -25,7 +25,9 @@ vectorization_mode="vector_entry_point")``. Each sub-env is exactly
 * Arguments: ``scenario``, ``num_envs``, ``observation``, ``learner_seat``,
   ``opponent_policy``, ``seat_policies``, ``game_overrides``, ``reward_overrides``,
   ``num_workers`` (>1: worker processes, same results), ``render_mode`` (None or
-  ``"rgb_array"``: ``render()`` returns one frame per sub-env).
+  ``"rgb_array"``: ``render()`` returns one frame per sub-env), ``max_episode_steps``
+  (what ``make_vec`` passes for ``gymnasium.make``'s TimeLimit: the sub-envs' episodes
+  are truncated after that many steps, as the game's ``max_steps`` where it is lower).
 * Version history: see :mod:`alphatank.envs.gym` (one ``ENV_VERSION`` for all envs).
 
 The engine under it, :class:`VectorMatchEnv` (``env.engine``), drives *every* learner seat
@@ -82,6 +84,7 @@ from alphatank.envs.core import (
     check_overrides,
     check_policy,
     check_reset_options,
+    check_step_limit,
     check_weakness,
     opponent_entry,
 )
@@ -814,9 +817,13 @@ class TankBattleVectorEnv(VectorEnv):
                  seat_policies: Mapping[int, Policy] | None = None,
                  game_overrides: Mapping[str, Any] | None = None,
                  reward_overrides: Mapping[str, Any] | None = None, num_workers: int = 1,
-                 render_mode: str | None = None):
+                 render_mode: str | None = None, max_episode_steps: int | None = None):
         sc = load_scenario(scenario)
         seat = single_learner_seat(sc, learner_seat, seat_policies, opponent_policy)
+        game = check_overrides(game_overrides, "game_overrides")
+        if max_episode_steps is not None:  # make_vec's TimeLimit: the game's own step limit
+            limit = check_step_limit(max_episode_steps, "max_episode_steps")
+            game["max_steps"] = min(limit, sc.game_config(**game).max_steps)
         if render_mode is not None and render_mode not in VECTOR_RENDER_MODES:
             raise ValueError(f"render_mode must be one of {VECTOR_RENDER_MODES} or None, "
                              f"got {render_mode!r}")
@@ -824,7 +831,7 @@ class TankBattleVectorEnv(VectorEnv):
             raise ValueError("render_mode needs the matches in this process: num_workers=1")
         self.engine: VectorMatchEnv | SubprocVectorMatchEnv = make_vector_env(
             sc, num_envs, 0, num_workers, observation=observation,
-            game_overrides=check_overrides(game_overrides, "game_overrides") or None,
+            game_overrides=game or None,
             reward_overrides=check_overrides(reward_overrides, "reward_overrides") or None,
             seat_policies=seat_policies, learner_seats=[seat])
         if opponent_policy is not None:
@@ -836,7 +843,7 @@ class TankBattleVectorEnv(VectorEnv):
         self.single_action_space = self.engine.action_space
         self.observation_space = batch_space(self.single_observation_space, num_envs)
         self.action_space = batch_space(self.single_action_space, num_envs)
-        fps = sc.game_config(**dict(game_overrides or {})).tick_hz
+        fps = sc.game_config(**game).tick_hz
         self.metadata = {**self.metadata, "render_fps": fps}
         self._shape = (num_envs, 3)
         self._started = False
