@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import copy
+import gc
+import pickle
+
 import numpy as np
 import pytest
 
@@ -198,6 +202,23 @@ def test_bad_settings_are_refused_before_the_workers_and_a_closed_env_says_so():
     for call in (lambda: sub.step(act), sub.reset, lambda: sub.set_bot_weakness(0.5)):
         with pytest.raises(RuntimeError, match=r"the env is closed: close\(\) was called"):
             call()
+
+
+def test_an_env_with_workers_refuses_to_be_copied_and_carries_on():
+    """deepcopy once copied the pipes, then closed them with the dropped half-copy: the
+    env lost its workers (OSError: Bad file descriptor on its next step or close)."""
+    sub = SubprocVectorMatchEnv("vs_random", 2, seed=0, num_workers=2)
+    act = np.ones((2, 1, 3), dtype=np.int64)
+    try:
+        sub.reset()
+        for copy_ in (copy.deepcopy, copy.copy, pickle.dumps):
+            with pytest.raises(TypeError, match=r"^a vector env with worker processes "
+                                                r"\(num_workers > 1\) cannot be pickled"):
+                copy_(sub)
+        gc.collect()
+        assert sub.step(act)[1].shape == (2, 1)
+    finally:
+        sub.close()
 
 
 def test_make_vector_env_picks_the_variant():

@@ -595,6 +595,14 @@ class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
     def _inputs(self, kind: str = "input") -> dict[str, np.ndarray]:
         return {name: self._shared.arr[f"{kind}:{name}"].copy() for name in self.input_shapes}
 
+    def __getstate__(self) -> dict[str, Any]:
+        """Refused at once: a copy would hold this env's pipes, whose closing when the
+        half-made copy is dropped would cut this env off from its workers."""
+        raise TypeError("a vector env with worker processes (num_workers > 1) cannot be "
+                        "pickled or copied: its workers, pipes and shared memory belong to "
+                        "this one; make another env, or use num_workers=1 (in-process envs "
+                        "pickle, without their live matches)")
+
     def _gather(self, raw: bool = False) -> list:
         """Every worker's answer, in worker order; ``raw``: answers to a step (empty
         bytes: no episodes)."""
