@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import copy
+import pickle
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -229,6 +232,10 @@ def test_rgb_array_render_gives_one_frame_per_env():
     v.reset(seed=0)
     frames = v.render()
     assert len(frames) == 2 and frames[0].shape == (770, 770, 3) and frames[0].dtype == np.uint8
+    for copied in (pickle.loads(pickle.dumps(v)), copy.deepcopy(v)):  # renderers left out
+        copied.reset(seed=0)
+        assert all(np.array_equal(a, b) for a, b in zip(copied.render(), frames, strict=True))
+        copied.close()
     v.close()
 
 

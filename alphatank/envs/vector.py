@@ -943,6 +943,11 @@ class TankBattleVectorEnv(VectorEnv):
         return tuple(r.render(m, c) for r, m, c in
                      zip(self._renderers, core.matches, core.controllers, strict=True))
 
+    def __getstate__(self) -> dict[str, Any]:
+        """As the single env: the renderers (pygame surfaces and fonts) are not carried;
+        ``render()`` makes them again."""
+        return {**self.__dict__, "_renderers": []}
+
     def close_extras(self, **kwargs: Any) -> None:
         for r in self._renderers:
             r.close()
