@@ -140,6 +140,7 @@ def test_make_vec_sync_async_and_wrappers():
     (np.array([1, 1, 2]), "out of range"),
     (np.array([1.0, 1.0, 0.0]), "integers"),
     ("fire", "integers"),
+    ([1, [1], 0], r"shape \(3,\) .*got nested sequences of different lengths$"),
 ])
 def test_wrong_gym_actions_name_the_seat(bad, match):
     env = TankBattleEnv("vs_random")

@@ -168,6 +168,9 @@ def test_errors_name_the_env_and_what_is_allowed():
         v.step(bad)
     with pytest.raises(ValueError, match=r"shape \(2, 3\)"):
         v.step(np.ones((2, 1, 3), dtype=np.int64))
+    with pytest.raises(ValueError, match=r"^actions must have shape \(2, 3\) .*got nested "
+                                         r"sequences of different lengths$"):
+        v.step([[1, 1, 1], [1, 1]])  # not numpy's 'inhomogeneous shape' error
     with pytest.raises(ValueError, match="no options"):
         v.reset(options={"reset_mask": np.ones(2, bool)})
     with pytest.raises(TypeError, match="seed must be an int"):

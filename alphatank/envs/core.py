@@ -64,7 +64,12 @@ def check_actions(actions: Any, shape: tuple[int, ...], name_of: Any) -> np.ndar
     """Validate an integer action array of ``shape`` (last axis 3); errors name the agent
     (``name_of(index_tuple)``; for one agent's action, shape (3,), every error does) and
     the allowed values. Returns an int64 array."""
-    arr = actions if type(actions) is np.ndarray else np.asarray(actions)
+    try:
+        arr = actions if type(actions) is np.ndarray else np.asarray(actions)
+    except ValueError:  # nested sequences of different lengths
+        who = f"{name_of(())}: " if len(shape) == 1 else ""
+        raise ValueError(f"{who}actions must have shape {shape} (last axis: rotate, move, "
+                         "fire), got nested sequences of different lengths") from None
     # Common cases first: one agent's row in plain Python (cheaper than numpy calls);
     # more rows by one comparison (negatives wrap round to huge unsigned values).
     if arr.dtype.type is np.int64 and arr.shape == shape:
