@@ -294,6 +294,49 @@ def test_preview_prints_ascii_and_draws_png_with_the_game_renderer(tmp_path, cap
     assert tuple(img.get_at((3 * 70 + 35, 3 * 70 + 5)))[:3] in (FLOOR, tuple(FLOOR))
 
 
+def test_preview_refuses_teams_and_maps_a_match_cannot_hold_in_one_line(tmp_path, capsys,
+                                                                       monkeypatch):
+    monkeypatch.chdir(tmp_path)  # where the default PNG would go
+    for teams in ("A", "AA", "A,B"):  # one tank, one team, a comma as a team: no match
+        for command in ("preview", "validate"):
+            with pytest.raises(SystemExit) as exc:
+                cli.main([command, "maze", "--teams", teams])
+            assert exc.value.code == 2
+            err = capsys.readouterr().err
+            assert "argument --teams: must be the team of each slot" in err
+            assert f"got {teams!r}" in err and "Traceback" not in err
+    tiny = tmp_path / "tiny.txt"
+    tiny.write_text("1\n")  # room for one tank: the PNG's two cannot be placed
+    assert cli.main(["preview", str(tiny)]) == 2
+    assert capsys.readouterr().err.strip() == (
+        f"mapgen.py preview: error: {tiny}: room for 1 tank(s) (free floor reachable from the "
+        "spawns), the PNG draws 2 on their spawns; give --no-png for the text preview")
+    assert cli.main(["preview", str(tiny), "--no-png"]) == 0
+    assert list(tmp_path.glob("*.png")) == []
+
+
+def test_map_names_that_are_not_file_names_write_nothing_outside_the_folder(tmp_path,
+                                                                           capsys,
+                                                                           monkeypatch):
+    inner = tmp_path / "inner"
+    inner.mkdir()
+    monkeypatch.chdir(inner)
+    for name in ("../escape", "sub/dir", ".."):
+        src = tmp_path / "src.txt"
+        src.write_text(f"name: {name}\n\n#####\n#1.2#\n#####\n")
+        assert cli.main(["variants", str(src), "--out", str(inner / "v")]) == 2
+        assert capsys.readouterr().err.strip() == (
+            f"mapgen.py variants: error: {src}: map name {name!r} cannot name the variants' "
+            "files in --out; give the map a name: header without '/' or '\\' (and not '.' "
+            "or '..')")
+        assert cli.main(["preview", str(src)]) == 2
+        assert f"map name {name!r} cannot name the default PNG (or give --png)" in \
+            capsys.readouterr().err
+        assert sorted(p.name for p in tmp_path.rglob("*")) == ["inner", "src.txt"]
+    assert cli.main(["preview", str(src), "--png", "ok.png"]) == 0
+    assert (inner / "ok.png").is_file()
+
+
 def test_batch_writes_consecutive_seeds_and_a_held_out_split(tmp_path, capsys):
     args = ["batch", "--count", "10", "--seed", "100", "--out", str(tmp_path), "--split",
             "0.8", "--algorithm", "maze,rooms", "--symmetry", "mirror,rotational"]

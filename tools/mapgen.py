@@ -65,6 +65,16 @@ def parse_zones(text: str) -> tuple[int, int] | None:
     return (nums[0], nums[-1])
 
 
+def parse_teams(text: str) -> str:
+    """``--teams``: the team of each spawn slot, one letter or digit each (``AABB``); a
+    match needs at least 2 tanks in at least 2 teams."""
+    if len(set(text)) < 2 or not text.isalnum():
+        raise argparse.ArgumentTypeError(
+            f"must be the team of each slot, one letter or digit each, at least 2 teams "
+            f"(like AB or AABB), got {text!r}")
+    return text
+
+
 def _split_list(text: str, allowed: tuple[str, ...], what: str) -> list[str]:
     items = [s.strip() for s in text.split(",") if s.strip()]
     bad = [s for s in items if s not in allowed]
@@ -102,6 +112,16 @@ def options_from_args(args: argparse.Namespace, i: int = 0, seed: int | None = N
     (rows, cols), alg, sym = combos[i % len(combos)]
     return GenOptions(rows, cols, alg, args.density, sym, args.spawns, args.zones, args.loops,
                       args.seed if seed is None else seed)
+
+
+def _file_stem(spec: MapSpec, use: str) -> str:
+    """The map's name as the stem of a file it names (``use``); MapGenError when it is not
+    one plain file name (a ``name:`` header such as ``../x`` or ``a/b`` would put the file
+    outside its folder)."""
+    if spec.name in (".", "..") or any(ch in spec.name for ch in "/\\\0"):
+        raise MapGenError(f"{spec.source}: map name {spec.name!r} cannot name {use}; give "
+                          "the map a name: header without '/' or '\\' (and not '.' or '..')")
+    return spec.name
 
 
 def _write(spec: MapSpec, path: Path, force: bool) -> None:
@@ -170,6 +190,7 @@ def cmd_variants(args: argparse.Namespace) -> int:
         except MapError as err:
             print(err)
             return 1
+        _file_stem(spec, "the variants' files in --out")
         for variant in map_variants(spec):
             path = out / f"{variant.name}.txt"
             if path in made:
@@ -254,13 +275,20 @@ def cmd_preview(args: argparse.Namespace) -> int:
     except MapError as err:
         print(err)
         return 1
+    png, teams = None, []
+    if not args.no_png:  # what the PNG needs is checked before anything is printed
+        png = Path(args.png or f"{_file_stem(spec, 'the default PNG (or give --png)')}.png")
+        teams = list(args.teams or _default_teams(max(2, len(spec.spawns))))
+        room = spec.tank_room(len(teams))
+        if room < len(teams):
+            raise MapGenError(f"{spec.source}: room for {room} tank(s) (free floor reachable "
+                              f"from the spawns), the PNG draws {len(teams)} on their "
+                              "spawns; give --no-png for the text preview")
     print(describe(spec))
     print(ascii_art(spec, show_fire=args.fire))
     for w in warnings:
         print(w)
-    if not args.no_png:
-        png = Path(args.png) if args.png else Path(f"{spec.name}.png")
-        teams = list(args.teams) if args.teams else None
+    if png is not None:
         render_png(spec, png, teams, args.seed, args.scale)
         print(f"wrote {png}")
     return 0
@@ -320,8 +348,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("validate", help="check maps with the game's loader, plus warnings")
     p.add_argument("maps", nargs="+", metavar="MAP", help="map files, folders or shipped names")
     p.add_argument("--strict", action="store_true", help="exit 1 on warnings too")
-    p.add_argument("--teams", help="team of each slot, e.g. AABB: line-of-fire warnings only "
-                                   "between enemies")
+    p.add_argument("--teams", type=parse_teams,
+                   help="team of each slot, e.g. AABB: line-of-fire warnings only between "
+                        "enemies")
     p.set_defaults(run=cmd_validate)
 
     p = sub.add_parser("preview", help="print the map and draw it to a PNG")
@@ -330,7 +359,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="PNG to write (default: NAME.png in the current folder)")
     p.add_argument("--no-png", action="store_true", help="ASCII only")
     p.add_argument("--fire", action="store_true", help="mark lines of fire between spawns")
-    p.add_argument("--teams", help="team of each slot, e.g. AABB (default: halves A and B)")
+    p.add_argument("--teams", type=parse_teams,
+                   help="team of each slot, e.g. AABB (default: halves A and B)")
     p.add_argument("--seed", type=int, default=0, help="match seed (random zones, headings)")
     p.add_argument("--scale", type=scale, default=1.0, help="PNG scale (default 1)")
     p.set_defaults(run=cmd_preview)
