@@ -119,6 +119,27 @@ def test_cli_generate_same_seed_same_bytes(tmp_path, capsys):
     assert "--force" in capsys.readouterr().err
 
 
+def test_cli_generate_refuses_lists_and_names_that_are_not_one_line(tmp_path, capsys):
+    out = tmp_path / "a.txt"
+    for flag, value in (("--size", "11x11,9x9"), ("--algorithm", "maze,rooms"),
+                        ("--symmetry", "mirror,none")):  # batch's lists: generate took the 1st
+        with pytest.raises(SystemExit) as exc:
+            cli.main(["generate", flag, value, "-o", str(out)])
+        assert exc.value.code == 2
+        assert (f"argument {flag}: takes one value in generate (comma-separated lists are for "
+                f"batch), got {value!r}") in capsys.readouterr().err
+    for name in ("x\ncell: 50", " ", "a\tb"):  # a line break wrote a header line of its own
+        with pytest.raises(SystemExit):
+            cli.main(["generate", "--name", name, "-o", str(out)])
+        assert (f"argument --name: name must be one line of printable text, got {name!r}"
+                in capsys.readouterr().err)
+        with pytest.raises(MapGenError, match="one line of printable text"):
+            generate(name=name)
+    assert not out.exists()
+    assert cli.main(["generate", "--name", "My map; v2", "-o", str(out)]) == 0
+    assert load_map(out).name == "My map; v2" and load_map(out).cell == 70
+
+
 def test_loops_turn_a_perfect_maze_into_a_graph_with_cycles():
     for seed in range(5):
         tree = generate(11, 15, "maze", symmetry="none", loops=0.0, seed=seed).walls

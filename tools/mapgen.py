@@ -31,6 +31,7 @@ from alphatank.mapgen import (
     MapGenError,
     ascii_art,
     check_map,
+    check_name,
     describe,
     generate_from,
     map_variants,
@@ -84,14 +85,31 @@ def _split_list(text: str, allowed: tuple[str, ...], what: str) -> list[str]:
     return items
 
 
+def one_value(text: str) -> str:
+    """An option of ``generate`` that ``batch`` takes as a list: one value here."""
+    if "," in text:
+        raise argparse.ArgumentTypeError(f"takes one value in generate (comma-separated lists "
+                                         f"are for batch), got {text!r}")
+    return text
+
+
+def map_name(text: str) -> str:
+    """``--name``: what :func:`~alphatank.mapgen.generate.check_name` allows."""
+    try:
+        return check_name(text)
+    except MapGenError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def _add_gen_options(p: argparse.ArgumentParser, lists: bool) -> None:
     many = " (comma-separated list: cycled over the maps)" if lists else ""
-    p.add_argument("--size", default="11x11", help=f"ROWSxCOLS (default 11x11){many}")
-    p.add_argument("--algorithm", default="maze",
+    kind = str if lists else one_value
+    p.add_argument("--size", type=kind, default="11x11", help=f"ROWSxCOLS (default 11x11){many}")
+    p.add_argument("--algorithm", type=kind, default="maze",
                    help=f"one of {', '.join(ALGORITHMS)} (default maze){many}")
     p.add_argument("--density", type=float, default=0.25,
                    help="target wall share of the interior, 0..1 (default 0.25; maze: fixed)")
-    p.add_argument("--symmetry", default="none",
+    p.add_argument("--symmetry", type=kind, default="none",
                    help=f"one of {', '.join(SYMMETRIES)} (default none){many}")
     p.add_argument("--spawns", type=int, default=2, help="spawn slots 0..8 (default 2)")
     p.add_argument("--zones", type=parse_zones, default=(2, 2),
@@ -326,7 +344,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("generate", help="write one seeded map")
     _add_gen_options(p, lists=False)
     p.add_argument("-o", "--output", type=given, help="map file to write (default: print the map)")
-    p.add_argument("--name", help="map name (default: the output file's stem)")
+    p.add_argument("--name", type=map_name,
+                   help="map name (default: the output file's stem)")
     p.set_defaults(run=cmd_generate)
 
     p = sub.add_parser("batch", help="write COUNT maps with consecutive seeds")

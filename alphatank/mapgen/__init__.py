@@ -5,6 +5,7 @@ from alphatank.mapgen.generate import (
     SYMMETRIES,
     GenOptions,
     MapGenError,
+    check_name,
     generate,
     generate_from,
     map_variants,
@@ -13,5 +14,5 @@ from alphatank.mapgen.lint import MapWarning, ascii_art, check_map, describe, ma
 from alphatank.mapgen.model import EditorModel
 
 __all__ = ["ALGORITHMS", "SYMMETRIES", "EditorModel", "GenOptions", "MapGenError",
-           "MapWarning", "ascii_art", "check_map", "describe", "generate", "generate_from",
-           "map_variants", "map_warnings"]
+           "MapWarning", "ascii_art", "check_map", "check_name", "describe", "generate",
+           "generate_from", "map_variants", "map_warnings"]

@@ -130,8 +130,18 @@ def generate(rows: int = 11, cols: int = 11, algorithm: str = "maze", density: f
     return generate_from(opts, name)
 
 
+def check_name(name: str) -> str:
+    """``name`` if it can be a map's ``name:`` header (one line of printable text, not blank);
+    MapGenError otherwise (a line break would add header lines of its own)."""
+    if not name.strip() or not name.isprintable():
+        raise MapGenError(f"name must be one line of printable text, got {name!r}")
+    return name
+
+
 def generate_from(opts: GenOptions, name: str | None = None) -> MapSpec:
     """:func:`generate` from a :class:`GenOptions`."""
+    if name is not None:
+        check_name(name)
     rng = np.random.default_rng(opts.seed)
     layout = None
     for _ in range(_ATTEMPTS):
