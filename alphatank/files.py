@@ -12,6 +12,7 @@ from __future__ import annotations
 import errno
 import fcntl
 import os
+import re
 import shutil
 import socket
 import stat
@@ -42,6 +43,14 @@ def decode_text(raw: bytes, source: str = "<bytes>") -> str:
         raise ValueError(f"{source}: not a UTF-8 text file ({kind}: byte "
                          f"0x{raw[exc.start]:02x} at offset {exc.start}); save it as "
                          "UTF-8") from None
+
+
+def text_lines(text: str) -> list[str]:
+    """``text`` split into lines at ``\\n``, ``\\r\\n`` and ``\\r`` only, as editors number them
+    (:meth:`str.splitlines` also breaks at form feeds, ``\\x85``, ``\\u2028`` and more, so the
+    line numbers of an error would not be the file's)."""
+    lines = re.split(r"\r\n|\r|\n", text)
+    return lines[:-1] if lines[-1] == "" else lines
 
 
 def write_text_atomic(path: str | Path, text: str, newline: str | None = None) -> Path:

@@ -10,6 +10,7 @@ import pytest
 from alphatank.mapgen import (
     ALGORITHMS,
     SYMMETRIES,
+    EditorModel,
     GenOptions,
     MapGenError,
     ascii_art,
@@ -236,6 +237,11 @@ def test_warning_lines_follow_comments_and_header():
     text = "; top\nname: c\n\n; between\n#####\n; inside\n#1.2#\n#...#\n#####\n"
     ws = map_warnings(parse_map(text), text)
     assert [(w.line, w.col) for w in ws] == [(7, 2)]
+    text = "name: c\ndescription: one\u2028two\x0cthree\n\n#####\n#1.2#\n#...#\n#####\n"
+    spec = parse_map(text)  # neither U+2028 nor a form feed breaks a line in an editor
+    assert spec.description == "one\u2028two\x0cthree"
+    assert [(w.line, w.col) for w in map_warnings(spec, text)] == [(5, 2)]
+    assert EditorModel.from_text(text).text() == text
 
 
 def test_shipped_maps_have_no_errors_and_expected_warnings():

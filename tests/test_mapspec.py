@@ -113,6 +113,12 @@ BAD = [
     ("###\n#1#\n\n#2#\n###\n", 3, 1, "blank line inside the grid"),
     ("###\n###\n", 1, 1, "no floor cells"),
     ("name: x\nzones: sometimes\n\n###\n#.#\n###\n", 2, 1, "'zones' must be"),
+    # lines break at \n, \r\n and \r only, as editors count them: a form feed or U+2028
+    # is a character of its line, not a line break that moves the reported line and column
+    ("#####\n#1\x0c2#\n#####\n", 2, 3, "unknown character '\\x0c'"),
+    ("#####\n#1\x852#\n#####\n", 2, 3, "unknown character '\\x85'"),
+    ("name: x\ndescription: a\u2028b\n\n###\n#1#\n#?#\n###\n", 6, 2, "unknown character '?'"),
+    ("#####\r#1.2#\r#..#\r#####\r", 3, 5, "ragged row"),
 ]
 
 

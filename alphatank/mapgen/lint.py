@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from alphatank.files import decode_text, read_text
+from alphatank.files import decode_text, read_text, text_lines
 from alphatank.mapgen.generate import lines_clear, segment_cells
 from alphatank.sim.grid import components, open_sides
 from alphatank.sim.mapspec import MapError, MapSpec, load_map, map_text
@@ -37,7 +37,7 @@ class MapWarning:
 def grid_lines(text: str, rows: int) -> list[int]:
     """1-based file line of each grid row of valid map ``text`` (the last ``rows`` lines that
     are neither blank nor ``;`` comments, as :func:`parse_map` reads them)."""
-    lines = [n + 1 for n, ln in enumerate(text.splitlines())
+    lines = [n + 1 for n, ln in enumerate(text_lines(text))
              if ln.rstrip() and not ln.lstrip().startswith(";")]
     return lines[-rows:]
 

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from alphatank.files import read_text, write_text_atomic
+from alphatank.files import read_text, text_lines, write_text_atomic
 from alphatank.mapgen.generate import MAX_SIZE, MapGenError
 from alphatank.sim.mapspec import (
     GRID_CHARS,
@@ -70,7 +70,7 @@ class EditorModel:
                 pending.clear()
 
         in_header = True
-        for ln in text.splitlines():
+        for ln in text_lines(text):
             if ln.lstrip().startswith(";"):
                 pending.append(ln.rstrip())
             elif in_header and ":" in ln and not rows:

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from alphatank.errors import InputError
-from alphatank.files import read_text
+from alphatank.files import read_text, text_lines
 from alphatank.sim.grid import components, floor_areas, reachable_from
 
 GRID_CHARS = "#.12345678+-"
@@ -151,7 +151,7 @@ def merge_walls(walls: np.ndarray) -> list[tuple[int, int, int, int]]:
 
 def parse_map(text: str, source: str = "<string>", name: str | None = None) -> MapSpec:
     """Parse and validate map text; raises MapError naming source, line and column."""
-    lines = text.removeprefix("\ufeff").splitlines()
+    lines = text_lines(text.removeprefix("\ufeff"))
     header: dict[str, str] = {}
     grid: list[tuple[int, str]] = []  # (1-based line number, row text)
     i = 0
