@@ -364,6 +364,16 @@ def test_map_names_that_are_not_file_names_write_nothing_outside_the_folder(tmp_
     assert (inner / "ok.png").is_file()
 
 
+def test_edit_cell_px_is_checked_before_a_window_opens(tmp_path, capsys):
+    for px in ("-5", "0", "100000"):  # a pygame traceback, the default, an out-of-memory one
+        with pytest.raises(SystemExit) as exc:
+            cli.main(["edit", str(tmp_path / "new.txt"), "--cell-px", px])
+        assert exc.value.code == 2
+        assert (f"argument --cell-px: must be an integer in [8, 128], got {px!r}"
+                in capsys.readouterr().err)
+    assert not (tmp_path / "new.txt").exists()
+
+
 def test_batch_writes_consecutive_seeds_and_a_held_out_split(tmp_path, capsys):
     args = ["batch", "--count", "10", "--seed", "100", "--out", str(tmp_path), "--split",
             "0.8", "--algorithm", "maze,rooms", "--symmetry", "mirror,rotational"]

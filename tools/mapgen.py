@@ -20,7 +20,7 @@ from fractions import Fraction
 from pathlib import Path
 
 from alphatank.cli import Parser, broken_pipe_exit
-from alphatank.commands.argtypes import given, scale
+from alphatank.commands.argtypes import given, int_in_range, scale
 from alphatank.errors import InputError, one_line
 from alphatank.files import check_folder, check_writable, write_text_atomic
 from alphatank.mapgen import (
@@ -387,7 +387,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("edit", help="paint a map in a pygame window")
     p.add_argument("map", type=given, help="map file to edit (created on first save if missing)")
     p.add_argument("--size", default="11x11", help="ROWSxCOLS of a new map (default 11x11)")
-    p.add_argument("--cell-px", type=int, help="pixels per cell on screen")
+    p.add_argument("--cell-px", type=int_in_range(8, 128),
+                   help="pixels per cell on screen, 8 to 128 (default: fit the map to ~760 px)")
     p.set_defaults(run=cmd_edit)
     return parser
 
