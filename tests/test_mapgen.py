@@ -141,6 +141,25 @@ def test_cli_generate_refuses_lists_and_names_that_are_not_one_line(tmp_path, ca
     assert load_map(out).name == "My map; v2" and load_map(out).cell == 70
 
 
+def test_cli_out_of_range_options_name_their_flag(tmp_path, capsys):
+    for command, flag, value, allowed in (
+            ("generate", "--spawns", "9", "an integer in [0, 8]"),
+            ("batch", "--spawns", "-1", "an integer in [0, 8]"),
+            ("generate", "--density", "1", "a number in [0, 1)"),
+            ("generate", "--density", "nan", "a number in [0, 1)"),
+            ("generate", "--loops", "2", "a number in [0, 1]"),
+            ("generate", "--seed", "-1", "an integer in [0, 2^63)"),
+            ("preview", "--seed", "-1", "an integer in [0, 2^63)")):  # was a traceback
+        args = ["maze", "--no-png"] if command == "preview" else ["--count", "1", "--out",
+                                                                   str(tmp_path)]
+        with pytest.raises(SystemExit) as exc:
+            cli.main([command, *(args if command != "generate" else []), flag, value])
+        assert exc.value.code == 2
+        assert (f"argument {flag}: must be {allowed}, got {value!r}"
+                in capsys.readouterr().err)
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_loops_turn_a_perfect_maze_into_a_graph_with_cycles():
     for seed in range(5):
         tree = generate(11, 15, "maze", symmetry="none", loops=0.0, seed=seed).walls

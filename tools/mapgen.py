@@ -20,7 +20,8 @@ from fractions import Fraction
 from pathlib import Path
 
 from alphatank.cli import Parser, broken_pipe_exit
-from alphatank.commands.argtypes import given, int_in_range, scale
+from alphatank.commands.argtypes import given, in_range, int_in_range, scale
+from alphatank.commands.argtypes import seed as seed_type
 from alphatank.errors import InputError, one_line
 from alphatank.files import check_folder, check_writable, write_text_atomic
 from alphatank.mapgen import (
@@ -37,6 +38,7 @@ from alphatank.mapgen import (
     map_variants,
     map_warnings,
 )
+from alphatank.mapgen.generate import MAX_SPAWNS
 from alphatank.sim.mapspec import MapError, MapSpec, load_map, map_text
 
 
@@ -50,6 +52,17 @@ def parse_size(text: str) -> tuple[int, int]:
     if rows <= 0 or cols <= 0:
         raise argparse.ArgumentTypeError(f"size must be ROWSxCOLS like 11x11, got {text!r}")
     return rows, cols
+
+
+def parse_density(text: str) -> float:
+    """``--density``: a wall share in [0, 1)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = -1.0
+    if not 0.0 <= value < 1.0:
+        raise argparse.ArgumentTypeError(f"must be a number in [0, 1), got {text!r}")
+    return value
 
 
 def parse_zones(text: str) -> tuple[int, int] | None:
@@ -107,16 +120,17 @@ def _add_gen_options(p: argparse.ArgumentParser, lists: bool) -> None:
     p.add_argument("--size", type=kind, default="11x11", help=f"ROWSxCOLS (default 11x11){many}")
     p.add_argument("--algorithm", type=kind, default="maze",
                    help=f"one of {', '.join(ALGORITHMS)} (default maze){many}")
-    p.add_argument("--density", type=float, default=0.25,
+    p.add_argument("--density", type=parse_density, default=0.25,
                    help="target wall share of the interior, 0..1 (default 0.25; maze: fixed)")
     p.add_argument("--symmetry", type=kind, default="none",
                    help=f"one of {', '.join(SYMMETRIES)} (default none){many}")
-    p.add_argument("--spawns", type=int, default=2, help="spawn slots 0..8 (default 2)")
+    p.add_argument("--spawns", type=int_in_range(0, MAX_SPAWNS), default=2,
+                   help=f"spawn slots 0..{MAX_SPAWNS} (default 2)")
     p.add_argument("--zones", type=parse_zones, default=(2, 2),
                    help="BUFF,DEBUFF zone cells, or 'random' (default 2,2)")
-    p.add_argument("--loops", type=float, default=0.1,
+    p.add_argument("--loops", type=in_range(0.0, 1.0), default=0.1,
                    help="share of thin walls knocked out to make loops, 0..1 (default 0.1)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--seed", type=seed_type, default=0, help="random seed (default 0)")
     p.add_argument("--force", action="store_true", help="overwrite existing files")
 
 
@@ -380,7 +394,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fire", action="store_true", help="mark lines of fire between spawns")
     p.add_argument("--teams", type=parse_teams,
                    help="team of each slot, e.g. AABB (default: halves A and B)")
-    p.add_argument("--seed", type=int, default=0, help="match seed (random zones, headings)")
+    p.add_argument("--seed", type=seed_type, default=0,
+                   help="match seed (random zones, headings)")
     p.add_argument("--scale", type=scale, default=1.0, help="PNG scale (default 1)")
     p.set_defaults(run=cmd_preview)
 
