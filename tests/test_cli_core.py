@@ -16,6 +16,20 @@ def test_maps_lists_shipped_maps(capsys):
         assert name in out
 
 
+def test_maps_gives_sizes_as_rows_x_cols_in_aligned_columns(capsys):
+    """ROWSxCOLS, as mapgen.py --size takes it (the list said arena4 was 13x10), and one
+    column for the long train_d8/ names (they pushed their rows out of line)."""
+    assert main(["maps"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    table = [ln for ln in lines if not ln.startswith("folder ")]
+    start = table[0].index("rows x cols")
+    arena4 = next(ln for ln in table if ln.startswith("arena4 "))
+    assert arena4[start:].split()[:4] == ["10", "x", "13", "4"]
+    assert {ln.index(" x ", start - 1) for ln in table[1:]} == {start + 4}
+    assert main(["maps", "arena4"]) == 0
+    assert "maps/arena4.txt: ok, 10 rows x 13 cols of 70 px" in capsys.readouterr().out
+
+
 def test_maps_validates_files(tmp_path, capsys):
     bad = tmp_path / "bad.txt"
     bad.write_text("#####\n#1x2#\n#####\n")

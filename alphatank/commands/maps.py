@@ -41,11 +41,13 @@ def _expand(items: list[str]) -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     if not args.maps:
-        print(f"{'name':18s} {'size':>7s} {'spawns':>6s}  description")
         folders = shipped_map_folders()
-        for name in shipped_maps() + [m for f in folders for m in shipped_maps(f)]:
-            spec = load_map(name)
-            print(f"{name:18s} {spec.cols:>3d}x{spec.rows:<3d} {len(spec.spawns):>6d}  "
+        names = shipped_maps() + [m for f in folders for m in shipped_maps(f)]
+        width = max(len(name) for name in names)  # train_d8/... names are the longest
+        print(f"{'name':{width}s} {'rows x cols':11s} {'spawns':>6s}  description")
+        for name in names:
+            spec = load_map(name)  # ROWSxCOLS, as tools/mapgen.py --size takes it
+            print(f"{name:{width}s} {spec.rows:>4d} x {spec.cols:<4d} {len(spec.spawns):>6d}  "
                   f"{spec.description}")
         for folder in folders:
             print(f"folder {folder}/: {len(shipped_maps(folder))} maps (a scenario's "
@@ -59,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"alphatank maps: error: {err}", file=sys.stderr)
             status = 2
             continue
-        print(f"{spec.source}: ok, {spec.cols}x{spec.rows} cells of {spec.cell:g} px, "
+        print(f"{spec.source}: ok, {spec.rows} rows x {spec.cols} cols of {spec.cell:g} px, "
               f"{len(spec.wall_rects)} wall boxes")
         print(map_text(spec))
     return status
