@@ -423,6 +423,15 @@ def test_batch_writes_consecutive_seeds_and_a_held_out_split(tmp_path, capsys):
 # ---- shipped folders ----------------------------------------------------------------------
 
 
+def test_batch_split_refuses_a_file_in_place_of_a_folder_before_writing(tmp_path, capsys):
+    (tmp_path / "test").write_text("not a folder\n")
+    args = ["batch", "--count", "4", "--out", str(tmp_path), "--split", "0.5"]
+    assert cli.main(args) == 2  # map 0 went to train/ before map 1 failed on test/
+    assert capsys.readouterr().err.strip() == (
+        f"mapgen.py batch: error: --out: {tmp_path / 'test'}: is a file, not a folder")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["test"]
+
+
 @pytest.mark.parametrize("folder,count", [("train", 16), ("test", 4)])
 def test_shipped_train_and_test_maps_are_valid_and_rebuildable(folder, count):
     paths = sorted((ROOT / "maps" / folder).glob("*.txt"))

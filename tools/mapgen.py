@@ -191,6 +191,8 @@ def cmd_batch(args: argparse.Namespace) -> int:
         if not 0.0 < args.split <= 1.0:
             raise MapGenError(f"--split must be in (0, 1] (the train share), got {args.split}")
         test_share = 1 - Fraction(str(args.split))
+        for part in ("train", "test"):  # a file of that name would stop the batch midway
+            check_folder(out / part, "--out")
     batch = []
     for i in range(args.count):
         opts = options_from_args(args, i, args.seed + i)
