@@ -252,6 +252,22 @@ def test_dead_end_unreachable_zone_isolated_floor_and_skipped_slot_warnings():
     assert "walled in" in map_warnings(walled_in)[0].message
 
 
+def test_zone_cells_that_zones_random_ignores_are_a_warning():
+    from alphatank.sim.config import game_config
+    from alphatank.sim.match import Match
+
+    text = "zones: random\n\n#######\n#1..-2#\n#..+..#\n#######\n"
+    spec = parse_map(text, "both.txt")
+    match = Match(game_config(), spec, ["A", "B"], seed=0)
+    assert (match.buffs, match.debuffs) != (list(spec.buffs), list(spec.debuffs))
+    (w,) = [w for w in map_warnings(spec, text) if w.code == "ignored-zones"]
+    assert (w.line, w.col) == (4, 5)  # the first of the cells, row by row
+    assert w.message.startswith("2 '+'/'-' zone cell(s), the first here, are ignored: "
+                                "'zones: random' draws each match's zones")
+    fixed = text.replace("zones: random", "zones: fixed")
+    assert "ignored-zones" not in {w.code for w in map_warnings(parse_map(fixed), fixed)}
+
+
 def test_warning_lines_follow_comments_and_header():
     text = "; top\nname: c\n\n; between\n#####\n; inside\n#1.2#\n#...#\n#####\n"
     ws = map_warnings(parse_map(text), text)

@@ -24,7 +24,8 @@ from alphatank.sim.mapspec import MapError, MapSpec, load_map, map_text
 class MapWarning:
     """A legal but questionable map feature, at a 1-based file line and column."""
 
-    code: str  # line-of-fire | dead-end-spawn | unreachable-zone | isolated-floor | spawn-slots
+    code: str  # line-of-fire | dead-end-spawn | unreachable-zone | isolated-floor |
+    # spawn-slots | ignored-zones
     message: str
     line: int
     col: int
@@ -63,6 +64,11 @@ def map_warnings(spec: MapSpec, text: str | None = None,
     if missing:
         out.append(warn("spawn-slots", f"spawn slots skip {missing}: a match with "
                         f"{slots[-1]} tanks draws those at random", spec.spawns[slots[-1]]))
+    drawn = sorted(spec.buffs + spec.debuffs)
+    if spec.random_zones and drawn:
+        out.append(warn("ignored-zones", f"{len(drawn)} '+'/'-' zone cell(s), the first here, are "
+                        "ignored: 'zones: random' draws each match's zones (drop the cells or "
+                        "the header)", drawn[0]))
     sides = open_sides(walls)
     for slot in slots:
         cell = spec.spawns[slot]
