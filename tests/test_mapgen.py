@@ -338,6 +338,15 @@ def test_validate_ok_warnings_strict_and_folders(tmp_path, capsys):
     assert any(line.startswith(f"{tmp_path / 'b.txt'}:2:4: spawn 2 cannot") for line in out)
 
 
+def test_validate_and_variants_take_shipped_folder_names_like_alphatank_maps(tmp_path, capsys,
+                                                                           monkeypatch):
+    monkeypatch.chdir(tmp_path)  # no local folder of that name
+    assert cli.main(["validate", "test"]) == 0
+    assert capsys.readouterr().out.count(": ok (") == 4
+    assert cli.main(["variants", "test/", "--out", str(tmp_path / "v")]) == 0
+    assert len(list((tmp_path / "v").glob("*_rot90.txt"))) == 4
+
+
 def test_preview_prints_ascii_and_draws_png_with_the_game_renderer(tmp_path, capsys):
     import pygame
 

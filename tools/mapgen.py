@@ -39,7 +39,14 @@ from alphatank.mapgen import (
     map_warnings,
 )
 from alphatank.mapgen.generate import MAX_SPAWNS
-from alphatank.sim.mapspec import MapError, MapSpec, load_map, map_text
+from alphatank.sim.mapspec import (
+    MapError,
+    MapSpec,
+    load_map,
+    map_text,
+    shipped_map_folders,
+    shipped_maps,
+)
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -243,13 +250,16 @@ def cmd_variants(args: argparse.Namespace) -> int:
 
 
 def _map_sources(items: list[str]) -> list[str]:
-    """Files and shipped names as given; folders expand to their .txt maps."""
+    """Files and shipped names as given; folders (paths, or shipped folder names such as
+    ``train``, as ``alphatank maps`` takes them) expand to their .txt maps."""
     out: list[str] = []
     for item in items:
         p = Path(item)
         if item and p.is_dir():  # not '': Path('') is the current folder
             found = sorted(str(f) for f in p.glob("*.txt"))
             out += found or [item]
+        elif item.strip("/") in shipped_map_folders():
+            out += shipped_maps(item.strip("/"))
         else:
             out.append(item)
     return out
