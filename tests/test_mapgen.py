@@ -1,6 +1,7 @@
 """Map generator, warnings, the tools/mapgen.py CLI and the shipped train/test map folders."""
 
 import importlib.util
+import os
 import re
 from pathlib import Path
 
@@ -14,6 +15,7 @@ from alphatank.mapgen import (
     GenOptions,
     MapGenError,
     ascii_art,
+    check_map,
     generate,
     generate_from,
     map_variants,
@@ -118,6 +120,18 @@ def test_cli_generate_same_seed_same_bytes(tmp_path, capsys):
     assert "--algorithm maze --density 0.25 --symmetry mirror" in spec.description
     assert cli.main([*args, "-o", str(tmp_path / "a.txt")]) == 2  # no silent overwrite
     assert "--force" in capsys.readouterr().err
+
+
+def test_cli_generate_writes_into_a_device_and_warns_with_the_file_name(tmp_path, capsys):
+    # /dev/null needed --force ("exists"), then the map written into it failed the
+    # reload check ("not a file (a device or pipe)"), exit 2
+    assert cli.main(["generate", "-o", os.devnull]) == 0
+    assert capsys.readouterr().out.startswith(f"wrote {os.devnull}: ")
+    out = tmp_path / "open.txt"
+    assert cli.main(["generate", "--algorithm", "open", "--density", "0", "-o", str(out)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[1:] and all(ln.startswith(f"{out}:") for ln in lines[1:])  # lines of fire
+    assert [str(w) for w in check_map(out)[1]] == lines[1:]
 
 
 def test_cli_generate_refuses_lists_and_names_that_are_not_one_line(tmp_path, capsys):

@@ -44,6 +44,7 @@ from alphatank.sim.mapspec import (
     MapSpec,
     load_map,
     map_text,
+    parse_map,
     shipped_map_folders,
     shipped_maps,
 )
@@ -163,11 +164,15 @@ def _file_stem(spec: MapSpec, use: str) -> str:
     return spec.name
 
 
-def _write(spec: MapSpec, path: Path, force: bool) -> None:
-    if path.exists() and not force:
+def _write(spec: MapSpec, path: Path, force: bool) -> tuple[MapSpec, str]:
+    """Write ``spec`` to ``path`` (a device such as /dev/stdout gets the text written into
+    it); returns the map as the game's loader reads the file, and the file's text."""
+    if path.is_file() and not force:
         raise FileExistsError(f"{path} exists (use --force to overwrite)")
-    write_text_atomic(path, map_text(spec))
-    load_map(path)  # what was written loads with the game's loader
+    text = map_text(spec)
+    written = parse_map(text, str(path), name=path.stem)  # what the loader makes of it
+    write_text_atomic(path, text)
+    return written, text
 
 
 def cmd_generate(args: argparse.Namespace) -> int:
@@ -181,9 +186,9 @@ def cmd_generate(args: argparse.Namespace) -> int:
         return 0
     check_writable(args.output, "--output")
     path = Path(args.output)
-    _write(spec, path, args.force)
+    written, text = _write(spec, path, args.force)
     print(f"wrote {path}: {describe(spec)}")
-    for w in check_map(path)[1]:
+    for w in map_warnings(written, text):
         print(w)
     return 0
 
