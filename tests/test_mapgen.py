@@ -400,6 +400,21 @@ def test_preview_refuses_teams_and_maps_a_match_cannot_hold_in_one_line(tmp_path
     assert list(tmp_path.glob("*.png")) == []
 
 
+def test_preview_png_must_be_a_png_file_and_never_overwrites_the_map(tmp_path, capsys):
+    src = tmp_path / "mine.txt"
+    src.write_text("#####\n#1.2#\n#####\n")
+    for png in (str(src), str(tmp_path / "out"), str(tmp_path / "out.jpg")):
+        # pygame wrote TGA or JPEG bytes, over the map too
+        assert cli.main(["preview", str(src), "--png", png]) == 2
+        assert capsys.readouterr().err == (f"mapgen.py preview: error: --png: {png}: must name "
+                                           "a .png file (another name got TGA, JPEG or BMP "
+                                           "bytes)\n")
+    assert src.read_text() == "#####\n#1.2#\n#####\n"
+    assert cli.main(["preview", str(src), "--png", str(tmp_path / "Mine.PNG")]) == 0
+    assert (tmp_path / "Mine.PNG").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["Mine.PNG", "mine.txt"]
+
+
 def test_map_names_that_are_not_file_names_write_nothing_outside_the_folder(tmp_path,
                                                                            capsys,
                                                                            monkeypatch):

@@ -23,7 +23,7 @@ from alphatank.cli import Parser, broken_pipe_exit
 from alphatank.commands.argtypes import given, in_range, int_in_range, scale
 from alphatank.commands.argtypes import seed as seed_type
 from alphatank.errors import InputError, one_line
-from alphatank.files import check_folder, check_writable, write_text_atomic
+from alphatank.files import check_folder, check_writable, replace_into, write_text_atomic
 from alphatank.mapgen import (
     ALGORITHMS,
     SYMMETRIES,
@@ -313,12 +313,21 @@ def render_png(spec: MapSpec, path: Path, teams: list[str] | None = None, seed: 
     renderer = Renderer(None, overlays="none", hud=False, explosions=False, scale=scale,
                         labels=labels)
     path.parent.mkdir(parents=True, exist_ok=True)
-    pygame.image.save(renderer.draw(match), str(path))
+    tmp = path.with_name(f".{path.stem}.tmp-{os.getpid()}.png")  # atomic, as text files are
+    try:
+        pygame.image.save(renderer.draw(match), str(tmp))
+        replace_into(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def cmd_preview(args: argparse.Namespace) -> int:
     if args.png and not args.no_png:
         check_writable(args.png, "--png")
+        if not args.png.lower().endswith(".png"):  # pygame picks the format from the name
+            raise InputError(f"--png: {args.png}: must name a .png file (another name got "
+                             "TGA, JPEG or BMP bytes)")
     try:
         spec, warnings = check_map(args.map, args.teams)
     except MapError as err:
