@@ -122,6 +122,18 @@ def test_cli_generate_same_seed_same_bytes(tmp_path, capsys):
     assert "--force" in capsys.readouterr().err
 
 
+def test_a_generated_map_rebuilds_from_its_description_at_any_density(tmp_path, capsys):
+    a, b = tmp_path / "a.txt", tmp_path / "b.txt"
+    for seed in ("1", "4", "6"):  # 'density 0.236686' (six digits) drew other rooms for 4, 6
+        assert cli.main(["generate", "--size", "15x15", "--algorithm", "rooms", "--density",
+                         "0.2366864", "--loops", "0", "--seed", seed, "-o", str(a),
+                         "--force"]) == 0
+        args = load_map(a).description.split("tools/mapgen.py ")[1].split()
+        assert "0.2366864" in args
+        assert cli.main(["generate", *args, "-o", str(b), "--name", "a", "--force"]) == 0
+        assert a.read_text() == b.read_text()
+
+
 def test_cli_generate_writes_into_a_device_and_warns_with_the_file_name(tmp_path, capsys):
     # /dev/null needed --force ("exists"), then the map written into it failed the
     # reload check ("not a file (a device or pipe)"), exit 2

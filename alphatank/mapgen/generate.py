@@ -112,8 +112,16 @@ class GenOptions:
         """The ``tools/mapgen.py generate`` options that rebuild this map."""
         zones = "random" if self.zones is None else f"{self.zones[0]},{self.zones[1]}"
         return (f"--size {self.rows}x{self.cols} --algorithm {self.algorithm} "
-                f"--density {self.density:g} --symmetry {self.symmetry} --spawns {self.spawns} "
-                f"--zones {zones} --loops {self.loops:g} --seed {self.seed}")
+                f"--density {_exact(self.density)} --symmetry {self.symmetry} "
+                f"--spawns {self.spawns} --zones {zones} --loops {_exact(self.loops)} "
+                f"--seed {self.seed}")
+
+
+def _exact(value: float) -> str:
+    """``value`` as ``:g`` writes it when that reads back as the same number, else every
+    digit it needs (0.2366864, not 0.236686: a rebuild would draw another map)."""
+    text = f"{value:g}"
+    return text if float(text) == value else repr(float(value))
 
 
 def generate(rows: int = 11, cols: int = 11, algorithm: str = "maze", density: float = 0.25,
