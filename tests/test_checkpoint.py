@@ -183,6 +183,38 @@ def test_resume_continues_exactly_like_an_uninterrupted_run(tmp_path):
     assert len(resumed.learners["sac"].replay) == len(full.learners["sac"].replay)
 
 
+def test_a_sac_checkpoint_whose_replay_does_not_fit_plays_but_does_not_resume(tmp_path,
+                                                                             capsys):
+    """Loading a SAC checkpoint to play built its learner with the full replay buffer: one
+    whose buffer_size exceeds this machine's memory was refused by eval, play, record and
+    load_policy, which need only the actor. Now the buffer is made when training needs it:
+    the checkpoint plays, and resuming it is still refused before training starts."""
+    from alphatank.cli import main
+
+    run = tmp_path / "sac"
+    spec = LearnerSpec("sac", "sac", (0,), config=SAC_TINY)
+    cfg = tiny_config("sac", 1, learners=(spec,), rollout_steps=16, checkpoint_every=0)
+    Trainer(cfg, run, progress=False).train()
+    meta = load_checkpoint(run).path / "meta.json"
+    text = meta.read_text(encoding="utf-8")
+    assert text.count('"buffer_size": 4096') == 2  # the learner's spec and the run's
+    meta.write_text(text.replace('"buffer_size": 4096', f'"buffer_size": {10**12}'),
+                    encoding="utf-8")
+    assert load_checkpoint(run).learner_specs[0].config.buffer_size == 10**12
+    assert main(["eval", str(run), "--games", "2"]) == 0
+    assert "SAC Agent vs Aggressive Bot" in capsys.readouterr().out
+    core = MatchSet("vs_aggressive", 1, driven=[], seat_policies={0: load_policy(run)})
+    core.reset_env(0, 1)
+    for _ in range(5):
+        core.step(np.zeros((1, 0, 3), dtype=np.int64))
+    assert main(["train", "--resume", str(run), "--total-steps", str(2 * ITER),
+                 "--wandb", "disabled", "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "buffer_size = 1,000,000,000,000 transitions" in err[0], err
+    assert "lower buffer_size" in err[0]
+    assert load_checkpoint(run).meta["progress"]["global_step"] == ITER  # nothing trained
+
+
 def _copy(trained, tmp_path):
     dst = tmp_path / "ck"
     shutil.copytree(load_checkpoint(trained).path, dst)

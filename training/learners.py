@@ -71,7 +71,9 @@ class Learner(Protocol):
 
     def plan(self, total_steps: int) -> None:
         """The run will call :meth:`observe` ``total_steps`` times in all (e.g. to anneal
-        the learning rate to zero); called before training and again on resume."""
+        the learning rate to zero); called before training and again on resume, inside
+        the run's ``memory_budget`` (SAC makes its replay buffer here: a learner loaded
+        for inference is never planned and needs none)."""
 
     def new_segment(self) -> None:
         """Every stream restarts from a fresh episode (after a checkpoint): forget

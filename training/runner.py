@@ -244,29 +244,29 @@ class Trainer:
             raise ValueError(f"the learners need env inputs {missing}, which this env does not "
                              f"supply (it supplies {sorted(supplied)})")
         self.input_dims = {x: int(np.prod(supplied[x], dtype=np.int64)) for x in self.inputs}
-        with memory_budget():  # the learners' buffers fit together
+        with memory_budget():  # the learners' buffers fit together (SAC's: made by plan)
             self.learners = {spec.name: make_learner(spec, self.D, self.E * len(spec.seats),
                                                      derive_seed(cfg.seed, k), mask_dim,
                                                      self.input_dims)
                              for k, spec in enumerate(specs)}
-        wants = {n: lr.rollout_steps for n, lr in self.learners.items() if lr.rollout_steps}
-        self.rollout_steps = (cfg.rollout_steps or max(wants.values(), default=0)
-                              or DEFAULT_ROLLOUT_STEPS)
-        if any(self.rollout_steps % n for n in wants.values()):
-            raise ValueError(f"rollout_steps {self.rollout_steps} must be a multiple of every "
-                             f"learner's rollout length ({wants})")
-        problems = fragment_problems(self.learners, self.rollout_steps,
-                                     masks=self.action_mask is not None,
-                                     selfplay=bool(cfg.selfplay),
-                                     env=env) if self.fragments else []
-        if problems:
-            raise ValueError("fragments: " + "; ".join(problems))
-        steps_per_iter = self.rollout_steps * self.E
-        self.total_iterations = max(1, math.ceil(cfg.total_steps / steps_per_iter))
-        # total_steps rounded up to whole iterations (presets.planned_steps): where it ends
-        self.planned_steps = self.total_iterations * steps_per_iter
-        for lr in self.learners.values():
-            lr.plan(self.total_iterations * self.rollout_steps)
+            wants = {n: lr.rollout_steps for n, lr in self.learners.items() if lr.rollout_steps}
+            self.rollout_steps = (cfg.rollout_steps or max(wants.values(), default=0)
+                                  or DEFAULT_ROLLOUT_STEPS)
+            if any(self.rollout_steps % n for n in wants.values()):
+                raise ValueError(f"rollout_steps {self.rollout_steps} must be a multiple of every "
+                                 f"learner's rollout length ({wants})")
+            problems = fragment_problems(self.learners, self.rollout_steps,
+                                         masks=self.action_mask is not None,
+                                         selfplay=bool(cfg.selfplay),
+                                         env=env) if self.fragments else []
+            if problems:
+                raise ValueError("fragments: " + "; ".join(problems))
+            steps_per_iter = self.rollout_steps * self.E
+            self.total_iterations = max(1, math.ceil(cfg.total_steps / steps_per_iter))
+            # total_steps rounded up to whole iterations (presets.planned_steps): where it ends
+            self.planned_steps = self.total_iterations * steps_per_iter
+            for lr in self.learners.values():
+                lr.plan(self.total_iterations * self.rollout_steps)
         self.rivals = opposing_learners(specs, [self.scenario.seats[s].team
                                                 for s in self.scenario.learner_seats])
         layout = getattr(env, "layout", None)

@@ -210,11 +210,7 @@ class SAC:
         self.generator = torch.Generator().manual_seed(seed)
         self.rng = np.random.default_rng(seed)
         self.obs_norm = ObsNormalizer(obs_dim, cfg.norm_obs, cfg.obs_clip)
-        self.replay = ReplayBuffer(cfg.buffer_size, obs_dim, act_dim)
-        # a gradient step's sampled observations and the networks' activations (about)
-        check_memory(4 * cfg.batch_size * (2 * obs_dim + 16 * cfg.hidden),
-                     f"a gradient step of batch_size = {cfg.batch_size:,} transitions x "
-                     f"{obs_dim} inputs", "lower batch_size")
+        self._replay: ReplayBuffer | None = None  # made by plan() or when first needed
         self.mirror = NumpyActor(self.actor)
         self.transitions = 0
         self.since_update = 0
@@ -232,7 +228,30 @@ class SAC:
     # ---- run plumbing (the Learner protocol) --------------------------------------------
 
     def plan(self, total_steps: int) -> None:
-        """SAC's schedule does not depend on the run length."""
+        """SAC's schedule does not depend on the run length, but the run trains: the
+        replay buffer is made now, inside the run's
+        :func:`~alphatank.training.buffers.memory_budget`, so that one that does not fit
+        is refused before training starts."""
+        self._claim()
+
+    @property
+    def replay(self) -> ReplayBuffer:
+        return self._claim()
+
+    def _claim(self) -> ReplayBuffer:
+        """The replay buffer, made when training first needs it (:meth:`plan`, collecting,
+        a resume's :meth:`load_arrays`) after checking that it and a gradient step fit in
+        memory: a learner loaded for inference needs neither, whatever its
+        ``buffer_size``."""
+        if self._replay is None:
+            cfg, obs_dim = self.cfg, self.obs_dim
+            replay = ReplayBuffer(cfg.buffer_size, obs_dim, len(self.nvec))
+            # a gradient step's sampled observations and the networks' activations (about)
+            check_memory(4 * cfg.batch_size * (2 * obs_dim + 16 * cfg.hidden),
+                         f"a gradient step of batch_size = {cfg.batch_size:,} transitions x "
+                         f"{obs_dim} inputs", "lower batch_size")
+            self._replay = replay
+        return self._replay
 
     def new_segment(self) -> None:
         """Nothing per episode to forget (transitions are stored whole)."""
