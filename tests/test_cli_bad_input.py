@@ -535,6 +535,10 @@ CASES = [
     ("train-batch-memory", ["train", "--preset", "sac_vs_aggressive", "--runs", "{dir}/runs",
                             "--wandb", "disabled", "--hp", "sac.batch_size=1e9"],
      ["batch_size = 1,000,000,000 transitions", "GiB available", "lower batch_size"]),
+    # accepted before: the first update round never ended, its stop's save did not load
+    ("train-utd-ratio-max", ["train", "--preset", "sac_vs_aggressive", "--print-config",
+                             "--hp", "sac.utd_ratio=1e308"],
+     ["--hp sac.utd_ratio", "must be in (0, 1000]", "1e+308"]),
     ("train-rollout-memory", ["train", "--runs", "{dir}/runs", "--wandb", "disabled", "--hp",
                               "ppo.num_steps=100000000"], ["num_steps = 100,000,000",
                                                            "lower num_steps or num_envs"]),

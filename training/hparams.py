@@ -16,6 +16,11 @@ from alphatank.training.fields import FieldError, build, hp, validate
 # fail in the middle of the set-up on many machines; at 4,096 they take about 0.5 GiB
 # (PPO) to 1.3 GiB (SAC's actor, critics and target critics).
 HIDDEN_MAX = 4096
+# Most SAC gradient steps per collected transition, far above the 1 to 20 of the
+# literature (at ~20 ms a step, 1,000 take 20 s per transition). Unbounded, a huge ratio
+# made an update round endless (the steps owed no longer drop by 1 past 2**53) or
+# infinite (near 1e308), and the checkpoint a stop then saved could not be loaded.
+UTD_RATIO_MAX = 1000.0
 
 
 @dataclass(frozen=True)
@@ -67,7 +72,8 @@ class SACConfig:
     start_steps: int = hp(1000, "uniform random actions before this many transitions", ge=0)
     update_after: int = hp(1000, "transitions collected before the first update", ge=0)
     update_every: int = hp(50, "transitions between update rounds", gt=0)
-    utd_ratio: float = hp(1.0, "gradient steps per collected transition", gt=0)
+    utd_ratio: float = hp(1.0, "gradient steps per collected transition", gt=0,
+                          le=UTD_RATIO_MAX)
     hidden: int = hp(256, "units per hidden layer (two ReLU layers)", gt=0,
                      le=HIDDEN_MAX)
     autotune: bool = hp(True, "tune the entropy coefficient towards target_entropy")
