@@ -1,5 +1,7 @@
 """SAC: the paper's eq. (33) action mapping, twin critics, targets, entropy tuning, replay."""
 
+import pickle
+
 import numpy as np
 import pytest
 import torch
@@ -9,6 +11,7 @@ from alphatank.envs.gym import TankBattleEnv
 from alphatank.envs.vector import VectorMatchEnv
 from alphatank.game.scenarios import parse_scenario
 from alphatank.training.evaluate import evaluate_learners
+from alphatank.training.learners import inference_state
 from alphatank.training.presets import LearnerSpec, TrainConfig
 from alphatank.training.runner import Trainer
 from alphatank.training.sac import (
@@ -186,6 +189,23 @@ def test_each_sac_learner_keeps_its_own_replay_buffer(tmp_path):
     assert a.replay is not b.replay
     assert not np.array_equal(a.replay.rewards[:128], b.replay.rewards[:128])
     assert a.grad_steps > 0 and b.grad_steps > 0
+
+
+def test_a_sac_learner_that_only_plays_holds_no_replay_buffer():
+    """Every SAC learner built to play (a checkpoint loaded to play, a self-play or league
+    snapshot) made a full replay buffer: 158 MiB of zeros at buffer_size 100,000 (1.6 GiB
+    at the default) in the pickle that env runners receive per snapshot. Now the buffer is
+    made only when training plans or fills it."""
+    cfg = SACConfig(buffer_size=100_000)
+    trained = SAC(201, 1, cfg)
+    player = SAC(201, 1, cfg)
+    player.load_state_dict(inference_state("sac", trained.state_dict()), weights_only=True)
+    assert len(pickle.dumps(player)) < 8 * 2**20
+    x = np.random.default_rng(0).standard_normal((3, 201), dtype=np.float32)
+    assert np.array_equal(player.policy_actions(x, deterministic=True),
+                          trained.policy_actions(x, deterministic=True))
+    trained.plan(1000)
+    assert trained.replay.capacity == 100_000 and len(trained.replay) == 0
 
 
 RANGE = """name: range
