@@ -1,11 +1,16 @@
 """The core CLI verbs: maps and bench."""
 
+import functools
 import json
+import shutil
 import signal
 import subprocess
 import sys
 
+import pytest
+
 from alphatank.cli import main
+from alphatank.commands import benchenv
 from alphatank.commands.benchfloor import find_floor
 
 
@@ -59,6 +64,24 @@ def test_bench_reports_match_ticks_and_the_floor_ratio(tmp_path, capsys):
 def test_bench_names_a_wrong_floor_folder(tmp_path, capsys):
     assert main(["bench", "--ticks", "10", "--floor", str(tmp_path)]) == 2
     assert f"error: --floor {tmp_path}: no sim_core.py" in capsys.readouterr().err
+
+
+def test_bench_env_compares_with_the_floor_given(tmp_path, capsys, monkeypatch):
+    """--floor DIR is the yardstick of --env too, not only of the match ticks."""
+    proto = find_floor(None)
+    if proto is None:
+        pytest.skip("no shared/bench/proto beside this checkout to copy")
+    given = tmp_path / "proto"
+    shutil.copytree(proto, given)
+    # the real env bench, on a small workload (one scenario, no worker processes)
+    monkeypatch.setattr(benchenv, "env_bench", functools.partial(
+        benchenv.env_bench, scenarios=["vs_random"], num_envs=2, steps=5, workers=1,
+        repeats=1))
+    assert main(["bench", "--ticks", "10", "--repeats", "1", "--env", "--floor",
+                 str(given)]) == 0
+    env_line = next(x for x in capsys.readouterr().out.splitlines()
+                    if x.startswith("references"))
+    assert "pymunk floor" in env_line and env_line.endswith(f"({given})")
 
 
 def test_console_script_runs():

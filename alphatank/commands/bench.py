@@ -172,7 +172,7 @@ def _measure(args: argparse.Namespace, floor: Path | None, train: TrainBench | N
     if args.env:
         from alphatank.commands.benchenv import env_bench
 
-        results["env"] = env_bench()
+        results["env"] = env_bench(floor=args.floor)
     if args.bots:
         from alphatank.bots.benchmark import bot_costs
 
