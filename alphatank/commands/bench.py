@@ -23,7 +23,7 @@ from alphatank.commands.benchsoak import DEFAULT_SOAK_SCENARIOS, check_soak_step
 from alphatank.errors import InputError, one_line
 from alphatank.files import check_writable, write_text_atomic
 from alphatank.game.scenarios import ScenarioError
-from alphatank.sim.config import game_config
+from alphatank.sim.config import ConfigError, game_config
 from alphatank.sim.mapspec import MapError, load_map
 from alphatank.sim.match import Match
 
@@ -115,7 +115,10 @@ def run(args: argparse.Namespace) -> int:
     if spec.tank_room(8) < 8:
         raise MapError(f"map {spec.name!r} has room for {spec.tank_room(8)} tanks; the bench "
                        "plays 1v1 and 4v4 (8 tanks)", f"--map {args.map}")
-    game_config(args.preset)  # an unknown --preset: one line from alphatank.cli
+    try:
+        game_config(args.preset)
+    except ConfigError as exc:
+        raise InputError(f"--preset: {exc}") from None
     train = _train_bench(args) if args.train else None
     try:
         return _measure(args, floor, train)
