@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from alphatank.commands.argtypes import given, match_count, positive_int
+from alphatank.commands.argtypes import given, int_in_range, match_count, positive_int
 from alphatank.commands.benchfloor import find_floor, floor_us_per_tick
 from alphatank.commands.benchsoak import DEFAULT_SOAK_SCENARIOS, check_soak_steps, soak
 from alphatank.errors import InputError, one_line
@@ -30,11 +30,13 @@ from alphatank.sim.match import Match
 if TYPE_CHECKING:
     from alphatank.commands.benchtrain import TrainBench
 
+TICKS_MAX = 1_000_000  # per run: the actions are drawn ahead (~300 MB for 4v4 at the most)
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--map", type=given, default="maze", help="map name or path (default: maze)")
-    p.add_argument("--ticks", type=positive_int, default=5000,
-                   help="ticks per run (default: 5000)")
+    p.add_argument("--ticks", type=int_in_range(1, TICKS_MAX), default=5000,
+                   help=f"ticks per run (default: 5000, at most {TICKS_MAX:,})")
     p.add_argument("--repeats", type=positive_int, default=5,
                    help="runs per setting; median ticks/s, best run for the floor ratio")
     p.add_argument("--preset", default="paper", help="game preset (paper, long_range)")
