@@ -248,6 +248,13 @@ CASES = [
      ["--preset: unknown preset 'fast'", "long_range"]),
     ("bench-ticks-huge", ["bench", "--ticks", "1000000000000"],
      ["argument --ticks", "integer in [1, 1000000]"]),
+    ("bench-steps-no-soak", ["bench", "--steps", "100000"],
+     ["--steps: an option of --soak; add --soak"]),
+    ("bench-train-option", ["bench", "--train-fragments"],
+     ["--train-fragments: an option of --train; add --train"]),
+    ("bench-soak-env", ["bench", "--soak", "--env"], ["--env: not an option of --soak"]),
+    ("bench-soak-train-option", ["bench", "--soak", "--train-workers", "4"],
+     ["--train-workers: not an option of --soak"]),
     ("bench-train-envs", ["bench", "--train", "--train-envs", "5000"],
      ["argument --train-envs", "integer in [1, 4096]", "'5000'"]),
     ("bench-soak-scn", ["bench", "--soak", "--scenarios", "nosuch"],
@@ -875,11 +882,11 @@ def test_eval_pool_without_shared_opponents_is_refused_before_any_game(files, ca
 
 
 @pytest.mark.parametrize(("argv", "fragments"), [
-    (["--preset", "nope"], ["unknown preset 'nope'"]),
-    (["--train", "--train-preset", "nope"],
+    (["--ticks", "10", "--preset", "nope"], ["unknown preset 'nope'"]),
+    (["--ticks", "10", "--train", "--train-preset", "nope"],
      ["--train-preset nope: unknown training preset 'nope'; valid: ", "ppo_vs_smart"]),
-    (["--train", "--train-preset", "sac_vs_aggressive", "--train-fragments", "--train-envs",
-      "2", "--train-workers", "1", "--train-iterations", "1"],
+    (["--ticks", "10", "--train", "--train-preset", "sac_vs_aggressive", "--train-fragments",
+      "--train-envs", "2", "--train-workers", "1", "--train-iterations", "1"],
      ["--train-preset sac_vs_aggressive --train-fragments: ",
       "fragments are acted by PPO and MAPPO learners only"]),
     (["--soak", "--steps", "3000", "--scenarios", "vs_random"],
@@ -889,7 +896,7 @@ def test_bench_checks_every_setting_before_measuring(capsys, tmp_path, argv, fra
     """A bad game preset, training preset or a --train combination `alphatank train`
     refuses, or a soak too short to measure a growth (it read 'soak FAILED', exit 1, as a
     leak): one line, exit 2, before any header, figure or --json file."""
-    rc, out, err = _run_main(main, ["bench", "--ticks", "10", "--repeats", "1", "--json",
-                                    str(tmp_path / "b.json"), *argv], capsys)
+    rc, out, err = _run_main(main, ["bench", "--json", str(tmp_path / "b.json"), *argv],
+                             capsys)
     _check(rc, out, err, fragments)
     assert rc == 2 and out == "" and not (tmp_path / "b.json").exists()

@@ -31,6 +31,12 @@ if TYPE_CHECKING:
     from alphatank.commands.benchtrain import TrainBench
 
 TICKS_MAX = 1_000_000  # per run: the actions are drawn ahead (~300 MB for 4v4 at the most)
+# The options of each mode (by dest): one of a mode not run is refused, not ignored.
+SOAK_OPTIONS = ("steps", "scenarios", "sample_every")
+TRAIN_OPTIONS = ("train_preset", "train_workers", "train_envs", "train_fragments",
+                 "train_overlap", "train_iterations", "train_threads")
+MATCH_OPTIONS = ("map", "ticks", "repeats", "preset", "floor", "env", "bots", "render",
+                 "train", "sac", *TRAIN_OPTIONS)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -81,6 +87,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="comma-separated soak scenarios (default: %(default)s)")
     p.add_argument("--sample-every", type=positive_int, default=10_000, metavar="N",
                    help="soak: memory sample every N steps (default: %(default)s)")
+    p.set_defaults(_defaults={dest: p.get_default(dest)
+                              for dest in (*SOAK_OPTIONS, *MATCH_OPTIONS)})
 
 
 def match_ticks_per_second(map_name: str, teams: list[str], ticks: int, seed: int = 0,
@@ -105,6 +113,7 @@ def match_ticks_per_second(map_name: str, teams: list[str], ticks: int, seed: in
 
 def run(args: argparse.Namespace) -> int:
     """Every setting is checked (one line, exit 2) before anything is measured."""
+    _check_mode(args)
     if args.json:
         check_writable(args.json, "--json")
     if args.soak:
@@ -127,6 +136,24 @@ def run(args: argparse.Namespace) -> int:
     finally:
         if train is not None:
             train.close()  # when the match bench failed or was interrupted
+
+
+def _check_mode(args: argparse.Namespace) -> None:
+    """InputError naming an option of a mode that is not run (``--steps`` without
+    ``--soak``, ``--train-fragments`` without ``--train``, ``--env`` with ``--soak``),
+    which would be ignored without a word."""
+    def changed(dests: tuple[str, ...]) -> list[str]:
+        return ["--" + d.replace("_", "-") for d in dests
+                if getattr(args, d) != args._defaults[d]]
+
+    if args.soak and (extra := changed(MATCH_OPTIONS)):
+        raise InputError(f"{extra[0]}: not an option of --soak (which steps envs with "
+                         "random actions, nothing else); leave it out, or run it without "
+                         "--soak")
+    if not args.soak and (extra := changed(SOAK_OPTIONS)):
+        raise InputError(f"{extra[0]}: an option of --soak; add --soak, or leave it out")
+    if not args.train and (extra := changed(TRAIN_OPTIONS)):
+        raise InputError(f"{extra[0]}: an option of --train; add --train, or leave it out")
 
 
 def _train_bench(args: argparse.Namespace) -> TrainBench:
