@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from alphatank.cli import main
-from alphatank.training.logging import read_metrics
+from alphatank.training.logging import plot_learning_curve, read_metrics
 from alphatank.training.plots import plot_heatmap, plot_row_curves, plot_runs
 
 
@@ -39,6 +39,27 @@ def test_plot_runs_draws_one_line_per_run_and_learner(tmp_path):
     assert [ln.get_label() for ln in steps_ax.lines] == ["a", "b ppo_a", "b ppo_b"]
     assert steps_ax.get_xlabel() == "env steps" and "wall time" in time_ax.get_xlabel()
     assert axes[2].get_ylabel() == "episode return"
+
+
+def test_a_run_of_one_iteration_shows_its_point(tmp_path, monkeypatch):
+    """A line through a single point draws nothing: the curves of a run that logged one
+    iteration (a short demo, a run just started) were empty panels. Its point is marked,
+    in every figure; longer runs stay plain lines."""
+    import matplotlib.pyplot as plt
+
+    one, five = fake_run(tmp_path / "one", n=1), fake_run(tmp_path / "five")
+
+    def markers(fig):
+        return {ln.get_label(): ln.get_marker() for ax in fig.axes for ln in ax.lines}
+
+    assert markers(plot_runs([one, five])) == {"one": "o", "five": "None"}
+    assert markers(plot_row_curves([("row", [one, five])])) == {"one": "o", "five": "None"}
+    close = plt.close
+    monkeypatch.setattr(plt, "close", lambda fig=None: None)  # keep it to look at it
+    plot_learning_curve(one)  # the demo's learning_curve.png
+    fig = plt.figure(plt.get_fignums()[-1])
+    assert markers(fig) == {"train win_rate": "o", "episode_return": "o"}
+    close(fig)
 
 
 def test_plot_command_writes_a_png(tmp_path, capsys):

@@ -156,6 +156,12 @@ def read_metrics(run_dir: str | Path) -> list[dict[str, float]]:
     return rows
 
 
+def lone_point_marker(points: int) -> dict[str, Any]:
+    """Keywords for a plotted line of ``points`` points: a line through a single point
+    draws nothing (a run that logged one iteration), so that point gets a marker."""
+    return {"marker": "o", "markersize": 4} if points == 1 else {}
+
+
 def plot_learning_curve(run_dir: str | Path,
                         evals: list[tuple[int, float, float, float]] | None = None) -> Path:
     """``learning_curve.png`` in ``run_dir``: the win rate (last-100-episode window, per
@@ -177,7 +183,8 @@ def plot_learning_curve(run_dir: str | Path,
     fig, (ax_w, ax_r) = plt.subplots(1, 2, figsize=(11, 4))
     for key in lines:
         pts = [(r["step"], r[key]) for r in rows if key in r]
-        ax_w.plot(*zip(*pts, strict=True), label=key.replace("charts/", "train "), lw=1.2)
+        ax_w.plot(*zip(*pts, strict=True), label=key.replace("charts/", "train "), lw=1.2,
+                  **lone_point_marker(len(pts)))
     points = [(r["step"], r["eval/win_rate"], r["eval/win_ci_low"], r["eval/win_ci_high"])
               for r in rows if "eval/win_rate" in r] + list(evals or [])
     if points:
@@ -186,7 +193,8 @@ def plot_learning_curve(run_dir: str | Path,
                       markersize=4, label="evaluation (Wilson 95%)")
     for key in sorted(k for k in keys if k.startswith("charts/episode_return")):
         pts = [(r["step"], r[key]) for r in rows if key in r]
-        ax_r.plot(*zip(*pts, strict=True), label=key.replace("charts/", ""))
+        ax_r.plot(*zip(*pts, strict=True), label=key.replace("charts/", ""),
+                  **lone_point_marker(len(pts)))
     ax_w.set(xlabel="env steps", ylabel="win rate", ylim=(-0.02, 1.02), title="Win rate")
     ax_r.set(xlabel="env steps", ylabel="return", title="Episode return (last 100)")
     for ax in (ax_w, ax_r):

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from alphatank.training.logging import read_metrics
+from alphatank.training.logging import lone_point_marker, read_metrics
 
 
 def _pyplot() -> Any:
@@ -75,9 +75,10 @@ def plot_runs(runs: Sequence[str | Path], out: str | Path | None = None,
     for label, per_learner in series:
         for name, s in per_learner.items():
             tag = f"{label} {name}".strip()
+            style = {"lw": 1.2, "label": tag, **lone_point_marker(len(s["step"]))}
             for row, metric in enumerate(("win_rate", "return")):
-                axes[row][0].plot(s["step"], s[metric], lw=1.2, label=tag)
-                axes[row][1].plot(s["minutes"], s[metric], lw=1.2, label=tag)
+                axes[row][0].plot(s["step"], s[metric], **style)
+                axes[row][1].plot(s["minutes"], s[metric], **style)
     for row, metric in enumerate(("win rate", "episode return")):
         for col, xlabel in enumerate(("env steps", "wall time (minutes)")):
             ax = axes[row][col]
@@ -110,7 +111,8 @@ def plot_row_curves(groups: Sequence[tuple[str, Sequence[str | Path]]],
                 continue
             for name, s in per_learner.items():
                 ax.plot(s["step"], s["win_rate"], lw=1.1,
-                        label=f"{Path(run).name.rsplit('-', 1)[0]} {name}".strip())
+                        label=f"{Path(run).name.rsplit('-', 1)[0]} {name}".strip(),
+                        **lone_point_marker(len(s["step"])))
         ax.set(xlabel="env steps", ylabel="win rate", ylim=(-0.02, 1.02))
         ax.set_title(_wrapped(label, 44), fontsize=10)
         _steps_axis(ax)
