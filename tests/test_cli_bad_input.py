@@ -881,6 +881,16 @@ def test_eval_pool_without_shared_opponents_is_refused_before_any_game(files, ca
     assert out == "" and not any(p.exists() for p in rows)
 
 
+def test_eval_pool_of_one_checkpoint_twice_is_refused_before_any_game(files, capsys):
+    """The same checkpoint twice (or spelled two ways) would pool its games twice: refused
+    naming both arguments (the error said they met no opponent in common)."""
+    for again in (files["run"], f"checkpoint:{files['ckpt']}"):
+        rc, out, err = _run_main(main, ["eval", files["run"], again, "--pool"], capsys)
+        _check(rc, out, err, [f"--pool: {files['run']} and {again} are one checkpoint",
+                              "give each run once"])
+        assert out == ""
+
+
 @pytest.mark.parametrize(("argv", "fragments"), [
     (["--ticks", "10", "--preset", "nope"], ["unknown preset 'nope'"]),
     (["--ticks", "10", "--train", "--train-preset", "nope"],

@@ -199,10 +199,18 @@ def check_game(game: dict[str, Any], scenario: str | None, ckpt: Checkpoint | No
 
 def check_pool(args: argparse.Namespace, sources: Sequence[Checkpoint | None],
                opponents: Sequence[str | None]) -> None:
-    """``--pool`` before any game: two or more rows must meet the same opponent."""
+    """``--pool`` before any game: no checkpoint given twice (its games would be pooled
+    twice), and two or more rows must meet the same opponent."""
     from alphatank.game.scenarios import load_scenario
     from alphatank.training.evaluate import row_opponents
 
+    seen: dict[Path | str, str] = {}
+    for arg, ckpt in zip(args.checkpoints, sources, strict=True):
+        key = ckpt.path.resolve() if ckpt is not None else arg
+        if key in seen:
+            raise InputError(f"--pool: {seen[key]} and {arg} are one checkpoint ({key}), "
+                             "whose games would be pooled twice; give each run once")
+        seen[key] = arg
     given = load_scenario(args.scenario) if args.scenario is not None else None
     met = {arg: row_opponents(given or ckpt.scenario, opponents, args.team, args.weakness,
                               stand_in=ckpt is None)
