@@ -670,6 +670,8 @@ CASES = [
     ("demo-minutes", ["demo", "--minutes", "-1"], ["--minutes", "in (0, 10080]", "'-1'"]),
     ("demo-minutes-huge", ["demo", "--minutes", "1e9"], ["--minutes", "(a week)", "'1e9'"]),
     ("demo-name", ["demo", "--runs", "{dir}/runs", "--name", "a/b"], ["--name", "'a/b'"]),
+    ("demo-name-empty", ["demo", "--runs", "{good_txt}/runs", "--name", ""],
+     ["--name: must be letters", "got ''"]),
     ("demo-runs-file", ["demo", "--runs", "{good_txt}/runs"], ["--runs", "{good_txt} is a file"]),
     ("demo-wandb", ["demo", "--wandb", "cloud"], ["--wandb", "invalid choice"]),
 ]

@@ -43,7 +43,7 @@ def run(args: argparse.Namespace) -> int:
     from alphatank.training.video import record_policy_match
 
     t0 = time.perf_counter()
-    name = args.name or time.strftime("demo-%Y%m%d-%H%M%S")
+    name = args.name if args.name is not None else time.strftime("demo-%Y%m%d-%H%M%S")
     try:
         cfg = get_preset("demo").with_overrides(name=name, time_limit_s=args.minutes * 60,
                                                  num_workers=args.workers, wandb=args.wandb)
