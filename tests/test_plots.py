@@ -2,6 +2,7 @@
 not on pixels)."""
 
 import json
+import os
 
 import numpy as np
 import pytest
@@ -74,6 +75,27 @@ def test_plot_command_writes_a_png(tmp_path, capsys):
     assert "metrics.jsonl" in capsys.readouterr().err
     assert main(["plot", *runs, "-o", str(tmp_path / "c.pdf")]) == 2
     assert main(["plot", *runs, "--labels", "only_one"]) == 2
+
+
+def test_figures_replace_the_file_they_write_whole(tmp_path, capsys):
+    """A figure is written beside its file and renamed over it (an interrupted save
+    leaves the old picture, not half of one): the old file's other name, a hard link,
+    still holds the old picture; its folders are made; the run's figure too."""
+    run = fake_run(tmp_path / "run")
+    out, other = tmp_path / "curves.png", tmp_path / "kept.png"
+    out.write_bytes(b"the old picture")
+    os.link(out, other)
+    assert main(["plot", str(run), "-o", str(out)]) == 0
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert other.read_bytes() == b"the old picture"
+    curve = run / "learning_curve.png"
+    curve.write_bytes(b"the old curve")
+    os.link(curve, tmp_path / "old_curve.png")
+    assert plot_learning_curve(run) == curve and curve.read_bytes()[:4] == b"\x89PNG"
+    assert (tmp_path / "old_curve.png").read_bytes() == b"the old curve"
+    plot_runs([run], tmp_path / "new" / "c.png")
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".")) == []
+    assert (tmp_path / "new" / "c.png").read_bytes()[:4] == b"\x89PNG"
 
 
 def test_damaged_metrics_skip_a_cut_line_and_foreign_rows_or_fail_in_one_line(tmp_path,

@@ -20,7 +20,7 @@ from typing import IO, Any
 import numpy as np
 
 from alphatank.errors import InputError, MissingPackageError, one_line
-from alphatank.files import read_text, write_text_atomic
+from alphatank.files import read_text, replace_into, write_text_atomic
 from alphatank.training.presets import WANDB_MODES
 
 
@@ -156,6 +156,22 @@ def read_metrics(run_dir: str | Path) -> list[dict[str, float]]:
     return rows
 
 
+def save_figure(fig: Any, path: str | Path) -> Path:
+    """Write the matplotlib ``fig`` to ``path`` (its format from the suffix, PNG without
+    one) through a temporary sibling renamed over it, so an interrupted save leaves the
+    old picture, never half of one; creates missing parent folders. Returns the path."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    try:
+        fig.savefig(tmp, dpi=110, format=path.suffix[1:] or "png")
+        replace_into(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
+
+
 def lone_point_marker(points: int) -> dict[str, Any]:
     """Keywords for a plotted line of ``points`` points: a line through a single point
     draws nothing (a run that logged one iteration), so that point gets a marker."""
@@ -202,6 +218,6 @@ def plot_learning_curve(run_dir: str | Path,
         if ax.lines:
             ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(out, dpi=110)
+    save_figure(fig, out)
     plt.close(fig)
     return out

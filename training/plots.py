@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from alphatank.training.logging import lone_point_marker, read_metrics
+from alphatank.training.logging import lone_point_marker, read_metrics, save_figure
 
 
 def _pyplot() -> Any:
@@ -157,8 +157,6 @@ def plot_heatmap(values: np.ndarray, row_labels: Sequence[str], col_labels: Sequ
 
 def _save(fig: Any, out: str | Path | None) -> Any:
     if out is not None:
-        out = Path(out)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(out, dpi=110)
+        save_figure(fig, out)
         _pyplot().close(fig)
     return fig
