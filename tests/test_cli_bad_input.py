@@ -259,6 +259,8 @@ CASES = [
      ["argument --train-envs", "integer in [1, 4096]", "'5000'"]),
     ("bench-soak-scn", ["bench", "--soak", "--scenarios", "nosuch"],
      ["nosuch", "shipped scenarios"]),
+    ("bench-soak-twice", ["bench", "--soak", "--scenarios", "vs_random,team,vs_random",
+                          "--steps", "2"], ["--scenarios: 'vs_random' is given twice"]),
     ("bench-soak-bots", ["bench", "--soak", "--scenarios", "bot_teams"],
      ["bot_teams", "no learner seat"]),
     ("bench-soak-steps", ["bench", "--soak", "--steps", "2"],

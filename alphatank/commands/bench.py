@@ -236,7 +236,9 @@ def _soak(args: argparse.Namespace) -> int:
     scenarios = [s.strip() for s in args.scenarios.split(",") if s.strip()]
     if not scenarios:
         raise ScenarioError(f"--scenarios: need at least one scenario, got {args.scenarios!r}")
-    for name in scenarios:
+    for k, name in enumerate(scenarios):
+        if name in scenarios[:k]:  # the figures are by name: one would replace the other
+            raise ScenarioError(f"--scenarios: {name!r} is given twice; give each once")
         if not load_scenario(name).learner_seats:
             raise ScenarioError(f"--scenarios: {name!r} has no learner seat to step")
     check_soak_steps(args.steps, args.sample_every, len(scenarios),
