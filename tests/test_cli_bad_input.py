@@ -474,6 +474,8 @@ CASES = [
     ("eval-vs", ["eval", "{run}", "--vs", "smart,genius", "--games", "1"],
      ["--vs: unknown bot 'genius'", "dodge"]),
     ("eval-seed", ["eval", "{run}", "--seed", "x"], ["--seed", "'x'"]),
+    ("eval-vs-twice", ["eval", "{run}", "--vs", "smart,dodge,smart", "--games", "1",
+                       "--num-envs", "1"], ["--vs: 'smart' is given twice"]),
     ("eval-vs-empty", ["eval", "{run}", "--vs", "", "--games", "1"],
      ["--vs: no bot named in ''; give comma-separated bots"]),
     ("eval-vs-commas", ["eval", "{run}", "--vs", " , ", "--games", "1"],

@@ -94,6 +94,9 @@ def run(args: argparse.Namespace) -> int:
     unknown = [b for b in opponents if b is not None and b not in BOT_NAMES]
     if unknown:
         raise InputError(f"--vs: unknown bot {unknown[0]!r}; valid bots: {list(BOT_NAMES)}")
+    twice = next((b for k, b in enumerate(opponents) if b in opponents[:k]), None)
+    if twice is not None:  # the same games again: a row repeated, pooled twice by --pool
+        raise InputError(f"--vs: {twice!r} is given twice; give each bot once")
     for label, path in (("--csv", args.csv), ("--json", args.json)):
         if path:
             check_writable(path, label)
