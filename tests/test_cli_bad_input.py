@@ -474,6 +474,8 @@ CASES = [
     ("eval-vs", ["eval", "{run}", "--vs", "smart,genius", "--games", "1"],
      ["--vs: unknown bot 'genius'", "dodge"]),
     ("eval-seed", ["eval", "{run}", "--seed", "x"], ["--seed", "'x'"]),
+    ("eval-game-twice", ["eval", "{run}", "--game", "max_steps=600,max_steps=60", "--games",
+                         "1", "--num-envs", "1"], ["--game max_steps: given twice"]),
     ("eval-vs-twice", ["eval", "{run}", "--vs", "smart,dodge,smart", "--games", "1",
                        "--num-envs", "1"], ["--vs: 'smart' is given twice"]),
     ("eval-vs-empty", ["eval", "{run}", "--vs", "", "--games", "1"],

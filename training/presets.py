@@ -355,6 +355,8 @@ def parse_game(flag: str, text: str) -> dict[str, Any]:
             raise ValueError(f"{flag}: expected KEY=VALUE, got {item!r}")
         if key not in fields:
             raise ValueError(f"{flag} {key}: unknown game setting; valid: {sorted(fields)}")
+        if key in out:  # which one plays would be a guess
+            raise ValueError(f"{flag} {key}: given twice; give it once")
         try:
             out[key] = check_field(GameConfig, key, parse_value(GameConfig, key, raw))
         except FieldError as exc:
