@@ -17,6 +17,7 @@ import shutil
 import socket
 import stat
 import warnings
+from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Any
 
@@ -53,21 +54,31 @@ def text_lines(text: str) -> list[str]:
     return lines[:-1] if lines[-1] == "" else lines
 
 
-def write_text_atomic(path: str | Path, text: str, newline: str | None = None) -> Path:
-    """Write ``text`` (UTF-8) to ``path`` through a temporary sibling renamed over it, so
-    the file is either the old one or the whole new one; creates missing parent folders.
-    ``newline`` as for :func:`open` (``""`` for CSV). Returns the path."""
+def write_atomic(path: str | Path, write: Callable[[Path], None], suffix: str = "") -> Path:
+    """Make ``path`` by ``write(tmp)`` into a temporary sibling renamed over it, so the file
+    is either the old one or the whole new one; creates missing parent folders. ``suffix``
+    ends the temporary name, for writers that pick a format from it. Returns the path."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}{suffix}")
     try:
-        with open(tmp, "w", encoding="utf-8", newline=newline) as f:
-            f.write(text)
+        write(tmp)
         replace_into(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
     return path
+
+
+def write_text_atomic(path: str | Path, text: str, newline: str | None = None) -> Path:
+    """Write ``text`` (UTF-8) to ``path`` atomically (:func:`write_atomic`); ``newline``
+    as for :func:`open` (``""`` for CSV). Returns the path."""
+
+    def write(tmp: Path) -> None:
+        with open(tmp, "w", encoding="utf-8", newline=newline) as f:
+            f.write(text)
+
+    return write_atomic(path, write)
 
 
 def check_writable(path: str | Path, label: str, overwrite: bool = True) -> None:

@@ -23,7 +23,7 @@ from alphatank.cli import Parser, broken_pipe_exit
 from alphatank.commands.argtypes import given, in_range, int_in_range, scale
 from alphatank.commands.argtypes import seed as seed_type
 from alphatank.errors import InputError, one_line
-from alphatank.files import check_folder, check_writable, replace_into, write_text_atomic
+from alphatank.files import check_folder, check_writable, write_atomic, write_text_atomic
 from alphatank.mapgen import (
     ALGORITHMS,
     SYMMETRIES,
@@ -312,14 +312,8 @@ def render_png(spec: MapSpec, path: Path, teams: list[str] | None = None, seed: 
     labels = [str(i + 1) for i in range(len(teams))]
     renderer = Renderer(None, overlays="none", hud=False, explosions=False, scale=scale,
                         labels=labels)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp-{os.getpid()}.png")  # atomic, as text files are
-    try:
-        pygame.image.save(renderer.draw(match), str(tmp))
-        replace_into(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    surface = renderer.draw(match)  # pygame picks the format from the temporary's suffix
+    write_atomic(path, lambda tmp: pygame.image.save(surface, str(tmp)), suffix=".png")
 
 
 def cmd_preview(args: argparse.Namespace) -> int:

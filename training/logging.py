@@ -20,7 +20,7 @@ from typing import IO, Any
 import numpy as np
 
 from alphatank.errors import InputError, MissingPackageError, one_line
-from alphatank.files import read_text, replace_into, write_text_atomic
+from alphatank.files import read_text, write_atomic, write_text_atomic
 from alphatank.training.presets import WANDB_MODES
 
 
@@ -157,19 +157,10 @@ def read_metrics(run_dir: str | Path) -> list[dict[str, float]]:
 
 
 def save_figure(fig: Any, path: str | Path) -> Path:
-    """Write the matplotlib ``fig`` to ``path`` (its format from the suffix, PNG without
-    one) through a temporary sibling renamed over it, so an interrupted save leaves the
-    old picture, never half of one; creates missing parent folders. Returns the path."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    try:
-        fig.savefig(tmp, dpi=110, format=path.suffix[1:] or "png")
-        replace_into(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    return path
+    """Write the matplotlib ``fig`` to ``path`` atomically (its format from the suffix, PNG
+    without one), so an interrupted save leaves the old picture, never half of one."""
+    return write_atomic(path, lambda tmp: fig.savefig(tmp, dpi=110,
+                                                      format=Path(path).suffix[1:] or "png"))
 
 
 def lone_point_marker(points: int) -> dict[str, Any]:
