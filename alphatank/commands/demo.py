@@ -55,7 +55,8 @@ def run(args: argparse.Namespace) -> int:
     if (run_dir / "latest").exists():
         raise InputError(f"{run_dir} already holds a run; pick another --name")
     print(f"[demo] training PPO vs the aggressive bot on 'open' for up to {args.minutes:g} min "
-          f"({cfg.num_envs} matches, {cfg.num_workers} worker processes) -> {run_dir}")
+          f"({cfg.num_envs} matches, {cfg.num_workers} worker "
+          f"process{'es' if cfg.num_workers > 1 else ''}) -> {run_dir}")
     summary = Trainer(cfg, run_dir, progress=not args.no_progress).train()
     if summary["exit_code"]:  # Ctrl-C / SIGTERM: the checkpoint is saved, skip the rest
         print(f"[demo] stopped by {summary['stopped']['reason']}; the run is saved in "
