@@ -305,6 +305,43 @@ def test_stop_flag_signals_and_interruptible_blocks():
     assert signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)
 
 
+def test_a_deferred_part_of_an_interruptible_block_ends_before_the_stop():
+    """A stop inside :meth:`StopFlag.deferred` (a trainer starting its env workers) waits
+    for the part to end, then raises StopRequested; outside an interruptible block it only
+    sets the flag."""
+    flag, done = StopFlag(), []
+    with stop_on_signals(flag), pytest.raises(StopRequested), flag.interruptible():
+        with flag.deferred():
+            signal.raise_signal(signal.SIGTERM)
+            done.append("made")
+        done.append("went on")
+    assert done == ["made"] and flag.exit_code == 143
+    with flag.deferred():
+        pass  # no interruptible block: nothing raised
+
+
+def test_a_stop_before_a_trainer_is_made_undoes_it_and_one_after_ends_train(tmp_path):
+    """A Trainer given the flag its caller's signal handlers set (alphatank train's, from
+    its start-up on): a signal that came before it is made raises StopRequested with the
+    lock it took released and the folders it made removed; one that comes once it is made
+    ends train() as it begins, with a checkpoint to resume from."""
+    cfg = config("early", LearnerSpec("ppo", "ppo", (0,), PPO_TINY), 4)
+    run = tmp_path / "runs" / "early"
+    flag = StopFlag()
+    with stop_on_signals(flag):
+        signal.raise_signal(signal.SIGTERM)
+        with pytest.raises(StopRequested):
+            Trainer(cfg, run, progress=False, stop=flag)
+    assert not any(tmp_path.iterdir())  # no runs/.early.lock, no runs/
+    later = StopFlag()
+    tr = Trainer(cfg, run, progress=False, stop=later)
+    later.request("SIGTERM", signal.SIGTERM)
+    out = tr.train()
+    assert out["exit_code"] == 143 and out["stopped"]["reason"] == "SIGTERM"
+    assert load_checkpoint(run).meta["progress"]["global_step"] == 0
+    assert not (tmp_path / "runs" / ".early.lock").exists()
+
+
 # a worker: watches its parent, then runs a job until a stop (like a run), says why it
 # ended and waits as a pool worker does for its next job (the job's end ends it); with
 # "ignore" it ignores SIGTERM, so only the (short) grace period can end it; with "idle" it

@@ -1,7 +1,9 @@
 """``alphatank train`` as a real process: Ctrl-C (SIGINT to the process group, workers
 included) and SIGTERM stop it within 5 s with a checkpoint that ``--resume`` continues;
 ``kill -9`` in the middle of a checkpoint write leaves the previous one intact, and the
-resumed run picks it and drops the metrics rows logged after it."""
+resumed run picks it and drops the metrics rows logged after it. A signal during the
+start-up ends it in one line with nothing left behind (a new run) or changed (a resumed
+one)."""
 
 import json
 import os
@@ -147,3 +149,40 @@ def test_a_second_ctrl_c_during_the_stops_save_lets_it_finish(tmp_path):
     assert out.splitlines()[-1] == (f"alphatank train: interrupted after saving step "
                                     f"{step:,}; continue with alphatank train --resume "
                                     f"{run}"), out
+
+
+@pytest.mark.slow
+def test_sigterm_right_after_the_lock_is_taken_undoes_the_start_up(tmp_path):
+    """SIGTERM while a new run starts (its folder locked, its env workers starting): one
+    line, exit 143, and nothing left: no lock file, no run folder, no shared memory (the
+    process was killed silently, leaving runs/.NAME.lock and the workers' shared memory)."""
+    proc = start(tmp_path, "early", [*PPO, "--workers", "2", "--num-envs", "2"])
+    wait_for(lambda: (tmp_path / ".early.lock").exists(), proc)
+    seconds, out = stop(proc, signal.SIGTERM, group=False)
+    assert proc.returncode == 143, out
+    assert out == "alphatank train: interrupted by SIGTERM during start-up; nothing saved\n"
+    assert not any(tmp_path.iterdir())
+
+
+@pytest.mark.slow
+def test_ctrl_c_in_the_start_up_of_a_resumed_run_leaves_it_as_it_was(tmp_path):
+    """Ctrl-C while a resumed MAPPO run starts: one line naming the run and how to go on,
+    exit 130; its checkpoint and metrics are as they were and its lock is released."""
+    code, out = train(tmp_path, ["--preset", "team_vs_def", "--name", "team", "--num-envs",
+                                 "2", "--total-steps", "64", "--hp", "mappo.num_steps=16"])
+    assert code == 0, out
+    run = tmp_path / "team"
+    latest, metrics = (run / "latest").read_text(), (run / "metrics.jsonl").read_text()
+    proc = subprocess.Popen([sys.executable, "-m", "alphatank.cli", "train", "--resume",
+                             str(run), "--total-steps", "128", *BASE[:3]],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            start_new_session=True)
+    wait_for(lambda: (tmp_path / ".team.lock").exists(), proc)
+    seconds, out = stop(proc, signal.SIGINT, group=True)
+    assert proc.returncode == 130, out
+    assert out.splitlines()[-1] == (f"alphatank train: interrupted by SIGINT during start-up; "
+                                    f"{run} is as it was; continue with alphatank train "
+                                    f"--resume {run}"), out
+    assert (run / "latest").read_text() == latest
+    assert (run / "metrics.jsonl").read_text() == metrics
+    assert not (tmp_path / ".team.lock").exists()

@@ -37,6 +37,7 @@ from __future__ import annotations
 import copy
 import math
 import re
+import shutil
 import sys
 import time
 import warnings
@@ -146,6 +147,12 @@ class Trainer:
     ``action_mask``: optional hook ``f(obs (E, L, D)) -> bool (E, L, 8)`` over the
     concatenated choices (rotate 3, move 3, fire 2); learners that take masks (PPO) never
     sample a masked choice and their losses use the same masks.
+
+    ``stop``: the flag that stops the run (default: a new one), for a caller whose signal
+    handlers set it from its own start-up on: a stop requested before or while the
+    Trainer is made raises :class:`StopRequested` once what was made is undone (env
+    workers, log, lock; a new run's folder), and one that comes after it ends
+    :meth:`train` as soon as it begins, with its save.
     """
 
     def __init__(self, cfg: TrainConfig, run_dir: str | Path, env: Any = None,
@@ -154,7 +161,7 @@ class Trainer:
                  action_mask: Callable[[np.ndarray], np.ndarray] | None = None,
                  scenario: Scenario | None = None, env_runners: int = 0,
                  env_runner_timeout_s: float = ENV_RUNNER_TIMEOUT_S, fragments: bool = False,
-                 overlap: bool = False):
+                 overlap: bool = False, stop: StopFlag | None = None):
         if env is not None and getattr(env, "action_repeat", 1) != cfg.action_repeat:
             raise ValueError(f"the env holds actions for {getattr(env, 'action_repeat', 1)} "
                              f"tick(s); the run's action_repeat is {cfg.action_repeat}")
@@ -167,61 +174,77 @@ class Trainer:
                              f"resume_trainer({str(self.run_dir)!r}) or give another folder")
         # one process at a time writes a run (BusyError otherwise), until train() ends
         made = missing_folders(self.run_dir)  # removed again if the run does not start
+        self.stop = stop if stop is not None else StopFlag()  # its time limit: train()'s
         self.lock = FolderLock(self.run_dir).acquire()
         try:
-            self.progress = progress
-            limit_threads(cfg.torch_threads)
-            # an injected env brings its own scenario (tests use custom maps); a resumed run
-            # uses the one saved in its checkpoint
-            self.scenario: Scenario = (scenario or getattr(env, "scenario", None)
-                                       or run_scenario(cfg))
-            n_learners = len(self.scenario.learner_seats)
-            self.specs = specs = list(run_learners(cfg, n_learners))
-            if not learners_fit(specs, n_learners, selfplay=bool(cfg.selfplay)):
-                owned = sorted(s for spec in specs for s in spec.seats)
+            with self.stop.interruptible():  # a stop that came before is raised here
+                self.progress = progress
+                limit_threads(cfg.torch_threads)
+                # an injected env brings its own scenario (tests use custom maps); a resumed
+                # run uses the one saved in its checkpoint
+                self.scenario: Scenario = (scenario or getattr(env, "scenario", None)
+                                           or run_scenario(cfg))
+                n_learners = len(self.scenario.learner_seats)
+                self.specs = specs = list(run_learners(cfg, n_learners))
+                if not learners_fit(specs, n_learners, selfplay=bool(cfg.selfplay)):
+                    owned = sorted(s for spec in specs for s in spec.seats)
+                    if cfg.selfplay:
+                        raise ValueError(f"self-play: learners must drive some of the "
+                                         f"scenario's {n_learners} learner seats at most once "
+                                         f"and leave the others to the snapshot pool; they "
+                                         f"drive {owned}")
+                    raise ValueError(f"learners must drive each of the scenario's {n_learners} "
+                                     f"learner seats exactly once; they drive {owned} "
+                                     f"({[(s.name, list(s.seats)) for s in specs]})")
+                # env columns: the learner seats the learners drive (all of them without
+                # self-play), each learner's columns in ascending seat order (MAPPO's seat ids
+                # follow it)
+                driven = sorted(s for spec in specs for s in spec.seats)
+                self.cols = {spec.name: [driven.index(s) for s in sorted(spec.seats)]
+                             for spec in specs}
+                # extra per-stream inputs the learners need from the env (Learner.inputs)
+                self.inputs = sorted({x for spec in specs for x in learner_class(spec.algo).inputs})
+                extra: dict[str, Any] = {"inputs": self.inputs} if self.inputs else {}
+                if cfg.action_repeat != 1:
+                    extra["action_repeat"] = cfg.action_repeat
                 if cfg.selfplay:
-                    raise ValueError(f"self-play: learners must drive some of the scenario's "
-                                     f"{n_learners} learner seats at most once and leave the "
-                                     f"others to the snapshot pool; they drive {owned}")
-                raise ValueError(f"learners must drive each of the scenario's {n_learners} learner "
-                                 f"seats exactly once; they drive {owned} "
-                                 f"({[(s.name, list(s.seats)) for s in specs]})")
-            # env columns: the learner seats the learners drive (all of them without self-play),
-            # each learner's columns in ascending seat order (MAPPO's seat ids follow it)
-            driven = sorted(s for spec in specs for s in spec.seats)
-            self.cols = {spec.name: [driven.index(s) for s in sorted(spec.seats)] for spec in specs}
-            # extra per-stream inputs the learners need from the env (Learner.inputs)
-            self.inputs = sorted({x for spec in specs for x in learner_class(spec.algo).inputs})
-            extra: dict[str, Any] = {"inputs": self.inputs} if self.inputs else {}
-            if cfg.action_repeat != 1:
-                extra["action_repeat"] = cfg.action_repeat
-            if cfg.selfplay:
-                extra["learner_seats"] = [self.scenario.learner_seats[s] for s in driven]
-            if env is not None:
-                self.env = env
-            elif env_runners:  # env shards in Ray actors: the same results as that many workers
-                from alphatank.envs.ray_vector import RayVectorMatchEnv
-                self.env = RayVectorMatchEnv(
-                    self.scenario, cfg.num_envs, seed=cfg.seed, num_runners=env_runners,
-                    step_timeout_s=env_runner_timeout_s, observation=cfg.observation,
-                    game_overrides=cfg.game or None, reward_overrides=cfg.rewards or None, **extra)
-            else:
-                self.env = make_vector_env(
-                    self.scenario, cfg.num_envs, seed=cfg.seed, num_workers=cfg.num_workers,
-                    observation=cfg.observation, game_overrides=cfg.game or None,
-                    reward_overrides=cfg.rewards or None, **extra)
-            self.fragments = fragments or overlap
-            self.overlap = overlap
-            self.ahead: dict[str, float] | None = None  # schedule metrics of a rollout in flight
-            self._setup(specs, resume, wandb_id)
+                    extra["learner_seats"] = [self.scenario.learner_seats[s] for s in driven]
+                if env is not None:
+                    self.env = env
+                else:  # a stop meanwhile waits: workers half started would be left behind
+                    with self.stop.deferred():
+                        self.env = self._make_env(env_runners, env_runner_timeout_s, extra)
+                self.fragments = fragments or overlap
+                self.overlap = overlap
+                # schedule metrics of a rollout in flight
+                self.ahead: dict[str, float] | None = None
+                self._setup(specs, resume, wandb_id)
         except BaseException:
             if hasattr(self, "logger"):  # made last in _setup: its metrics file is open
                 self.logger.close()
             if env is None and hasattr(self, "env"):  # do not leave worker processes behind
                 self.env.close()
+            if made and made[0] == self.run_dir.absolute():  # a new run's: no run in it yet
+                shutil.rmtree(self.run_dir, ignore_errors=True)
             self.lock.release()
             remove_empty_folders(made)
             raise
+
+    def _make_env(self, env_runners: int, env_runner_timeout_s: float,
+                  extra: dict[str, Any]) -> Any:
+        """The run's vector env: ``cfg.num_workers`` processes, or ``env_runners`` Ray
+        actors (the same results as that many workers)."""
+        cfg = self.cfg
+        if env_runners:
+            from alphatank.envs.ray_vector import RayVectorMatchEnv
+            return RayVectorMatchEnv(
+                self.scenario, cfg.num_envs, seed=cfg.seed, num_runners=env_runners,
+                step_timeout_s=env_runner_timeout_s, observation=cfg.observation,
+                game_overrides=cfg.game or None, reward_overrides=cfg.rewards or None, **extra)
+        return make_vector_env(
+            self.scenario, cfg.num_envs, seed=cfg.seed, num_workers=cfg.num_workers,
+            observation=cfg.observation, game_overrides=cfg.game or None,
+            reward_overrides=cfg.rewards or None, **extra)
 
     def _setup(self, specs: list, resume: Checkpoint | None, wandb_id: str | None) -> None:
         cfg, env = self.cfg, self.env
@@ -297,7 +320,6 @@ class Trainer:
         self.lost_rollouts = 0  # iterations collected again after an env runner died
         self.notes: list[str] = []  # what happened to the run (lost rollouts), in words
         self.saved_step = -1  # global_step of the newest checkpoint written or resumed from
-        self.stop = StopFlag()  # replaced by train()
         self.trained = False  # train() ran: its env and log are closed
         self.stopped: dict[str, Any] = {}  # how train() stopped early, if it did
         self.selfplay = self._make_selfplay() if cfg.selfplay else None
@@ -688,7 +710,7 @@ class Trainer:
         cfg = self.cfg
         self.lock.acquire()
         start = time.perf_counter() - self.elapsed  # elapsed counts the whole run
-        self.stop = StopFlag(cfg.time_limit_s)  # the budget counts this call only
+        self.stop.limit(cfg.time_limit_s)  # the budget counts this call only
         self.stopped = {}
         bar = None
         if self.progress:
@@ -866,15 +888,16 @@ class Trainer:
 
 def resume_trainer(path: str | Path, progress: bool = True, env: Any = None,
                    env_runners: int = 0, env_runner_timeout_s: float = ENV_RUNNER_TIMEOUT_S,
-                   fragments: bool = False, overlap: bool = False, **overrides: Any
-                   ) -> Trainer:
+                   fragments: bool = False, overlap: bool = False,
+                   stop: StopFlag | None = None, **overrides: Any) -> Trainer:
     """A :class:`Trainer` continuing the run saved at ``path`` (checkpoint or run dir);
     ``overrides`` change run settings such as ``total_steps``; ``env_runners``,
-    ``env_runner_timeout_s``, ``fragments`` and ``overlap``: as for :class:`Trainer`."""
+    ``env_runner_timeout_s``, ``fragments``, ``overlap`` and ``stop``: as for
+    :class:`Trainer`."""
     ckpt = load_checkpoint(path)
     run_dir = resume_dir(ckpt)
     cfg = ckpt.train_config.with_overrides(**overrides)
     return Trainer(cfg, run_dir, env=env, resume=ckpt, progress=progress,
                    wandb_id=ckpt.meta.get("wandb_id"), scenario=ckpt.scenario,
                    env_runners=env_runners, env_runner_timeout_s=env_runner_timeout_s,
-                   fragments=fragments, overlap=overlap)
+                   fragments=fragments, overlap=overlap, stop=stop)

@@ -8,8 +8,10 @@ stretches that do not poll (evaluation, videos) inside :meth:`StopFlag.interrupt
 A SIGINT while a signal's stop is under way (or a second SIGINT) aborts at once
 (``KeyboardInterrupt``; the previous checkpoint stays intact), unless a checkpoint is being
 written (:meth:`StopFlag.shielded`): then the save is finished first and the abort comes
-right after it. :func:`exit_with_parent` makes a pool worker stop its job the same way when
-the process that started it dies or ends the pool early (:func:`running_job`).
+right after it. :meth:`StopFlag.deferred` keeps a stop from cutting short the making of
+what could not be undone halfway (worker processes). :func:`exit_with_parent` makes a
+pool worker stop its job the same way when the process that started it dies or ends the
+pool early (:func:`running_job`).
 """
 
 from __future__ import annotations
@@ -47,8 +49,7 @@ class StopFlag:
     def __init__(self, time_limit_s: float = 0.0):
         self.reason: str | None = None
         self.signum: int | None = None
-        self.deadline = (time.monotonic() + time_limit_s if time_limit_s > 0
-                         else math.inf)
+        self.limit(time_limit_s)
         self._interruptible = 0
         self._shielded = 0
         self.aborted = False  # an abort came inside a shielded block (raised after it)
@@ -57,6 +58,12 @@ class StopFlag:
         if self.reason is None and time.monotonic() >= self.deadline:
             self.reason = "time limit"
         return self.reason is not None
+
+    def limit(self, time_limit_s: float) -> None:
+        """Stop ``time_limit_s`` seconds from now (0: no time limit); for a flag made
+        before the work it times (a command's, watching its start-up too)."""
+        self.deadline = (time.monotonic() + time_limit_s if time_limit_s > 0
+                         else math.inf)
 
     def request(self, reason: str, signum: int | None = None) -> None:
         """Ask the run to stop (the first reason given is kept)."""
@@ -103,6 +110,19 @@ class StopFlag:
             yield
         finally:
             self._interruptible -= 1
+
+    @contextmanager
+    def deferred(self) -> Iterator[None]:
+        """A part of an :meth:`interruptible` block that a stop does not cut short (making
+        what cannot be undone halfway, such as worker processes): a stop that comes
+        meanwhile raises :class:`StopRequested` once it has ended."""
+        outer, self._interruptible = self._interruptible, 0
+        try:
+            yield
+        finally:
+            self._interruptible = outer
+        if outer and self():
+            raise StopRequested(self.reason)
 
 
 @contextmanager

@@ -12,7 +12,7 @@ import sys
 import warnings
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from alphatank.cluster import ENV_RUNNER_TIMEOUT_S
 from alphatank.commands.argtypes import (
@@ -48,7 +48,10 @@ from alphatank.training.presets import (
     run_toml,
     with_hp,
 )
-from alphatank.training.stopping import TIME_LIMIT_MAX_S
+from alphatank.training.stopping import TIME_LIMIT_MAX_S, StopFlag, StopRequested, stop_on_signals
+
+if TYPE_CHECKING:
+    from alphatank.training.runner import Trainer
 
 DEFAULT_PRESET = "ppo_vs_aggressive"
 SCHEDULES = ("none", "cycle:fixed", "cycle:random", "cycle:adaptive")
@@ -373,8 +376,46 @@ def _env_runners(args: argparse.Namespace, cfg: TrainConfig, stack: contextlib.E
 
 
 def _run(args: argparse.Namespace, progress: bool, stack: contextlib.ExitStack) -> int:
-    """:func:`run` once the flags are checked; a --ray run joins Ray (held by ``stack``)
-    when its settings are known, just before its trainer is made."""
+    """:func:`run` once the flags are checked. SIGINT and SIGTERM stop it from here on: in
+    the start-up (reading the run, making its envs, workers and learners) with nothing
+    written, its lock released and a new run's folder removed (one line, exit 130 or
+    143); once the trainer is made, as in training (:meth:`Trainer.train`)."""
+    stop = StopFlag()
+    with stop_on_signals(stop):
+        try:
+            trainer = _start(args, progress, stack, stop)
+        except StopRequested:
+            kept = (f"{args.resume} is as it was; continue with alphatank train --resume "
+                    f"{args.resume}" if args.resume else "nothing saved")
+            print(f"alphatank train: interrupted by {stop.reason} during start-up; {kept}",
+                  file=sys.stderr)
+            return stop.exit_code
+        if trainer is None:  # --print-config
+            return 0
+        if args.total_steps is not None:
+            _note_rounding(trainer.cfg)
+        try:
+            summary = trainer.train()
+        except KeyboardInterrupt:
+            if not trainer.stop.aborted:
+                raise
+            # a second Ctrl-C during a save: it was finished first, so the run goes on from it
+            raise KeyboardInterrupt(f"after saving step {trainer.saved_step:,}; continue "
+                                    f"with alphatank train --resume {trainer.run_dir}"
+                                    ) from None
+    code = report(summary)
+    # the process ends now: spare it the final garbage collections over torch's objects
+    # (about a second of the time between Ctrl-C and the prompt on a busy machine)
+    gc.freeze()
+    return code
+
+
+def _start(args: argparse.Namespace, progress: bool, stack: contextlib.ExitStack,
+           stop: StopFlag) -> Trainer | None:
+    """The run's Trainer (None after --print-config). A stop (``stop``, set by the signals)
+    raises :class:`StopRequested`: at once while the run is read and checked, and while
+    the Trainer is made once that has undone what it made. A --ray run joins Ray (held by
+    ``stack``) when its settings are known, just before its trainer is made."""
     if args.resume:
         given = [f"--{k.replace('_', '-')}" for k in NEW_RUN_ONLY
                  if getattr(args, k) not in (None, "", [])]
@@ -385,27 +426,28 @@ def _run(args: argparse.Namespace, progress: bool, stack: contextlib.ExitStack) 
             raise InputError("--name and --runs name a new run's folder; a resumed run "
                              "continues in its own (--resume DIR); to branch a run, copy its "
                              "folder and resume the copy")
-        from alphatank.training.checkpoint import load_checkpoint, resume_dir
-        from alphatank.training.runner import resume_trainer
         try:  # a CheckpointError is an InputError already
-            ckpt = load_checkpoint(args.resume)
-            saved = ckpt.train_config
-            if args.num_envs not in (None, saved.num_envs):
-                raise InputError(f"--num-envs: the run plays {saved.num_envs} matches, and a "
-                                 f"resumed run keeps them (its normalisers and rollouts hold "
-                                 f"one stream per match)")
-            cfg = _with_run_settings(saved, args)
-            _check_workers(cfg, args, "--workers")
-            if args.print_config:
-                print(run_toml(cfg), end="")
-                return 0
-            resume_dir(ckpt)  # refused before Ray starts: not a run's save, or not writable
-            runners = _env_runners(args, cfg, stack)
+            with stop.interruptible():
+                from alphatank.training.checkpoint import load_checkpoint, resume_dir
+                from alphatank.training.runner import resume_trainer
+                ckpt = load_checkpoint(args.resume)
+                saved = ckpt.train_config
+                if args.num_envs not in (None, saved.num_envs):
+                    raise InputError(f"--num-envs: the run plays {saved.num_envs} matches, "
+                                     f"and a resumed run keeps them (its normalisers and "
+                                     f"rollouts hold one stream per match)")
+                cfg = _with_run_settings(saved, args)
+                _check_workers(cfg, args, "--workers")
+                if args.print_config:
+                    print(run_toml(cfg), end="")
+                    return None
+                resume_dir(ckpt)  # refused before Ray starts: not a run's save, or not writable
+                runners = _env_runners(args, cfg, stack)
             with _one_line_warnings():
                 trainer = resume_trainer(args.resume, progress=progress, env_runners=runners,
                                          env_runner_timeout_s=_runner_timeout(args),
                                          fragments=args.fragments, overlap=args.overlap,
-                                         **_overrides(args))
+                                         stop=stop, **_overrides(args))
         except ValueError as exc:
             raise as_input_error(exc) from None
         stretched = _stretched(saved, trainer.cfg)
@@ -419,14 +461,15 @@ def _run(args: argparse.Namespace, progress: bool, stack: contextlib.ExitStack) 
         print(f"resuming {trainer.run_dir} at step {trainer.global_step:,}"
               + (f" ({rewound} metrics rows logged after that checkpoint dropped)"
                  if rewound else ""))
-    else:
+        return trainer
+    with stop.interruptible():
         try:
             cfg = build_run(args)
         except ValueError as exc:
             raise as_input_error(exc) from None
         if args.print_config:
             print(run_toml(cfg), end="")
-            return 0
+            return None
         runs = args.runs or "runs"
         check_folder(runs, "--runs")
         run_dir = Path(runs) / cfg.name
@@ -436,32 +479,18 @@ def _run(args: argparse.Namespace, progress: bool, stack: contextlib.ExitStack) 
                              f"{run_dir} or pick another --name")
         from alphatank.training.runner import Trainer
         runners = _env_runners(args, cfg, stack)
-        try:
-            with _one_line_warnings():
-                trainer = Trainer(cfg, run_dir, progress=progress, env_runners=runners,
-                                  env_runner_timeout_s=_runner_timeout(args),
-                                  fragments=args.fragments, overlap=args.overlap)
-        except ValueError as exc:
-            raise as_input_error(exc) from None
-        for name, counts in trainer.warm_start.items():
-            print(f"warm start {name} from {cfg.init_from}: {counts['mapped']} features "
-                  f"mapped, {counts['new']} new (zero weight), {counts['dropped']} dropped"
-                  f"{', critic copied' if counts['critic'] else ', critic fresh'}")
-    if args.total_steps is not None:
-        _note_rounding(trainer.cfg)
     try:
-        summary = trainer.train()
-    except KeyboardInterrupt:
-        if not trainer.stop.aborted:
-            raise
-        # a second Ctrl-C during a save: it was finished first, so the run can go on from it
-        raise KeyboardInterrupt(f"after saving step {trainer.saved_step:,}; continue with "
-                                f"alphatank train --resume {trainer.run_dir}") from None
-    code = report(summary)
-    # the process ends now: spare it the final garbage collections over torch's objects
-    # (about a second of the time between Ctrl-C and the prompt on a busy machine)
-    gc.freeze()
-    return code
+        with _one_line_warnings():
+            trainer = Trainer(cfg, run_dir, progress=progress, env_runners=runners,
+                              env_runner_timeout_s=_runner_timeout(args),
+                              fragments=args.fragments, overlap=args.overlap, stop=stop)
+    except ValueError as exc:
+        raise as_input_error(exc) from None
+    for name, counts in trainer.warm_start.items():
+        print(f"warm start {name} from {cfg.init_from}: {counts['mapped']} features "
+              f"mapped, {counts['new']} new (zero weight), {counts['dropped']} dropped"
+              f"{', critic copied' if counts['critic'] else ', critic fresh'}")
+    return trainer
 
 
 def _note_rounding(cfg: TrainConfig) -> None:
