@@ -279,7 +279,7 @@ def test_hp_overrides_are_typed_per_algorithm():
     ([("--hp", "ppo.clip=1")], r"^--hp ppo\.clip: unknown ppo hyperparameter; valid: \[.*"),
     ([("--hp", "dqn.lr=1")], r"^--hp dqn\.lr: unknown algorithm 'dqn'; registered"),
     ([("--hp", "clip_coef=0.1")], r"^--hp: expected ALGO\.FIELD=VALUE, got 'clip_coef=0\.1'"),
-    ([("--ppo", "num_stepz=3")], r"^--ppo ppo\.num_stepz: unknown ppo hyperparameter"),
+    ([("--ppo", "num_stepz=3")], r"^--ppo num_stepz: unknown ppo hyperparameter"),
     ([("--sac", "tau")], r"^--sac: expected FIELD=VALUE, got 'tau'"),
 ])
 def test_bad_hp_overrides_give_one_line_errors(items, error):

@@ -85,8 +85,12 @@ def test_scenario_flag_refits_learners_of_the_first_kind(capsys, tmp_path):
     (["--scenario", "nowhere"], "--scenario: unknown scenario 'nowhere'"),
     (["--hp", "ppo.gamma=2"], "--hp ppo.gamma: must be in [0, 1], got 2.0"),
     (["--hp", "sac.tau=0.1"], "--hp sac.*: this run has no sac learner"),
-    (["--hp", "ppo.anchor_kl=0.5"], "--hp: 'ppo': anchor_kl = 0.5 needs a warm "
+    (["--hp", "ppo.anchor_kl=0.5"], "--hp ppo.*: 'ppo': anchor_kl = 0.5 needs a warm "
                                     "start to pull towards (an imitate table or init_from)"),
+    # --ppo and --sac errors name them as typed (they named the --hp spelling)
+    (["--ppo", "gamma=2"], "--ppo gamma: must be in [0, 1], got 2.0"),
+    (["--sac", "tau=0.1"], "--sac: this run has no sac learner (its learners use ppo)"),
+    (["--ppo", "anchor_kl=0.5"], "--ppo: 'ppo': anchor_kl = 0.5 needs a warm start"),
     (["--workers", "3", "--num-envs", "2"], "--workers: 3 worker processes for 2 matches; "
                                             "at most one per match"),
     (["--preset", "demo", "--num-envs", "1"], "presets/demo.toml: num_workers: 2 worker "

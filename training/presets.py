@@ -309,10 +309,12 @@ def run_scenario(cfg: TrainConfig) -> Any:
 
 # ---- hyperparameter overrides (--hp ALGO.FIELD=VALUE) -------------------------------------
 
-def parse_hp(items: Iterable[tuple[str, str]]) -> dict[str, dict[str, Any]]:
+def parse_hp(items: Iterable[tuple[str, str]], flags: dict[str, list[str]] | None = None
+             ) -> dict[str, dict[str, Any]]:
     """``[(flag, "ppo.clip_coef=0.1,sac.tau=0.01"), ...]`` -> typed values per algorithm.
     A flag named after an algorithm (``--ppo``) takes bare ``FIELD=VALUE`` items. Errors
-    are one line naming the flag, the field and what is allowed."""
+    are one line naming the flag and the field as typed and what is allowed. ``flags``, if
+    given, gets the flags that set each algorithm's values (for :func:`with_hp`)."""
     out: dict[str, dict[str, Any]] = {}
     for flag, text in items:
         fixed = flag.lstrip("-") if flag.lstrip("-") in ALGORITHMS else None
@@ -329,14 +331,16 @@ def parse_hp(items: Iterable[tuple[str, str]]) -> dict[str, dict[str, Any]]:
                 raise ValueError(f"{flag} {key}: {exc}") from None
             fields = field_map(cfg_cls)
             if name not in fields:
-                raise ValueError(f"{flag} {algo_name}.{name}: unknown {algo_name} "
-                                 f"hyperparameter; valid: {sorted(fields)}")
+                raise ValueError(f"{flag} {key}: unknown {algo_name} hyperparameter; valid: "
+                                 f"{sorted(fields)}")
             try:
                 value = parse_value(cfg_cls, name, raw)
                 dataclasses.replace(cfg_cls(), **{name: value})  # range check now
             except FieldError as exc:
-                raise ValueError(f"{flag} {algo_name}.{name}: {exc.problem}") from None
+                raise ValueError(f"{flag} {key}: {exc.problem}") from None
             out.setdefault(algo_name, {})[name] = value
+            if flags is not None and flag not in flags.setdefault(algo_name, []):
+                flags[algo_name].append(flag)
     return out
 
 
@@ -366,23 +370,30 @@ def parse_game(flag: str, text: str) -> dict[str, Any]:
     return out
 
 
-def with_hp(cfg: TrainConfig, overrides: dict[str, dict[str, Any]], num_learners: int
-            ) -> TrainConfig:
-    """``cfg`` with hyperparameters changed for every learner of each algorithm named."""
+def with_hp(cfg: TrainConfig, overrides: dict[str, dict[str, Any]], num_learners: int,
+            flags: dict[str, list[str]] | None = None) -> TrainConfig:
+    """``cfg`` with hyperparameters changed for every learner of each algorithm named.
+    Errors name the flags that set the values (``flags``, from :func:`parse_hp`; default
+    ``--hp``)."""
     if not overrides:
         return cfg
+
+    def given(algo: str) -> str:
+        return ", ".join(f if f == f"--{algo}" else f"{f} {algo}.*"
+                         for f in (flags or {}).get(algo, ["--hp"]))
+
     specs = run_learners(cfg, num_learners)
     present = sorted({s.algo for s in specs})
     for algo in overrides:
         if algo not in present:
-            raise ValueError(f"--hp {algo}.*: this run has no {algo} learner (its learners "
+            raise ValueError(f"{given(algo)}: this run has no {algo} learner (its learners "
                              f"use {', '.join(present)})")
     specs = tuple(dataclasses.replace(
         s, config=dataclasses.replace(s.config, **overrides.get(s.algo, {}))) for s in specs)
     try:
         return dataclasses.replace(cfg, learners=specs)
     except FieldError as exc:  # a rule across settings, e.g. anchor_kl without a warm start
-        raise ValueError(f"--hp: {exc.problem}") from None
+        raise ValueError(f"{', '.join(map(given, overrides))}: {exc.problem}") from None
 
 
 # ---- run files ----------------------------------------------------------------------------

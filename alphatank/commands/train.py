@@ -320,7 +320,8 @@ def build_run(args: argparse.Namespace) -> TrainConfig:
     except ValueError as exc:
         raise ValueError(f"schedule: {exc}") from None
     hp_items = [("--hp", t) for t in args.hp] + [("--ppo", args.ppo), ("--sac", args.sac)]
-    cfg = with_hp(cfg, parse_hp(hp_items), n)
+    flags: dict[str, list[str]] = {}
+    cfg = with_hp(cfg, parse_hp(hp_items, flags), n, flags)
     wants = {s.name: s.config.num_steps for s in run_learners(cfg, n)
              if hasattr(s.config, "num_steps")}
     if cfg.rollout_steps and any(cfg.rollout_steps % k for k in wants.values()):
