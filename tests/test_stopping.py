@@ -6,6 +6,8 @@ rows after a checkpoint are rewound, and the time limit is the budget of each ca
 import dataclasses
 import gc
 import json
+import multiprocessing
+import os
 import shutil
 import signal
 import subprocess
@@ -24,7 +26,7 @@ from alphatank.training.checkpoint import load_checkpoint
 from alphatank.training.logging import RunLogger, rewind_metrics
 from alphatank.training.ppo import PPOConfig
 from alphatank.training.presets import LearnerSpec, TrainConfig
-from alphatank.training.runner import RunWarning, Trainer, resume_trainer
+from alphatank.training.runner import EnvWorkerDied, RunWarning, Trainer, resume_trainer
 from alphatank.training.sac import SAC, SACConfig
 from alphatank.training.stopping import (
     StopFlag,
@@ -340,6 +342,36 @@ def test_a_stop_before_a_trainer_is_made_undoes_it_and_one_after_ends_train(tmp_
     assert out["exit_code"] == 143 and out["stopped"]["reason"] == "SIGTERM"
     assert load_checkpoint(run).meta["progress"]["global_step"] == 0
     assert not (tmp_path / "runs" / ".early.lock").exists()
+
+
+def kill_a_worker() -> None:
+    """SIGKILL one env worker process of this process (as the out-of-memory killer)."""
+    worker = multiprocessing.active_children()[0]
+    os.kill(worker.pid, signal.SIGKILL)
+    worker.join(30)
+
+
+def test_an_env_worker_that_dies_ends_train_saying_so_and_what_is_kept(tmp_path):
+    """An env worker process killed, before a run's first save and in a resumed run:
+    train() raises EnvWorkerDied, one line saying what is kept, lock released (the broken
+    pipe reached the command's handler for a closed stdout: exit 141 without a word; or a
+    traceback whose line told to create the env under ``if __name__ == "__main__"``)."""
+    cfg = config("dies", LearnerSpec("ppo", "ppo", (0,), PPO_TINY), 2, num_workers=2)
+    run = tmp_path / "dies"
+    tr = Trainer(cfg, run, progress=False)
+    kill_a_worker()
+    with pytest.raises(EnvWorkerDied, match=r"^an env worker process died at step 0 "
+                                            r"\(killed\? out of memory\?\); nothing was saved$"):
+        tr.train()
+    assert not (tmp_path / ".dies.lock").exists() and not multiprocessing.active_children()
+    Trainer(dataclasses.replace(cfg, num_workers=1), tmp_path / "done", progress=False).train()
+    again = resume_trainer(tmp_path / "done", progress=False, total_steps=4 * 16 * E,
+                           num_workers=2)
+    kill_a_worker()
+    with pytest.raises(EnvWorkerDied, match=f"last checkpoint, step {2 * 16 * E}, is kept: "
+                                            f"continue with alphatank train --resume "
+                                            f"{tmp_path / 'done'}$"):
+        again.train()
 
 
 # a worker: watches its parent, then runs a job until a stop (like a run), says why it

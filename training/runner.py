@@ -40,6 +40,7 @@ import re
 import shutil
 import sys
 import time
+import traceback
 import warnings
 from collections import deque
 from collections.abc import Callable
@@ -98,6 +99,24 @@ WINDOW = 100  # episodes in the rolling win-rate / return windows
 
 class RunWarning(UserWarning):
     """A run setting that works but probably not as intended (shown as one line)."""
+
+
+class EnvWorkerDied(RuntimeError):
+    """An env worker process died during :meth:`Trainer.train` (killed, out of memory):
+    the pipe to it broke. The message says where the run stands (one line)."""
+
+
+# how SubprocVectorMatchEnv says that a worker ended without answering
+WORKER_GONE = "vector env worker failed: the worker process exited without answering"
+
+
+def _worker_died(exc: BaseException) -> bool:
+    """Whether ``exc`` says that a worker process of the env died: its pipe broke (not
+    this process's own output: raised inside the env), or it ended without answering."""
+    if isinstance(exc, RuntimeError):
+        return str(exc).startswith(WORKER_GONE)
+    return any(frame.f_globals.get("__name__", "").startswith("alphatank.envs.")
+               for frame, _ in traceback.walk_tb(exc.__traceback__))
 
 
 def derive_seed(*parts: int) -> int:
@@ -701,8 +720,9 @@ class Trainer:
         summary; ``stopped`` says why it ended early (None: it reached ``total_steps``;
         ``finished``: a stop that came once the steps were trained, which skipped the final
         evaluation if ``final_eval_skipped``) and ``exit_code`` is 130 / 143 after SIGINT
-        / SIGTERM, else 0. A Trainer trains
-        once (its env and log close at the end): go on with :func:`resume_trainer`."""
+        / SIGTERM, else 0. An env worker process that dies raises :class:`EnvWorkerDied`
+        (the last checkpoint stays as it was). A Trainer trains once (its env and log close
+        at the end): go on with :func:`resume_trainer`."""
         if self.trained:
             raise RuntimeError(f"this Trainer has trained; continue the run with "
                                f"resume_trainer({str(self.run_dir)!r})")
@@ -722,6 +742,15 @@ class Trainer:
         with stop_on_signals(self.stop):
             try:
                 self._run(bar, start)
+            except (BrokenPipeError, ConnectionResetError, EOFError, RuntimeError) as exc:
+                if not _worker_died(exc):
+                    raise
+                kept = (f"the run's last checkpoint, step {self.saved_step:,}, is kept: "
+                        f"continue with alphatank train --resume {self.run_dir}"
+                        if self.saved_step >= 0 else "nothing was saved")
+                raise EnvWorkerDied(f"an env worker process died at step "
+                                    f"{self.global_step:,} (killed? out of memory?); "
+                                    f"{kept}") from exc
             finally:
                 for lr in self.learners.values():
                     lr.interrupt = None
