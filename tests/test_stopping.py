@@ -285,6 +285,25 @@ def test_the_time_limit_is_the_budget_of_each_call(tmp_path):
     assert ck.meta["progress"]["global_step"] > step1 + 16 * E
 
 
+def test_a_time_limit_shorter_than_an_iteration_says_a_resume_gets_no_further(tmp_path,
+                                                                               capsys):
+    """A time limit that ends the run before it trains one iteration (fresh or resumed):
+    the summary says that a resume under the same limit would get no further (it said
+    only to resume, which stopped at the same step again, forever); a call that got
+    somewhere does not say it."""
+    cfg = config("short", LearnerSpec("ppo", "ppo", (0,), PPO_TINY), 4, time_limit_s=1e-3)
+    run = tmp_path / "short"
+    for start in (lambda: Trainer(cfg, run, progress=False),
+                  lambda: resume_trainer(run, progress=False)):
+        out = start().train()
+        assert out["stopped"]["no_progress"] and out["saved_step"] == 0
+        assert report(out) == 0
+        assert "a resume under the same --time-limit gets no further" in capsys.readouterr().out
+    out = resume_trainer(run, progress=False, time_limit_s=0.0).train()
+    assert out["stopped"] is None and report(out) == 0
+    assert "no further" not in capsys.readouterr().out
+
+
 def test_stop_flag_signals_and_interruptible_blocks():
     flag = StopFlag()
     with stop_on_signals(flag):

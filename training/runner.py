@@ -719,7 +719,8 @@ class Trainer:
         SIGINT / SIGTERM, always ending with a checkpoint to resume from. Returns a
         summary; ``stopped`` says why it ended early (None: it reached ``total_steps``;
         ``finished``: a stop that came once the steps were trained, which skipped the final
-        evaluation if ``final_eval_skipped``) and ``exit_code`` is 130 / 143 after SIGINT
+        evaluation if ``final_eval_skipped``; ``no_progress``: the time limit came before
+        this call saved anything further) and ``exit_code`` is 130 / 143 after SIGINT
         / SIGTERM, else 0. An env worker process that dies raises :class:`EnvWorkerDied`
         (the last checkpoint stays as it was). A Trainer trains once (its env and log close
         at the end): go on with :func:`resume_trainer`."""
@@ -730,6 +731,7 @@ class Trainer:
         cfg = self.cfg
         self.lock.acquire()
         start = time.perf_counter() - self.elapsed  # elapsed counts the whole run
+        began = self.global_step
         self.stop.limit(cfg.time_limit_s)  # the budget counts this call only
         self.stopped = {}
         bar = None
@@ -762,8 +764,12 @@ class Trainer:
                 self.lock.release()
         if self.stop.reason is not None:
             finished = {"finished": True} if self.saved_step >= self.planned_steps else {}
+            # a time limit shorter than an iteration: a resume under it gets no further
+            stuck = ({"no_progress": True} if self.stop.reason == "time limit"
+                     and not finished and self.saved_step <= began
+                     and "clone_pending" not in self.stopped else {})
             self.stopped = {"reason": self.stop.reason, "checkpoint_step": self.saved_step,
-                            **finished, **self.stopped}
+                            **finished, **stuck, **self.stopped}
         return {"run_dir": str(self.run_dir), "global_step": self.global_step,
                 "saved_step": self.saved_step, "iterations": self.iteration,
                 "episodes": self.episodes, "elapsed_s": self.elapsed,

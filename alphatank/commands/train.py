@@ -556,6 +556,11 @@ def report(summary: dict[str, Any]) -> int:
         if key.startswith("charts/win_rate"):
             print(f"  {key} (last 100 episodes): {val:.2f}")
     print(f"  checkpoint: {run_dir / 'latest'} -> {latest}")
-    for note in summary.get("notes") or ():
+    notes = list(summary.get("notes") or ())
+    if stopped and stopped.get("no_progress"):
+        notes.append("the time limit ended this run before it trained a whole iteration: a "
+                     "resume under the same --time-limit gets no further; give it a longer "
+                     "one")
+    for note in notes:
         print(f"  note: {note}")
     return int(summary.get("exit_code") or 0)
