@@ -186,3 +186,36 @@ def test_ctrl_c_in_the_start_up_of_a_resumed_run_leaves_it_as_it_was(tmp_path):
     assert (run / "latest").read_text() == latest
     assert (run / "metrics.jsonl").read_text() == metrics
     assert not (tmp_path / ".team.lock").exists()
+
+
+def fork_server(pid: int) -> bool:
+    """Whether process ``pid`` has started its multiprocessing fork server (Linux)."""
+    try:
+        with open(f"/proc/{pid}/task/{pid}/children") as f:
+            kids = f.read().split()
+    except OSError:
+        return False
+    for kid in kids:
+        try:
+            with open(f"/proc/{kid}/cmdline", "rb") as f:
+                if b"forkserver" in f.read():
+                    return True
+        except OSError:
+            continue
+    return False
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not os.path.exists(f"/proc/{os.getpid()}/task/{os.getpid()}/children"),
+                    reason="needs /proc/PID/task/PID/children")
+def test_sigterm_to_the_group_while_the_workers_start_is_a_stop_not_a_traceback(tmp_path):
+    """SIGTERM to the process group (``timeout``, a scheduler) as the env workers start:
+    it also ends their fork server, which the run took for a failure (an EOFError
+    traceback, exit 1); it is the stop: its line, exit 143, nothing left."""
+    proc = start(tmp_path, "group", [*PPO, "--workers", "2", "--num-envs", "2"])
+    wait_for(lambda: fork_server(proc.pid), proc)  # loading torch before it forks workers
+    seconds, out = stop(proc, signal.SIGTERM, group=True)
+    assert proc.returncode == 143, out
+    assert "alphatank train: interrupted by SIGTERM during start-up; nothing saved" in \
+        out.splitlines() and "Traceback" not in out, out
+    assert not any(tmp_path.iterdir())

@@ -252,18 +252,26 @@ class Trainer:
     def _make_env(self, env_runners: int, env_runner_timeout_s: float,
                   extra: dict[str, Any]) -> Any:
         """The run's vector env: ``cfg.num_workers`` processes, or ``env_runners`` Ray
-        actors (the same results as that many workers)."""
+        actors (the same results as that many workers). A failure that follows a stop
+        (a SIGTERM to the process group also ends the fork server the workers start
+        from) is the stop: :class:`StopRequested`."""
         cfg = self.cfg
-        if env_runners:
-            from alphatank.envs.ray_vector import RayVectorMatchEnv
-            return RayVectorMatchEnv(
-                self.scenario, cfg.num_envs, seed=cfg.seed, num_runners=env_runners,
-                step_timeout_s=env_runner_timeout_s, observation=cfg.observation,
-                game_overrides=cfg.game or None, reward_overrides=cfg.rewards or None, **extra)
-        return make_vector_env(
-            self.scenario, cfg.num_envs, seed=cfg.seed, num_workers=cfg.num_workers,
-            observation=cfg.observation, game_overrides=cfg.game or None,
-            reward_overrides=cfg.rewards or None, **extra)
+        try:
+            if env_runners:
+                from alphatank.envs.ray_vector import RayVectorMatchEnv
+                return RayVectorMatchEnv(
+                    self.scenario, cfg.num_envs, seed=cfg.seed, num_runners=env_runners,
+                    step_timeout_s=env_runner_timeout_s, observation=cfg.observation,
+                    game_overrides=cfg.game or None, reward_overrides=cfg.rewards or None,
+                    **extra)
+            return make_vector_env(
+                self.scenario, cfg.num_envs, seed=cfg.seed, num_workers=cfg.num_workers,
+                observation=cfg.observation, game_overrides=cfg.game or None,
+                reward_overrides=cfg.rewards or None, **extra)
+        except Exception as exc:
+            if self.stop.signum is None:
+                raise
+            raise StopRequested(self.stop.reason) from exc
 
     def _setup(self, specs: list, resume: Checkpoint | None, wandb_id: str | None) -> None:
         cfg, env = self.cfg, self.env
