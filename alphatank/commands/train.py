@@ -390,6 +390,7 @@ def _run(args: argparse.Namespace, progress: bool, stack: contextlib.ExitStack) 
                     f"{args.resume}" if args.resume else "nothing saved")
             print(f"alphatank train: interrupted by {stop.reason} during start-up; {kept}",
                   file=sys.stderr)
+            gc.freeze()  # as after training: a quicker exit
             return stop.exit_code
         if trainer is None:  # --print-config
             return 0
