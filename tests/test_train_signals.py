@@ -180,11 +180,10 @@ def test_ctrl_c_in_the_start_up_of_a_resumed_run_leaves_it_as_it_was(tmp_path):
     wait_for(lambda: (tmp_path / ".team.lock").exists(), proc)
     seconds, out = stop(proc, signal.SIGINT, group=True)
     assert proc.returncode == 130, out
-    # (a Ctrl-C that reaches the env's fork server while it imports torch ends it, and
-    # the env it was starting leaves a shared-memory warning: the env's to fix)
-    assert (f"alphatank train: interrupted by SIGINT during start-up; {run} is as it was; "
-            f"continue with alphatank train --resume {run}") in out.splitlines(), out
-    assert "Traceback" not in out, out
+    # nothing else: the env's fork server, importing torch, does not see the Ctrl-C (it
+    # ended with a traceback, and the env it was starting left a shared-memory warning)
+    assert out == (f"alphatank train: interrupted by SIGINT during start-up; {run} is as it "
+                   f"was; continue with alphatank train --resume {run}\n"), out
     assert (run / "latest").read_text() == latest
     assert (run / "metrics.jsonl").read_text() == metrics
     assert not (tmp_path / ".team.lock").exists()

@@ -4,14 +4,18 @@ from __future__ import annotations
 
 import copy
 import gc
+import os
 import pickle
+import signal
 
 import numpy as np
 import pytest
 
+from alphatank.commands.benchenv import RandomRollout
 from alphatank.envs.vector import (
     SubprocVectorMatchEnv,
     VectorMatchEnv,
+    WorkerDied,
     episode_seed,
     make_vector_env,
 )
@@ -217,6 +221,57 @@ def test_an_env_with_workers_refuses_to_be_copied_and_carries_on():
                 copy_(sub)
         gc.collect()
         assert sub.step(act)[1].shape == (2, 1)
+    finally:
+        sub.close()
+
+
+@pytest.mark.parametrize("call", ["step", "rollout", "set_bot_weakness"])
+def test_a_killed_worker_is_worker_died_whether_sent_to_or_heard_from(call):
+    """A worker killed (as by the out-of-memory killer): the next call raises WorkerDied
+    and the env is closed, whether the pipe broke on the send or the answer never came
+    (a send raised a bare BrokenPipeError, which the train command took for its own
+    stdout's reader going away: exit 141 without a word)."""
+    sub = SubprocVectorMatchEnv("vs_random", 2, seed=0, num_workers=2)
+    try:
+        obs = sub.reset()
+        proc = sub._procs[1]
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.join(30)
+        act = np.ones((2, 1, 3), dtype=np.int64)
+        do = {"step": lambda: sub.step(act), "set_bot_weakness": lambda: sub.set_bot_weakness(1),
+              "rollout": lambda: sub.rollout(RandomRollout(), obs, 4)}[call]
+        with pytest.raises(WorkerDied, match="^vector env worker failed: the worker process "
+                                             "exited without answering"):
+            do()
+        with pytest.raises(RuntimeError, match="the env is closed: a worker failed earlier"):
+            sub.step(act)
+    finally:
+        sub.close()
+
+
+def _blocked_signals(pid: int) -> int:
+    """Process ``pid``'s mask of blocked signals (Linux /proc: bit s - 1 is signal s)."""
+    with open(f"/proc/{pid}/status") as f:
+        return int(next(line for line in f if line.startswith("SigBlk:")).split()[1], 16)
+
+
+@pytest.mark.skipif(not os.path.exists(f"/proc/{os.getpid()}/status"), reason="Linux /proc")
+def test_the_fork_server_starts_with_sigint_blocked_and_this_process_does_not_keep_it():
+    """The fork server imports torch for seconds before it ignores SIGINT: a Ctrl-C to the
+    process group in that window ended it with a KeyboardInterrupt traceback."""
+    sub = SubprocVectorMatchEnv("vs_random", 2, seed=0, num_workers=2)
+    try:
+        with open(f"/proc/{os.getpid()}/task/{os.getpid()}/children") as f:
+            kids = [int(k) for k in f.read().split()]
+        servers = []
+        for kid in kids:
+            with open(f"/proc/{kid}/cmdline", "rb") as f:
+                if b"forkserver" in f.read():
+                    servers.append(kid)
+        assert servers
+        assert all(_blocked_signals(k) >> (signal.SIGINT - 1) & 1 for k in servers)
+        assert not _blocked_signals(os.getpid()) >> (signal.SIGINT - 1) & 1
+        assert sub.reset().shape[0] == 2
     finally:
         sub.close()
 

@@ -40,7 +40,6 @@ import re
 import shutil
 import sys
 import time
-import traceback
 import warnings
 from collections import deque
 from collections.abc import Callable
@@ -53,7 +52,7 @@ from alphatank.cluster import ENV_RUNNER_TIMEOUT_S
 from alphatank.envs.core import ACTION_NVEC
 from alphatank.envs.ids import env_id
 from alphatank.envs.ray_vector import RolloutLost
-from alphatank.envs.vector import make_vector_env
+from alphatank.envs.vector import WorkerDied, make_vector_env
 from alphatank.errors import InputError
 from alphatank.extras import require
 from alphatank.files import FolderLock, missing_folders, remove_empty_folders
@@ -104,19 +103,6 @@ class RunWarning(UserWarning):
 class EnvWorkerDied(RuntimeError):
     """An env worker process died during :meth:`Trainer.train` (killed, out of memory):
     the pipe to it broke. The message says where the run stands (one line)."""
-
-
-# how SubprocVectorMatchEnv says that a worker ended without answering
-WORKER_GONE = "vector env worker failed: the worker process exited without answering"
-
-
-def _worker_died(exc: BaseException) -> bool:
-    """Whether ``exc`` says that a worker process of the env died: its pipe broke (not
-    this process's own output: raised inside the env), or it ended without answering."""
-    if isinstance(exc, RuntimeError):
-        return str(exc).startswith(WORKER_GONE)
-    return any(frame.f_globals.get("__name__", "").startswith("alphatank.envs.")
-               for frame, _ in traceback.walk_tb(exc.__traceback__))
 
 
 def derive_seed(*parts: int) -> int:
@@ -752,9 +738,7 @@ class Trainer:
         with stop_on_signals(self.stop):
             try:
                 self._run(bar, start)
-            except (BrokenPipeError, ConnectionResetError, EOFError, RuntimeError) as exc:
-                if not _worker_died(exc):
-                    raise
+            except WorkerDied as exc:  # not this process's stdout going away (exit 141)
                 kept = (f"the run's last checkpoint, step {self.saved_step:,}, is kept: "
                         f"continue with alphatank train --resume {self.run_dir}"
                         if self.saved_step >= 0 else "nothing was saved")

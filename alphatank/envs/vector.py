@@ -526,13 +526,33 @@ def worker_context(start_method: str | None = None) -> Any:
     "forkserver" where the platform has it, else "spawn" (both safe next to torch's
     threads). The fork server imports this module, and torch when this process has, once;
     each worker is then forked from it instead of importing them again (seconds a worker
-    on a slow machine)."""
+    on a slow machine). The server starts with SIGINT blocked: it ignores SIGINT only once
+    those imports are done, so a Ctrl-C to the process group before then ended it with a
+    KeyboardInterrupt traceback (the workers it forks ignore SIGINT too)."""
     if start_method is None:
         start_method = "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
     ctx = mp.get_context(start_method)
     if start_method == "forkserver":  # no effect once this process's server runs
         ctx.set_forkserver_preload([__name__, *(["torch"] if "torch" in sys.modules else [])])
+        from multiprocessing import forkserver
+
+        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        try:
+            forkserver.ensure_running()
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
     return ctx
+
+
+class WorkerDied(RuntimeError):
+    """A worker process of a :class:`SubprocVectorMatchEnv` ended (killed, out of memory)
+    without answering; the env is closed."""
+
+
+# why a worker that ended without answering did: its most common cause in a script
+_EXITED = ("the worker process exited without answering (with the 'forkserver' and "
+           "'spawn' start methods a script must create the env under "
+           "`if __name__ == \"__main__\":`)")
 
 
 class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
@@ -615,16 +635,30 @@ class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
                 else:
                     status, payload = conn.recv()
             except (EOFError, OSError):
-                status, payload = "error", (
-                    "the worker process exited without answering (with the 'forkserver' "
-                    "and 'spawn' start methods a script must create the env under "
-                    "`if __name__ == \"__main__\":`)")
+                self._died()
             if status == "error":
                 self._failed = payload.splitlines()[0]
                 self.close()
                 raise RuntimeError(f"vector env worker failed: {payload}")
             out.append(payload)
         return out
+
+    def _send(self, conn: Any, msg: Any) -> None:
+        """Send ``msg`` (bytes: as they are) to a worker; :class:`WorkerDied` when it is
+        gone (its pipe broke)."""
+        try:
+            if isinstance(msg, bytes):
+                conn.send_bytes(msg)
+            else:
+                conn.send(msg)
+        except OSError:  # BrokenPipeError, ConnectionResetError
+            self._died()
+
+    def _died(self) -> None:
+        """A worker ended without answering: close the env and raise :class:`WorkerDied`."""
+        self._failed = _EXITED
+        self.close()
+        raise WorkerDied(f"vector env worker failed: {_EXITED}")
 
     def check_idle(self, call: str) -> None:
         """As :meth:`SplitRollout.check_idle`, and RuntimeError naming ``call`` once the
@@ -640,7 +674,7 @@ class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
         is in flight: the workers would answer it first)."""
         self.check_idle(arg[0] if cmd == "call" else cmd)
         for conn in self._conns:
-            conn.send((cmd, arg))
+            self._send(conn, (cmd, arg))
         return self._gather()
 
     # each setting is checked here, as in-process, before it goes to the workers: a
@@ -674,7 +708,7 @@ class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
         names = check_env_opponents(names, self.num_envs, self._opponent_names)
         self.check_idle("set_env_opponents")
         for conn, (lo, hi) in zip(self._conns, self._blocks, strict=True):
-            conn.send(("call", ("set_env_opponents", (list(names[lo:hi]),))))
+            self._send(conn, ("call", ("set_env_opponents", (list(names[lo:hi]),))))
         self._gather()
 
     def reset(self, seed: int | None = None) -> np.ndarray:
@@ -699,7 +733,7 @@ class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
         a = self._shared.arr
         a["actions"][...] = acts
         for conn in self._conns:
-            conn.send_bytes(_STEP)
+            self._send(conn, _STEP)
         episodes = []
         for part in self._gather(raw=True):
             episodes.extend(part)
@@ -719,10 +753,10 @@ class SubprocVectorMatchEnv(ShardedEnv, SplitRollout):
         frag = self._fragment_arrays(steps)
         for conn, (lo, hi) in zip(self._conns, self._blocks, strict=True):
             if frag is None:
-                conn.send(("rollout", (policy, obs[lo:hi], steps)))
+                self._send(conn, ("rollout", (policy, obs[lo:hi], steps)))
             else:
-                conn.send(("rollout_shared", (policy, obs[lo:hi], steps, frag.specs,
-                                              frag.names)))
+                self._send(conn, ("rollout_shared", (policy, obs[lo:hi], steps, frag.specs,
+                                                    frag.names)))
         self._in_flight, self._frag_steps = True, steps if frag is not None else 0
 
     def _fragment_arrays(self, steps: int) -> _Shared | None:
