@@ -299,3 +299,16 @@ def test_learner_seats_take_an_agent(trained, monkeypatch):
         build_lineup("vs_aggressive")
     with pytest.raises(ScenarioError, match="agent:tiny: --seats has no learner seat for it"):
         build_lineup(seats_scenario("smart,random", "open"), learner="agent:tiny")
+
+
+def test_checkpoint_seats_are_labelled_by_their_folder(trained, monkeypatch, tmp_path):
+    """Each checkpoint seat is labelled by its run folder (a save inside one: RUN/step_N),
+    so two checkpoints in one match can be told apart; shipped agents keep their names."""
+    run, agents = trained
+    monkeypatch.setattr(seats, "agents_root", lambda: agents)
+    other = tmp_path / "rival"
+    shutil.copytree(run, other)
+    save = sorted((run / "checkpoints").iterdir())[-1]
+    lineup = build_lineup(seats_scenario(f"checkpoint:{run}/,checkpoint:{other},"
+                                         f"checkpoint:{save},agent:tiny", "arena4"))
+    assert lineup.labels == ["run", "rival", f"run/{save.name}", "tiny"]

@@ -291,7 +291,7 @@ def test_human_vs_trained_agent_and_checkpoint_in_learner_seats(tmp_path):
     Trainer(cfg, run, progress=False).train()
 
     lineup = build_lineup(parse_seats(f"human:wasd,checkpoint:{run}", "open"))
-    assert lineup.labels == ["P1", "agent"]
+    assert lineup.labels == ["P1", "tiny"]  # the run folder's name
     s = PlaySession(lineup, seed=0, fps=30, realtime=False, verbose=False)
     start = s.match.tank_xy[1].copy(), float(s.match.tank_angle[1])
     s.run(max_frames=30)
@@ -299,5 +299,5 @@ def test_human_vs_trained_agent_and_checkpoint_in_learner_seats(tmp_path):
     assert moved > 0.1  # the agent acted (an untrained net still picks moves)
 
     vs = build_lineup(load_scenario("vs_aggressive"), checkpoint=str(run))
-    assert vs.labels == ["agent", "aggressive"] and vs.seats[0] == f"checkpoint:{run}"
+    assert vs.labels == ["tiny", "aggressive"] and vs.seats[0] == f"checkpoint:{run}"
     assert not vs.notes

@@ -10,8 +10,10 @@ and evaluation. Controllers come from the seat kinds of :mod:`alphatank.game.sea
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from alphatank.errors import InputError
@@ -63,13 +65,17 @@ class Lineup:
 
 def seat_label(seat: Seat) -> str:
     """The short name drawn over a seat's tank: the bot, ``P1``..``P3`` for keyboard
-    players, ``agent`` for a checkpoint, the agent's name, else the kind."""
+    players, a checkpoint's folder (``RUN`` for a run folder, ``RUN/step_N`` for one of
+    its saves), the agent's name, else the kind."""
     if seat.controller == "bot":
         return str(seat.bot)
     if seat.controller == "human":
         return f"P{KEYSETS.index(str(seat.keys)) + 1}"
     if seat.controller == "checkpoint":
-        return "agent"
+        folder = Path(os.path.abspath(str(seat.path)))  # "runs/x/" and "." have names too
+        if folder.parent.name == "checkpoints":  # one save of a run
+            return f"{folder.parent.parent.name}/{folder.name}"
+        return folder.name
     if seat.controller == "agent":
         return str(seat.agent)
     return seat.controller
