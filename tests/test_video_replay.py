@@ -168,6 +168,12 @@ def test_tampered_replay_is_reported_as_diverged(recorded, tmp_path, capsys):
     path = save_replay(rep, tmp_path / "bad.npz")
     assert replay.run(_args(replay, str(path))) == 1
     assert f"{path}: replay diverged" in capsys.readouterr().err
+    mp4, gif = tmp_path / "old.mp4", tmp_path / "new.gif"
+    mp4.write_bytes(b"an earlier video")
+    assert replay.run(_args(replay, str(path), "--record", str(mp4), "--gif", str(gif))) == 1
+    assert f"{path}: replay diverged" in capsys.readouterr().err
+    assert mp4.read_bytes() == b"an earlier video" and not gif.exists()  # no video of it
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.npz", "old.mp4"]
     with pytest.raises(ReplayError, match=r"is a folder, not a replay file \(\.npz\)"):
         load_replay(tmp_path)
 

@@ -23,8 +23,8 @@ from alphatank.ui.render import (
 )
 from alphatank.ui.replay import (
     Replay,
+    ReplayCheck,
     ReplayError,
-    check_replayed,
     load_replay,
     replay_episode,
     simulate,
@@ -72,9 +72,8 @@ def run(args: argparse.Namespace) -> int:
         if args.record or args.gif:
             video = VideoRecorder(mp4=args.record, gif=args.gif, overlays=overlays,
                                   labels=replay.labels or None)
-            episode = replay_episode(replay, [video])
+            episode = replay_episode(replay, [ReplayCheck(replay), video])  # check first
             rec = record_episode(episode, video)
-            check_replayed(replay, episode.match)
             wrote = [f"{rec.mp4} ({rec.frames} frames)"] if rec.mp4 is not None else []
             print("wrote " + " and ".join(wrote + ([str(rec.gif)] if rec.gif else [])))
         if args.render:

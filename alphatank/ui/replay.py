@@ -461,6 +461,18 @@ def check_replayed(replay: Replay, match: Match) -> None:
                           f"{_result(match.winner)}, the file claims {_result(replay.winner)}")
 
 
+class ReplayCheck(EpisodeHook):
+    """An episode hook that raises :func:`check_replayed`'s ReplayError when the played-back
+    episode ends: placed before a video's hook, a replay that diverges leaves no video
+    (the recorder removes its partial file, an existing file at its path is kept)."""
+
+    def __init__(self, replay: Replay):
+        self.replay = replay
+
+    def on_end(self, episode: Episode) -> None:
+        check_replayed(self.replay, episode.match)
+
+
 def _result(winner: str | None) -> str:
     return f"team {winner}" if winner is not None else "no winner"
 
