@@ -8,7 +8,7 @@ import argparse
 import sys
 import time
 
-from alphatank.commands.argtypes import given, positive_int, seed, window_fps
+from alphatank.commands.argtypes import given, max_steps, positive_int, seed, window_fps
 from alphatank.game.arena import arena_scenario, run_arena
 from alphatank.game.lineup import spec_seat
 from alphatank.game.scenarios import ScenarioError
@@ -30,8 +30,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="games per pair, sides alternating (default: %(default)s)")
     p.add_argument("--seed", type=seed, default=0, help="first episode seed")
     p.add_argument("--preset", default="paper", help="game preset (paper, long_range)")
-    p.add_argument("--max-steps", type=positive_int, default=None,
-                   help="ticks before a game is a draw (default: the preset's)")
+    p.add_argument("--max-steps", type=max_steps, default=None,
+                   help="ticks before a game is a draw, 1 to 10,000,000 (default: the "
+                        "preset's)")
     p.add_argument("--render", action="store_true",
                    help="show every game in a window (refused without a display)")
     p.add_argument("--fps", type=window_fps, default=60.0,

@@ -4,10 +4,11 @@ exit 2) naming the flag and what is allowed."""
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 from collections.abc import Callable
 
-from alphatank.sim.config import ACTION_REPEAT_MAX, MATCHES_MAX
+from alphatank.sim.config import ACTION_REPEAT_MAX, MATCHES_MAX, GameConfig
 
 
 def given(text: str) -> str:
@@ -55,6 +56,9 @@ def int_in_range(lo: int, hi: int) -> Callable[[str], int]:
 
 match_count = int_in_range(1, MATCHES_MAX)  # matches played at once
 action_repeat = int_in_range(1, ACTION_REPEAT_MAX)  # ticks a learner's action is held
+# an episode's length limit in ticks, in GameConfig.max_steps' own range
+max_steps = int_in_range(*next(f.metadata["range"] for f in dataclasses.fields(GameConfig)
+                               if f.name == "max_steps"))
 
 
 def positive_float(text: str) -> float:

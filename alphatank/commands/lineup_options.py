@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from alphatank.commands.argtypes import given, seed
+from alphatank.commands.argtypes import given, max_steps, seed
 from alphatank.game.lineup import Lineup, build_lineup, lineup_scenario
 from alphatank.game.seats import SEAT_HELP
 from alphatank.ui.render import DEFAULT_OVERLAYS
@@ -22,7 +22,8 @@ def add_lineup_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--stand-in", default="smart",
                    help="bot for learner seats when no --checkpoint is given (default: smart)")
     p.add_argument("--seed", type=seed, default=0, help="episode seed (default: 0)")
-    p.add_argument("--max-steps", type=int, help="episode length limit in ticks")
+    p.add_argument("--max-steps", type=max_steps,
+                   help="episode length limit in ticks, 1 to 10,000,000")
     p.add_argument("--overlays", default=",".join(DEFAULT_OVERLAYS),
                    help="aim,trajectory,bfs | all | none (default: aim,bfs)")
 
@@ -37,7 +38,7 @@ def learner_seat(checkpoint: str | None) -> str | None:
 def lineup_from_args(args: argparse.Namespace, interactive: bool) -> Lineup:
     """The line-up a ``play``/``record`` command line asks for (without a keyboard, human
     seats are played by the stand-in bot)."""
-    game = {"max_steps": args.max_steps} if args.max_steps is not None else {}  # 0: an error
+    game = {"max_steps": args.max_steps} if args.max_steps is not None else {}
     sc = lineup_scenario(args.scenario, args.seats, args.map, game)
     return build_lineup(sc, interactive=interactive, learner=learner_seat(args.checkpoint),
                         stand_in=args.stand_in)
