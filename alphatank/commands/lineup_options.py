@@ -1,5 +1,5 @@
 """Command-line options that choose a line-up, shared by ``play`` and ``record`` (not a
-verb itself)."""
+verb itself), and the ``--overlays`` type (``replay`` takes it too)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import argparse
 from alphatank.commands.argtypes import given, max_steps, seed
 from alphatank.game.lineup import Lineup, build_lineup, lineup_scenario
 from alphatank.game.seats import SEAT_HELP
-from alphatank.ui.render import DEFAULT_OVERLAYS
+from alphatank.ui.render import DEFAULT_OVERLAYS, parse_overlays
 
 
 def add_lineup_arguments(p: argparse.ArgumentParser) -> None:
@@ -24,8 +24,17 @@ def add_lineup_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=seed, default=0, help="episode seed (default: 0)")
     p.add_argument("--max-steps", type=max_steps,
                    help="episode length limit in ticks, 1 to 10,000,000")
-    p.add_argument("--overlays", default=",".join(DEFAULT_OVERLAYS),
+    p.add_argument("--overlays", type=overlays, default=",".join(DEFAULT_OVERLAYS),
                    help="aim,trajectory,bfs | all | none (default: aim,bfs)")
+
+
+def overlays(text: str) -> tuple[str, ...]:
+    """``--overlays`` as overlay names (an argparse type: a bad name is refused naming the
+    flag, before any seat is loaded)."""
+    try:
+        return parse_overlays(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def learner_seat(checkpoint: str | None) -> str | None:

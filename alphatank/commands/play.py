@@ -17,7 +17,7 @@ from alphatank.commands.lineup_options import add_lineup_arguments, lineup_from_
 from alphatank.errors import one_line
 from alphatank.files import check_writable
 from alphatank.ui.human import HUMAN_ORDER
-from alphatank.ui.render import DisplayUnavailable, parse_overlays, window_display
+from alphatank.ui.render import DisplayUnavailable, window_display
 from alphatank.ui.replay import check_replay_room
 from alphatank.ui.session import NO_DISPLAY_HELP, PlaySession
 
@@ -59,9 +59,9 @@ def run(args: argparse.Namespace) -> int:
             sc = lineup.scenario
             check_replay_room(sc.game_config(), sc.map_specs(), "--save-replay")
         session = PlaySession(lineup, seed=args.seed, fps=args.fps,
-                              overlays=parse_overlays(args.overlays), scale=args.scale,
+                              overlays=args.overlays, scale=args.scale,
                               save_replay=args.save_replay, realtime=not args.headless_test)
-    except ValueError as exc:  # overlays; other bad input goes to alphatank.cli's one line
+    except ValueError as exc:  # bad input not an InputError (those go to alphatank.cli)
         print(f"alphatank play: error: {one_line(exc)}", file=sys.stderr)
         return 2
     for note in lineup.notes:

@@ -22,7 +22,6 @@ from alphatank.commands.lineup_options import add_lineup_arguments, lineup_from_
 from alphatank.errors import one_line
 from alphatank.files import check_distinct, check_writable
 from alphatank.sim.episode import EpisodeHook
-from alphatank.ui.render import parse_overlays
 from alphatank.ui.replay import ReplayRecorder, check_replay_room
 from alphatank.ui.video import VideoRecorder, check_outputs, record_episode
 
@@ -58,9 +57,9 @@ def run(args: argparse.Namespace) -> int:
             check_replay_room(sc.game_config(), sc.map_specs(), "--replay")
         video = VideoRecorder(mp4=Path(args.out), gif=args.gif, fps=args.fps,
                               every=args.every, hold_s=args.hold,
-                              overlays=parse_overlays(args.overlays), labels=lineup.labels,
+                              overlays=args.overlays, labels=lineup.labels,
                               scale=args.scale)
-    except ValueError as exc:  # overlays; other bad input goes to alphatank.cli's one line
+    except ValueError as exc:  # bad input not an InputError (those go to alphatank.cli)
         print(f"alphatank record: error: {one_line(exc)}", file=sys.stderr)
         return 2
     for note in lineup.notes:

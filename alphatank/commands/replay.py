@@ -13,12 +13,12 @@ import sys
 import time
 
 from alphatank.commands.argtypes import given, positive_int, replay_speed
+from alphatank.commands.lineup_options import overlays
 from alphatank.errors import one_line
 from alphatank.files import check_distinct
 from alphatank.ui.render import (
     DEFAULT_OVERLAYS,
     DisplayUnavailable,
-    parse_overlays,
     window_display,
 )
 from alphatank.ui.replay import (
@@ -42,7 +42,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--render", action="store_true", help="play it back in a window")
     p.add_argument("--speed", type=replay_speed, default=1.0,
                    help="playback speed for --render, 0.05 to 50 (default: 1, real time)")
-    p.add_argument("--overlays", default=",".join(DEFAULT_OVERLAYS),
+    p.add_argument("--overlays", type=overlays, default=",".join(DEFAULT_OVERLAYS),
                    help="aim,trajectory,bfs | all | none (default: aim,bfs)")
     p.add_argument("--headless-test", action="store_true",
                    help="allow --render with SDL_VIDEODRIVER=dummy (automated tests only)")
@@ -55,7 +55,6 @@ def run(args: argparse.Namespace) -> int:
         check_distinct({"the replay file": args.file, "--record": args.record,
                         "--gif": args.gif})
         replay = load_replay(args.file)
-        overlays = parse_overlays(args.overlays)
     except (ReplayError, ValueError) as exc:
         print(f"alphatank replay: error: {one_line(exc)}", file=sys.stderr)
         return 2
@@ -70,14 +69,14 @@ def run(args: argparse.Namespace) -> int:
           f"{'team ' + replay.winner + ' wins' if replay.winner else 'no winner'}")
     try:
         if args.record or args.gif:
-            video = VideoRecorder(mp4=args.record, gif=args.gif, overlays=overlays,
+            video = VideoRecorder(mp4=args.record, gif=args.gif, overlays=args.overlays,
                                   labels=replay.labels or None)
             episode = replay_episode(replay, [ReplayCheck(replay), video])  # check first
             rec = record_episode(episode, video)
             wrote = [f"{rec.mp4} ({rec.frames} frames)"] if rec.mp4 is not None else []
             print("wrote " + " and ".join(wrote + ([str(rec.gif)] if rec.gif else [])))
         if args.render:
-            return _render(replay, args, overlays)
+            return _render(replay, args)
         if not (args.record or args.gif):
             t0 = time.perf_counter()
             match = simulate(replay)
@@ -97,10 +96,10 @@ def _no_display(why: str) -> int:
     return 2
 
 
-def _render(replay: Replay, args: argparse.Namespace, overlays: tuple[str, ...]) -> int:
+def _render(replay: Replay, args: argparse.Namespace) -> int:
     tick_hz = replay.game_config().tick_hz
     labels = replay.labels or [str(i) for i in range(len(replay.teams))]  # seats from 0
-    session = PlaySession(fps=tick_hz * args.speed, overlays=overlays, verbose=False,
+    session = PlaySession(fps=tick_hz * args.speed, overlays=args.overlays, verbose=False,
                           new_episode=lambda _seed, hooks: replay_episode(replay, hooks),
                           labels=labels)
     try:
