@@ -391,6 +391,8 @@ CASES = [
     ("record-ckpt-nan", ["record", "--checkpoint", "{ckpt_nan}", "--seats", "learner,smart"],
      ["{ckpt_nan}", "{nan_tensor}", "NaN"]),
     ("record-seed", ["record", "--seats", "smart,random", "--seed", "-1"], ["--seed", "2^63"]),
+    ("record-hold", ["record", "--seats", "smart,random", "--max-steps", "1", "--scale", "0.1",
+                     "--hold", "61"], ["argument --hold", "must be a number in [0, 60]", "'61'"]),
     ("record-overlays", ["record", "--overlays", "xray", "--seats", "smart,random"],
      ["argument --overlays", "xray"]),
     ("play-overlays", ["play", "--headless-test", "--overlays", "aim,xray"],

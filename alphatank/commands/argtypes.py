@@ -72,17 +72,6 @@ def positive_float(text: str) -> float:
     return value
 
 
-def non_negative_float(text: str) -> float:
-    """A finite number >= 0."""
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not (math.isfinite(value) and value >= 0):
-        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text!r}")
-    return value
-
-
 def seed(text: str) -> int:
     """A random seed: an integer in [0, 2^63)."""
     try:
@@ -114,6 +103,7 @@ scale = in_range(*SCALE_RANGE)  # a window or video scale (times the map's size 
 window_fps = in_range(1.0, 1000.0)  # a window's frames per second (play)
 video_fps = in_range(0.01, 1000.0)  # a video's frames per second (record)
 replay_speed = in_range(0.05, 50.0)  # times real time (replay --render)
+hold_seconds = in_range(0.0, 60.0)  # a video's still final frame (record --hold)
 
 
 BUDGET_MAX_MIN = 7 * 24 * 60  # a week

@@ -13,7 +13,7 @@ from pathlib import Path
 
 from alphatank.commands.argtypes import (
     given,
-    non_negative_float,
+    hold_seconds,
     positive_int,
     scale,
     video_fps,
@@ -39,8 +39,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="draw every N-th tick (default: 1, a frame per tick)")
     p.add_argument("--fps", type=video_fps,
                    help="video frame rate, 0.01 to 1000 (default: real time)")
-    p.add_argument("--hold", type=non_negative_float, default=0.0,
-                   help="seconds to hold the final frame (default: 0)")
+    p.add_argument("--hold", type=hold_seconds, default=0.0,
+                   help="seconds to hold the final frame, 0 to 60 (default: 0)")
     p.add_argument("--scale", type=scale, default=1.0,
                    help="video scale, 0.1 to 8 times the map's size (default: 1)")
 
