@@ -7,8 +7,10 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import subprocess
 import sys
+import time
 import zipfile
 from pathlib import Path
 
@@ -251,3 +253,22 @@ def test_wandb_video_wraps_the_mp4(tmp_path):
     assert isinstance(wandb_video(rec, caption="eval"), wandb.Video)
     with pytest.raises(ValueError, match="mp4="):
         wandb_video(record_match(lineup.start(1).match, lineup.controllers))
+
+
+def test_record_killed_by_sigterm_leaves_no_partial_files(tmp_path):
+    """`kill` or `timeout` stops `alphatank record` as Ctrl-C does: one line, status 130,
+    and the half-written video is removed (the process died with it left behind)."""
+    proc = subprocess.Popen([sys.executable, "-m", "alphatank.cli", "record", "--seats",
+                             "smart,dodge", "--hold", "60", "-o", "k.mp4", "--gif", "k.gif",
+                             "--replay", "k.npz"], cwd=tmp_path, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not list(tmp_path.glob(".k.partial.mp4")) and time.monotonic() < deadline:
+            time.sleep(0.05)  # the video is being written
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()  # no-op once it has ended; a hung one must not outlive the test
+    assert (proc.returncode, err) == (130, "alphatank record: interrupted by SIGTERM\n")
+    assert list(tmp_path.iterdir()) == []

@@ -23,7 +23,12 @@ from alphatank.errors import one_line
 from alphatank.files import check_distinct, check_writable
 from alphatank.sim.episode import EpisodeHook
 from alphatank.ui.replay import ReplayRecorder, check_replay_room
-from alphatank.ui.video import VideoRecorder, check_outputs, record_episode
+from alphatank.ui.video import (
+    VideoRecorder,
+    check_outputs,
+    record_episode,
+    sigterm_interrupts,
+)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -69,8 +74,9 @@ def run(args: argparse.Namespace) -> int:
         hooks.append(ReplayRecorder(scenario=lineup.scenario.name, seats=lineup.seats,
                                     labels=lineup.labels, path=args.replay,
                                     policies=lineup.controllers))
-    episode = lineup.start(args.seed, hooks)
-    rec = record_episode(episode, video)
+    with sigterm_interrupts():  # killed: no partial files left behind
+        episode = lineup.start(args.seed, hooks)
+        rec = record_episode(episode, video)
     result = f"team {rec.winner} wins" if rec.winner else "draw"
     print(f"{lineup.scenario.name} seed {args.seed} on {episode.match.spec.name}: {result} "
           f"after {rec.ticks} ticks; {rec.frames} frames at {rec.fps:g} fps -> {rec.mp4}")

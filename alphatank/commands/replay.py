@@ -30,7 +30,12 @@ from alphatank.ui.replay import (
     simulate,
 )
 from alphatank.ui.session import NO_DISPLAY_HELP, PlaySession
-from alphatank.ui.video import VideoRecorder, check_outputs, record_episode
+from alphatank.ui.video import (
+    VideoRecorder,
+    check_outputs,
+    record_episode,
+    sigterm_interrupts,
+)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -71,8 +76,9 @@ def run(args: argparse.Namespace) -> int:
         if args.record or args.gif:
             video = VideoRecorder(mp4=args.record, gif=args.gif, overlays=args.overlays,
                                   labels=replay.labels or None)
-            episode = replay_episode(replay, [ReplayCheck(replay), video])  # check first
-            rec = record_episode(episode, video)
+            with sigterm_interrupts():  # killed: no partial files left behind
+                episode = replay_episode(replay, [ReplayCheck(replay), video])  # check first
+                rec = record_episode(episode, video)
             wrote = [f"{rec.mp4} ({rec.frames} frames)"] if rec.mp4 is not None else []
             print("wrote " + " and ".join(wrote + ([str(rec.gif)] if rec.gif else [])))
         if args.render:

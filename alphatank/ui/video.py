@@ -10,7 +10,9 @@ streams them to an MP4; an optional GIF gets a downscaled, thinned copy.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+import signal
+from collections.abc import Iterable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -44,6 +46,7 @@ class Recording:
 
 
 VIDEO_SUFFIXES = (".mp4", ".mkv", ".mov", ".avi")  # containers that hold H.264
+_STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
 
 
 def check_outputs(mp4: str | Path | None, gif: str | Path | None,
@@ -79,7 +82,13 @@ class _Mp4:
         h, w = frame.shape[:2]
         if h % 2 or w % 2:
             frame = np.pad(frame, ((0, h % 2), (0, w % 2), (0, 0)), mode="edge")
-        self.writer.append_data(frame)
+        # Ctrl-C or SIGTERM wait for the whole frame to be written: one arriving mid-write
+        # left ffmpeg a torn frame, which it reported on stderr besides our one line
+        held = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
+        try:
+            self.writer.append_data(frame)
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, held)
 
     def close(self, ok: bool) -> None:
         self.writer.close()
@@ -179,6 +188,20 @@ def record_episode(episode: Episode, video: VideoRecorder) -> Recording:
         raise
     assert video.recording is not None
     return video.recording
+
+
+@contextmanager
+def sigterm_interrupts() -> Iterator[None]:
+    """Within the block SIGTERM (``kill``, ``timeout``) raises KeyboardInterrupt as Ctrl-C
+    does, so :func:`record_episode` removes its partial files instead of the process dying
+    with them (for a command's main thread; the previous handler is restored after)."""
+    def on_term(signum: int, frame: Any) -> None:
+        raise KeyboardInterrupt("by SIGTERM")
+    previous = signal.signal(signal.SIGTERM, on_term)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def record_match(match: Match, policies: Sequence[Policy], *,
