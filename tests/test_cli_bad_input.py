@@ -28,7 +28,7 @@ from alphatank.game.seats import agent_path
 from alphatank.training.ppo import PPOConfig
 from alphatank.training.presets import LearnerSpec, TrainConfig
 from alphatank.training.runner import Trainer
-from alphatank.ui.replay import ReplayRecorder, save_replay
+from alphatank.ui.replay import ReplayRecorder, content_digest, save_replay
 
 ROOT = Path(__file__).resolve().parents[1]
 GOOD_MAP = "name: m\n\n#####\n#1..#\n#.#.#\n#..2#\n#####\n"
@@ -134,11 +134,15 @@ def files(tmp_path_factory) -> dict[str, str]:
     flipped[head + 30 + name_len + extra_len + info.compress_size // 2] ^= 0xFF  # deflate data
     put("flipped.npz", bytes(flipped))
 
-    def spoiled(name: str, **meta_changes: object) -> None:
+    def spoiled(name: str, redigest: bool = False, **meta_changes: object) -> None:
+        """A copy of the good replay with ``meta_changes``; ``redigest``: with the digest
+        of the changed content (anyone can compute it; it is no signature)."""
         with np.load(good) as z:
             arrays = {k: z[k] for k in z.files}
         meta = json.loads(arrays.pop("meta").tobytes())
         meta.update(meta_changes)
+        if redigest:
+            meta["digest"] = content_digest(meta, arrays)
         blob = np.frombuffer(json.dumps(meta).encode(), np.uint8)
         np.savez_compressed(d / name, meta=blob, **arrays)
         out[name.replace(".", "_")] = str(d / name)
@@ -152,6 +156,8 @@ def files(tmp_path_factory) -> dict[str, str]:
     spoiled("maptext.npz", map_text=replay.map_text + "\n; an edit the simulation ignores\n")
     spoiled("teamnul.npz", teams=["A\x00", *replay.teams[1:]])
     spoiled("longlabel.npz", labels=["y" * 5000, "z"])
+    spoiled("escscenario.npz", True, scenario="vs\n\x1b[31mred")  # printed in the header
+    spoiled("longmapname.npz", True, map_name="m" * 5000)
     # A 6 TiB array declared in 1 KB: an .npy header's shape, then 100 bytes of data.
     with zipfile.ZipFile(good) as src, zipfile.ZipFile(d / "bomb.npz", "w") as dst:
         for item in src.infolist():
@@ -333,6 +339,11 @@ CASES = [
      ["meta.teams[0]: must be printable, got 'A\\x00': U+0000 is a control character"]),
     ("replay-long-label", ["replay", "{longlabel_npz}"],
      ["meta.labels[0]: must be at most 4096 characters, got 5,000"]),
+    ("replay-scenario-escape", ["replay", "{escscenario_npz}"],
+     ["meta.scenario: must be printable, got 'vs\\n\\x1b[31mred': U+000A is a control "
+      "character"]),
+    ("replay-long-map-name", ["replay", "{longmapname_npz}"],
+     ["meta.map_name: must be at most 4096 characters, got 5,000"]),
     ("replay-header-bomb", ["replay", "{bomb_npz}"],
      ["member 'actions.npy' unpacks to 6,597,069,766,656 bytes; a replay member may hold "
       "at most 268,435,456"]),

@@ -50,7 +50,8 @@ _META_KEYS = ("format", "version", "seed", "match_seed", "scenario", "seats", "m
               "digest")
 MAX_SUBSTEPS = 5_000_000  # physics substeps a re-simulation may take (ticks x substeps)
 MAX_TANKS = 64
-LABEL_MAX = 4096  # characters of a seat's description or label (a checkpoint path)
+LABEL_MAX = 4096  # characters of a seat's description or label (a checkpoint path), of the
+# scenario (its name or .toml path) and of the map's name
 MAX_META_BYTES = 8 << 20
 MAX_ARRAY_BYTES = 256 << 20
 _HEX64 = re.compile(r"[0-9a-f]{64}")
@@ -371,6 +372,9 @@ def load_replay(path: str | Path) -> Replay:
     for key in ("final_hash", "digest"):
         if not _HEX64.fullmatch(meta[key]):
             raise fail(f"meta.{key}", "must be 64 lowercase hex digits (a SHA-256)")
+    for key in ("scenario", "map_name"):  # printed and drawn, as labels are: one line
+        if meta[key] and (why := name_problem(meta[key], LABEL_MAX)):
+            raise fail(f"meta.{key}", why[:300])
     teams = meta["teams"]
     if (not isinstance(teams, list) or not 2 <= len(teams) <= MAX_TANKS
             or not all(isinstance(t, str) and t for t in teams)):
