@@ -35,7 +35,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_lineup_arguments(p)
     p.add_argument("-o", "--out", type=given, default="match.mp4",
                    help="MP4 to write (default: match.mp4)")
-    p.add_argument("--gif", type=given, metavar="FILE", help="also write a GIF (half size, 15 fps)")
+    p.add_argument("--gif", type=given, metavar="FILE",
+                   help="also write a GIF: half size, every other frame at half the frame "
+                        "rate (15 fps in real time)")
     p.add_argument("--replay", type=given, metavar="FILE",
                    help="also save the match as a replay file (refused if it exists, unless "
                         "--force)")
