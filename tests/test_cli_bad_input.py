@@ -351,6 +351,10 @@ CASES = [
      ["the replay file and --gif name the same file"]),
     ("record-replay-empty", ["record", "--seats", "smart,random", "--replay", ""],
      ["argument --replay: is empty"]),
+    ("record-seats-empty", ["record", "--seats", "", "--max-steps", "3"],
+     ["argument --seats: is empty"]),  # not read as none: the default human,smart
+    ("play-stand-in-empty", ["play", "--headless-test", "--seats", "learner,smart",
+                             "--stand-in", ""], ["argument --stand-in: is empty"]),
     ("record-scenario-empty-path", ["record", "--scenario", ""], ["argument --scenario: is empty"]),
     ("record-replay-room", ["record", "--scenario", "{longgame_toml}", "--replay",
                             "{dir}/long.npz"],

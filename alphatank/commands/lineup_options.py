@@ -15,11 +15,11 @@ def add_lineup_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scenario", type=given, help="scenario name or .toml path (e.g. mixed_teams)")
     p.add_argument("--map", type=given, help="map for --seats (default: battlefield for 2 seats, "
                                  "arena4 up to 4, arena8 up to 8)")
-    p.add_argument("--seats", help=SEAT_HELP)
+    p.add_argument("--seats", type=given, help=SEAT_HELP)
     p.add_argument("--checkpoint", type=given, metavar="SEAT",
                    help="who plays the scenario's learner seats: a checkpoint or run folder, "
                         "checkpoint:PATH, agent:NAME or bot:NAME")
-    p.add_argument("--stand-in", default="smart",
+    p.add_argument("--stand-in", type=given, default="smart",
                    help="bot for learner seats when no --checkpoint is given (default: smart)")
     p.add_argument("--seed", type=seed, default=0, help="episode seed (default: 0)")
     p.add_argument("--max-steps", type=max_steps,
