@@ -148,6 +148,7 @@ def files(tmp_path_factory) -> dict[str, str]:
         out[name.replace(".", "_")] = str(d / name)
 
     spoiled("v1.npz", version=1)
+    spoiled("v3.npz", version=3)  # from a newer AlphaTank
     spoiled("seed.npz", match_seed=-5)
     spoiled("teamsnull.npz", teams=None)
     spoiled("teamsAA.npz", teams=["A", "A"])
@@ -315,7 +316,11 @@ CASES = [
     ("replay-truncated", ["replay", "{truncated_npz}"], ["{truncated_npz}", "not a readable"]),
     ("replay-flipped-byte", ["replay", "{flipped_npz}"], ["{flipped_npz}"]),
     ("replay-wrong-kind", ["replay", "{good_txt}"], ["{good_txt}", "not a readable"]),
-    ("replay-v1", ["replay", "{v1_npz}"], ["{v1_npz}", "version 1", "version 2"]),
+    ("replay-v1", ["replay", "{v1_npz}"],
+     ["{v1_npz}", "version 1", "version 2", "(record the match again)"]),
+    ("replay-v3", ["replay", "{v3_npz}"], ["{v3_npz}", "replay version 3 is not supported: "
+     "this AlphaTank reads version 2 (a newer AlphaTank wrote it: upgrade AlphaTank to "
+     "replay it)"]),
     ("replay-seed", ["replay", "{seed_npz}"], ["{seed_npz}", "meta.match_seed", "-5"]),
     ("replay-teams-null", ["replay", "{teamsnull_npz}"], ["{teamsnull_npz}", "meta.teams"]),
     ("replay-teams-AA", ["replay", "{teamsAA_npz}"], ["meta.teams", "2 different teams"]),

@@ -355,9 +355,13 @@ def load_replay(path: str | Path) -> Replay:
 
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         raise ReplayError(f"{path}: not an AlphaTank replay (meta.format is not {FORMAT!r})")
-    if meta.get("version") != VERSION:
-        raise ReplayError(f"{path}: replay version {meta.get('version')!r} is not supported: "
-                          f"this AlphaTank reads version {VERSION} (record the match again)")
+    version = meta.get("version")
+    if version != VERSION:
+        newer = isinstance(version, int) and not isinstance(version, bool) and version > VERSION
+        fix = ("a newer AlphaTank wrote it: upgrade AlphaTank to replay it" if newer
+               else "record the match again")
+        raise ReplayError(f"{path}: replay version {version!r} is not supported: this "
+                          f"AlphaTank reads version {VERSION} ({fix})")
     missing = [k for k in _META_KEYS if k not in meta]
     if missing:
         raise ReplayError(f"{path}: replay meta lacks field(s) {missing}")
