@@ -32,11 +32,12 @@ from alphatank.ui.replay import (
     ReplayError,
     ReplayRecorder,
     load_replay,
+    replay_episode,
     save_replay,
     simulate,
 )
 from alphatank.ui.session import PlaySession
-from alphatank.ui.video import record_match
+from alphatank.ui.video import VideoRecorder, record_episode, record_match
 
 
 def _args(module, *argv: str) -> argparse.Namespace:
@@ -272,3 +273,16 @@ def test_record_killed_by_sigterm_leaves_no_partial_files(tmp_path):
         proc.kill()  # no-op once it has ended; a hung one must not outlive the test
     assert (proc.returncode, err) == (130, "alphatank record: interrupted by SIGTERM\n")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_replay_video_of_an_unlabelled_replay_numbers_seats_from_0(tmp_path):
+    """A replay without labels (made from Python) is drawn with seat numbers from 0 in its
+    video, as in its window and every message (the video said 1, 2, ...)."""
+    lineup = build_lineup(seats_scenario("smart,aggressive", "open", {"max_steps": 12}))
+    rec = ReplayRecorder()  # no labels
+    lineup.play(2, [rec])
+    path = save_replay(rec.replay, tmp_path / "plain.npz")
+    assert replay.run(_args(replay, str(path), "--gif", str(tmp_path / "cmd.gif"))) == 0
+    video = VideoRecorder(gif=tmp_path / "from0.gif", labels=["0", "1"])
+    record_episode(replay_episode(load_replay(path), [video]), video)
+    assert (tmp_path / "cmd.gif").read_bytes() == (tmp_path / "from0.gif").read_bytes()

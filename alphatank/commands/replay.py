@@ -75,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         if args.record or args.gif:
             video = VideoRecorder(mp4=args.record, gif=args.gif, overlays=args.overlays,
-                                  labels=replay.labels or None)
+                                  labels=_labels(replay))
             with sigterm_interrupts():  # killed: no partial files left behind
                 episode = replay_episode(replay, [ReplayCheck(replay), video])  # check first
                 rec = record_episode(episode, video)
@@ -102,12 +102,17 @@ def _no_display(why: str) -> int:
     return 2
 
 
+def _labels(replay: Replay) -> list[str]:
+    """The names drawn over the tanks: the recorded labels, else the seat numbers (from 0,
+    as in every message), in the window and the videos alike."""
+    return replay.labels or [str(i) for i in range(len(replay.teams))]
+
+
 def _render(replay: Replay, args: argparse.Namespace) -> int:
     tick_hz = replay.game_config().tick_hz
-    labels = replay.labels or [str(i) for i in range(len(replay.teams))]  # seats from 0
     session = PlaySession(fps=tick_hz * args.speed, overlays=args.overlays, verbose=False,
                           new_episode=lambda _seed, hooks: replay_episode(replay, hooks),
-                          labels=labels)
+                          labels=_labels(replay))
     try:
         session.run(max_frames=args.max_frames, caption=f"AlphaTank replay: {args.file}")
     except DisplayUnavailable as exc:
