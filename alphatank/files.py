@@ -189,6 +189,15 @@ def replace_into(tmp: str | Path, path: str | Path) -> None:
 _HELD: dict[str, list[Any]] = {}  # lock file -> [open file, holds] of the locks held here
 
 
+def check_free(folder: str | Path) -> None:
+    """:class:`BusyError` at once if another process holds ``folder``'s
+    :class:`FolderLock`: a probe, before work that comes ahead of taking the lock; it
+    holds nothing after it and makes nothing where no lock file is."""
+    lock = FolderLock(folder)
+    if os.path.exists(lock.path):
+        lock.acquire().release()
+
+
 class FolderLock:
     """An exclusive lock on ``folder`` (``flock`` on the hidden sibling file
     ``.<name>.lock``, which says who holds it and is removed on release), for as long as

@@ -11,6 +11,7 @@ import os
 import re
 import shutil
 import subprocess
+import sys
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -524,3 +525,25 @@ def test_the_learners_replay_buffers_must_fit_together(capsys, tmp_path):
     assert len(err) == 1 and f"buffer_size = {size:,}" in err[0], err
     assert "besides the" in err[0] and "lower buffer_size" in err[0], err
     assert not (tmp_path / "sac_vs_sac").exists()
+
+
+
+PROBE = ("import sys\nfrom alphatank.cli import main\ncode = main(sys.argv[1:])\n"
+         "print('torch' in sys.modules, code)\n")
+
+
+def test_a_run_in_use_is_refused_before_torch_is_loaded(tmp_path, held_elsewhere):
+    """A second train on a run another process holds (a new run before its first save, or
+    a resume) is refused at once: it went through its start-up first (torch, checkpoint,
+    env workers: about 30 s on a loaded machine) before it was told."""
+    new = ["--preset", "ppo_vs_aggressive", "--total-steps", "64", "--num-envs", "2",
+           "--workers", "1", "--wandb", "disabled", "--no-progress", "--runs", str(tmp_path)]
+    assert main(["train", *new, "--name", "done"]) == 0
+    for args, folder in (([*new, "--name", "busy"], tmp_path / "busy"),
+                         (["--resume", str(tmp_path / "done")], tmp_path / "done")):
+        with held_elsewhere(folder) as pid:
+            run = subprocess.run([sys.executable, "-c", PROBE, "train", *args],
+                                 capture_output=True, text=True, timeout=120)
+        assert run.stdout.split()[-2:] == ["False", "2"], (run.stdout, run.stderr)
+        assert re.search(f"{re.escape(str(folder))}: pid {pid} on .* is using it",
+                         run.stderr), run.stderr

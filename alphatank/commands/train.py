@@ -26,7 +26,7 @@ from alphatank.commands.argtypes import (
     seed,
 )
 from alphatank.errors import InputError, as_input_error
-from alphatank.files import check_folder
+from alphatank.files import check_folder, check_free
 from alphatank.training.fields import FieldError
 from alphatank.training.presets import (
     BOT_POOL,
@@ -434,6 +434,9 @@ def _start(args: argparse.Namespace, progress: bool, stack: contextlib.ExitStack
                              "folder and resume the copy")
         try:  # a CheckpointError is an InputError already
             with stop.interruptible():
+                saved_in = Path(args.resume)  # a run, or one of its saves
+                check_free(saved_in.parent.parent if saved_in.parent.name == "checkpoints"
+                           else saved_in)  # in use: said before torch and the load
                 from alphatank.training.checkpoint import load_checkpoint, resume_dir
                 from alphatank.training.runner import resume_trainer
                 ckpt = load_checkpoint(args.resume)
@@ -483,6 +486,7 @@ def _start(args: argparse.Namespace, progress: bool, stack: contextlib.ExitStack
         if (run_dir / "latest").exists():
             raise InputError(f"{run_dir} already holds a run; continue it with --resume "
                              f"{run_dir} or pick another --name")
+        check_free(run_dir)  # a run starting under this name: said before torch is loaded
         from alphatank.training.runner import Trainer
         runners = _env_runners(args, cfg, stack)
     try:
