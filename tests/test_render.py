@@ -120,6 +120,8 @@ def test_overlays_toggle_by_key_and_draw():
         assert r.overlays == set()
         assert np.array_equal(r.frame(m, bots), base)
     assert parse_overlays("all") == OVERLAYS and parse_overlays("none") == ()
+    # 'all' with others is all (it was refused as an unknown overlay, though listed as valid)
+    assert parse_overlays("all,aim") == OVERLAYS == parse_overlays(["aim", "all"])
     with pytest.raises(ValueError, match="valid"):
         parse_overlays("aim,lasers")
 

@@ -137,12 +137,10 @@ def parse_overlays(text: str | Iterable[str]) -> tuple[str, ...]:
     """Overlay names from "aim,bfs" (or an iterable); "none" or "" for none, "all" for all."""
     names = [s.strip() for s in text.split(",")] if isinstance(text, str) else list(text)
     names = [n for n in names if n and n != "none"]
-    if names == ["all"]:
-        return OVERLAYS
-    bad = [n for n in names if n not in OVERLAYS]
+    bad = [n for n in names if n not in (*OVERLAYS, "all")]
     if bad:
         raise ValueError(f"unknown overlay(s) {bad}; valid: {list(OVERLAYS)}, 'all' or 'none'")
-    return tuple(dict.fromkeys(names))
+    return OVERLAYS if "all" in names else tuple(dict.fromkeys(names))
 
 
 class Renderer:
