@@ -260,6 +260,8 @@ CASES = [
     ("bench-train-option", ["bench", "--train-fragments"],
      ["--train-fragments: an option of --train; add --train"]),
     ("bench-soak-env", ["bench", "--soak", "--env"], ["--env: not an option of --soak"]),
+    ("bench-train-threads", ["bench", "--train", "--train-threads", "100000"],
+     ["argument --train-threads", "[1, 1024]"]),
     ("bench-soak-train-option", ["bench", "--soak", "--train-workers", "4"],
      ["--train-workers: not an option of --soak"]),
     ("bench-train-envs", ["bench", "--train", "--train-envs", "5000"],

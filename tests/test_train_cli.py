@@ -114,7 +114,8 @@ def test_bad_flags_are_one_line_errors(capsys, argv, error):
     ("--total-steps", "0", "an integer >= 1"),
     ("--workers", "0", "an integer >= 1"),
     ("--eval-games", "0", "an integer >= 1"),
-    ("--torch-threads", "x", "an integer >= 1"),
+    ("--torch-threads", "x", "an integer in [1, 1024]"),
+    ("--torch-threads", "100000", "an integer in [1, 1024]"),  # torch crashed (SIGSEGV)
     ("--env-runners", "0", "an integer >= 1"),
     ("--checkpoint-every", "-1", "an integer >= 0"),
     ("--keep-checkpoints", "-1", "an integer >= 0"),

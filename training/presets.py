@@ -115,6 +115,11 @@ class LearnerSpec:
             raise ValueError(f"{prefix.rstrip('.: ')}: {exc}") from None
 
 
+# Most torch threads: more than any one machine has cores (torch made them all: at
+# 100,000 its first matrix product crashed the process with a segmentation fault).
+TORCH_THREADS_MAX = 1024
+
+
 @dataclass(frozen=True)
 class TrainConfig:
     """A training run. ``learners`` empty means one PPO learner per learner seat.
@@ -159,7 +164,7 @@ class TrainConfig:
     wandb: str = hp("offline", "wandb mode", choices=WANDB_MODES)
     project: str = hp("alphatank", "wandb project")
     tensorboard: bool = hp(False, "also write TensorBoard logs")
-    torch_threads: int = hp(1, "torch threads", gt=0)
+    torch_threads: int = hp(1, "torch threads", gt=0, le=TORCH_THREADS_MAX)
     time_limit_s: float = hp(0.0, "stop (and checkpoint) after this much wall time in "
                              "seconds of one invocation, at most a week; a resumed run gets "
                              "it again (0: none)", ge=0, le=TIME_LIMIT_MAX_S)

@@ -26,6 +26,7 @@ from alphatank.game.scenarios import ScenarioError
 from alphatank.sim.config import ConfigError, game_config
 from alphatank.sim.mapspec import MapError, load_map
 from alphatank.sim.match import Match
+from alphatank.training.presets import TORCH_THREADS_MAX
 
 if TYPE_CHECKING:
     from alphatank.commands.benchtrain import TrainBench
@@ -71,7 +72,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="training iterations per round of --train (default: 3; with "
                         "--train-overlap a round's first rollout and last update overlap "
                         "nothing, so longer rounds come nearer a long run)")
-    p.add_argument("--train-threads", type=positive_int, default=1, metavar="N",
+    p.add_argument("--train-threads", type=int_in_range(1, TORCH_THREADS_MAX), default=1,
+                   metavar="N",
                    help="torch threads of the --train run's learner (default: 1; more help "
                         "only with idle cores: the env workers wait during each update)")
     p.add_argument("--sac", action="store_true",

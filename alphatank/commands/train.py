@@ -19,6 +19,7 @@ from alphatank.commands.argtypes import (
     action_repeat,
     given,
     in_range,
+    int_in_range,
     match_count,
     non_negative_int,
     positive_float,
@@ -31,6 +32,7 @@ from alphatank.training.fields import FieldError
 from alphatank.training.presets import (
     BOT_POOL,
     CYCLE_INTERVAL,
+    TORCH_THREADS_MAX,
     WANDB_MODES,
     TrainConfig,
     check_run_fields,
@@ -138,7 +140,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     run.add_argument("--wandb", choices=WANDB_MODES, help="wandb mode (default: offline)")
     run.add_argument("--tensorboard", action="store_true", default=None,
                      help="also write TensorBoard logs (needs the tensorboard package)")
-    run.add_argument("--torch-threads", type=positive_int, help="torch threads (default: 1)")
+    run.add_argument("--torch-threads", type=int_in_range(1, TORCH_THREADS_MAX),
+                     help="torch threads (default: 1)")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
     cluster = p.add_argument_group("Ray cluster (the ray extra; docs/distributed.md)")
     cluster.add_argument("--ray", nargs="?", const="", metavar="ADDRESS",
