@@ -2,10 +2,12 @@
 
 import functools
 import json
+import re
 import shutil
 import signal
 import subprocess
 import sys
+import time
 
 import pytest
 
@@ -90,18 +92,30 @@ def test_console_script_runs():
     assert "bench" in out.stdout and "maps" in out.stdout
 
 
-def test_ctrl_c_in_a_verb_without_its_own_stop_is_one_line_and_status_130():
+@pytest.mark.parametrize("wait_s", [0.0, 3.0])
+def test_ctrl_c_in_a_verb_without_its_own_stop_is_one_line_and_status_130(wait_s):
+    """Ctrl-C in the arena: one line, status 130, and the table of the games played
+    before it (they were lost: the line said only 'interrupted')."""
     # as from a terminal: a job started in the background by a script ignores SIGINT, and
     # its children inherit that (the Python in them then never sees Ctrl-C)
     proc = subprocess.Popen([sys.executable, "-m", "alphatank.cli", "arena", "--seats",
-                             "smart,dodge", "--games", "100000"], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True,
+                             "smart,dodge", "--games", "100000", "--max-steps", "20"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         assert proc.stdout.readline().startswith("arena: 2 seats")  # playing now
+        time.sleep(wait_s)  # 20-tick games: many are played in 3 s
         proc.send_signal(signal.SIGINT)
         out, err = proc.communicate(timeout=120)
     finally:
         proc.kill()  # no-op once it has ended; a hung one must not outlive the test
     assert proc.returncode == 130
-    assert err == "alphatank arena: interrupted\n"
+    played = re.fullmatch(r"alphatank arena: interrupted(?: after (\d+) of 100000 games "
+                          r"\(their table above\))?\n", err)
+    assert played, err
+    if wait_s:
+        assert int(played[1]) > 0 and out.startswith("rows: W-D-L")
+        # the table's games are the ones the line counts: smart's row holds them all
+        smart = next(line for line in out.splitlines() if line.startswith("smart "))
+        w, d, loss = map(int, re.search(r"(\d+)-(\d+)-(\d+)", smart).groups())
+        assert w + d + loss == int(played[1])

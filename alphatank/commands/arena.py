@@ -9,7 +9,7 @@ import sys
 import time
 
 from alphatank.commands.argtypes import given, max_steps, positive_int, seed, window_fps
-from alphatank.game.arena import arena_scenario, run_arena
+from alphatank.game.arena import ArenaResult, arena_scenario, run_arena
 from alphatank.game.lineup import spec_seat
 from alphatank.game.scenarios import ScenarioError
 from alphatank.sim.config import game_config
@@ -71,13 +71,25 @@ def run(args: argparse.Namespace) -> int:
     header = (f"arena: {len(seats)} seats, {pairs} pairs x {args.games} games on {where} "
               f"(preset {args.preset}, max {cfg.max_steps} ticks)")
     t0 = time.perf_counter()
-    try:  # the header once the seats pass their checks: a bad one is the only line
+    filled: list[ArenaResult] = []  # the result the games fill, kept if interrupted
+
+    def start(result: ArenaResult) -> None:
+        filled.append(result)
+        print(header, flush=True)  # once the seats pass their checks: a bad one is the only line
+
+    try:
         result = run_arena(seats, args.map, args.games, seed=args.seed, preset=args.preset,
-                           game=overrides, hooks=hooks,
-                           on_start=lambda: print(header, flush=True))
+                           game=overrides, hooks=hooks, on_start=start)
     except no_window as exc:
         print(f"alphatank arena: error: --render: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        played = int(filled[0].wdl.sum()) // 2 if filled else 0  # each game in two cells
+        if not played:
+            raise
+        print(filled[0].table(), flush=True)
+        raise KeyboardInterrupt(f"after {played} of {pairs * args.games} games (their table "
+                                "above)") from None
     finally:
         if renderer is not None:
             renderer.close()

@@ -91,12 +91,13 @@ def run_arena(seats: Sequence[str], map_name: str = "maze", games: int = 20, see
               *, preset: str = "paper", game: Mapping[str, Any] | None = None,
               on_game: Callable[[str, str, Episode], None] | None = None,
               hooks: Sequence[EpisodeHook] = (),
-              on_start: Callable[[], None] | None = None) -> ArenaResult:
+              on_start: Callable[[ArenaResult], None] | None = None) -> ArenaResult:
     """Play ``games`` games for every pair of ``seats`` on ``map_name``, sides alternating
     (see the module docstring). ``game`` overrides the preset's GameConfig fields;
     ``on_game(first, second, episode)`` sees every finished game (``first`` is seat i of
-    the pair, whichever side it played); ``hooks`` join every episode; ``on_start()`` is
-    called once every seat has passed its checks, before the first game."""
+    the pair, whichever side it played); ``hooks`` join every episode; ``on_start(result)``
+    is called once every seat has passed its checks, before the first game, with the
+    result the games fill (a caller that is interrupted keeps the games played)."""
     if games < 1:
         raise ValueError(f"games must be >= 1, got {games}")
     if len(seats) < 2:
@@ -115,11 +116,11 @@ def run_arena(seats: Sequence[str], map_name: str = "maze", games: int = 20, see
     # each controller in both seats of a game on each map: one that does not fit fails now
     check_fit(arena_scenario(seats[0], seats[1], map_name, preset, game),
               [(side, c) for c in ctrls for side in (0, 1)])
-    if on_start is not None:
-        on_start()
     labels = [seat_label(s) for s in parsed]
     n = len(seats)
     result = ArenaResult(list(seats), np.zeros((n, n, 3), dtype=np.int64), League(list(seats)))
+    if on_start is not None:
+        on_start(result)
     for i in range(n):
         for j in range(i + 1, n):
             sides = []
