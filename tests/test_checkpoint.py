@@ -19,6 +19,8 @@ from alphatank.training.checkpoint import (
     CheckpointError,
     load_checkpoint,
     load_policy,
+    non_finite,
+    npz_arrays,
     save_checkpoint,
 )
 from alphatank.training.ppo import PPOConfig
@@ -436,3 +438,34 @@ def test_a_save_that_fails_leaves_no_temporary_folder(tmp_path):
         save_checkpoint(tmp_path, "step_0000000001", {}, {"ppo": {"f": lambda: 0}})
     assert list((tmp_path / "checkpoints").iterdir()) == []
     assert not (tmp_path / "latest").exists()
+
+
+def _anonymous_rss() -> int:
+    """This process's resident anonymous memory in bytes (Linux /proc)."""
+    with open("/proc/self/status") as f:
+        return 1024 * int(next(x for x in f if x.startswith("RssAnon:")).split()[1])
+
+
+@pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="Linux /proc")
+def test_a_saved_replay_is_mapped_not_read_into_memory(tmp_path):
+    """A replay buffer's arrays as a resume reads them: the same values, dtypes, shapes and
+    orders, the big ones mapped from the file, so the buffer filled from them is the only
+    copy in memory (the file was read whole first: twice the buffer at the peak, and a
+    buffer over half the machine's memory passed the check, then was killed on resume)."""
+    rng = np.random.default_rng(0)
+    saved = {"obs": rng.random((200_000, 200), dtype=np.float32),  # 160 MB
+             "fortran": np.asfortranarray(rng.random((3000, 120))), "pos": np.array(7),
+             "empty": np.zeros((0, 5), np.float32)}
+    np.savez(tmp_path / "r.replay.npz", **saved)
+    before = _anonymous_rss()
+    arrays = npz_arrays(tmp_path / "r.replay.npz")
+    assert non_finite(arrays) is None
+    assert _anonymous_rss() - before < 40_000_000  # not the 160 MB of obs
+    for key, want in saved.items():
+        got = arrays[key]
+        assert (got.dtype, got.shape, got.flags.f_contiguous) == (
+            want.dtype, want.shape, want.flags.f_contiguous)
+        assert np.array_equal(got, want)
+    spoiled = np.array(arrays["obs"])
+    spoiled[150_000, 3] = np.inf  # past the first block of the check
+    assert non_finite({"obs": spoiled}) == "obs"

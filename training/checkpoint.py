@@ -26,6 +26,7 @@ import re
 import shutil
 import time
 import weakref
+import zipfile
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -322,8 +323,7 @@ class Checkpoint:
             return None
         self._check_file(file)
         try:
-            with np.load(file, allow_pickle=False) as data:
-                arrays = {k: data[k] for k in data.files}
+            arrays = npz_arrays(file)
         except Exception as exc:
             raise CheckpointError(f"{file}: cannot be read: {type(exc).__name__}: {exc}") from None
         bad = non_finite(arrays)
@@ -481,14 +481,42 @@ def _file_key(key: str) -> bool:
     return bool(name) and "/" not in name and "\\" not in name and name not in (".", "..")
 
 
+def npz_arrays(file: Path) -> dict[str, np.ndarray]:
+    """The arrays of a ``.npz`` file (no pickles), those stored uncompressed (``np.savez``)
+    memory-mapped read-only from the file: a replay buffer restored from them on resume
+    needs no second copy of itself in memory (the whole file was read first, twice the
+    buffer's size at the peak)."""
+    out = {}
+    with np.load(file, allow_pickle=False) as data, zipfile.ZipFile(file) as z:
+        for key in data.files:
+            info = z.getinfo(f"{key}.npy")
+            if info.compress_type != zipfile.ZIP_STORED or info.file_size < 1 << 16:
+                out[key] = data[key]  # compressed, or small: read as it is
+                continue
+            with z.open(info) as f:  # the array's own header: shape, order, dtype
+                version = np.lib.format.read_magic(f)
+                shape, fortran, dtype = (np.lib.format.read_array_header_1_0(f) if version
+                                         == (1, 0) else np.lib.format.read_array_header_2_0(f))
+                header = f.tell()
+            with open(file, "rb") as raw:  # the member's data start: after its local header
+                raw.seek(info.header_offset + 26)
+                names, extra = np.frombuffer(raw.read(4), dtype="<u2")
+            start = info.header_offset + 30 + int(names) + int(extra) + header
+            out[key] = np.memmap(file, dtype=dtype, mode="r", offset=start, shape=shape,
+                                 order="F" if fortran else "C")
+    return out
+
+
 def non_finite(state: Any, prefix: str = "") -> str | None:
     """Dotted name of the first floating-point tensor or array in ``state`` (nested dicts,
     lists) holding NaN or infinity, else None."""
     if isinstance(state, torch.Tensor):
         ok = not state.is_floating_point() or bool(torch.isfinite(state).all())
         return None if ok else prefix or "<tensor>"
-    if isinstance(state, np.ndarray):
-        ok = state.dtype.kind != "f" or bool(np.isfinite(state).all())
+    if isinstance(state, np.ndarray):  # in blocks: no temporary the size of a replay buffer
+        flat = state.ravel(order="K")
+        ok = state.dtype.kind != "f" or all(bool(np.isfinite(flat[i:i + (1 << 20)]).all())
+                                             for i in range(0, flat.size, 1 << 20))
         return None if ok else prefix or "<array>"
     if isinstance(state, float):
         return None if math.isfinite(state) else prefix or "<number>"
