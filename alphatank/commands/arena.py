@@ -9,11 +9,12 @@ import sys
 import time
 
 from alphatank.commands.argtypes import given, max_steps, positive_int, seed, window_fps
-from alphatank.game.arena import ArenaResult, arena_scenario, run_arena
+from alphatank.game.arena import arena_scenario, run_arena
 from alphatank.game.lineup import spec_seat
 from alphatank.game.scenarios import ScenarioError
 from alphatank.sim.config import game_config
 from alphatank.sim.episode import EpisodeHook
+from alphatank.training.stopping import StopFlag, stop_on_signals
 
 DEFAULT_SEATS = "smart,aggressive,defensive,dodge,random"
 
@@ -71,31 +72,27 @@ def run(args: argparse.Namespace) -> int:
     header = (f"arena: {len(seats)} seats, {pairs} pairs x {args.games} games on {where} "
               f"(preset {args.preset}, max {cfg.max_steps} ticks)")
     t0 = time.perf_counter()
-    filled: list[ArenaResult] = []  # the result the games fill, kept if interrupted
-
-    def start(result: ArenaResult) -> None:
-        filled.append(result)
-        print(header, flush=True)  # once the seats pass their checks: a bad one is the only line
-
-    try:
-        result = run_arena(seats, args.map, args.games, seed=args.seed, preset=args.preset,
-                           game=overrides, hooks=hooks, on_start=start)
+    stop = StopFlag()  # Ctrl-C or SIGTERM: the games played are kept (polled every tick)
+    try:  # the header once the seats pass their checks: a bad one is the only line
+        with stop_on_signals(stop):
+            result = run_arena(seats, args.map, args.games, seed=args.seed,
+                               preset=args.preset, game=overrides, hooks=hooks,
+                               on_start=lambda: print(header, flush=True), stop=stop)
     except no_window as exc:
         print(f"alphatank arena: error: --render: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        played = int(filled[0].wdl.sum()) // 2 if filled else 0  # each game in two cells
-        if not played:
-            raise
-        print(filled[0].table(), flush=True)
-        raise KeyboardInterrupt(f"after {played} of {pairs * args.games} games (their table "
-                                "above)") from None
     finally:
         if renderer is not None:
             renderer.close()
     dt = time.perf_counter() - t0
-    print(result.table())
     ticks, n = sum(result.ticks), len(result.ticks)
+    if n:
+        print(result.table(), flush=True)
+    if stop.reason is not None:
+        print(f"alphatank arena: interrupted by {stop.reason}"
+              + (f" after {n} of {pairs * args.games} games (their table above)" if n else ""),
+              file=sys.stderr)
+        return stop.exit_code
     print(f"{n} games, {ticks} ticks in {dt:.1f}s ({ticks / max(dt, 1e-9):,.0f} ticks/s, "
           f"mean game {ticks / n / cfg.tick_hz:.1f}s of game time)")
     return 0

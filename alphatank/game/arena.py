@@ -22,6 +22,7 @@ from alphatank.game.lineup import Lineup, check_fit, seat_label, spec_seat
 from alphatank.game.scenarios import Scenario, parse_scenario
 from alphatank.game.seats import SeatError, controller_kind, make_controller
 from alphatank.sim.episode import Episode, EpisodeHook
+from alphatank.sim.match import TickEvents
 from alphatank.stats import League, wilson_interval
 
 
@@ -91,13 +92,15 @@ def run_arena(seats: Sequence[str], map_name: str = "maze", games: int = 20, see
               *, preset: str = "paper", game: Mapping[str, Any] | None = None,
               on_game: Callable[[str, str, Episode], None] | None = None,
               hooks: Sequence[EpisodeHook] = (),
-              on_start: Callable[[ArenaResult], None] | None = None) -> ArenaResult:
+              on_start: Callable[[], None] | None = None,
+              stop: Callable[[], bool] | None = None) -> ArenaResult:
     """Play ``games`` games for every pair of ``seats`` on ``map_name``, sides alternating
     (see the module docstring). ``game`` overrides the preset's GameConfig fields;
     ``on_game(first, second, episode)`` sees every finished game (``first`` is seat i of
-    the pair, whichever side it played); ``hooks`` join every episode; ``on_start(result)``
-    is called once every seat has passed its checks, before the first game, with the
-    result the games fill (a caller that is interrupted keeps the games played)."""
+    the pair, whichever side it played); ``hooks`` join every episode; ``on_start()`` is
+    called once every seat has passed its checks, before the first game. ``stop()`` is
+    polled after every tick: once it is True the game in play is dropped and the result
+    of the games played is returned."""
     if games < 1:
         raise ValueError(f"games must be >= 1, got {games}")
     if len(seats) < 2:
@@ -116,25 +119,45 @@ def run_arena(seats: Sequence[str], map_name: str = "maze", games: int = 20, see
     # each controller in both seats of a game on each map: one that does not fit fails now
     check_fit(arena_scenario(seats[0], seats[1], map_name, preset, game),
               [(side, c) for c in ctrls for side in (0, 1)])
+    if on_start is not None:
+        on_start()
     labels = [seat_label(s) for s in parsed]
     n = len(seats)
     result = ArenaResult(list(seats), np.zeros((n, n, 3), dtype=np.int64), League(list(seats)))
-    if on_start is not None:
-        on_start(result)
-    for i in range(n):
-        for j in range(i + 1, n):
-            sides = []
-            for a, b in ((i, j), (j, i)):
-                sc = arena_scenario(seats[a], seats[b], map_name, preset, game)
-                sides.append(Lineup(sc, [ctrls[a], ctrls[b]], [labels[a], labels[b]],
-                                    [sc.seats[0].describe(), sc.seats[1].describe()]))
-            for g in range(games):
-                ep = sides[g % 2].play(seed + g // 2, hooks)
-                out_i = ep.outcome(g % 2)  # +1 / 0 / -1 for seat i
-                result.wdl[i, j, 1 - out_i] += 1
-                result.wdl[j, i, 1 + out_i] += 1
-                result.league.record(i, j, out_i)
-                result.ticks.append(ep.ticks)
-                if on_game is not None:
-                    on_game(seats[i], seats[j], ep)
+    if stop is not None:
+        hooks = [*hooks, _StopHook(stop)]
+    try:
+        for i in range(n):
+            for j in range(i + 1, n):
+                sides = []
+                for a, b in ((i, j), (j, i)):
+                    sc = arena_scenario(seats[a], seats[b], map_name, preset, game)
+                    sides.append(Lineup(sc, [ctrls[a], ctrls[b]], [labels[a], labels[b]],
+                                        [sc.seats[0].describe(), sc.seats[1].describe()]))
+                for g in range(games):
+                    ep = sides[g % 2].play(seed + g // 2, hooks)
+                    out_i = ep.outcome(g % 2)  # +1 / 0 / -1 for seat i
+                    result.wdl[i, j, 1 - out_i] += 1
+                    result.wdl[j, i, 1 + out_i] += 1
+                    result.league.record(i, j, out_i)
+                    result.ticks.append(ep.ticks)
+                    if on_game is not None:
+                        on_game(seats[i], seats[j], ep)
+    except _Stopped:
+        pass  # the game in play is dropped; those played stand
     return result
+
+
+class _Stopped(Exception):  # noqa: N818 (a stop, not an error)
+    """Raised by :class:`_StopHook` to end an arena between two ticks."""
+
+
+class _StopHook(EpisodeHook):
+    """Ends the arena (:class:`_Stopped`) after the first tick at which ``stop()`` holds."""
+
+    def __init__(self, stop: Callable[[], bool]):
+        self.stop = stop
+
+    def on_tick(self, episode: Episode, events: TickEvents) -> None:
+        if self.stop():
+            raise _Stopped
