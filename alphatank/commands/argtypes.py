@@ -4,11 +4,10 @@ exit 2) naming the flag and what is allowed."""
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import math
 from collections.abc import Callable
 
-from alphatank.sim.config import ACTION_REPEAT_MAX, MATCHES_MAX, GameConfig
+from alphatank.sim.config import ACTION_REPEAT_MAX, MATCHES_MAX, MAX_STEPS_MAX
 
 
 def given(text: str) -> str:
@@ -56,9 +55,7 @@ def int_in_range(lo: int, hi: int) -> Callable[[str], int]:
 
 match_count = int_in_range(1, MATCHES_MAX)  # matches played at once
 action_repeat = int_in_range(1, ACTION_REPEAT_MAX)  # ticks a learner's action is held
-# an episode's length limit in ticks, in GameConfig.max_steps' own range
-max_steps = int_in_range(*next(f.metadata["range"] for f in dataclasses.fields(GameConfig)
-                               if f.name == "max_steps"))
+max_steps = int_in_range(1, MAX_STEPS_MAX)  # an episode's length limit in ticks
 
 
 def positive_float(text: str) -> float:

@@ -40,7 +40,12 @@ from alphatank.game.observe import (
 from alphatank.game.rewards import RewardTracker, as_index
 from alphatank.game.scenarios import Scenario, ScenarioError, Seat, bot_names, load_scenario
 from alphatank.game.seats import make_controller
-from alphatank.sim.config import ACTION_REPEAT_MAX, MATCHES_MAX, GameConfig, check_value
+from alphatank.sim.config import (
+    ACTION_REPEAT_MAX,
+    MATCHES_MAX,
+    MAX_STEPS_MAX,
+    check_value,
+)
 from alphatank.sim.episode import episode_match, episode_seeds, reset_controllers
 from alphatank.sim.match import Match, TickEvents
 from alphatank.sim.policy import NOOP, BatchPolicy, Policy, is_batch_policy
@@ -240,8 +245,7 @@ def check_learner_seats(sc: Scenario, seats: Any) -> list[int] | None:
 def check_step_limit(steps: Any, what: str) -> int:
     """``steps`` (an argument ``what`` that sets GameConfig.max_steps, e.g. PettingZoo's
     ``max_cycles``) as an int; ScenarioError naming ``what`` unless in max_steps' range."""
-    field = next(f for f in dataclasses.fields(GameConfig) if f.name == "max_steps")
-    value, why = check_value((int,), steps, field.metadata["range"])
+    value, why = check_value((int,), steps, (1, MAX_STEPS_MAX))
     if why:
         raise ScenarioError(f"{what}: {why}")
     return value

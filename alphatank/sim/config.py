@@ -160,6 +160,7 @@ ACTION_REPEAT_MAX = 30
 # Most matches one set steps together (num_envs): each holds a physics space, its bots'
 # tables and its observation rows, about 0.5 MB, so 4,096 is about 2 GB.
 MATCHES_MAX = 4096
+MAX_STEPS_MAX = 10_000_000  # ticks an episode may be limited to (GameConfig.max_steps)
 
 
 @dataclass(frozen=True)
@@ -190,7 +191,7 @@ class GameConfig:
     immortal: bool = False  # the paper's TERMINATE_TIME training mode: hits score, nobody dies
     # every tank starts on a random free cell, the map's spawn slots unused (the paper's team env)
     random_spawns: bool = False
-    max_steps: int = bounded(1200, 1, 10_000_000)
+    max_steps: int = bounded(1200, 1, MAX_STEPS_MAX)
 
     def __post_init__(self) -> None:
         check_fields(self)
