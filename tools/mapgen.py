@@ -38,7 +38,7 @@ from alphatank.mapgen import (
     map_variants,
     map_warnings,
 )
-from alphatank.mapgen.generate import MAX_SPAWNS
+from alphatank.mapgen.generate import MAX_SIZE, MAX_SPAWNS, MIN_SIZE
 from alphatank.sim.mapspec import (
     MapError,
     MapSpec,
@@ -50,15 +50,17 @@ from alphatank.sim.mapspec import (
 )
 
 
-def parse_size(text: str) -> tuple[int, int]:
-    """``"11x13"`` -> (11 rows, 13 cols); ``"11"`` -> (11, 11)."""
+def parse_size(text: str, low: int = MIN_SIZE) -> tuple[int, int]:
+    """``--size``: ``"11x13"`` -> (11 rows, 13 cols); ``"11"`` -> (11, 11); each in
+    [``low``, MAX_SIZE] (``edit`` makes blank maps down to 3 x 3)."""
     parts = text.lower().split("x")
     try:
         rows, cols = (int(parts[0]), int(parts[-1])) if len(parts) <= 2 else (0, 0)
     except ValueError:
         rows = cols = 0
-    if rows <= 0 or cols <= 0:
-        raise argparse.ArgumentTypeError(f"size must be ROWSxCOLS like 11x11, got {text!r}")
+    if not (low <= rows <= MAX_SIZE and low <= cols <= MAX_SIZE):
+        raise argparse.ArgumentTypeError(f"--size must be ROWSxCOLS like 11x11, each in "
+                                         f"[{low}, {MAX_SIZE}], got {text!r}")
     return rows, cols
 
 
@@ -354,7 +356,7 @@ def cmd_edit(args: argparse.Namespace) -> int:
     if path.exists():
         model = EditorModel.from_file(path)
     else:
-        rows, cols = parse_size(args.size)
+        rows, cols = parse_size(args.size, 3)
         model = EditorModel.blank(rows, cols, name=path.stem)
     if os.environ.get("SDL_VIDEODRIVER") == "dummy":  # no window would ever show: it waited
         raise InputError("edit needs a display for its window (SDL_VIDEODRIVER=dummy is set); "
