@@ -24,13 +24,17 @@ from typing import IO, Any
 from alphatank.errors import BusyError, InputError
 
 
-def read_text(path: str | Path) -> str:
+def read_text(path: str | Path, max_bytes: int | None = None, kind: str = "file") -> str:
     """A text file's contents as UTF-8 (a leading byte-order mark dropped); ValueError
-    naming the file, and the offset of the first bad byte, for anything else."""
+    naming the file, and the offset of the first bad byte, for anything else, or when the
+    file holds more than ``max_bytes`` (read no further; ``kind`` names what it should be)."""
     try:
-        raw = Path(path).read_bytes()
+        with Path(path).open("rb") as f:
+            raw = f.read() if max_bytes is None else f.read(max_bytes + 1)
     except OSError as exc:
         raise ValueError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    if max_bytes is not None and len(raw) > max_bytes:
+        raise ValueError(f"{path}: over {max_bytes:,} bytes, too large for a {kind}")
     return decode_text(raw, str(path))
 
 

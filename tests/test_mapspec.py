@@ -7,6 +7,7 @@ import pytest
 
 from alphatank.cli import main
 from alphatank.mapgen.generate import MAX_SIZE, generate
+from alphatank.mapgen.model import EditorModel
 from alphatank.sim.grid import reachable_from
 from alphatank.sim.mapspec import (
     MAX_FLOOR,
@@ -148,8 +149,21 @@ def test_floor_and_world_size_limits_name_the_limit():
         parse_map(_room(5, 21, "name: w\ncell: 400\n\n"), "wide.txt")
     assert str(info.value) == ("wide.txt:2:1: world of 9200 x 2800 px (7 x 23 cells of 400 px);"
                                " at most 8960 px each way")
-    with pytest.raises(MapError, match=r"big.txt:1:1: grid of 3 x 129 cells; at most 128 each"):
+    with pytest.raises(MapError) as info:
         parse_map(_room(1, 127), "big.txt")
+    assert str(info.value) == "big.txt:1:129: row of 129 cells; a grid has at most 128 each way"
+    with pytest.raises(MapError) as info:  # named at the first row too many
+        parse_map(_room(127, 1) + "###\n" * 10, "big.txt")
+    assert str(info.value) == "big.txt:129:1: grid of over 128 rows; at most 128 each way"
+
+
+def test_a_huge_map_file_is_refused_by_its_size_unread(tmp_path):
+    path = tmp_path / "huge.txt"
+    path.write_text(_room(5, 5) + "; padding\n" * 200_000)  # about 2 MB of comment lines
+    for load in (load_map, EditorModel.from_file):
+        with pytest.raises(MapError) as info:
+            load(path)
+        assert str(info.value) == f"{path}: over 1,048,576 bytes, too large for a map file"
     # the map generator's largest size, with no interior walls, loads
     spec = generate(MAX_SIZE, MAX_SIZE, "open", density=0.0)
     assert parse_map(map_text(spec)).rows == MAX_SIZE

@@ -13,6 +13,7 @@ from alphatank.mapgen.generate import MAX_SIZE, MapGenError
 from alphatank.sim.mapspec import (
     GRID_CHARS,
     HEADER_KEYS,
+    MAX_MAP_BYTES,
     MapError,
     MapSpec,
     parse_map,
@@ -92,7 +93,7 @@ class EditorModel:
     def from_file(cls, path: str | Path) -> EditorModel:
         path = Path(path)
         try:
-            text = read_text(path)
+            text = read_text(path, MAX_MAP_BYTES, "map file")
         except ValueError as exc:
             raise MapError(str(exc).removeprefix(f"{path}: "), str(path)) from None
         model = cls.from_text(text, str(path))

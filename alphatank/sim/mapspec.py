@@ -27,6 +27,7 @@ DEFAULT_CELL = 70.0
 # checks the game's tank size), worlds stay drawable
 CELL_RANGE = (39.0, 400.0)
 MAX_GRID = 128  # cells each way
+MAX_MAP_BYTES = 1 << 20  # a map file's size (a 128 x 128 grid takes 16.5 KiB)
 MAX_FLOOR = 64 * 64  # floor cells: navigation keeps (F, F) tables (64 MiB each at most)
 MAX_WORLD = MAX_GRID * DEFAULT_CELL  # px each way: the bots' 5 px clearance raster
 
@@ -178,12 +179,20 @@ def parse_map(text: str, source: str = "<string>", name: str | None = None) -> M
             i += 1
     while i < len(content) and not content[i][1].strip():
         i += 1
+    rows = 0
     for lineno, ln in content[i:]:
         row = ln.rstrip()
         if not row:
             if grid:
                 grid.append((lineno, ""))
             continue
+        rows += 1  # stop at the first row too many, not after the whole file
+        if len(row) > MAX_GRID:
+            raise MapError(f"row of {len(row)} cells; a grid has at most {MAX_GRID} each way",
+                           source, lineno, MAX_GRID + 1)
+        if rows > MAX_GRID:
+            raise MapError(f"grid of over {MAX_GRID} rows; at most {MAX_GRID} each way",
+                           source, lineno, 1)
         grid.append((lineno, row))
     while grid and not grid[-1][1]:
         grid.pop()
@@ -201,9 +210,6 @@ def parse_map(text: str, source: str = "<string>", name: str | None = None) -> M
             raise MapError(f"ragged row: {len(row)} cells, expected {width} like the first row",
                            source, lineno, min(len(row), width) + 1)
 
-    if len(grid) > MAX_GRID or width > MAX_GRID:
-        raise MapError(f"grid of {len(grid)} x {width} cells; at most {MAX_GRID} each way",
-                       source, grid[0][0], 1)
     cell = DEFAULT_CELL
     if "cell" in header:
         try:
@@ -334,7 +340,7 @@ def load_map(name_or_path: str | Path) -> MapSpec:
             raise MapError("not a file (a device or pipe)" if path.exists() else
                            "no such map file", str(path))
         try:
-            text = read_text(path)
+            text = read_text(path, MAX_MAP_BYTES, "map file")
         except ValueError as exc:
             raise MapError(str(exc).removeprefix(f"{path}: "), str(path)) from None
         return parse_map(text, str(path), name=path.stem)
