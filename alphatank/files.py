@@ -58,13 +58,22 @@ def text_lines(text: str) -> list[str]:
     return lines[:-1] if lines[-1] == "" else lines
 
 
+def temp_name(name: str, suffix: str = "", kind: str = "tmp") -> str:
+    """The hidden name ``.NAME.KIND-PID[SUFFIX]`` of a file or folder made before it
+    replaces ``name`` (``kind`` "old": one kept until then); ``NAME`` is cut short so
+    that it fits a file system's 255 bytes."""
+    tail = f".{kind}-{os.getpid()}{suffix}"
+    room = 255 - 1 - len(tail.encode())
+    return f".{name.encode()[:room].decode(errors='ignore')}{tail}"
+
+
 def write_atomic(path: str | Path, write: Callable[[Path], None], suffix: str = "") -> Path:
     """Make ``path`` by ``write(tmp)`` into a temporary sibling renamed over it, so the file
     is either the old one or the whole new one; creates missing parent folders. ``suffix``
     ends the temporary name, for writers that pick a format from it. Returns the path."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}{suffix}")
+    tmp = path.with_name(temp_name(path.name, suffix))
     try:
         write(tmp)
         replace_into(tmp, path)
@@ -174,8 +183,7 @@ def replace_into(tmp: str | Path, path: str | Path) -> None:
         except OSError as exc:
             if exc.errno != errno.EXDEV:
                 raise
-            near = os.path.join(os.path.dirname(real),
-                                f".{os.path.basename(real)}.tmp-{os.getpid()}")
+            near = os.path.join(os.path.dirname(real), temp_name(os.path.basename(real)))
             try:
                 shutil.copyfile(tmp, near)
                 os.replace(near, real)

@@ -196,6 +196,10 @@ def test_export_replaces_only_an_agent_folder(tmp_path, capsys):
     record = load_checkpoint(dest).meta["agent"]
     assert record["description"] == "second" and record["commands"] == ["made second"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["agent", "keep"]  # no leftovers
+    long = tmp_path / ("a" * 250)  # the temporary and old folders' names are cut short
+    for _ in range(2):
+        assert main(["agents", "export", f"agent:{name}", str(long)]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == [long.name, "agent", "keep"]
     (tmp_path / "e.json").write_text("{bad")
     assert main(["agents", "export", f"agent:{name}", str(dest), "--eval",
                  str(tmp_path / "e.json")]) == 2

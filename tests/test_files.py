@@ -35,6 +35,13 @@ def test_atomic_write_replaces_whole_file_and_creates_folders(tmp_path):
     assert [p.name for p in path.parent.iterdir()] == ["out.txt"]
 
 
+def test_atomic_write_of_a_name_as_long_as_the_file_system_takes(tmp_path):
+    path = tmp_path / ("é" * 125 + ".txt")  # 254 bytes: the temporary name is cut short
+    for text in ("first\n", "second\n"):
+        write_text_atomic(path, text)
+    assert [(p.name, read_text(p)) for p in tmp_path.iterdir()] == [(path.name, "second\n")]
+
+
 def test_failed_atomic_write_keeps_old_file_and_no_temporary(tmp_path):
     path = tmp_path / "keep.json"
     write_text_atomic(path, '{"ok": 1}\n')

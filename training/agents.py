@@ -26,6 +26,7 @@ from typing import Any
 import torch
 
 from alphatank.errors import InputError
+from alphatank.files import temp_name
 from alphatank.training.checkpoint import _sha256, load_checkpoint
 from alphatank.training.learners import inference_state
 
@@ -52,7 +53,7 @@ def export_agent(source: str | Path, dest: str | Path, record: dict[str, Any] | 
             raise InputError(f"{dest}: an agent folder that also holds {', '.join(others)}, "
                              f"which replacing it would delete; move them out or give "
                              f"another folder")
-    tmp = dest.with_name(f".{dest.name}.tmp-{os.getpid()}")
+    tmp = dest.with_name(temp_name(dest.name))
     if tmp.exists():
         shutil.rmtree(tmp)
     tmp.mkdir(parents=True)
@@ -67,7 +68,7 @@ def export_agent(source: str | Path, dest: str | Path, record: dict[str, Any] | 
                      **(record or {})}
     meta["files"] = files
     (tmp / "meta.json").write_text(json.dumps(meta, indent=1) + "\n", encoding="utf-8")
-    old = dest.with_name(f".{dest.name}.old-{os.getpid()}")
+    old = dest.with_name(temp_name(dest.name, kind="old"))
     if dest.exists():
         os.replace(dest, old)  # kept until the new folder is in place
     try:
