@@ -217,6 +217,32 @@ def test_a_sac_checkpoint_whose_replay_does_not_fit_plays_but_does_not_resume(tm
     assert load_checkpoint(run).meta["progress"]["global_step"] == ITER  # nothing trained
 
 
+@pytest.mark.parametrize("agent", ["ppo_vs_smart", "team_vs_def"])  # PPO, MAPPO
+def test_a_checkpoint_whose_rollout_does_not_fit_plays_but_does_not_train(agent, tmp_path):
+    """PPO and MAPPO learners loaded to play made their rollout buffer (num_steps rows per
+    seat) and the memory check refused one too large for this machine: they need only the
+    networks. Now the buffer is made when training needs it (plan, act, ingest)."""
+    src = Path(alphatank.__file__).parent / "data" / "agents" / agent
+    ck = tmp_path / agent
+    shutil.copytree(src, ck)
+    meta = ck / "meta.json"
+    text = meta.read_text(encoding="utf-8")
+    meta.write_text(text.replace('"num_steps": 128', f'"num_steps": {10**12}'), encoding="utf-8")
+    checkpoint = load_checkpoint(ck)
+    spec = checkpoint.learner_specs[0]
+    assert spec.config.num_steps == 10**12
+    learner = checkpoint.load_learner(spec.name, weights_only=True)
+    assert learner._buffer is None
+    policy = load_policy(ck)
+    core = MatchSet(checkpoint.scenario, 1, driven=[],
+                    seat_policies=dict.fromkeys(spec.seats, policy))
+    core.reset_env(0, 1)
+    for _ in range(5):
+        core.step(np.zeros((1, 0, 3), dtype=np.int64))
+    with pytest.raises(ValueError, match=r"a rollout of num_steps = 1,000,000,000,000 x "):
+        learner.plan(10**13)
+
+
 def _copy(trained, tmp_path):
     dst = tmp_path / "ck"
     shutil.copytree(load_checkpoint(trained).path, dst)

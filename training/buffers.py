@@ -119,10 +119,11 @@ class RolloutBuffer:
     """Preallocated PPO rollout of ``num_steps`` rows for ``num_streams`` (env, seat) streams."""
 
     def __init__(self, num_steps: int, num_streams: int, obs_dim: int, mask_dim: int = 0,
-                 logit_dim: int = 0):
-        """``logit_dim`` > 0: also ``anchor_logits`` (the anchor policy's logits per row)."""
+                 logit_dim: int = 0, state_dim: int = 0):
+        """``logit_dim`` > 0: also ``anchor_logits`` (the anchor policy's logits per row);
+        ``state_dim`` > 0: also ``states`` (a centralised critic's inputs per row)."""
         t, b = num_steps, num_streams
-        check_memory(t * b * (4 * (obs_dim + logit_dim + 7) + 24 + 1 + mask_dim),
+        check_memory(t * b * (4 * (obs_dim + logit_dim + state_dim + 7) + 24 + 1 + mask_dim),
                      f"a rollout of num_steps = {t:,} x {b:,} streams x {obs_dim} inputs",
                      "lower num_steps or num_envs")
         self.num_steps, self.num_streams = t, b
@@ -138,6 +139,7 @@ class RolloutBuffer:
         self.masks = torch.ones((t, b, mask_dim), dtype=torch.bool) if mask_dim else None
         self.anchor_logits = (torch.zeros((t, b, logit_dim), dtype=torch.float32)
                               if logit_dim else None)
+        self.states = torch.zeros((t, b, state_dim), dtype=torch.float32) if state_dim else None
         self.step = 0
         # numpy views of the same memory: per-step writes through numpy cost a third
         self.np = {k: v.numpy() for k, v in vars(self).items() if isinstance(v, torch.Tensor)}
@@ -153,18 +155,32 @@ class RolloutBuffer:
 
 class OnPolicyPlumbing:
     """The Learner protocol's run plumbing shared by the fixed-rollout learners (PPO,
-    MAPPO): they hold ``cfg.num_steps``, a :class:`RolloutBuffer` ``buffer``, a return
-    normaliser ``ret_norm``, an ``optimizer``, a torch ``generator`` and a numpy
-    ``np_rng``, ``updates`` and ``total_updates``, and keep all their state in
-    ``state_dict``."""
+    MAPPO): they hold ``cfg.num_steps``, a return normaliser ``ret_norm``, an
+    ``optimizer``, a torch ``generator`` and a numpy ``np_rng``, ``updates`` and
+    ``total_updates``, make their :class:`RolloutBuffer` by ``make_buffer()``, and keep all
+    their state in ``state_dict``."""
+
+    _buffer: RolloutBuffer | None = None
+
+    @property
+    def buffer(self) -> RolloutBuffer:
+        """The rollout, made when the learner first trains (:meth:`plan`, acting, taking
+        in fragments): a learner loaded to play or kept as a self-play snapshot holds
+        none, whatever its ``num_steps``."""
+        if self._buffer is None:
+            self._buffer = self.make_buffer()
+        return self._buffer
 
     @property
     def rollout_steps(self) -> int:
         return self.cfg.num_steps
 
     def plan(self, total_steps: int) -> None:
-        """Anneal the learning rate(s) (``anneal_lr``) over ``total_steps`` observe calls."""
+        """Anneal the learning rate(s) (``anneal_lr``) over ``total_steps`` observe calls;
+        make the rollout now, inside the run's :func:`memory_budget`, so that one that
+        does not fit is refused before training starts."""
         self.total_updates = total_steps // self.cfg.num_steps
+        self._buffer = self.buffer
 
     def new_segment(self) -> None:
         """Fresh episodes everywhere: restart the discounted returns of reward scaling."""

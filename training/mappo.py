@@ -265,16 +265,17 @@ class MAPPO(OnPolicyPlumbing, MAPPOActing):
         self.value_norm = ValueNorm()
         self.ret_norm = ReturnNormalizer(num_streams, cfg.gamma, cfg.norm_reward,
                                          cfg.reward_clip)
-        self.buffer = RolloutBuffer(cfg.num_steps, num_streams, self.actor_in, mask_dim)
-        self.states = (torch.zeros((cfg.num_steps, num_streams, state_dim)) if state_dim
-                       else None)
-        self.states_np = self.states.numpy() if self.states is not None else None
+        self.mask_dim = mask_dim
         self.seat_of = np.tile(np.arange(num_seats), self.num_envs)
         self.onehot = np.eye(num_seats, dtype=np.float32)
         self._alive_now = np.ones(num_streams, dtype=bool)  # alive at the last act()
         self.updates = 0
         self.total_updates = 0  # set by plan() for learning-rate annealing
         self.interrupt: Any = None  # set by the runner; polled between minibatches
+
+    def make_buffer(self) -> RolloutBuffer:
+        return RolloutBuffer(self.cfg.num_steps, self.num_streams, self.actor_in,
+                             self.mask_dim, state_dim=self.state_dim)
 
     # ---- acting -------------------------------------------------------------------------
 
@@ -290,8 +291,8 @@ class MAPPO(OnPolicyPlumbing, MAPPOActing):
         values = self.critic_np.forward(s)[:, 0]  # normalised (value_norm units)
         actions = sample_into(buf, x, self.actor_np.forward(x), values, masks, self.nvec,
                               self.np_rng)
-        if self.states_np is not None:
-            self.states_np[t] = s
+        if buf.states is not None:
+            buf.np["states"][t] = s
         live = self._alive(obs, alive)
         self._alive_now = live if live is not None else np.ones(self.num_streams, bool)
         return actions
@@ -335,12 +336,13 @@ class MAPPO(OnPolicyPlumbing, MAPPOActing):
         :meth:`act` and :meth:`observe` record them: (T, B, ...) arrays of raw
         observations, the inputs ``state`` / ``alive``, and what followed (``bootstrap``:
         the copy's values of time-limit cuts). The normalisers take the rows in after."""
-        if self.buffer.masks is not None:
+        buf = self.buffer
+        if buf.masks is not None:
             raise RuntimeError("rollouts acted elsewhere carry no action masks")
         for t in range(obs.shape[0]):
             x = self._actor_input(obs[t], self.seat_of)
-            if self.states_np is not None:
-                self.states_np[self.buffer.step] = self._critic_input(state[t], x)
+            if buf.states is not None:
+                buf.np["states"][buf.step] = self._critic_input(state[t], x)
             if active is None:
                 live = self._alive(obs[t], None if alive is None else alive[t])
                 active_t = live if live is not None else True
@@ -378,7 +380,7 @@ class MAPPO(OnPolicyPlumbing, MAPPOActing):
             live = b_adv[b_active]
             b_adv = (b_adv - live.mean()) / (live.std() + 1e-8) * b_w
         b_x, x_fold = fold_constant(buf.obs.reshape(n, -1))
-        b_s, s_fold = (fold_constant(self.states.reshape(n, -1)) if self.states is not None
+        b_s, s_fold = (fold_constant(buf.states.reshape(n, -1)) if buf.states is not None
                        else (b_x, x_fold))
         b_actions = buf.actions.reshape(n, -1)
         b_logprobs, b_values = buf.logprobs.reshape(n), buf.values.reshape(n)

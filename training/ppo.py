@@ -303,8 +303,7 @@ class PPO(OnPolicyPlumbing):
         self.mirror = NumpyActorCritic(self.net)
         self.obs_norm = ObsNormalizer(obs_dim, cfg.norm_obs, cfg.obs_clip)
         self.ret_norm = ReturnNormalizer(num_streams, cfg.gamma, cfg.norm_reward, cfg.reward_clip)
-        self.buffer = RolloutBuffer(cfg.num_steps, num_streams, obs_dim, mask_dim,
-                                    sum(self.nvec) if cfg.anchor_kl else 0)
+        self.mask_dim = mask_dim
         # the policy RL started from (see anchor()): its actor and observation statistics
         self.anchor_actor: nn.Sequential | None = None
         self.anchor_np: NumpyMLP | None = None
@@ -312,6 +311,10 @@ class PPO(OnPolicyPlumbing):
         self.updates = 0
         self.total_updates = 0  # set by plan() for learning-rate annealing
         self.interrupt: Any = None  # set by the runner; polled between minibatches
+
+    def make_buffer(self) -> RolloutBuffer:
+        return RolloutBuffer(self.cfg.num_steps, self.num_streams, self.obs_dim,
+                             self.mask_dim, sum(self.nvec) if self.cfg.anchor_kl else 0)
 
     # ---- acting -----------------------------------------------------------------------
 
