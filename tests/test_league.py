@@ -72,6 +72,24 @@ def test_opponent_names_and_bad_settings():
         make_schedule({"kind": "league", "colour": "red"}, 100)
 
 
+@pytest.mark.parametrize("spec, message", [
+    # twice the same opponent: two table rows of one name, one of them never rated
+    ({"bots": ["smart", "smart"]}, r"league bots must be a list of distinct names"),
+    ({"weaknesses": [0.5, 0.5000001]}, r"league weaknesses must differ \(an opponent is "
+                                        r"named with 6 digits: \['0.5', '0.5'\]\)"),
+    ({"bots": "smart"}, r"league bots must be a list of distinct names .*, got 'smart'"),
+    ({"weaknesses": 0.5}, r"league weaknesses must be a list of numbers in \(0, 1\], got 0.5"),
+    ({"weaknesses": ["a"]}, r"league weaknesses must be a list of numbers"),
+    ({"weaknesses": [True]}, r"league weaknesses must be a list of numbers"),
+    ({"settings": ["vs_smart"]}, r"league settings must be a table of bot name = "
+                                 r"\[scenario names\], got \['vs_smart'\]"),
+    ({"settings": {"smart": 3}}, r"league settings: 'smart' = 3; keys must be"),
+])
+def test_a_mistyped_league_setting_is_one_line_naming_it(spec, message):
+    with pytest.raises(ValueError, match=message):
+        make_schedule({"kind": "league", **spec}, 100)
+
+
 def test_settings_keep_each_bot_to_its_scenarios_blocks():
     mix = MixedVectorEnv(["vs_random", "vs_dodge"], 5, seed=0, observation="egocentric",
                          game_overrides={"max_steps": 8})

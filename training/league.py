@@ -33,7 +33,8 @@ resumed league starts its snapshot pool afresh).
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from numbers import Real
 from typing import Any
 
 import numpy as np
@@ -69,11 +70,19 @@ class LeagueSchedule(OpponentSchedule):
         from alphatank.game.scenarios import bot_names
 
         valid = bot_names()
-        bad = [b for b in bots if b not in valid]
-        if bad or not bots:
-            raise ValueError(f"league bots must be some of {list(valid)}, got {list(bots)}")
-        if not weaknesses or any(not 0.0 < float(w) <= 1.0 for w in weaknesses):
-            raise ValueError(f"league weaknesses must be in (0, 1], got {list(weaknesses)}")
+        if isinstance(bots, str) or not isinstance(bots, Sequence) or not bots or any(
+                b not in valid for b in bots) or len(set(bots)) != len(bots):
+            raise ValueError(f"league bots must be a list of distinct names from "
+                             f"{list(valid)}, got {bots!r}")
+        if isinstance(weaknesses, str) or not isinstance(weaknesses, Sequence) \
+                or not weaknesses or any(isinstance(w, bool) or not isinstance(w, Real)
+                                         or not 0.0 < w <= 1.0 for w in weaknesses):
+            raise ValueError(f"league weaknesses must be a list of numbers in (0, 1], got "
+                             f"{weaknesses!r}")
+        names = [f"{float(w):g}" for w in weaknesses]  # as the opponents are named
+        if len(set(names)) != len(names):
+            raise ValueError(f"league weaknesses must differ (an opponent is named with 6 "
+                             f"digits: {names}), got {list(weaknesses)}")
         if snapshot_every < 0 or snapshots < 0:
             raise ValueError(f"league snapshot_every and snapshots must be >= 0 (0: no "
                              f"snapshots), got {snapshot_every}, {snapshots}")
@@ -86,8 +95,12 @@ class LeagueSchedule(OpponentSchedule):
                              f"{snapshot_share}")
         self.snapshot_share = None if snapshot_share is None else float(snapshot_share)
         self.bots = [f"{b}@{float(w):g}" for b in bots for w in weaknesses]
+        if not isinstance(settings, Mapping | None):
+            raise ValueError(f"league settings must be a table of bot name = [scenario "
+                             f"names], got {settings!r}")
         for b, sc in (settings or {}).items():
-            if b not in bots or isinstance(sc, str) or not sc:
+            if b not in bots or not isinstance(sc, Sequence) or isinstance(sc, str) \
+                    or not sc or not all(isinstance(x, str) for x in sc):
                 raise ValueError(f"league settings: {b!r} = {sc!r}; keys must be some of the "
                                  f"league's bots {list(bots)}, values non-empty lists of "
                                  f"scenario names")
