@@ -47,6 +47,25 @@ def test_no_wins_give_no_share_and_the_interval_of_nothing_known():
     assert s["wins"] == 0 and s["wins_both_scored_share"] is None
     assert s["wins_both_scored_ci95"] == [0.0, 1.0]
     assert "no wins, so no share of wins" in format_team_stats(s)
+    # no kills: no share of them in crossfire either (0 of 0 was printed as "0%")
+    assert s["kills"] == 0 and s["crossfire_share"] is None
+    assert "kills 0, so no share of them in crossfire;" in format_team_stats(s)
+
+
+def test_a_team_of_one_tank_has_no_cooperation_shares(tmp_path, capsys):
+    """On a 1v1 scenario the evaluated team is one tank: no teammate to score beside it
+    or to fire across. Its shares were printed as measured ("every teammate hit an enemy
+    in 100% of the wins", "in crossfire 0%"); they are None, and the terminal says why."""
+    out = tmp_path / "e.json"
+    assert main(["eval", "bot:smart", "--scenario", "vs_random", "--games", "2", "--seed",
+                 "1", "--team-stats", "--json", str(out)]) == 0
+    [s] = json.loads(out.with_suffix(".team.json").read_text(encoding="utf-8"))
+    assert s["seats"] == 1 and s["wins"] == 2 and s["kills"] >= 2
+    assert s["wins_both_scored_share"] is None and s["crossfire_share"] is None
+    assert s["wins_both_scored_ci95"] == [0.0, 1.0]
+    text = capsys.readouterr().out
+    assert "one tank, so no teammate to hit enemies beside it or to fire across" in text
+    assert "every teammate" not in text and "crossfire" not in text
 
 
 def test_eval_cli_writes_team_stats_beside_json(tmp_path, capsys):

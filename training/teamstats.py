@@ -11,7 +11,9 @@ Per game:
   within ``radius`` px of it (the enemy was shot at from two sides).
 
 Summary: win / loss / draw counts of these games, the share of won games in which every
-teammate scored, the share of the team's kills made in crossfire, and hits per seat.
+teammate scored, the share of the team's kills made in crossfire, and hits per seat. A
+share with nothing to count is None: no wins, no kills, or a team of one tank (no
+teammate to score beside it or to fire across; a 1v1 scenario).
 """
 
 from __future__ import annotations
@@ -87,29 +89,34 @@ class TeamWatch:
         both = sum(all(h > 0 for h in x.hits) for x in wins)
         kills = sum(sum(x.kills) for x in g)
         cross = sum(x.crossfire for x in g)
-        lo, hi = wilson_interval(both, len(wins))  # no wins: (0, 1), nothing known
-        seats = len(g[0].hits) if g else 0
-        return {"team": self.team, "crossfire_px": self.radius,
+        mates = len(self.seats) > 1  # a lone tank (1v1) has no teammate
+        lo, hi = wilson_interval(both, len(wins)) if mates else (0.0, 1.0)  # (0, 1): unknown
+        return {"team": self.team, "crossfire_px": self.radius, "seats": len(self.seats),
                 "games": n, "wins": len(wins), "losses": sum(x.outcome < 0 for x in g),
                 "draws": sum(x.outcome == 0 for x in g),
                 "wins_both_scored": both,
-                "wins_both_scored_share": round(both / len(wins), 4) if wins else None,
+                "wins_both_scored_share": round(both / len(wins), 4) if wins and mates
+                else None,
                 "wins_both_scored_ci95": [round(lo, 4), round(hi, 4)],
                 "kills": kills, "crossfire_kills": cross,
-                "crossfire_share": round(cross / kills, 4) if kills else 0.0,
+                "crossfire_share": round(cross / kills, 4) if kills and mates else None,
                 "hits_per_game_by_seat": [round(sum(x.hits[k] for x in g) / n, 3)
-                                          for k in range(seats)] if n else []}
+                                          for k in range(len(self.seats))] if n else []}
 
 
 def format_team_stats(s: dict[str, Any]) -> str:
     """Two lines for the terminal."""
     lo, hi = s["wins_both_scored_ci95"]
-    share = s["wins_both_scored_share"]
-    both = ("no wins, so no share of wins in which every teammate hit an enemy" if share is None
-            else f"every teammate hit an enemy in {100 * share:.0f}% of the wins "
-                 f"[{100 * lo:.0f}, {100 * hi:.0f}]")
+    share, cross = s["wins_both_scored_share"], s["crossfire_share"]
+    lone = s["seats"] == 1
+    both = ("one tank, so no teammate to hit enemies beside it or to fire across" if lone
+            else "no wins, so no share of wins in which every teammate hit an enemy"
+            if share is None else f"every teammate hit an enemy in {100 * share:.0f}% of the "
+                                  f"wins [{100 * lo:.0f}, {100 * hi:.0f}]")
+    crossfire = ("" if lone else ", so no share of them in crossfire" if cross is None
+                 else f", in crossfire (a teammate's bullet within {s['crossfire_px']:.0f} px "
+                      f"of the victim) {100 * cross:.0f}%")
     return (f"team {s['team']}: {s['wins']}/{s['losses']}/{s['draws']} "
             f"(W/L/D) of {s['games']} games; {both}\n"
-            f"  kills {s['kills']}, in crossfire (a teammate's bullet within "
-            f"{s['crossfire_px']:.0f} px of the victim) {100 * s['crossfire_share']:.0f}%; "
-            f"hits per game by seat {s['hits_per_game_by_seat']}")
+            f"  kills {s['kills']}{crossfire}; hits per game by seat "
+            f"{s['hits_per_game_by_seat']}")
