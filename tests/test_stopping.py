@@ -496,6 +496,20 @@ def test_a_logger_that_wandb_refuses_is_one_line_and_leaves_no_metrics_file(tmp_
         assert not [w for w in caught if "metrics.jsonl" in str(w.message)]
 
 
+def test_a_wandb_variable_wandb_cannot_read_is_one_line_naming_it(tmp_path, monkeypatch):
+    """wandb reads its WANDB_* environment variables whatever mode it is given: a value it
+    cannot read (WANDB_MODE=garbage) stopped the run with pydantic's text ('1 validation
+    error for Settings | mode | Input should be ...'), naming neither wandb nor the
+    variable. It is one InputError line naming the variable and its value."""
+    monkeypatch.setenv("WANDB_MODE", "garbage")
+    with pytest.raises(InputError, match="^wandb offline: the environment's WANDB_MODE="
+                                         "'garbage': Input should be 'online', 'offline'.*; "
+                                         "unset it or give it a value wandb takes") as info:
+        RunLogger(tmp_path, {}, "env", wandb_mode="offline")
+    assert "\n" not in str(info.value)
+    assert not (tmp_path / "metrics.jsonl").exists()
+
+
 def test_rewind_metrics_drops_rows_after_the_step_and_a_torn_line(tmp_path):
     path = tmp_path / "metrics.jsonl"
     rows = [json.dumps({"step": s, "charts/sps": 1.0}) for s in (10, 20, 30)]

@@ -55,6 +55,7 @@ class RunLogger:
         try:
             if wandb_mode != "disabled":
                 import wandb
+                from pydantic import ValidationError
                 os.environ.setdefault("WANDB_SILENT", "true")
                 try:
                     self.wandb_run = wandb.init(
@@ -64,6 +65,9 @@ class RunLogger:
                 except wandb.errors.Error as exc:  # e.g. online without `wandb login`
                     raise InputError(f"wandb {wandb_mode}: {one_line(exc)} (--wandb "
                                      "offline logs without an account)") from None
+                except ValidationError as exc:  # a setting wandb cannot read, e.g. WANDB_MODE
+                    raise InputError(f"wandb {wandb_mode}: {unreadable_setting(exc)}"
+                                     ) from None
                 self.run_id = self.wandb_run.id
             if tensorboard:
                 self.tb = SummaryWriter(str(self.run_dir / "tensorboard"), purge_step=None
@@ -101,6 +105,22 @@ class RunLogger:
             self.wandb_run = None
         if self.tb is not None:
             self.tb.close()
+
+
+def unreadable_setting(exc: Any) -> str:
+    """What wandb could not read in its settings (``exc``: pydantic's ValidationError),
+    naming the ``WANDB_*`` environment variable that gave it: wandb reads them whatever
+    the mode ``wandb.init`` is given."""
+    err = exc.errors()[0]
+    field, given = ".".join(map(str, err["loc"])), err.get("input")
+    var = f"WANDB_{field.upper()}"
+    if os.environ.get(var) != given:
+        var = next((k for k, v in os.environ.items() if k.startswith("WANDB_") and v == given),
+                   "")
+    where = (f"the environment's {var}={given!r}" if var
+             else f"wandb's setting {field} = {given!r}")
+    return (f"{where}: {one_line(err['msg'])}; unset it or give it a value wandb takes (or "
+            "train with --wandb disabled)")
 
 
 def rewind_metrics(path: str | Path, step: int) -> int:
