@@ -122,6 +122,19 @@ def test_table_layout_wilson_and_files(tmp_path):
     assert data[0]["win_rate"] == 0.6 and data[0]["ci95_low"] == round(lo, 4)
 
 
+def test_a_win_ratio_never_reads_none_or_all_when_it_is_not():
+    """The table's whole percent rounded 1 win of 200 to '0%' and 199 of 200 to '100%'
+    (beside '1' and '199' wins and a Wilson interval that excludes them); such a ratio
+    gets the decimals it takes. Whole games stay whole percent, as in the paper."""
+    rows = [EvalResult("a", "smart", wins=1, losses=199), EvalResult("b", "smart", wins=199,
+                                                                    draws=1),
+            EvalResult("c", "smart", wins=1, losses=29999), EvalResult("d", "smart", wins=0,
+                                                                      losses=7),
+            EvalResult("e", "smart", wins=7), EvalResult("f", "smart", wins=3, losses=497)]
+    ratios = [line.split("|")[5].strip() for line in format_table(rows).splitlines()[2:]]
+    assert ratios == ["0.5%", "99.5%", "0.003%", "0%", "100%", "1%"]
+
+
 @pytest.fixture(scope="module")
 def checkpoint(tmp_path_factory):
     run = tmp_path_factory.mktemp("runs") / "ev"

@@ -425,9 +425,23 @@ def format_table(results: Sequence[EvalResult]) -> str:
     for r in results:
         lo, hi = r.interval
         row = (r.name, str(r.wins), str(r.losses), str(r.draws),
-               f"{100 * r.win_rate:.0f}%", f"[{100 * lo:.1f}%, {100 * hi:.1f}%]")
+               win_ratio_text(r.wins, r.games), f"[{100 * lo:.1f}%, {100 * hi:.1f}%]")
         rows.append(((r.agent,) + row) if head[0] == "Checkpoint" else row)
     return markdown_table(head, rows)
+
+
+def win_ratio_text(wins: int, games: int) -> str:
+    """``wins / games`` in whole percent as in the paper's Table 3, with as many decimals
+    as it takes never to read 0% with a win or 100% short of all wins (1 of 200:
+    ``0.5%``, 199 of 200: ``99.5%``, not ``0%`` and ``100%``)."""
+    if not games:
+        return "0%"
+    digits = 0
+    while True:
+        text = f"{100 * wins / games:.{digits}f}"
+        if not (float(text) == 0 < wins or float(text) == 100 and wins < games):
+            return f"{text}%"
+        digits += 1
 
 
 def markdown_table(head: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
