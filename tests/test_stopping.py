@@ -510,6 +510,30 @@ def test_a_wandb_variable_wandb_cannot_read_is_one_line_naming_it(tmp_path, monk
     assert not (tmp_path / "metrics.jsonl").exists()
 
 
+def test_every_logged_metric_is_finite_and_named_in_the_docs(tmp_path):
+    """docs/training.md "Logging" named the losses loosely ('SAC: critic, actor, alpha'),
+    so a user looking for them in wandb found none of those names (`losses/qf_loss`...).
+    Every key a PPO run (with evaluations) and a SAC run log is now listed there by name."""
+    import re
+    from pathlib import Path
+
+    docs = Path(__file__).parents[1] / "docs" / "training.md"
+    section = docs.read_text(encoding="utf-8").split("## Logging")[1].split("\n## ")[0]
+    named = set(re.findall(r"`([a-z_]+/[a-z_/<>]+)`", section))
+    for spec in (LearnerSpec("ppo", "ppo", (0,), PPO_TINY), LearnerSpec("sac", "sac", (0,),
+                                                                         SAC_TINY)):
+        Trainer(config(spec.algo, spec, 2, eval_every=2, eval_games=2),
+                tmp_path / spec.algo, progress=False).train()
+        text = (tmp_path / spec.algo / "metrics.jsonl").read_text(encoding="utf-8")
+        rows = [json.loads(line) for line in text.splitlines()]  # strict: no NaN
+        keys = {k for row in rows for k in row} - {"step"}
+        assert "eval/win_rate" in keys and "charts/win_rate_vs/aggressive" in keys
+        assert all(np.isfinite(v) for row in rows for v in row.values())
+        unnamed = {k for k in keys if k not in named
+                   and not k.startswith("charts/win_rate_vs/")}
+        assert not unnamed, f"{spec.algo} logs {sorted(unnamed)}, not in docs/training.md"
+
+
 def test_rewind_metrics_drops_rows_after_the_step_and_a_torn_line(tmp_path):
     path = tmp_path / "metrics.jsonl"
     rows = [json.dumps({"step": s, "charts/sps": 1.0}) for s in (10, 20, 30)]
