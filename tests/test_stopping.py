@@ -534,6 +534,19 @@ def test_every_logged_metric_is_finite_and_named_in_the_docs(tmp_path):
         assert not unnamed, f"{spec.algo} logs {sorted(unnamed)}, not in docs/training.md"
 
 
+def test_the_progress_bar_shows_no_win_rate_before_an_episode_has_ended(tmp_path, capsys):
+    """Before any episode had ended the bar read 'win=nan'; it leaves the win rate out
+    until there is one, then shows it."""
+    spec = LearnerSpec("ppo", "ppo", (0,), PPO_TINY)
+    Trainer(config("bar", spec, 1), tmp_path / "one", progress=True).train()  # 16 of 30 ticks
+    first = capsys.readouterr().err
+    assert "sps=" in first and "it=1" in first
+    assert "win=" not in first and "nan" not in first
+    Trainer(config("bar", spec, 3), tmp_path / "three", progress=True).train()
+    err = capsys.readouterr().err
+    assert "win=0." in err or "win=1." in err
+
+
 def test_rewind_metrics_drops_rows_after_the_step_and_a_torn_line(tmp_path):
     path = tmp_path / "metrics.jsonl"
     rows = [json.dumps({"step": s, "charts/sps": 1.0}) for s in (10, 20, 30)]

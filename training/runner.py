@@ -837,9 +837,11 @@ class Trainer:
                 bar.update(min(self.global_step, self.planned_steps) - bar.n)
                 win = metrics.get("charts/win_rate",
                                   next((v for k, v in metrics.items()
-                                        if k.startswith("charts/win_rate/")), float("nan")))
-                bar.set_postfix(sps=f"{metrics['charts/sps']:.0f}", win=f"{win:.2f}",
-                                it=self.iteration, refresh=False)
+                                        if k.startswith("charts/win_rate/")), None))
+                post = {"sps": f"{metrics['charts/sps']:.0f}"}
+                if win is not None:  # else no episode has ended yet
+                    post["win"] = f"{win:.2f}"
+                bar.set_postfix(post, it=self.iteration, refresh=False)
             if last or (cfg.checkpoint_every and self.iteration % cfg.checkpoint_every == 0):
                 self.elapsed = time.perf_counter() - start  # up to the save, stop check included
                 self.save()
