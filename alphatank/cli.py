@@ -13,11 +13,16 @@ status 141, as a program killed by SIGPIPE. ``ALPHATANK_TRACEBACK=1`` re-raises 
 
 from __future__ import annotations
 
+import _thread
 import argparse
 import importlib
 import os
+import signal
 import sys
-from collections.abc import Iterable
+import threading
+import time
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from typing import Any, NoReturn
 
 from alphatank import __version__
@@ -87,6 +92,47 @@ def _unavailable(exc: MissingExtraError) -> Any:
     return run
 
 
+def torch_importing() -> bool:
+    """Whether this process is in the middle of importing torch."""
+    spec = getattr(sys.modules.get("torch"), "__spec__", None)
+    return bool(getattr(spec, "_initializing", False))
+
+
+@contextmanager
+def interrupts_clear_of_torch_import() -> Iterator[None]:
+    """Ctrl-C raises KeyboardInterrupt as Python's own handler does, except while torch is
+    being imported: then it is raised once the import is done. Raised inside the import,
+    it could abort the process (torch's C++ side: ``terminate called after throwing an
+    instance of 'pybind11::error_already_set'``, exit 134). Nothing changes where SIGINT
+    is not Python's default handler (ignored, or a verb's own) or off the main thread."""
+    if (threading.current_thread() is not threading.main_thread()
+            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler):
+        yield
+        return
+
+    held = threading.Event()  # a Ctrl-C waits for the import (more are the same one)
+
+    def deliver_after_import() -> None:
+        while torch_importing():
+            time.sleep(0.01)
+        held.clear()
+        _thread.interrupt_main()  # the SIGINT handler of the main thread once more
+
+    def on_sigint(signum: int, frame: Any) -> None:
+        if torch_importing():
+            if not held.is_set():
+                held.set()
+                threading.Thread(target=deliver_after_import, daemon=True).start()
+            return
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGINT, on_sigint)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     # The verb comes first (the top level has only --help and --version): build its
@@ -96,7 +142,8 @@ def main(argv: list[str] | None = None) -> int:
     if unknown and not getattr(args, "_any_args", False):
         parser.verbs[args.command].error(f"unrecognized arguments: {' '.join(unknown)}")
     try:
-        return int(args._run(args) or 0)
+        with interrupts_clear_of_torch_import():
+            return int(args._run(args) or 0)
     except BrokenPipeError:
         return broken_pipe_exit()
     except KeyboardInterrupt as exc:  # its message, if any, says what was kept

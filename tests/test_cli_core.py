@@ -7,6 +7,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import textwrap
 import time
 
 import pytest
@@ -90,6 +91,32 @@ def test_console_script_runs():
     out = subprocess.run([sys.executable, "-m", "alphatank.cli", "--help"], capture_output=True,
                          text=True, check=True)
     assert "bench" in out.stdout and "maps" in out.stdout
+
+
+def test_ctrl_c_while_torch_imports_is_raised_once_the_import_is_done():
+    """A Ctrl-C raised inside torch's import could abort the process (exit 134, 'terminate
+    called after throwing an instance of pybind11::error_already_set': 1 in 40 Ctrl-Cs
+    during `import torch` here) or leave torch half-imported. The command line's handler
+    holds it until the import is done: one line, status 130, torch whole."""
+    script = textwrap.dedent("""
+        import os, signal, sys, threading, time
+        from alphatank import cli
+
+        def kick():  # Ctrl-C as soon as torch is being imported
+            while not cli.torch_importing():
+                time.sleep(0.0005)
+            os.kill(os.getpid(), signal.SIGINT)
+
+        threading.Thread(target=kick, daemon=True).start()
+        rc = cli.main(["eval", "agent:ppo_vs_smart", "--games", "100000"])
+        torch = sys.modules.get("torch")
+        print(rc, torch is not None and hasattr(torch, "nn"))
+    """)
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=120,
+                          preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    assert (proc.returncode, proc.stdout, proc.stderr) == (
+        0, "130 True\n", "alphatank eval: interrupted\n")
 
 
 @pytest.mark.parametrize("wait_s", [0.0, 3.0])
