@@ -99,37 +99,57 @@ def torch_importing() -> bool:
 
 
 @contextmanager
-def interrupts_clear_of_torch_import() -> Iterator[None]:
-    """Ctrl-C raises KeyboardInterrupt as Python's own handler does, except while torch is
-    being imported: then it is raised once the import is done. Raised inside the import,
-    it could abort the process (torch's C++ side: ``terminate called after throwing an
-    instance of 'pybind11::error_already_set'``, exit 134). Nothing changes where SIGINT
-    is not Python's default handler (ignored, or a verb's own) or off the main thread."""
+def ctrl_c_kept() -> Iterator[None]:
+    """Ctrl-C raises KeyboardInterrupt as Python's own handler does, but never where it
+    would be lost. While torch is being imported it is raised once the import is done:
+    inside, it could abort the process (torch's C++ side: ``terminate called after throwing
+    an instance of 'pybind11::error_already_set'``, exit 134). One raised inside a C
+    callback (pymunk's collision handlers and finalizers, through cffi), which swallows
+    it, is raised again after it. Nothing changes where SIGINT is not Python's default
+    handler (ignored, or a verb's own) or off the main thread."""
     if (threading.current_thread() is not threading.main_thread()
             or signal.getsignal(signal.SIGINT) is not signal.default_int_handler):
         yield
         return
+    pending = threading.Event()  # a KeyboardInterrupt waits to be raised (one at a time)
+    in_hook = threading.Event()
 
-    held = threading.Event()  # a Ctrl-C waits for the import (more are the same one)
-
-    def deliver_after_import() -> None:
+    def deliver() -> None:
+        time.sleep(0.01)  # out of the hook or callback that deferred it
         while torch_importing():
             time.sleep(0.01)
-        held.clear()
-        _thread.interrupt_main()  # the SIGINT handler of the main thread once more
+        pending.clear()
+        _thread.interrupt_main()  # the main thread's SIGINT handler once more
+
+    def defer() -> None:
+        if not pending.is_set():
+            pending.set()
+            threading.Thread(target=deliver, daemon=True).start()
 
     def on_sigint(signum: int, frame: Any) -> None:
-        if torch_importing():
-            if not held.is_set():
-                held.set()
-                threading.Thread(target=deliver_after_import, daemon=True).start()
+        if torch_importing() or in_hook.is_set():
+            defer()
             return
         raise KeyboardInterrupt
 
+    hook = sys.unraisablehook
+
+    def on_unraisable(unraisable: Any) -> None:
+        if not issubclass(unraisable.exc_type, KeyboardInterrupt):
+            hook(unraisable)
+            return
+        in_hook.set()  # swallowed by a callback: raised again after it
+        try:
+            defer()
+        finally:
+            in_hook.clear()
+
     signal.signal(signal.SIGINT, on_sigint)
+    sys.unraisablehook = on_unraisable
     try:
         yield
     finally:
+        sys.unraisablehook = hook
         signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
@@ -142,7 +162,7 @@ def main(argv: list[str] | None = None) -> int:
     if unknown and not getattr(args, "_any_args", False):
         parser.verbs[args.command].error(f"unrecognized arguments: {' '.join(unknown)}")
     try:
-        with interrupts_clear_of_torch_import():
+        with ctrl_c_kept():
             return int(args._run(args) or 0)
     except BrokenPipeError:
         return broken_pipe_exit()

@@ -119,6 +119,40 @@ def test_ctrl_c_while_torch_imports_is_raised_once_the_import_is_done():
         0, "130 True\n", "alphatank eval: interrupted\n")
 
 
+def test_ctrl_c_swallowed_by_a_pymunk_callback_is_raised_again():
+    """A KeyboardInterrupt raised inside a C callback (pymunk's collision handlers and
+    finalizers, through cffi) was printed as 'Exception ignored' and lost: eval, record
+    and play went on. The command line raises it again once out of the callback."""
+    script = textwrap.dedent("""
+        import os, signal, time
+        import pymunk
+        from alphatank.cli import ctrl_c_kept
+
+        space = pymunk.Space()
+        for x in (0, 3):
+            body = pymunk.Body(1, 1)
+            body.position = (x, 0)
+            space.add(body, pymunk.Circle(body, 5))
+
+        def begin(arbiter, space, data):  # Ctrl-C lands inside pymunk's callback
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.05)
+
+        space.on_collision(begin=begin)
+        try:
+            with ctrl_c_kept():
+                for _ in range(1000):  # about 1 s
+                    space.step(0.01)
+                    time.sleep(0.001)
+        except KeyboardInterrupt:
+            print("interrupted")
+    """)
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=60,
+                          preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    assert (proc.returncode, proc.stdout, proc.stderr) == (0, "interrupted\n", "")
+
+
 @pytest.mark.parametrize("wait_s", [0.0, 3.0])
 def test_ctrl_c_in_a_verb_without_its_own_stop_is_one_line_and_status_130(wait_s):
     """Ctrl-C in the arena: one line, status 130, and the table of the games played
