@@ -99,6 +99,7 @@ bot = "random"
     (BASE + 'colour = "red"\n', "colour", "valid keys"),
     (BASE.replace('map = "open"', 'map = "nowhere"'), "map", "shipped maps"),
     (BASE.replace('name = "t"\n', 'name = "t"\npreset = "fast"\n'), "preset", "long_range"),
+    (BASE.replace('name = "t"\n', 'name = "t"\npreset = ["paper"]\n'), "preset", "long_range"),
     (BASE.replace('name = "t"\n', 'name = "t"\nobservation = "pixels"\n'), "observation",
      "egocentric"),
     (BASE.replace('bot = "random"', 'bot = "genius"'), "seats[1].bot", "smart"),

@@ -263,7 +263,7 @@ def parse_scenario(data: dict[str, Any], source: str = "<dict>",
     if why := printable_problem(description):
         raise fail("description", why)
     preset = data.get("preset", "paper")
-    if preset not in PRESETS:
+    if not isinstance(preset, str) or preset not in PRESETS:
         raise fail("preset", f"unknown preset {preset!r}; valid: {sorted(PRESETS)}")
     observation = data.get("observation", "paper")
     if observation not in OBS_KINDS:
