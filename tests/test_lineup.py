@@ -8,6 +8,7 @@ import argparse
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,6 +17,7 @@ from alphatank.cli import main
 from alphatank.commands import arena as arena_cmd
 from alphatank.commands import eval as eval_cmd
 from alphatank.commands import play, record
+from alphatank.commands.lineup_options import lineup_from_args
 from alphatank.envs.core import MatchSet
 from alphatank.game import seats
 from alphatank.game.arena import run_arena
@@ -33,6 +35,7 @@ from alphatank.sim.episode import EpisodeHook, episode_seeds
 from alphatank.sim.policy import NoopPolicy
 from alphatank.ui.replay import load_replay
 
+MAPS = Path(__file__).resolve().parents[1] / "maps"
 SEATS, MAP, STEPS, SEED = "smart,aggressive", "battlefield", 400, 7
 
 
@@ -113,6 +116,26 @@ def test_the_map_of_an_episode_comes_from_its_seed():
         assert ep.match.state_hash() == core.matches[0].state_hash()
         names.add(core.map_name(0))
     assert len(names) > 2
+
+
+def test_max_steps_keeps_a_scenario_maps_relative_to_its_file(tmp_path, monkeypatch):
+    """``record``/``play --scenario FILE --max-steps N``: a map named relative to the
+    scenario file's folder was looked up from the working folder ('unknown map')."""
+    folder = tmp_path / "duel"
+    folder.mkdir()
+    shutil.copy(MAPS / "maze.txt", folder / "mine.txt")
+    (folder / "s.toml").write_text('name = "s"\nmap = "mine.txt"\n[game]\nmax_steps = 900\n'
+                                   '[[seats]]\nteam = "A"\ncontroller = "learner"\n'
+                                   '[[seats]]\nteam = "B"\ncontroller = "bot"\nbot = "smart"\n',
+                                   encoding="utf-8")
+    monkeypatch.chdir(tmp_path)
+    args = _args(record, "--scenario", str(folder / "s.toml"), "--max-steps", "5")
+    lineup = lineup_from_args(args, interactive=False)
+    assert lineup.scenario.maps == (str(folder / "mine.txt"),)
+    assert lineup.scenario.game_config().max_steps == 5
+    assert lineup.play(0).match.tick == 5
+    with pytest.raises(ScenarioError, match=r"s\.toml: \[game\]\.max_steps: must be in"):
+        lineup_scenario(str(folder / "s.toml"), game={"max_steps": 0})
 
 
 def test_episode_hooks_see_start_every_tick_and_the_end_once():

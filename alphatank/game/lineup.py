@@ -10,6 +10,7 @@ and evaluation. Controllers come from the seat kinds of :mod:`alphatank.game.sea
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -21,7 +22,6 @@ from alphatank.game.scenarios import (
     Scenario,
     ScenarioError,
     load_scenario,
-    parse_scenario,
     seats_scenario,
 )
 from alphatank.game.seats import (
@@ -183,9 +183,10 @@ def lineup_scenario(scenario: str | None = None, seats: str | None = None,
                             "map (give either --scenario or --map, not both)")
     if scenario:
         sc = load_scenario(scenario)
-        if game:
-            sc = parse_scenario({**sc.to_dict(), "game": {**sc.game, **game}},
-                                source=sc.source)
+        if game:  # the maps as resolved from the file's folder, not its relative paths
+            table = {**sc.game, **game}
+            sc.game_config(f"{sc.source}: [game]", **table)
+            sc = dataclasses.replace(sc, game=table)
         return sc
     seats = seats or default_seats
     n = len([s for s in seats.split(",") if s.strip()])
