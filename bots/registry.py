@@ -47,20 +47,26 @@ def make_bot(name: str, weakness: float | None = None, seed: int | None = None,
 
 
 def options_problem(name: str, options: dict[str, Any]) -> str | None:
-    """What is wrong with bot ``name``'s ``options`` (unknown keys, or a value not of its
-    default's type: bool, int or float), or None."""
+    """What is wrong with bot ``name``'s ``options`` (unknown keys, a value not of its
+    default's type: bool, int or float, or values its constructor refuses, such as
+    ``hold_min`` above ``hold_max``), or None."""
     valid = bot_options(name)
     unknown = sorted(set(options) - set(valid), key=str)
     if unknown:
         return (f"bot {name!r} has no option(s) {unknown}; valid options: {valid} "
                 f"(weakness: NAME@W in a spec, the seat's own key in a table)")
-    params = inspect.signature(_lookup(name).__init__).parameters
+    cls = _lookup(name)
+    params = inspect.signature(cls.__init__).parameters
     for key, value in options.items():
         kind = type(params[key].default)
         if kind in (bool, int, float):
             _, reason = check_value((kind,), value)
             if reason is not None:
                 return f"bot {name!r} option {key}: {reason}"
+    try:  # the ranges are the constructor's (a bot is cheap to make: no map yet)
+        cls(seed=0, **options)
+    except ValueError as exc:
+        return str(exc)
     return None
 
 

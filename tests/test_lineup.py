@@ -191,6 +191,8 @@ def test_seat_list_grammar():
     ("human,smart:speed=3", "seats[1].options: bot 'smart' has no option(s) ['speed']; "
                             "valid options: ['ricochet', 'evade'] (weakness: NAME@W"),
     ("human,smart@2", "seats[1].weakness: must be a number in [0, 1]"),
+    ("human,random:hold_min=40", "seats[1].options: RandomBot: need 1 <= hold_min <= "
+                                 "hold_max, got hold_min=40, hold_max=30"),
     ("human,smart:fast", "must be KEY=VALUE"),
     ("human,human:zqsd", "seats[1].keys: got 'zqsd'; valid: ['wasd', 'arrows', 'ijkl']"),
     ("human,checkpoint:/no/such/run", "seats[1].path: /no/such/run: no such checkpoint"),

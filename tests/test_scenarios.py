@@ -105,6 +105,8 @@ bot = "random"
     (BASE.replace('bot = "random"', 'bot = "genius"'), "seats[1].bot", "smart"),
     (BASE.replace('bot = "random"', 'bot = "random"\nweakness = 1.5'), "seats[1].weakness",
      "[0, 1]"),
+    (BASE.replace('bot = "random"', 'bot = "random"\noptions = { hold_min = 0 }'),
+     "seats[1].options", "need 1 <= hold_min <= hold_max, got hold_min=0"),
     (BASE.replace('controller = "learner"', 'controller = "robot"'), "seats[0].controller",
      "checkpoint"),
     (BASE.replace('controller = "learner"', 'controller = "human"\nkeys = "zqsd"'),
