@@ -100,6 +100,7 @@ bot = "random"
     (BASE.replace('map = "open"', 'map = "nowhere"'), "map", "shipped maps"),
     (BASE.replace('name = "t"\n', 'name = "t"\npreset = "fast"\n'), "preset", "long_range"),
     (BASE.replace('name = "t"\n', 'name = "t"\npreset = ["paper"]\n'), "preset", "long_range"),
+    (BASE.replace('name = "t"\n', 'name = "t\\nu"\n'), "name", "U+000A is a control character"),
     (BASE.replace('name = "t"\n', 'name = "t"\nobservation = "pixels"\n'), "observation",
      "egocentric"),
     (BASE.replace('bot = "random"', 'bot = "genius"'), "seats[1].bot", "smart"),

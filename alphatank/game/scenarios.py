@@ -257,6 +257,8 @@ def parse_scenario(data: dict[str, Any], source: str = "<dict>",
     for key in ("name", "map"):
         if not isinstance(data.get(key), str) or not data[key]:
             raise fail(key, "required, a non-empty string")
+    if why := printable_problem(data["name"]):  # printed, drawn and kept in replays
+        raise fail("name", why)
     description = data.get("description", "")
     if not isinstance(description, str):
         raise fail("description", "must be a string")
