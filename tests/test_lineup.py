@@ -179,6 +179,10 @@ def test_seat_list_grammar():
     assert [t["keys"] for t in parse_seat_list("human:arrows,human")] == ["arrows", "wasd"]
     assert [t.get("keys") for t in parse_seat_list("human,smart,human:wasd")] == [
         "arrows", None, "wasd"]
+    # after Z: AA, AB, ... (the 28th seat got '\\', the 64th the control character U+007F)
+    teams = [t["team"] for t in parse_seat_list(",".join(["random"] * 64))]
+    assert teams[24:29] == ["Y", "Z", "AA", "AB", "AC"] and teams[-1] == "BL"
+    assert len(set(teams)) == 64 and seats_scenario(",".join(["random"] * 64), "open")
 
 
 @pytest.mark.parametrize("text,hint", [

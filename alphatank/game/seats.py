@@ -20,6 +20,7 @@ returns a Policy (see :mod:`alphatank.sim.policy`).
 list of ``[TEAM=]SEAT``, where SEAT is ``human[:wasd|arrows|ijkl]``, ``learner``,
 ``checkpoint:PATH``, ``agent:NAME``, ``KIND:ARG`` for a registered kind, or a bot
 ``[bot:]NAME[:KEY=VALUE...][@WEAKNESS]``. Without ``TEAM=`` seat k gets team A, B, C, ...
+(after Z: AA, AB, ...)
 """
 
 from __future__ import annotations
@@ -303,7 +304,7 @@ def parse_seat_list(text: str) -> list[dict[str, Any]]:
     seats = []
     for k, item in enumerate(items):
         m = _TEAM.fullmatch(item)
-        team, body = (m.group(1), m.group(2)) if m else (chr(ord("A") + k), item)
+        team, body = (m.group(1), m.group(2)) if m else (seat_team(k), item)
         seat = parse_seat_spec(body, where=f"--seats[{k}] {item!r}")  # seats count from 0
         seats.append({"team": team, **seat})
     humans = [s for s in seats if s["controller"] == "human"]
@@ -312,6 +313,17 @@ def parse_seat_list(text: str) -> list[dict[str, Any]]:
         if "keys" not in seat:  # with none free, the check of the seats names the clash
             seat["keys"] = free.pop(0) if free else KEYSETS[-1]
     return seats
+
+
+def seat_team(k: int) -> str:
+    """The team of seat ``k`` of a ``--seats`` list without ``TEAM=``: A .. Z, then AA,
+    AB, ... (spreadsheet columns)."""
+    name = ""
+    k += 1
+    while k:
+        k, r = divmod(k - 1, 26)
+        name = chr(ord("A") + r) + name
+    return name
 
 
 def check_human_seat(seat: Seat) -> tuple[str, str] | None:
