@@ -369,6 +369,13 @@ CASES = [
       "substeps to re-simulate; a replay may ask for at most 5,000,000"]),
     ("play-replay-room", ["play", "--headless-test", "--scenario", "{longgame_toml}",
                           "--save-replay", "{dir}/long.npz"], ["--save-replay: a game of up to"]),
+    # a replay holds at most 64 tanks: refused before the game, not after it (the MP4 made)
+    ("record-replay-tanks", ["record", "--seats", ",".join(["random"] * 65), "--map", "open",
+                             "--replay", "{dir}/many.npz"],
+     ["--replay: a replay holds at most 64 tanks, this game has 65"]),
+    ("play-replay-tanks", ["play", "--headless-test", "--seats", ",".join(["random"] * 65),
+                           "--map", "open", "--save-replay", "{dir}/many.npz"],
+     ["--save-replay: a replay holds at most 64 tanks, this game has 65"]),
     ("record-team-nul", ["record", "--scenario", "{nulteam_toml}"],
      ["seats[0].team: must be printable, got 'A\\x00': U+0000 is a control character"]),
     ("record-team-nbsp", ["record", "--scenario", "{nbspteam_toml}"],

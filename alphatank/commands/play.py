@@ -57,7 +57,8 @@ def run(args: argparse.Namespace) -> int:
         lineup = lineup_from_args(args, interactive=True)
         if args.save_replay:
             sc = lineup.scenario
-            check_replay_room(sc.game_config(), sc.map_specs(), "--save-replay")
+            check_replay_room(sc.game_config(), sc.map_specs(), len(sc.seats),
+                              "--save-replay")
         session = PlaySession(lineup, seed=args.seed, fps=args.fps,
                               overlays=args.overlays, scale=args.scale,
                               save_replay=args.save_replay, realtime=not args.headless_test)

@@ -61,7 +61,8 @@ def run(args: argparse.Namespace) -> int:
         lineup = lineup_from_args(args, interactive=False)
         if args.replay:
             sc = lineup.scenario
-            check_replay_room(sc.game_config(), sc.map_specs(), "--replay")
+            check_replay_room(sc.game_config(), sc.map_specs(), len(sc.seats),
+                              "--replay")
         video = VideoRecorder(mp4=Path(args.out), gif=args.gif, fps=args.fps,
                               every=args.every, hold_s=args.hold,
                               overlays=args.overlays, labels=lineup.labels,

@@ -284,10 +284,14 @@ def _plain(value: Any) -> Any:
     raise TypeError(f"{type(value).__name__} {value!r} is not a JSON value")
 
 
-def check_replay_room(cfg: GameConfig, specs: Sequence[MapSpec], flag: str) -> None:
-    """InputError ``flag: why`` when a game of ``cfg`` on one of ``specs`` might make a
-    replay that :func:`load_replay` refuses (its longest game would ask for more than
+def check_replay_room(cfg: GameConfig, specs: Sequence[MapSpec], tanks: int, flag: str) -> None:
+    """InputError ``flag: why`` when a game of ``tanks`` tanks and ``cfg`` on one of
+    ``specs`` might make a replay that :func:`load_replay` refuses (more than
+    :data:`MAX_TANKS` tanks, or a longest game that would ask for more than
     :data:`MAX_SUBSTEPS` of re-simulation): asked before recording one."""
+    if tanks > MAX_TANKS:
+        raise InputError(f"{flag}: a replay holds at most {MAX_TANKS} tanks, this game has "
+                         f"{tanks}")
     work = max(cfg.max_steps * substeps_for(cfg, s.min_wall_thickness()) for s in specs)
     if work > MAX_SUBSTEPS:
         raise InputError(f"{flag}: a game of up to {cfg.max_steps:,} ticks (max_steps) may "
