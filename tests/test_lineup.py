@@ -208,6 +208,16 @@ def test_bad_seats_name_the_seat_and_what_is_allowed(text, hint):
     assert hint in str(err.value)
 
 
+def test_more_players_than_key_sets_is_said_so():
+    """Four human seats at one keyboard: the error said two seats 'use the ijkl keys' and
+    to give each player its own of the three sets."""
+    sc = seats_scenario("human,human,human,human,smart", "arena8")
+    with pytest.raises(ScenarioError, match=r"^--seats: seats \[0, 1, 2, 3\] are 4 players at "
+                                            r"one keyboard, which has 3 key sets"):
+        build_lineup(sc, interactive=True)
+    assert len(build_lineup(sc, stand_in="smart").controllers) == 5  # no keyboard: stand-ins
+
+
 def test_unknown_agents_list_the_shipped_ones(tmp_path, monkeypatch):
     monkeypatch.setattr(seats, "agents_root", lambda: tmp_path)
     assert shipped_agents() == []

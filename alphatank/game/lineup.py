@@ -114,6 +114,11 @@ def build_lineup(scenario: str | Scenario, *, interactive: bool = False,
     if fill is not None and not sc.learner_seats:
         raise ScenarioError(f"{learner}: {sc.source} has no learner seat for it to play; "
                             f"put it in a seat instead (e.g. --seats \"human,{learner}\")")
+    people = [i for i, s in enumerate(sc.seats) if controller_kind(s.controller).interactive]
+    if interactive and len(people) > len(KEYSETS):
+        raise ScenarioError(f"{sc.source}: seats {people} are {len(people)} players at one "
+                            f"keyboard, which has {len(KEYSETS)} key sets {list(KEYSETS)}; "
+                            f"give at most {len(KEYSETS)} seats to players")
     humans: dict[str, int] = {}
     for i, seat in enumerate(sc.seats):
         desc, played = seat.describe(), seat
