@@ -369,6 +369,14 @@ CASES = [
       "substeps to re-simulate; a replay may ask for at most 5,000,000"]),
     ("play-replay-room", ["play", "--headless-test", "--scenario", "{longgame_toml}",
                           "--save-replay", "{dir}/long.npz"], ["--save-replay: a game of up to"]),
+    # a bare bot or agent name as --checkpoint was read as a folder path
+    ("record-checkpoint-bot", ["record", "--scenario", "vs_smart", "--checkpoint", "smart"],
+     ["record: error: --checkpoint: no checkpoint or run folder 'smart' here; for the bot, "
+      "give bot:smart"]),
+    ("play-checkpoint-agent-name", ["play", "--headless-test", "--scenario", "vs_smart",
+                                    "--checkpoint", "ppo_vs_smart"],
+     ["play: error: --checkpoint: no checkpoint or run folder 'ppo_vs_smart' here; for the "
+      "agent, give agent:ppo_vs_smart"]),
     # a replay holds at most 64 tanks: refused before the game, not after it (the MP4 made)
     ("record-replay-tanks", ["record", "--seats", ",".join(["random"] * 65), "--map", "open",
                              "--replay", "{dir}/many.npz"],

@@ -4,10 +4,13 @@ verb itself), and the ``--overlays`` type (``replay`` takes it too)."""
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from alphatank.commands.argtypes import given, max_steps, seed
+from alphatank.errors import InputError
 from alphatank.game.lineup import Lineup, build_lineup, lineup_scenario
-from alphatank.game.seats import SEAT_HELP
+from alphatank.game.scenarios import bot_names
+from alphatank.game.seats import SEAT_HELP, shipped_agents
 from alphatank.ui.render import DEFAULT_OVERLAYS, parse_overlays
 
 
@@ -38,9 +41,16 @@ def overlays(text: str) -> tuple[str, ...]:
 
 
 def learner_seat(checkpoint: str | None) -> str | None:
-    """``--checkpoint`` as a seat spec: a bare path means ``checkpoint:PATH``."""
+    """``--checkpoint`` as a seat spec: a bare path means ``checkpoint:PATH``; a bare bot
+    or shipped agent name that is no folder here is refused, naming the spec it means."""
     if not checkpoint or checkpoint.startswith(("checkpoint:", "agent:", "bot:")):
         return checkpoint
+    if not Path(checkpoint).exists():
+        kind = ("bot" if checkpoint in bot_names() else
+                "agent" if checkpoint in shipped_agents() else None)
+        if kind is not None:
+            raise InputError(f"--checkpoint: no checkpoint or run folder {checkpoint!r} here; "
+                             f"for the {kind}, give {kind}:{checkpoint}")
     return f"checkpoint:{checkpoint}"
 
 
