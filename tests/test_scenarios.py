@@ -139,6 +139,22 @@ def test_invalid_toml_and_unknown_name(tmp_path):
         load_scenario("no_such_scenario")
 
 
+def test_a_shipped_name_is_not_hidden_by_a_folder_or_file_of_that_name(tmp_path, monkeypatch):
+    """A folder 'team' or a file 'pair' in the working folder made load_scenario('team')
+    fail ('team: a folder, not a scenario file'), and with it `import alphatank.envs`,
+    which loads every shipped scenario by name to register its ids."""
+    from alphatank.envs.ids import single_learner_scenarios
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "team").mkdir()
+    (tmp_path / "pair").write_text("not toml [", encoding="utf-8")
+    assert load_scenario("team").source == "scenarios/team.toml"
+    assert len(load_scenario("pair").learner_seats) == 2
+    assert "vs_smart" in single_learner_scenarios()
+    with pytest.raises(ScenarioError, match="team: a folder, not a scenario file"):
+        load_scenario(tmp_path / "team")  # a path is a path
+
+
 def test_overrides_reach_the_configs():
     sc = parse_scenario({"name": "x", "map": "open", "game": {"max_steps": 77},
                          "rewards": {"victory": 5.0},

@@ -204,14 +204,16 @@ def shipped_scenarios() -> list[str]:
 
 
 def load_scenario(name_or_path: str | Path | Scenario) -> Scenario:
-    """A shipped scenario by name (``"vs_smart"``) or any scenario TOML file by path."""
+    """A shipped scenario by name (``"vs_smart"``; a file or folder of that name in the
+    working folder does not hide it) or any scenario TOML file by path."""
     if isinstance(name_or_path, Scenario):
         return name_or_path
     if not isinstance(name_or_path, str | Path):
         raise ScenarioError(f"scenario: a shipped scenario's name, a .toml path or a Scenario, "
                             f"got {type(name_or_path).__name__} {name_or_path!r}")
     path = Path(name_or_path)
-    if path.suffix == ".toml" or path.exists():
+    named = isinstance(name_or_path, str) and name_or_path in shipped_scenarios()
+    if not named and (path.suffix == ".toml" or path.exists()):
         if not path.is_file():
             raise ScenarioError(f"{path}: " + ("a folder, not a scenario file" if path.is_dir()
                                                else "no such scenario file"))
