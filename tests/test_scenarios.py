@@ -18,6 +18,7 @@ from alphatank.game.scenarios import (
     Seat,
     load_scenario,
     parse_scenario,
+    seats_scenario,
     shipped_scenarios,
 )
 from alphatank.game.seats import make_controller
@@ -153,6 +154,24 @@ def test_a_shipped_name_is_not_hidden_by_a_folder_or_file_of_that_name(tmp_path,
     assert "vs_smart" in single_learner_scenarios()
     with pytest.raises(ScenarioError, match="team: a folder, not a scenario file"):
         load_scenario(tmp_path / "team")  # a path is a path
+
+
+def test_a_shipped_map_is_not_hidden_by_a_folder_of_that_name(tmp_path, monkeypatch):
+    """A folder 'battlefield' in the working folder made every scenario on battlefield fail
+    ('folder 'battlefield' holds no .txt maps': `import alphatank.envs` too), and a folder
+    'arena4' of maps silently replaced the shipped arena4 of `team`."""
+    from alphatank.envs.ids import single_learner_scenarios
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "battlefield").mkdir()
+    (tmp_path / "arena4").mkdir()
+    shutil.copy(MAPS / "maze.txt", tmp_path / "arena4" / "maze.txt")
+    assert "vs_smart" in single_learner_scenarios()
+    assert load_scenario("vs_smart").maps == ("pkg:battlefield.txt",)
+    assert load_scenario("team").maps == ("pkg:arena4.txt",)
+    assert seats_scenario("smart,smart", "train/maze_0000").maps == ("pkg:train/maze_0000.txt",)
+    for local in ("./arena4", "arena4/"):  # the folder here, named as a path
+        assert seats_scenario("smart,smart", local).maps == (str(Path("arena4/maze.txt")),)
 
 
 def test_overrides_reach_the_configs():

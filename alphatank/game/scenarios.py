@@ -64,6 +64,7 @@ from alphatank.sim.mapspec import (
     MapSpec,
     load_map,
     parse_map,
+    shipped_map_folders,
     shipped_maps,
 )
 from alphatank.sim.policy import NoopPolicy
@@ -322,7 +323,15 @@ def _text_maps(value: Any, fail: Any) -> tuple[str, ...]:
 
 
 def _resolve_maps(value: str, base: Path | None, fail: Any) -> tuple[str, ...]:
-    """Map sources for a ``map`` value: a shipped map or folder, or a file or folder path."""
+    """Map sources for a ``map`` value: a shipped map or folder (by its name: a file or
+    folder of that name here does not hide it), or a file or folder path."""
+    root = resources.files("alphatank.maps")
+    if _is_shipped_map(value):
+        if root.joinpath(f"{value}.txt").is_file():
+            return _checked((f"pkg:{value}.txt",), fail)
+        return _checked(tuple(f"pkg:{value}/{p.name}" for p in sorted(
+            root.joinpath(value).iterdir(), key=lambda p: p.name) if p.name.endswith(".txt")),
+            fail)
     candidates = []
     path = Path(value)
     if base is not None and not path.is_absolute():
@@ -336,19 +345,18 @@ def _resolve_maps(value: str, base: Path | None, fail: Any) -> tuple[str, ...]:
             return _checked(found, fail)
         if cand.is_file():
             return _checked((str(cand),), fail)
-    root = resources.files("alphatank.maps")
-    folder = root.joinpath(value)
-    if folder.is_dir():
-        found = tuple(f"pkg:{value}/{p.name}" for p in sorted(folder.iterdir(),
-                                                              key=lambda p: p.name)
-                      if p.name.endswith(".txt"))
-        if not found:
-            raise fail("map", f"shipped folder {value!r} holds no .txt maps")
-        return _checked(found, fail)
-    if root.joinpath(f"{value}.txt").is_file():
-        return _checked((f"pkg:{value}.txt",), fail)
     raise fail("map", f"unknown map {value!r}; shipped maps: {shipped_maps()} "
                "(or a path to a .txt map or a folder of maps)")
+
+
+def _is_shipped_map(value: str) -> bool:
+    """Whether ``value`` names a shipped map (``maze``, ``train/maze_0000``) or a shipped
+    folder of maps (``train``)."""
+    folder = value.rpartition("/")[0]
+    folders = shipped_map_folders()
+    if folder and folder not in folders:
+        return False
+    return value in folders or value in shipped_maps(folder or None)
 
 
 def _checked(sources: tuple[str, ...], fail: Any, key: str = "map") -> tuple[str, ...]:
