@@ -172,6 +172,9 @@ def test_a_shipped_map_is_not_hidden_by_a_folder_of_that_name(tmp_path, monkeypa
     assert seats_scenario("smart,smart", "train/maze_0000").maps == ("pkg:train/maze_0000.txt",)
     for local in ("./arena4", "arena4/"):  # the folder here, named as a path
         assert seats_scenario("smart,smart", local).maps == (str(Path("arena4/maze.txt")),)
+    # a scenario file's own folder is still read first (docs: relative map paths)
+    own = _write(tmp_path, BASE.replace('map = "open"', 'map = "arena4"'))
+    assert load_scenario(own).maps == (str(tmp_path / "arena4" / "maze.txt"),)
 
 
 def test_overrides_reach_the_configs():

@@ -323,30 +323,35 @@ def _text_maps(value: Any, fail: Any) -> tuple[str, ...]:
 
 
 def _resolve_maps(value: str, base: Path | None, fail: Any) -> tuple[str, ...]:
-    """Map sources for a ``map`` value: a shipped map or folder (by its name: a file or
-    folder of that name here does not hide it), or a file or folder path."""
-    root = resources.files("alphatank.maps")
+    """Map sources for a ``map`` value: a file or folder path in the scenario file's folder
+    (``base``), a shipped map or folder, or a file or folder path from the working folder
+    (which does not hide a shipped name: ``./arena4`` names a folder there)."""
+    path = Path(value)
+    if base is not None and not path.is_absolute() and (found := _maps_at(base / path, fail)):
+        return found
     if _is_shipped_map(value):
+        root = resources.files("alphatank.maps")
         if root.joinpath(f"{value}.txt").is_file():
             return _checked((f"pkg:{value}.txt",), fail)
         return _checked(tuple(f"pkg:{value}/{p.name}" for p in sorted(
             root.joinpath(value).iterdir(), key=lambda p: p.name) if p.name.endswith(".txt")),
             fail)
-    candidates = []
-    path = Path(value)
-    if base is not None and not path.is_absolute():
-        candidates.append(base / path)
-    candidates.append(path)
-    for cand in candidates:
-        if cand.is_dir():
-            found = tuple(str(p) for p in sorted(cand.glob("*.txt")))
-            if not found:
-                raise fail("map", f"folder {str(cand)!r} holds no .txt maps")
-            return _checked(found, fail)
-        if cand.is_file():
-            return _checked((str(cand),), fail)
+    if found := _maps_at(path, fail):
+        return found
     raise fail("map", f"unknown map {value!r}; shipped maps: {shipped_maps()} "
                "(or a path to a .txt map or a folder of maps)")
+
+
+def _maps_at(cand: Path, fail: Any) -> tuple[str, ...] | None:
+    """The map sources of a file or folder ``cand``, or None when there is none."""
+    if cand.is_dir():
+        found = tuple(str(p) for p in sorted(cand.glob("*.txt")))
+        if not found:
+            raise fail("map", f"folder {str(cand)!r} holds no .txt maps")
+        return _checked(found, fail)
+    if cand.is_file():
+        return _checked((str(cand),), fail)
+    return None
 
 
 def _is_shipped_map(value: str) -> bool:
