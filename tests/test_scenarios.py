@@ -132,12 +132,16 @@ def test_invalid_scenarios_name_file_and_field(tmp_path, text, field, hint):
     assert str(p) in msg and field in msg and hint in msg
 
 
-def test_invalid_toml_and_unknown_name(tmp_path):
+def test_invalid_toml_and_unknown_name(tmp_path, monkeypatch):
     p = _write(tmp_path, "name = \n")
     with pytest.raises(ScenarioError, match="invalid TOML"):
         load_scenario(p)
     with pytest.raises(ScenarioError, match="vs_smart"):
         load_scenario("no_such_scenario")
+    monkeypatch.chdir(tmp_path)  # a shipped name with .toml is a path: say so
+    with pytest.raises(ScenarioError, match=r"^vs_smart\.toml: no such scenario file \(the "
+                                            r"shipped scenario is 'vs_smart', without \.toml\)$"):
+        load_scenario("vs_smart.toml")
 
 
 def test_a_shipped_name_is_not_hidden_by_a_folder_or_file_of_that_name(tmp_path, monkeypatch):

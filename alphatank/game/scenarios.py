@@ -216,8 +216,10 @@ def load_scenario(name_or_path: str | Path | Scenario) -> Scenario:
     named = isinstance(name_or_path, str) and name_or_path in shipped_scenarios()
     if not named and (path.suffix == ".toml" or path.exists()):
         if not path.is_file():
+            hint = (f" (the shipped scenario is {path.stem!r}, without .toml)"
+                    if str(path) == path.name and path.stem in shipped_scenarios() else "")
             raise ScenarioError(f"{path}: " + ("a folder, not a scenario file" if path.is_dir()
-                                               else "no such scenario file"))
+                                               else "no such scenario file") + hint)
         try:
             text = read_text(path)
         except ValueError as exc:
