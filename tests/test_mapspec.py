@@ -181,6 +181,23 @@ def test_trailing_comments_on_cell_and_zones_lines_only():
         parse_map("zones: often ; random\n\n###\n#1#\n###\n", "c.txt")
 
 
+def test_a_shipped_map_name_is_not_hidden_by_a_file_or_folder_of_that_name(tmp_path,
+                                                                           monkeypatch):
+    """A folder 'maze' in the working folder made load_map('maze') 'is a folder, not a map
+    file' (bench, maps, the README's Match example); a file 'open' was read as the map."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "maze").mkdir()
+    (tmp_path / "open").write_text("not a map\n")
+    (tmp_path / "train").mkdir()
+    (tmp_path / "train" / "maze_0000").mkdir()
+    for name in ("maze", "open", "train/maze_0000"):
+        assert load_map(name).source == f"maps/{name}.txt"
+    with pytest.raises(MapError, match="is a folder, not a map file"):  # named as a path
+        load_map(Path("maze"))
+    with pytest.raises(MapError, match=r"^open:1:1: unknown character"):  # the file here
+        load_map("./open")
+
+
 def test_an_empty_map_path_is_refused_not_the_current_folder(tmp_path, monkeypatch, capsys):
     (tmp_path / "a.txt").write_text("#####\n#1.2#\n#####\n")
     monkeypatch.chdir(tmp_path)

@@ -62,6 +62,7 @@ from alphatank.sim.config import (
 from alphatank.sim.mapspec import (
     MapError,
     MapSpec,
+    is_shipped_map,
     load_map,
     parse_map,
     shipped_map_folders,
@@ -359,11 +360,7 @@ def _maps_at(cand: Path, fail: Any) -> tuple[str, ...] | None:
 def _is_shipped_map(value: str) -> bool:
     """Whether ``value`` names a shipped map (``maze``, ``train/maze_0000``) or a shipped
     folder of maps (``train``)."""
-    folder = value.rpartition("/")[0]
-    folders = shipped_map_folders()
-    if folder and folder not in folders:
-        return False
-    return value in folders or value in shipped_maps(folder or None)
+    return value in shipped_map_folders() or is_shipped_map(value)
 
 
 def _checked(sources: tuple[str, ...], fail: Any, key: str = "map") -> tuple[str, ...]:

@@ -327,13 +327,24 @@ def shipped_map_folders() -> list[str]:
                   if p.is_dir() and any(q.name.endswith(".txt") for q in p.iterdir()))
 
 
+def is_shipped_map(name: str) -> bool:
+    """Whether ``name`` names a shipped map as :func:`load_map` takes it (``"maze"``,
+    ``"train/maze_0000"``)."""
+    folder = name.rpartition("/")[0]
+    if folder and folder not in shipped_map_folders():
+        return False
+    return name in shipped_maps(folder or None)
+
+
 def load_map(name_or_path: str | Path) -> MapSpec:
-    """Load a shipped map by name (``"maze"``) or any map file by path."""
+    """Load a shipped map by name (``"maze"``, ``"train/maze_0000"``; a file or folder of
+    that name in the working folder does not hide it) or any map file by path."""
     if not str(name_or_path):  # Path("") is the current folder
         raise MapError("empty map name or path; give a shipped map's name (e.g. 'maze') or a "
                        ".txt file", "''")
     path = Path(name_or_path)
-    if path.suffix == ".txt" or path.exists():
+    named = isinstance(name_or_path, str) and is_shipped_map(name_or_path)
+    if not named and (path.suffix == ".txt" or path.exists()):
         if path.is_dir():
             raise MapError("is a folder, not a map file (.txt)", str(path))
         if not path.is_file():
