@@ -17,6 +17,7 @@ import _thread
 import argparse
 import importlib
 import os
+import select
 import signal
 import sys
 import threading
@@ -164,8 +165,13 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with ctrl_c_kept():
             return int(args._run(args) or 0)
-    except BrokenPipeError:
-        return broken_pipe_exit()
+    except BrokenPipeError as exc:
+        if stdout_reader_gone():
+            return broken_pipe_exit()
+        if os.environ.get("ALPHATANK_TRACEBACK"):
+            raise
+        print(f"alphatank {args.command}: error: {one_line(exc)}", file=sys.stderr)
+        return 1  # another pipe (a worker process's): said, not taken for SIGPIPE
     except KeyboardInterrupt as exc:  # its message, if any, says what was kept
         if os.environ.get("ALPHATANK_TRACEBACK"):
             raise
@@ -185,6 +191,18 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"alphatank {args.command}: error: {one_line(exc)}", file=sys.stderr)
         return EXIT_BAD_INPUT
+
+
+def stdout_reader_gone() -> bool:
+    """Whether stdout is a pipe whose reader has closed it (poll reports an error on it),
+    or not a real file (tests capture it): a BrokenPipeError is then stdout's."""
+    try:
+        fd = sys.stdout.fileno()
+    except (OSError, ValueError, AttributeError):
+        return True
+    poller = select.poll()
+    poller.register(fd, select.POLLOUT)
+    return any(events & select.POLLERR for _, events in poller.poll(0))
 
 
 def broken_pipe_exit() -> int:

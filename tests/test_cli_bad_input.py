@@ -839,6 +839,23 @@ def test_closed_pipe_is_quiet():
     assert proc.stderr == ""
 
 
+def test_a_broken_pipe_is_taken_for_stdouts_only_when_its_reader_is_gone():
+    """A BrokenPipeError from another pipe (an env worker's that failed to start) ended
+    the command with status 141 and no word, as if stdout's reader had gone away: the
+    command line now asks stdout itself (a real pipe, its reader open, then closed)."""
+    probe = ("import sys, time; from alphatank.cli import stdout_reader_gone; "
+             "time.sleep(0.3); print(stdout_reader_gone(), file=sys.stderr)")
+    for close in (False, True):
+        proc = subprocess.Popen([sys.executable, "-c", probe], stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True, env=_env())
+        if close:
+            proc.stdout.close()
+        assert proc.stderr.read().strip() == str(close)
+        proc.wait(timeout=60)
+        if not close:
+            proc.stdout.close()
+
+
 def test_version_and_help(capsys):
     from alphatank import __version__
 
