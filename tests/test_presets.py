@@ -141,6 +141,9 @@ BAD = [
      r"bad\.toml: learners\[0\]\.config\.clip: unknown key; valid keys: \[.*'clip_coef'"),
     ("scenario = 'pair'\n[[learners]]\nname = 'a'\nalgo = 'dqn'\n",
      r"bad\.toml: learners\[0\]\.algo: unknown algorithm 'dqn'; registered: \[.*'ppo'"),
+    # a list raised TypeError (unhashable) out of the algorithm table: a traceback
+    ("scenario = 'pair'\n[[learners]]\nname = 'a'\nalgo = ['ppo']\n",
+     r"bad\.toml: learners\[0\]\.algo: unknown algorithm \['ppo'\]; registered: \[.*'ppo'"),
     ("scenario = 'pair'\n[[learners]]\nname = 'a'\nseat = 1\n",
      r"bad\.toml: learners\[0\]\.seat: unknown key; valid keys: \['name', 'algo', 'seats'"),
     ("scenario = 'pair'\n[[learners]]\nname = 'a'\nseats = [0, 0]\n",

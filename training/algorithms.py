@@ -45,10 +45,10 @@ def register(name: str, config: type, learner: str, description: str = "") -> Al
 
 
 def get_algorithm(name: str) -> Algorithm:
-    try:
-        return ALGORITHMS[name]
-    except KeyError:
-        raise ValueError(f"unknown algorithm {name!r}; registered: {sorted(ALGORITHMS)}") from None
+    """The registered algorithm ``name``; ValueError naming the registered ones."""
+    if not isinstance(name, str) or name not in ALGORITHMS:  # a list from TOML: unhashable
+        raise ValueError(f"unknown algorithm {name!r}; registered: {sorted(ALGORITHMS)}")
+    return ALGORITHMS[name]
 
 
 register("ppo", PPOConfig, "alphatank.training.ppo:PPO",
