@@ -245,6 +245,30 @@ def test_bad_schedule_settings_are_rejected():
         make_schedule({"kind": "curriculum", "speed": 2}, 100)
     with pytest.raises(ValueError, match="cycle pool: unknown bot 'genius'"):
         make_schedule({"kind": "cycle", "pool": ["smart", "genius"]}, 100)
+    # a string pool was read letter by letter ("unknown bot 'r'"), levels that are not a
+    # list of numbers gave Python's words ("'float' object is not iterable")
+    with pytest.raises(ValueError, match=r"cycle pool must be a list of bot names, got 'random'"):
+        make_schedule({"kind": "cycle", "pool": "random"}, 100)
+    for levels in (0.5, ["a"], [[0.1]], [True]):
+        with pytest.raises(ValueError, match=r"winrate curriculum levels must be a list of "
+                                             r"weaknesses in \[0, 1\], got "):
+            make_schedule({"kind": "winrate", "levels": levels}, 100)
+
+
+@pytest.mark.parametrize("steepness", [1e-17, 0.001, 2000.0, 1e308])
+def test_a_sigmoid_steepness_it_cannot_compute_is_refused(steepness):
+    """Beyond [0.01, 1000] the sigmoid overflowed (OverflowError) or its ends met (division
+    by zero) at the first apply, once the run had started."""
+    with pytest.raises(ValueError, match=r"steepness must be in \[0.01, 1000\], got "):
+        make_schedule({"kind": "curriculum", "shape": "sigmoid", "steepness": steepness}, 100)
+
+
+@pytest.mark.parametrize("steepness", [0.01, 1000.0])
+def test_the_steepest_and_flattest_sigmoids_allowed_run_from_start_to_end(steepness):
+    c = make_schedule({"kind": "curriculum", "shape": "sigmoid", "steepness": steepness}, 100)
+    w = [c.weakness(s) for s in range(101)]
+    assert w[0] == pytest.approx(0.1) and w[-1] == pytest.approx(0.8)
+    assert all(b >= a for a, b in zip(w, w[1:], strict=False))
 
 
 def test_cycle_training_rotates_the_opponents_and_scales_the_victory_reward(tmp_path):

@@ -30,7 +30,7 @@ RANGES = {"start": (0, 1), "end": (0, 1), "weakness": (0, 1), "target": (0, 1),
           "threshold": (0, 1), "demote": (0, 1), "floor": (0, 1), "snapshot_share": (0, 1),
           "interval": (1, None), "window": (1, None), "steps": (1, None),
           "mastery_phase": (0, None), "min_episodes": (0, None), "snapshot_every": (0, None),
-          "snapshots": (0, None), "seed": (0, None)}
+          "snapshots": (0, None), "seed": (0, None), "steepness": (0.01, 1000.0)}
 
 
 class ScheduledEnv(Protocol):
@@ -87,9 +87,10 @@ class CurriculumSchedule(OpponentSchedule):
         for name, w in (("start", start), ("end", end)):
             if not 0.0 <= w <= 1.0:
                 raise ValueError(f"curriculum {name} weakness must be in [0, 1], got {w}")
-        if steps <= 0 or steepness <= 0:
-            raise ValueError(f"curriculum steps and steepness must be > 0, got {steps}, "
-                             f"{steepness}")
+        lo, hi = RANGES["steepness"]  # beyond: exp overflows, or the ends meet (0 / 0)
+        if steps <= 0 or not lo <= steepness <= hi:
+            raise ValueError(f"curriculum needs steps > 0 and steepness in [{lo:g}, {hi:g}], "
+                             f"got {steps}, {steepness}")
         self.steps, self.start, self.end = int(steps), float(start), float(end)
         self.shape, self.steepness = shape, float(steepness)
         self._applied: float | None = None
@@ -136,6 +137,8 @@ class CycleSchedule(OpponentSchedule):
     def __init__(self, pool: list[str], mode: str = "fixed", interval: int = 50_000,
                  window: int = 50, target: float = 0.6, mastery_phase: int = 500_000,
                  scale_victory: bool = True, weakness: float | None = None, seed: int = 0):
+        if not isinstance(pool, list | tuple) or not all(isinstance(b, str) for b in pool):
+            raise ValueError(f"cycle pool must be a list of bot names, got {pool!r}")
         if not pool:
             raise ValueError("cycle schedule needs a non-empty bot pool")
         from alphatank.game.scenarios import bot_names
@@ -302,6 +305,10 @@ class WinRateCurriculum(_LevelCurriculum):
     def __init__(self, levels: tuple[float, ...] | list[float] = (0.1, 0.25, 0.5, 0.75, 1.0),
                  threshold: float = 0.6, window: int = 100, min_episodes: int = 50,
                  demote: float = 0.0):
+        if not isinstance(levels, list | tuple) or any(
+                isinstance(w, bool) or not isinstance(w, int | float) for w in levels):
+            raise ValueError(f"winrate curriculum levels must be a list of weaknesses in "
+                             f"[0, 1], got {levels!r}")
         levels = tuple(float(w) for w in levels)
         if not levels or any(not 0.0 <= w <= 1.0 for w in levels):
             raise ValueError(f"winrate curriculum levels must be weaknesses in [0, 1], "
