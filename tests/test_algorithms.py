@@ -281,6 +281,12 @@ def test_hp_overrides_are_typed_per_algorithm():
     ([("--hp", "clip_coef=0.1")], r"^--hp: expected ALGO\.FIELD=VALUE, got 'clip_coef=0\.1'"),
     ([("--ppo", "num_stepz=3")], r"^--ppo num_stepz: unknown ppo hyperparameter"),
     ([("--sac", "tau")], r"^--sac: expected FIELD=VALUE, got 'tau'"),
+    # the last one given played, silently
+    ([("--hp", "ppo.clip_coef=0.1,ppo.clip_coef=0.3")],
+     r"^--hp ppo\.clip_coef: ppo\.clip_coef is also set by --hp ppo\.clip_coef; give it "
+     r"once$"),
+    ([("--hp", "ppo.clip_coef=0.1"), ("--ppo", "clip_coef=0.2")],
+     r"^--ppo clip_coef: ppo\.clip_coef is also set by --hp ppo\.clip_coef;"),
 ])
 def test_bad_hp_overrides_give_one_line_errors(items, error):
     with pytest.raises(ValueError, match=error):

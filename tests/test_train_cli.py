@@ -50,6 +50,15 @@ def test_map_schedule_and_hp_flags_build_the_run(capsys, tmp_path):
     assert none.schedule == {}
 
 
+def test_ppo_and_sac_flags_repeat_as_hp_does(capsys, tmp_path):
+    """A second --ppo replaced the first (its update_epochs=4 was dropped, silently)."""
+    cfg = printed_run(capsys, tmp_path, "--preset", "sac_vs_ppo", "--ppo", "update_epochs=4",
+                      "--ppo", "num_steps=64", "--sac", "tau=0.01", "--sac", "batch_size=64")
+    sac, ppo = cfg.learners
+    assert (ppo.config.update_epochs, ppo.config.num_steps) == (4, 64)
+    assert (sac.config.tau, sac.config.batch_size) == (0.01, 64)
+
+
 def test_curriculum_flag(capsys, tmp_path):
     cfg = printed_run(capsys, tmp_path, "--preset", "ppo_vs_smart", "--curriculum")
     assert cfg.schedule == {"kind": "curriculum", "start": 0.1, "end": 0.8}
@@ -92,6 +101,8 @@ def test_scenario_flag_refits_learners_of_the_first_kind(capsys, tmp_path):
     (["--ppo", "gamma=2"], "--ppo gamma: must be in [0, 1], got 2.0"),
     (["--sac", "tau=0.1"], "--sac: this run has no sac learner (its learners use ppo)"),
     (["--ppo", "anchor_kl=0.5"], "--ppo: 'ppo': anchor_kl = 0.5 needs a warm start"),
+    (["--ppo", "clip_coef=0.1", "--hp", "ppo.clip_coef=0.3"],
+     "--ppo clip_coef: ppo.clip_coef is also set by --hp ppo.clip_coef; give it once"),
     (["--workers", "3", "--num-envs", "2"], "--workers: 3 worker processes for 2 matches; "
                                             "at most one per match"),
     (["--preset", "demo", "--num-envs", "1"], "presets/demo.toml: num_workers: 2 worker "

@@ -319,8 +319,10 @@ def parse_hp(items: Iterable[tuple[str, str]], flags: dict[str, list[str]] | Non
     """``[(flag, "ppo.clip_coef=0.1,sac.tau=0.01"), ...]`` -> typed values per algorithm.
     A flag named after an algorithm (``--ppo``) takes bare ``FIELD=VALUE`` items. Errors
     are one line naming the flag and the field as typed and what is allowed. ``flags``, if
-    given, gets the flags that set each algorithm's values (for :func:`with_hp`)."""
+    given, gets the flags that set each algorithm's values (for :func:`with_hp`). A
+    hyperparameter given twice is refused: which one plays would be a guess."""
     out: dict[str, dict[str, Any]] = {}
+    set_by: dict[tuple[str, str], str] = {}  # (algorithm, field) -> the item that set it
     for flag, text in items:
         fixed = flag.lstrip("-") if flag.lstrip("-") in ALGORITHMS else None
         for item in filter(None, (part.strip() for part in text.split(","))):
@@ -343,6 +345,10 @@ def parse_hp(items: Iterable[tuple[str, str]], flags: dict[str, list[str]] | Non
                 dataclasses.replace(cfg_cls(), **{name: value})  # range check now
             except FieldError as exc:
                 raise ValueError(f"{flag} {key}: {exc.problem}") from None
+            if (algo_name, name) in set_by:
+                raise ValueError(f"{flag} {key}: {algo_name}.{name} is also set by "
+                                 f"{set_by[algo_name, name]}; give it once")
+            set_by[algo_name, name] = f"{flag} {key}"
             out.setdefault(algo_name, {})[name] = value
             if flags is not None and flag not in flags.setdefault(algo_name, []):
                 flags[algo_name].append(flag)

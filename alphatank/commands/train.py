@@ -95,10 +95,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     what.add_argument("--hp", action="append", default=[], metavar="ALGO.FIELD=VALUE,...",
                       help="set a hyperparameter of every learner of that algorithm, e.g. "
                            "ppo.update_epochs=4 (repeatable; see the list below)")
-    what.add_argument("--ppo", default="", metavar="K=V,...",
-                      help="same as --hp ppo.K=V,... (e.g. update_epochs=4,num_steps=128)")
-    what.add_argument("--sac", default="", metavar="K=V,...",
-                      help="same as --hp sac.K=V,... (e.g. utd_ratio=0.25)")
+    what.add_argument("--ppo", action="append", default=[], metavar="K=V,...",
+                      help="same as --hp ppo.K=V,... (e.g. update_epochs=4,num_steps=128; "
+                           "repeatable)")
+    what.add_argument("--sac", action="append", default=[], metavar="K=V,...",
+                      help="same as --hp sac.K=V,... (e.g. utd_ratio=0.25; repeatable)")
     info = p.add_argument_group("information")
     info.add_argument("--list", action="store_true",
                       help="list the presets and every hyperparameter, then exit")
@@ -322,7 +323,7 @@ def build_run(args: argparse.Namespace) -> TrainConfig:
         make_schedule(cfg.schedule, cfg.total_steps)
     except ValueError as exc:
         raise ValueError(f"schedule: {exc}") from None
-    hp_items = [("--hp", t) for t in args.hp] + [("--ppo", args.ppo), ("--sac", args.sac)]
+    hp_items = [(f"--{flag}", t) for flag in ("hp", "ppo", "sac") for t in getattr(args, flag)]
     flags: dict[str, list[str]] = {}
     cfg = with_hp(cfg, parse_hp(hp_items, flags), n, flags)
     wants = {s.name: s.config.num_steps for s in run_learners(cfg, n)
