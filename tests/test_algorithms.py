@@ -279,7 +279,10 @@ def test_hp_overrides_are_typed_per_algorithm():
     ([("--hp", "ppo.clip=1")], r"^--hp ppo\.clip: unknown ppo hyperparameter; valid: \[.*"),
     ([("--hp", "dqn.lr=1")], r"^--hp dqn\.lr: unknown algorithm 'dqn'; registered"),
     ([("--hp", "clip_coef=0.1")], r"^--hp: expected ALGO\.FIELD=VALUE, got 'clip_coef=0\.1'"),
-    ([("--ppo", "num_stepz=3")], r"^--ppo num_stepz: unknown ppo hyperparameter"),
+    ([("--ppo", "num_stepz=3")], r"^--ppo num_stepz: unknown ppo hyperparameter; valid: "
+                                 r"\[.*\]; did you mean 'num_steps'\?$"),
+    ([("--hp", "pop.clip_coef=1")], r"^--hp pop\.clip_coef: unknown algorithm 'pop'; "
+                                    r"registered: \[.*\]; did you mean 'ppo'\?$"),
     ([("--sac", "tau")], r"^--sac: expected FIELD=VALUE, got 'tau'"),
     # the last one given played, silently
     ([("--hp", "ppo.clip_coef=0.1,ppo.clip_coef=0.3")],

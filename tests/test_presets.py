@@ -195,9 +195,35 @@ def test_malformed_run_files_name_the_file_and_the_field(tmp_path, text, error):
     assert "\n" not in str(info.value)
 
 
+@pytest.mark.parametrize("text,near", [
+    ("totl_steps = 5", "total_steps"),
+    ("[[learners]]\nname = 'a'\nseat = [0]", "seats"),
+    ("[[learners]]\nname = 'a'\nalgo = 'PPO'", "ppo"),
+    ("[[learners]]\nname = 'a'\n[learners.config]\nlearningrate = 1.0", "learning_rate"),
+    ("[schedule]\nkind = 'curriculm'", "curriculum"),
+    ("[schedule]\nkind = 'curriculum'\nstrat = 0.1", "start"),
+    ("[selfplay]\nwindw = 3", "window"),
+    ("[game]\nmax_step = 5", "max_steps"),
+    ("xyz = 1", None),
+])
+def test_a_misspelt_key_or_name_suggests_the_nearest_valid_one(tmp_path, text, near):
+    """The errors listed the valid keys only (28 of them for the run's own)."""
+    path = tmp_path / "typo.toml"
+    path.write_text(f"scenario = 'vs_smart'\n{text}\n")
+    with pytest.raises(ValueError, match=r"typo\.toml: .*(unknown|registered)") as info:
+        load_run(path)
+    message = str(info.value)
+    if near is None:
+        assert "did you mean" not in message
+    else:
+        assert message.endswith(f"; did you mean {near!r}?"), message
+
+
 def test_unknown_preset_and_missing_file_are_named(tmp_path):
     with pytest.raises(ValueError, match=r"unknown training preset 'nope'; valid: \[.*'demo'"):
         get_preset("nope")
+    with pytest.raises(ValueError, match=r"\]; did you mean 'ppo_vs_smart'\?$"):
+        get_preset("ppo_vs_smrt")
     with pytest.raises(ValueError, match="missing.toml: no such run file"):
         load_run(tmp_path / "missing.toml")
 

@@ -107,7 +107,9 @@ def test_scenario_flag_refits_learners_of_the_first_kind(capsys, tmp_path):
                                             "at most one per match"),
     (["--preset", "demo", "--num-envs", "1"], "presets/demo.toml: num_workers: 2 worker "
                                               "processes for 1 matches; at most one per match"),
-    (["--preset", "nope"], "unknown training preset 'nope'"),
+    (["--preset", "nope"], "--preset: unknown training preset 'nope'"),
+    (["--preset", "ppo_vs_agressive"], "--preset: unknown training preset 'ppo_vs_agressive'; "
+                                       "valid: ['demo', "),
     (["--config", "missing.toml"], "missing.toml: no such run file"),
     (["--config", "x.toml", "--preset", "demo"], "--config and --preset: give one"),
 ])

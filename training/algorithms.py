@@ -14,6 +14,7 @@ import importlib
 from dataclasses import dataclass
 from typing import Any
 
+from alphatank.training.fields import did_you_mean
 from alphatank.training.hparams import MAPPOConfig, PPOConfig, SACConfig
 
 
@@ -47,7 +48,8 @@ def register(name: str, config: type, learner: str, description: str = "") -> Al
 def get_algorithm(name: str) -> Algorithm:
     """The registered algorithm ``name``; ValueError naming the registered ones."""
     if not isinstance(name, str) or name not in ALGORITHMS:  # a list from TOML: unhashable
-        raise ValueError(f"unknown algorithm {name!r}; registered: {sorted(ALGORITHMS)}")
+        raise ValueError(f"unknown algorithm {name!r}; registered: {sorted(ALGORITHMS)}"
+                         f"{did_you_mean(name, ALGORITHMS)}")
     return ALGORITHMS[name]
 
 

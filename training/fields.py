@@ -11,11 +11,12 @@ hyperparameters stays cheap.
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import functools
 import math
 import types
 import typing
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from typing import Any, NamedTuple
 
 from alphatank.errors import InputError
@@ -153,6 +154,17 @@ def field_map(cls: type) -> dict[str, dataclasses.Field]:
     return {f.name: f for f in dataclasses.fields(cls)}
 
 
+def did_you_mean(name: Any, valid: Iterable[str]) -> str:
+    """``"; did you mean 'total_steps'?"`` when ``name`` is a near miss of one of ``valid``
+    (a typo, or another case), else ``""``: the end of an unknown-name error that lists
+    the valid ones."""
+    if not isinstance(name, str):
+        return ""
+    lower = {v.lower(): v for v in valid}
+    close = difflib.get_close_matches(name.lower(), list(lower), n=1)
+    return f"; did you mean {lower[close[0]]!r}?" if close else ""
+
+
 def build(cls: type, data: Mapping[str, Any], prefix: str = "") -> Any:
     """``cls(**data)`` with unknown keys and bad values reported as ``{prefix}{key}:
     problem`` (``prefix`` e.g. ``"presets/x.toml: learners[0].config."``)."""
@@ -160,7 +172,8 @@ def build(cls: type, data: Mapping[str, Any], prefix: str = "") -> Any:
     data = dict(data)
     for key, value in data.items():
         if key not in fields:
-            raise ValueError(f"{prefix}{key}: unknown key; valid keys: {sorted(fields)}")
+            raise ValueError(f"{prefix}{key}: unknown key; valid keys: {sorted(fields)}"
+                             f"{did_you_mean(key, fields)}")
         base, optional = _kind(_hints(cls)[key])
         if optional and base is not str and value == "none":  # TOML has no null
             data[key] = None

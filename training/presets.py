@@ -26,6 +26,7 @@ from alphatank.training.fields import (
     a_type,
     build,
     describe,
+    did_you_mean,
     field_map,
     hp,
     parse_value,
@@ -91,7 +92,8 @@ class LearnerSpec:
         valid = ("name", "algo", "seats", "config")
         for key in data:
             if key not in valid:
-                raise ValueError(f"{prefix}{key}: unknown key; valid keys: {list(valid)}")
+                raise ValueError(f"{prefix}{key}: unknown key; valid keys: {list(valid)}"
+                                 f"{did_you_mean(key, valid)}")
         name = data.get("name")
         if not isinstance(name, str):
             raise ValueError(f"{prefix}name: required, a string")
@@ -260,7 +262,8 @@ def selfplay_pool_args(cfg: TrainConfig) -> tuple[str, dict[str, Any]]:
     table = dict(cfg.selfplay)
     bad = sorted(set(table) - set(SELFPLAY_KEYS))
     if bad:
-        raise ValueError(f"selfplay.{bad[0]}: unknown key; valid keys: {list(SELFPLAY_KEYS)}")
+        raise ValueError(f"selfplay.{bad[0]}: unknown key; valid keys: {list(SELFPLAY_KEYS)}"
+                         f"{did_you_mean(bad[0], SELFPLAY_KEYS)}")
     names = [s.name for s in cfg.learners]
     learner = table.pop("learner", names[0] if names else "")
     if learner not in names:
@@ -339,7 +342,7 @@ def parse_hp(items: Iterable[tuple[str, str]], flags: dict[str, list[str]] | Non
             fields = field_map(cfg_cls)
             if name not in fields:
                 raise ValueError(f"{flag} {key}: unknown {algo_name} hyperparameter; valid: "
-                                 f"{sorted(fields)}")
+                                 f"{sorted(fields)}{did_you_mean(name, fields)}")
             try:
                 value = parse_value(cfg_cls, name, raw)
                 dataclasses.replace(cfg_cls(), **{name: value})  # range check now
@@ -369,7 +372,8 @@ def parse_game(flag: str, text: str) -> dict[str, Any]:
         if not sep or not key:
             raise ValueError(f"{flag}: expected KEY=VALUE, got {item!r}")
         if key not in fields:
-            raise ValueError(f"{flag} {key}: unknown game setting; valid: {sorted(fields)}")
+            raise ValueError(f"{flag} {key}: unknown game setting; valid: {sorted(fields)}"
+                             f"{did_you_mean(key, fields)}")
         if key in out:  # which one plays would be a guess
             raise ValueError(f"{flag} {key}: given twice; give it once")
         try:
@@ -490,7 +494,7 @@ def _check_overrides(table: dict[str, Any], key: str, prefix: str) -> None:
     for name, value in table.items():
         if name not in fields:
             raise ValueError(f"{prefix}{key}.{name}: unknown {cls.__name__} key; valid keys: "
-                             f"{sorted(fields)}")
+                             f"{sorted(fields)}{did_you_mean(name, fields)}")
         default = fields[name].default
         kind = type(default)
         ok = (isinstance(value, bool) if kind is bool else
@@ -558,7 +562,8 @@ def get_preset(name: str) -> TrainConfig:
     """A shipped preset by name."""
     res = _preset_dir().joinpath(f"{name}.toml")
     if not res.is_file():
-        raise ValueError(f"unknown training preset {name!r}; valid: {preset_names()}")
+        raise ValueError(f"unknown training preset {name!r}; valid: {preset_names()}"
+                         f"{did_you_mean(name, preset_names())}")
     return _parse_text(res.read_text(encoding="utf-8"), f"presets/{name}.toml", None, name)
 
 

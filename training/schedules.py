@@ -22,6 +22,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from alphatank.sim.config import check_value
+from alphatank.training.fields import did_you_mean
 
 SHAPES = ("linear", "sigmoid")
 CYCLE_MODES = ("fixed", "random", "adaptive")
@@ -395,14 +396,14 @@ def make_schedule(spec: dict[str, Any], total_steps: int, seed: int = 0) -> Oppo
         classes[kind] = resolve("alphatank.training.league:LeagueSchedule")
     if not isinstance(kind, str) or kind not in classes:
         raise ValueError(f"unknown schedule kind {kind!r}; valid: none, curriculum, cycle, "
-                         f"winrate, lineup, league")
+                         f"winrate, lineup, league{did_you_mean(kind, [*classes, 'league'])}")
     params = inspect.signature(classes[kind], eval_str=True).parameters
     given = {"steps": total_steps, "seed": seed}
     spec = {**{k: v for k, v in given.items() if k in params}, **spec}
     for key, value in spec.items():
         if key not in params:
             raise ValueError(f"{key}: unknown key for kind {kind!r}; valid keys: "
-                             f"{['kind', *sorted(params)]}")
+                             f"{['kind', *sorted(params)]}{did_you_mean(key, params)}")
         ann = params[key].annotation
         kinds = typing.get_args(ann) if isinstance(ann, types.UnionType) else (ann,)
         if all(k in SCALARS for k in kinds):  # numbers, flags and names: type and range

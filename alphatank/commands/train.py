@@ -276,7 +276,10 @@ def build_run(args: argparse.Namespace) -> TrainConfig:
     # where the run's own settings come from, for errors in the ones no flag replaces
     source = str(Path(args.config)) if args.config else \
         f"presets/{args.preset or DEFAULT_PRESET}.toml"
-    cfg = load_run(args.config) if args.config else get_preset(args.preset or DEFAULT_PRESET)
+    try:
+        cfg = load_run(args.config) if args.config else get_preset(args.preset or DEFAULT_PRESET)
+    except ValueError as exc:  # a run file's errors name the file; a preset's: the flag
+        raise ValueError(f"{'' if args.config else '--preset: '}{exc}") from None
     cfg = _with_run_settings(cfg, args, args.name)
     _check_workers(cfg, args, f"{source}: num_workers")
     from alphatank.game.scenarios import load_scenario
