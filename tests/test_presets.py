@@ -177,6 +177,14 @@ BAD = [
      r"bad\.toml: rewards\.victory: needs a float, got 'big'"),
     ("scenario = 'vs_smart'\ngame = 3\n", r"bad\.toml: game: needs a table, got 3"),
     ("scenario = 'vs_smart\n", r"bad\.toml: invalid TOML"),
+    # said 'must be a number'; a window past 2**63 raised OverflowError as the run started
+    ("scenario = 'team'\n[selfplay]\nwindow = 1.5\n[[learners]]\nname = 't'\nseats = [0, 1]\n",
+     r"bad\.toml: selfplay\.window: must be an integer, got 1\.5$"),
+    ("scenario = 'team'\n[selfplay]\nwindow = 1e300\n[[learners]]\nname = 't'\nseats = [0, 1]\n",
+     r"bad\.toml: selfplay: snapshot pool needs window >= 1 and at most 10,000 \(snapshots "
+     r"kept\), got 1e\+300$"),
+    ("scenario = 'team'\n[selfplay]\nevery = inf\n[[learners]]\nname = 't'\nseats = [0, 1]\n",
+     r"bad\.toml: selfplay\.every: must be an integer, got inf$"),
     # wandb refused these with a traceback once the run had started
     ("scenario = 'vs_smart'\nproject = 'me/tanks'\n",
      r"bad\.toml: project: must be a wandb project name: at most 128 characters, none of "

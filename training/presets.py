@@ -10,6 +10,7 @@ settings. Every load error names the file and the field.
 from __future__ import annotations
 
 import dataclasses
+import math
 import re
 import tomllib
 from collections.abc import Iterable, Sequence
@@ -245,13 +246,20 @@ def learners_fit(specs: Sequence[LearnerSpec], num_learners: int, selfplay: bool
 
 
 SELFPLAY_KEYS = ("learner", "window", "latest_share", "every")
+# Most snapshots a self-play pool keeps, each a copy of the learner's networks (up to
+# ~0.5 GiB at the widest): far more would not fit, and past 2**63 the window could not
+# even be made (OverflowError as the run started).
+SNAPSHOT_WINDOW_MAX = 10_000
 
 
 def check_pool_args(window: int = 8, latest_share: float = 0.5, every: int = 200_000) -> None:
     """Raise ValueError unless these are valid :class:`SnapshotPool` settings."""
-    if window < 1 or every < 1:
-        raise ValueError(f"snapshot pool needs window >= 1 and every >= 1, got {window}, "
-                         f"{every}")
+    if not 1 <= window <= SNAPSHOT_WINDOW_MAX:
+        raise ValueError(f"snapshot pool needs window >= 1 and at most "
+                         f"{SNAPSHOT_WINDOW_MAX:,} (snapshots kept), got {window!r}")
+    if every < 1:
+        raise ValueError(f"snapshot pool needs every >= 1 (env steps between snapshots), "
+                         f"got {every!r}")
     if not 0.0 <= latest_share <= 1.0:
         raise ValueError(f"latest_share must be in [0, 1], got {latest_share}")
 
@@ -269,18 +277,19 @@ def selfplay_pool_args(cfg: TrainConfig) -> tuple[str, dict[str, Any]]:
     if learner not in names:
         raise ValueError(f"selfplay.learner: {learner!r} is not one of the run's learners "
                          f"{names} (self-play needs its learners listed)")
-    for key, kind in (("window", int), ("every", int), ("latest_share", float)):
+    kinds = {"window": int, "every": int, "latest_share": float}
+    for key, kind in kinds.items():
         value = table.get(key)
         if value is not None and (isinstance(value, bool) or not isinstance(value, int | float)
+                                  or not math.isfinite(value)
                                   or (kind is int and not float(value).is_integer())):
-            raise ValueError(f"selfplay.{key}: must be a number, got {value!r}")
-        if value is not None:
-            table[key] = kind(value)
+            what = "an integer" if kind is int else "a number"
+            raise ValueError(f"selfplay.{key}: must be {what}, got {value!r}")
     try:
         check_pool_args(**table)
     except ValueError as exc:
         raise ValueError(f"selfplay: {exc}") from None
-    return learner, table
+    return learner, {key: kind(table[key]) for key, kind in kinds.items() if key in table}
 
 
 def run_learners(cfg: TrainConfig, num_learners: int) -> tuple[LearnerSpec, ...]:
