@@ -134,6 +134,12 @@ BAD = [
     ("scenario = 'vs_smart'\nwandb = 'cloud'\n",
      r"bad\.toml: wandb: must be one of offline, online, disabled, got 'cloud'"),
     ("total_steps = 5\n", r"bad\.toml: scenario: required"),
+    # read as the current folder ('scenario: .: a folder, not a scenario file'), or an error
+    # naming the scenario's file, not this one
+    ("scenario = ''\n", r"bad\.toml: scenario: is empty; give a shipped scenario name or a "
+                         r"path to a \.toml$"),
+    ("scenario = 'vs_smart'\nmap = ''\n", r"bad\.toml: map: is empty; give a shipped map or "
+                                           r"folder name or a path, or leave it out$"),
     ("scenario = 'pair'\n[[learners]]\nname = 'a'\n[[learners]]\nname = 'b'\nseats = [1]\n"
      "[learners.config]\nclip_coef = -1\n",
      r"bad\.toml: learners\[1\]\.config\.clip_coef: must be > 0, got -1\.0"),

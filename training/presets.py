@@ -181,6 +181,10 @@ class TrainConfig:
             raise FieldError("TrainConfig", "name", f"must be letters, digits, '_', '.' or "
                              f"'-', not starting with '.' (it names the run's folder), got "
                              f"{self.name!r}")
+        for key, what in (("scenario", "a shipped scenario name or a path to a .toml"),
+                          ("map", "a shipped map or folder name or a path, or leave it out")):
+            if getattr(self, key) == "":  # read as the current folder
+                raise FieldError("TrainConfig", key, f"is empty; give {what}")
         if why := printable_problem(self.description):  # one line of `train --list`
             raise FieldError("TrainConfig", "description", why)
         if self.wandb != "disabled" and (len(self.project) > 128 or any(
