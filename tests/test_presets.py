@@ -107,6 +107,13 @@ def test_every_setting_round_trips_including_none_and_tables(tmp_path):
     assert load_run(path) == cfg
 
 
+def test_strings_with_quotes_newlines_and_control_characters_round_trip():
+    """A DEL (\\x7f) was written raw: the file did not read back ('invalid TOML')."""
+    odd = 'runs/"a" \\ b\n\tc\x7f\x00 é ☃'
+    cfg = TrainConfig("odd", "vs_smart", init_from=odd, project="it's \"x\"", wandb="disabled")
+    assert roundtrip(cfg) == cfg
+
+
 def test_run_file_defaults_its_name_and_resolves_paths_beside_it(tmp_path):
     folder = tmp_path / "exp"
     folder.mkdir()
