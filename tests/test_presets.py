@@ -163,6 +163,12 @@ BAD = [
      r"bad\.toml: learners\[0\]: learner 'a': seats must be distinct"),
     ("scenario = 'pair'\n[[learners]]\nname = 'a'\n[[learners]]\nname = 'a'\nseats = [1]\n",
      r"bad\.toml: learners: names must be unique"),
+    # said 'needs an int, got 2000000.0' only: TOML reads 2e6 as a float
+    ("scenario = 'vs_smart'\ntotal_steps = 2e6\n",
+     r"bad\.toml: total_steps: needs an int, got 2000000\.0 \(an integer is written without a "
+     r"point or exponent: 2_000_000\)$"),
+    ("scenario = 'vs_smart'\ntotal_steps = 1e300\n",
+     r"bad\.toml: total_steps: needs an int, got 1e\+300$"),
     ("scenario = 'pair'\n[[learners]]\nname = 'a'\n[learners.config]\nupdate_epochs = 2.5\n",
      r"bad\.toml: learners\[0\]\.config\.update_epochs: needs an int, got 2\.5"),
     ("scenario = 'vs_smart'\n[schedule]\nkind = 'tournament'\n",

@@ -128,7 +128,11 @@ def check_value(cls: type, f: dataclasses.Field, value: Any) -> Any:
         return value
     accepted = (bool,) if base is bool else (int, float) if base is float else (base,)
     if not isinstance(value, accepted) or (base is not bool and isinstance(value, bool)):
-        raise FieldError(owner, f.name, f"needs {a_type(tp)}, got {value!r}")
+        whole = base is int and isinstance(value, float) and value.is_integer() and \
+            abs(value) < 2**53  # TOML reads 2e6 and 2.0 as floats
+        hint = (f" (an integer is written without a point or exponent: {int(value):_})"
+                if whole else "")
+        raise FieldError(owner, f.name, f"needs {a_type(tp)}, got {value!r}{hint}")
     if base is float:
         value = float(value)
         if not math.isfinite(value):  # as the game and reward configs: no NaN or inf
