@@ -3,6 +3,7 @@ through TOML; malformed run files give one-line errors naming the file and the f
 
 import dataclasses
 import tomllib
+from importlib import resources
 
 import pytest
 
@@ -124,6 +125,13 @@ def test_run_file_defaults_its_name_and_resolves_paths_beside_it(tmp_path):
     cfg = load_run(folder / "run.toml")
     assert cfg.name == "run" and cfg.learners == ()
     assert run_scenario(cfg).seats[1].bot == "dodge"
+    # a folder of maps named without a '/' was looked up among the shipped maps only
+    # ('unknown map 'mine''), where a scenario file's map finds it beside the file
+    (folder / "mine").mkdir()
+    (folder / "mine" / "a.txt").write_text(
+        resources.files("alphatank.maps").joinpath("open.txt").read_text())
+    (folder / "run2.toml").write_text('scenario = "vs_smart"\nmap = "mine"\n')
+    assert run_scenario(load_run(folder / "run2.toml")).maps == (str(folder / "mine" / "a.txt"),)
 
 
 def test_map_override_swaps_the_scenarios_map():

@@ -475,11 +475,11 @@ def parse_run(data: dict[str, Any], source: str, base: Path | None = None,
     if "scenario" not in data:
         raise ValueError(f"{source}: scenario: required (a shipped scenario name or a path "
                          f"to a scenario .toml)")
-    if base is not None:
+    if base is not None:  # as a scenario file's map: a path beside the file comes first
         for key in ("scenario", "map", "init_from"):
             value = data.get(key)
-            if isinstance(value, str) and ("/" in value or value.endswith((".toml", ".txt"))) \
-                    and not Path(value).is_absolute() and (base / value).exists():
+            if isinstance(value, str) and value and not Path(value).is_absolute() and (
+                    (base / value).is_file() if key == "scenario" else (base / value).exists()):
                 data[key] = str(base / value)
     cfg = TrainConfig.from_dict(data, f"{source}: ")
     if cfg.selfplay:
