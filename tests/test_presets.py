@@ -2,6 +2,8 @@
 through TOML; malformed run files give one-line errors naming the file and the field."""
 
 import dataclasses
+import os
+import threading
 import tomllib
 from importlib import resources
 
@@ -261,6 +263,23 @@ def test_unknown_preset_and_missing_file_are_named(tmp_path):
         get_preset("ppo_vs_smrt")
     with pytest.raises(ValueError, match="missing.toml: no such run file"):
         load_run(tmp_path / "missing.toml")
+
+
+def test_a_run_file_may_come_through_a_pipe(tmp_path):
+    """``--config <(alphatank train --print-config ...)``: a pipe was 'no such run file'."""
+    fifo = tmp_path / "piped.toml"
+    os.mkfifo(fifo)
+    writer = threading.Thread(target=fifo.write_text, args=("scenario = 'vs_smart'\n",))
+    writer.start()
+    try:
+        cfg = load_run(fifo)
+    finally:
+        if writer.is_alive():  # not read: let the writer finish
+            fifo.read_bytes()
+        writer.join()
+    assert (cfg.name, cfg.scenario) == ("piped", "vs_smart")
+    with pytest.raises(ValueError, match=r"^/dev/null: not a file, nor a pipe$"):
+        load_run("/dev/null")
 
 
 def test_a_project_name_is_checked_only_for_a_run_that_logs_to_wandb(tmp_path):

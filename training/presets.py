@@ -521,8 +521,9 @@ def load_run(path: str | Path) -> TrainConfig:
     """A run file (``--config FILE.toml``): TrainConfig fields as TOML keys, learners as
     ``[[learners]]`` tables with a ``[learners.config]`` sub-table."""
     p = Path(path)
-    if not p.is_file():
+    if not (p.is_file() or p.is_fifo()):  # a pipe: --config <(alphatank train --print-config)
         raise ValueError(f"{p}: " + ("a folder, not a run file" if p.is_dir() else
+                                     "not a file, nor a pipe" if p.exists() else
                                      "no such run file"))
     return _parse_text(read_text(p), str(p), p.parent, p.stem)
 
