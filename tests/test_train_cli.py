@@ -59,6 +59,19 @@ def test_ppo_and_sac_flags_repeat_as_hp_does(capsys, tmp_path):
     assert (sac.config.tau, sac.config.batch_size) == (0.01, 64)
 
 
+def test_a_run_file_whose_name_cannot_name_a_folder_takes_name_from_the_flag(capsys, tmp_path):
+    """'my run.toml' was refused as the run's name even with --name given (the file's
+    name was checked first), in words that did not say where the name came from."""
+    path = tmp_path / "my run.toml"
+    path.write_text("scenario = 'vs_smart'\n")
+    assert main(["train", "--print-config", "--config", str(path)]) == 2
+    assert capsys.readouterr().err == (
+        f"alphatank train: error: {path}: name: the run is named after its file, 'my run', "
+        "which cannot name its folder (letters, digits, '_', '.' or '-', not starting with "
+        "'.'); add name = \"...\" to the file or give --name\n")
+    assert printed_run(capsys, tmp_path, "--config", str(path), "--name", "mine").name == "mine"
+
+
 def test_curriculum_flag(capsys, tmp_path):
     cfg = printed_run(capsys, tmp_path, "--preset", "ppo_vs_smart", "--curriculum")
     assert cfg.schedule == {"kind": "curriculum", "start": 0.1, "end": 0.8}

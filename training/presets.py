@@ -118,6 +118,15 @@ class LearnerSpec:
             raise ValueError(f"{prefix.rstrip('.: ')}: {exc}") from None
 
 
+def run_name_problem(name: str) -> str | None:
+    """Why ``name`` cannot name a run's folder (None: it can); it names a folder, so no
+    way out of the runs folder."""
+    if _NAME.match(name):
+        return None
+    return (f"must be letters, digits, '_', '.' or '-', not starting with '.' (it names the "
+            f"run's folder), got {name!r}")
+
+
 # Most torch threads: more than any one machine has cores (torch made them all: at
 # 100,000 its first matrix product crashed the process with a segmentation fault).
 TORCH_THREADS_MAX = 1024
@@ -177,10 +186,8 @@ class TrainConfig:
     def __post_init__(self) -> None:
         object.__setattr__(self, "learners", tuple(self.learners))
         validate_fields(self)
-        if not _NAME.match(self.name):  # it names a folder: no way out of the runs folder
-            raise FieldError("TrainConfig", "name", f"must be letters, digits, '_', '.' or "
-                             f"'-', not starting with '.' (it names the run's folder), got "
-                             f"{self.name!r}")
+        if why := run_name_problem(self.name):
+            raise FieldError("TrainConfig", "name", why)
         for key, what in (("scenario", "a shipped scenario name or a path to a .toml"),
                           ("map", "a shipped map or folder name or a path, or leave it out")):
             if getattr(self, key) == "":  # read as the current folder
@@ -471,7 +478,13 @@ def parse_run(data: dict[str, Any], source: str, base: Path | None = None,
     """A :class:`TrainConfig` from a run file's mapping. ``name`` is the default run name
     (the file's stem); relative scenario and map paths resolve against ``base``."""
     data = dict(data)
-    data.setdefault("name", name or "run")
+    if "name" not in data:
+        data["name"] = name or "run"
+        if not _NAME.match(data["name"]):  # the file's name: say where it came from
+            raise ValueError(f"{source}: name: the run is named after its file, "
+                             f"{data['name']!r}, which cannot name its folder (letters, "
+                             f"digits, '_', '.' or '-', not starting with '.'); add name = "
+                             f"\"...\" to the file or give --name")
     if "scenario" not in data:
         raise ValueError(f"{source}: scenario: required (a shipped scenario name or a path "
                          f"to a scenario .toml)")
@@ -517,15 +530,16 @@ def _check_overrides(table: dict[str, Any], key: str, prefix: str) -> None:
             raise ValueError(f"{prefix}{key}.{name}: needs {a_type(kind)}, got {value!r}")
 
 
-def load_run(path: str | Path) -> TrainConfig:
+def load_run(path: str | Path, name: str | None = None) -> TrainConfig:
     """A run file (``--config FILE.toml``): TrainConfig fields as TOML keys, learners as
-    ``[[learners]]`` tables with a ``[learners.config]`` sub-table."""
+    ``[[learners]]`` tables with a ``[learners.config]`` sub-table. Without a ``name``
+    key the run is named ``name`` (``--name``), else after the file."""
     p = Path(path)
     if not (p.is_file() or p.is_fifo()):  # a pipe: --config <(alphatank train --print-config)
         raise ValueError(f"{p}: " + ("a folder, not a run file" if p.is_dir() else
                                      "not a file, nor a pipe" if p.exists() else
                                      "no such run file"))
-    return _parse_text(read_text(p), str(p), p.parent, p.stem)
+    return _parse_text(read_text(p), str(p), p.parent, name or p.stem)
 
 
 def _parse_text(text: str, source: str, base: Path | None, name: str) -> TrainConfig:

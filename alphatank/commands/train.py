@@ -46,6 +46,7 @@ from alphatank.training.presets import (
     planned_steps,
     preset_names,
     run_learners,
+    run_name_problem,
     run_scenario,
     run_toml,
     with_hp,
@@ -273,11 +274,14 @@ def build_run(args: argparse.Namespace) -> TrainConfig:
     """The TrainConfig a new run's flags describe; ValueError (one line) on bad input."""
     if args.config and args.preset:
         raise ValueError("--config and --preset: give one")
+    if args.name is not None and (why := run_name_problem(args.name)):
+        raise ValueError(f"--name: {why}")  # before it names a run file's run
     # where the run's own settings come from, for errors in the ones no flag replaces
     source = str(Path(args.config)) if args.config else \
         f"presets/{args.preset or DEFAULT_PRESET}.toml"
     try:
-        cfg = load_run(args.config) if args.config else get_preset(args.preset or DEFAULT_PRESET)
+        cfg = (load_run(args.config, args.name) if args.config else
+               get_preset(args.preset or DEFAULT_PRESET))
     except ValueError as exc:  # a run file's errors name the file; a preset's: the flag
         raise ValueError(f"{'' if args.config else '--preset: '}{exc}") from None
     cfg = _with_run_settings(cfg, args, args.name)
