@@ -117,6 +117,14 @@ def test_strings_with_quotes_newlines_and_control_characters_round_trip():
     assert roundtrip(cfg) == cfg
 
 
+def test_none_is_read_in_any_case_as_on_the_command_line():
+    """'NONE' or 'null' was 'needs a float or none, got 'NONE'' (--hp reads them as none)."""
+    for text in ("NONE", "None", "null"):
+        cfg = parse_run({"scenario": "vs_smart", "learners": [
+            {"name": "p", "config": {"target_kl": text, "clip_coef": 0.1}}]}, "<text>")
+        assert cfg.learners[0].config == PPOConfig(target_kl=None, clip_coef=0.1)
+
+
 def test_run_file_defaults_its_name_and_resolves_paths_beside_it(tmp_path):
     folder = tmp_path / "exp"
     folder.mkdir()

@@ -179,7 +179,8 @@ def build(cls: type, data: Mapping[str, Any], prefix: str = "") -> Any:
             raise ValueError(f"{prefix}{key}: unknown key; valid keys: {sorted(fields)}"
                              f"{did_you_mean(key, fields)}")
         base, optional = _kind(_hints(cls)[key])
-        if optional and base is not str and value == "none":  # TOML has no null
+        if optional and base is not str and isinstance(value, str) and \
+                value.lower() in ("none", "null"):  # TOML has no null; as parse_value
             data[key] = None
     try:
         return cls(**data)
