@@ -2,6 +2,7 @@
 
 import dataclasses
 import json
+import resource
 import shutil
 from pathlib import Path
 
@@ -17,6 +18,7 @@ from alphatank.sim.episode import start_episode
 from alphatank.sim.policy import Policy
 from alphatank.training.checkpoint import (
     CheckpointError,
+    SaveFailed,
     load_checkpoint,
     load_policy,
     non_finite,
@@ -464,6 +466,31 @@ def test_a_save_that_fails_leaves_no_temporary_folder(tmp_path):
         save_checkpoint(tmp_path, "step_0000000001", {}, {"ppo": {"f": lambda: 0}})
     assert list((tmp_path / "checkpoints").iterdir()) == []
     assert not (tmp_path / "latest").exists()
+
+
+def test_a_save_on_a_full_disk_says_so_and_keeps_the_previous_save(tmp_path):
+    """A write that fails (here a file-size limit, as a full disk) ends the run with one
+    line naming the save and the cause; the previous save and latest stay as they were."""
+    run = tmp_path / "run"
+    trainer = Trainer(tiny_config("full", 1), run, progress=False)
+    trainer.train()
+    before = (run / "latest").read_text()
+    trainer = resume_trainer(run, progress=False, total_steps=2 * ITER)
+    soft, hard = resource.getrlimit(resource.RLIMIT_FSIZE)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (100_000, hard))  # ppo.pt is larger
+    try:
+        with pytest.raises(SaveFailed) as err:
+            trainer.train()
+    finally:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (soft, hard))
+    assert str(err.value) == (
+        f"{run / 'checkpoints' / f'step_{2 * ITER:010d}'}: the checkpoint cannot be written "
+        f"(File too large); nothing of it is kept, and the run's earlier saves are as they "
+        f"were; continue from step {ITER} with alphatank train --resume {run} once it can "
+        f"be written")
+    assert (run / "latest").read_text() == before
+    assert [p.name for p in (run / "checkpoints").iterdir()] == [f"step_{ITER:010d}"]
+    load_policy(run)  # intact
 
 
 def _anonymous_rss() -> int:

@@ -59,6 +59,11 @@ class CheckpointError(InputError, RuntimeError):
     """A checkpoint is missing, corrupt, truncated or does not fit; names file and cause."""
 
 
+class SaveFailed(OSError):
+    """A checkpoint could not be written (disk full, folder not writable): names the save
+    and the cause; the run's earlier saves and ``latest`` are as they were."""
+
+
 def scenario_to_dict(sc: Scenario) -> dict[str, Any]:
     """A mapping :func:`parse_scenario` rebuilds ``sc`` from. Maps not shipped with the
     package travel as text (``map_texts``), so the checkpoint needs no map file; ``map``
@@ -89,25 +94,36 @@ def save_checkpoint(run_dir: str | Path, tag: str, meta: dict[str, Any],
     state dict, saved as ``extra/<key>.pt`` (no learner name can clash with a folder).
     ``keep`` > 0 prunes all but the newest ``keep`` saves."""
     root = Path(run_dir) / "checkpoints"
-    root.mkdir(parents=True, exist_ok=True)
     final = root / tag
     tmp = root / f".{tag}.tmp-{os.getpid()}"
-    if tmp.exists():
-        shutil.rmtree(tmp)
-    tmp.mkdir()
     try:
-        _write_save(tmp, meta, states, arrays or {}, extra or {})
-    except BaseException:  # a failed or aborted write leaves nothing behind
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    if final.exists():  # re-saving a tag: move the old one aside first (rename is atomic;
-        old = root / f".{tag}.old-{os.getpid()}"  # resolve_checkpoint_dir finds it if the
-        os.replace(final, old)  # process dies before the next rename)
-        os.replace(tmp, final)
-        shutil.rmtree(old)
-    else:
-        os.replace(tmp, final)
-    write_text_atomic(Path(run_dir) / "latest", f"checkpoints/{tag}\n")
+        root.mkdir(parents=True, exist_ok=True)
+        if tmp.exists():
+            shutil.rmtree(tmp)
+        tmp.mkdir()
+        try:
+            _write_save(tmp, meta, states, arrays or {}, extra or {})
+        except BaseException:  # a failed or aborted write leaves nothing behind
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise
+        new = not final.exists()
+        if not new:  # re-saving a tag: move the old one aside first (rename is atomic;
+            old = root / f".{tag}.old-{os.getpid()}"  # resolve_checkpoint_dir finds it if
+            os.replace(final, old)  # the process dies before the next rename)
+            os.replace(tmp, final)
+            shutil.rmtree(old)
+        else:
+            os.replace(tmp, final)
+        try:
+            write_text_atomic(Path(run_dir) / "latest", f"checkpoints/{tag}\n")
+        except OSError:  # latest names the previous save: a save it does not name would
+            if new:  # stop a resume of it ("the run has later saves")
+                shutil.rmtree(final, ignore_errors=True)
+            raise
+    except OSError as exc:
+        raise SaveFailed(f"{final}: the checkpoint cannot be written ({exc.strerror or exc});"
+                         f" nothing of it is kept, and the run's earlier saves are as they "
+                         f"were") from None
     if keep > 0:  # only the run's own saves: other folders a user put there stay
         for old in run_saves(root)[:-keep]:
             if old != final:
@@ -122,20 +138,32 @@ def _write_save(tmp: Path, meta: dict[str, Any], states: dict[str, dict[str, Any
     """The files of a save (:func:`save_checkpoint`) in its temporary folder ``tmp``."""
     files: dict[str, str] = {}
     for name, state in states.items():
-        torch.save(state, tmp / f"{name}.pt")
+        _torch_save(state, tmp / f"{name}.pt")
         files[f"{name}.pt"] = _sha256(tmp / f"{name}.pt")
     for name, arrs in arrays.items():
         np.savez(tmp / f"{name}.replay.npz", **arrs)
         files[f"{name}.replay.npz"] = _sha256(tmp / f"{name}.replay.npz")
     for key, state in extra.items():
         (tmp / "extra").mkdir(exist_ok=True)
-        torch.save(state, tmp / "extra" / f"{key}.pt")
+        _torch_save(state, tmp / "extra" / f"{key}.pt")
         files[f"extra/{key}.pt"] = _sha256(tmp / "extra" / f"{key}.pt")
     meta = {"format": FORMAT, "version": VERSION, "saved_at": time.time(), **meta,
             "files": files}
     if os.environ.get(DELAY_ENV):
         time.sleep(float(os.environ[DELAY_ENV]))
     (tmp / "meta.json").write_text(json.dumps(meta, indent=1), encoding="utf-8")
+
+
+def _torch_save(state: dict[str, Any], file: Path) -> None:
+    """``torch.save`` into ``file``; a write that fails (disk full) raises its OSError
+    (torch's writer reports it as a RuntimeError about zip positions)."""
+    try:
+        with open(file, "wb") as f:
+            torch.save(state, f)
+    except RuntimeError as exc:
+        if isinstance(exc.__context__, OSError):
+            raise exc.__context__ from None
+        raise
 
 
 _SAVE = re.compile(r"step_(\d+)")  # the name of a save's folder (save_checkpoint's tag)

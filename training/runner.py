@@ -64,6 +64,7 @@ from alphatank.training.checkpoint import (
     Checkpoint,
     CheckpointError,
     LivePolicy,
+    SaveFailed,
     load_checkpoint,
     load_problem,
     resume_dir,
@@ -497,8 +498,14 @@ class Trainer:
         with self.stop.shielded():
             payload = payload or self._payload()
             step = int(payload["meta"]["progress"]["global_step"])
-            path = save_checkpoint(self.run_dir, f"step_{step:010d}", **payload,
-                                   keep=self.cfg.keep_checkpoints)
+            try:
+                path = save_checkpoint(self.run_dir, f"step_{step:010d}", **payload,
+                                       keep=self.cfg.keep_checkpoints)
+            except SaveFailed as exc:
+                raise SaveFailed(f"{exc}; " + (
+                    f"continue from step {self.saved_step:,} with alphatank train --resume "
+                    f"{self.run_dir} once it can be written" if self.saved_step >= 0
+                    else "the run saved no checkpoint")) from None
             self.saved_step = step
         return path
 

@@ -407,10 +407,12 @@ def _run(args: argparse.Namespace, progress: bool, stack: contextlib.ExitStack) 
             return 0
         if args.total_steps is not None:
             _note_rounding(trainer.cfg)
+        from alphatank.training.checkpoint import SaveFailed
         from alphatank.training.runner import EnvWorkerDied
         try:
             summary = trainer.train()
-        except EnvWorkerDied as exc:  # not the reader of stdout going away (exit 141)
+        except (EnvWorkerDied, SaveFailed) as exc:  # not bad input, nor the reader of
+            # stdout going away (exit 141)
             print(f"alphatank train: error: {exc}", file=sys.stderr)
             return 1
         except KeyboardInterrupt:
