@@ -271,6 +271,28 @@ def test_truncated_checkpoint_without_checksum_gives_a_clear_error(trained, tmp_
         load_policy(ck)
 
 
+def test_hand_edited_learner_files_give_one_line_naming_the_file(trained, tmp_path):
+    """A .pt holding other Python objects names the one the weights-only load refused
+    (not torch's advice to load it with weights_only=False, with terminal escapes); one
+    whose values have other types says it does not fit (it raised a TypeError)."""
+    ck = _copy(trained, tmp_path)
+    meta = json.loads((ck / "meta.json").read_text())
+    meta["files"] = {}  # edited without their digests
+    (ck / "meta.json").write_text(json.dumps(meta))
+    state = torch.load(ck / "ppo.pt", weights_only=True)
+    torch.save({**state, "where": Path("/")}, ck / "ppo.pt")
+    with pytest.raises(CheckpointError) as err:
+        load_policy(ck)
+    assert str(err.value) == (f"{ck / 'ppo.pt'}: holds more than tensors and plain data, "
+                              f"which a checkpoint never does (Unsupported global: GLOBAL "
+                              f"pathlib.PosixPath); it was not saved by alphatank or was "
+                              f"altered")
+    torch.save({**state, "net": 5}, ck / "ppo.pt")
+    with pytest.raises(CheckpointError, match=r"ppo\.pt: does not fit a ppo learner .* "
+                                              r"TypeError: Expected state_dict to be dict-like"):
+        load_policy(ck)
+
+
 def test_truncated_meta_and_missing_files_are_named(trained, tmp_path):
     ck = _copy(trained, tmp_path)
     text = (ck / "meta.json").read_text()
@@ -305,6 +327,9 @@ def test_meta_fields_that_resuming_reads_are_checked_at_load(trained, tmp_path):
                         ({"schedule": [1]}, r"meta\.json: schedule: must be an object"),
                         ({"scenario": "vs_smart"},
                          r"meta\.json: scenario: must be an object, got 'vs_smart'"),
+                        ({"scenario": {**meta["scenario"], "seats": "A,B"}},
+                         r"meta\.json: scenario\.seats: must be a list of seat objects, "
+                         r"got 'A,B'"),
                         ({"observation": {**meta["observation"], "kind": "bogus"}},
                          r"meta\.json: observation\.kind: unknown observation kind 'bogus'"),
                         ({"observation": {**meta["observation"],

@@ -253,6 +253,25 @@ def resolve_checkpoint_dir(path: str | Path) -> Path:
                           f"(no 'latest' file)")
 
 
+def _torch_load(file: Path) -> Any:
+    """``torch.load(weights_only=True)`` of ``file``; CheckpointError naming it and why not
+    (for a file holding other Python objects, the one that the weights-only load refused,
+    not torch's advice to load it with ``weights_only=False``)."""
+    try:
+        return torch.load(file, map_location="cpu", weights_only=True)
+    except Exception as exc:  # torch raises many types for damaged files
+        text = re.sub(r"\x1b\[[0-9;]*m", "", str(exc))  # torch bolds a phrase with escapes
+        refused = re.search(r"WeightsUnpickler error: (.+?)(?: was not an allowed global|$)",
+                            text, re.MULTILINE)
+        if refused:
+            raise CheckpointError(f"{file}: holds more than tensors and plain data, which "
+                                  f"a checkpoint never does ({refused.group(1).rstrip('.')}); "
+                                  f"it was not saved by alphatank or was altered") from None
+        first = text.strip().splitlines()[0] if text.strip() else ""
+        raise CheckpointError(f"{file}: cannot be loaded (corrupt or not a checkpoint "
+                              f"file): {type(exc).__name__}: {first}") from None
+
+
 @dataclass
 class Checkpoint:
     """A validated checkpoint on disk (meta read; tensors loaded on demand)."""
@@ -319,12 +338,7 @@ class Checkpoint:
                                   f"{self.learner_names()}")
         file = self.path / f"{name}.pt"
         self._check_file(file)
-        try:
-            state = torch.load(file, map_location="cpu", weights_only=True)
-        except Exception as exc:  # torch raises many types for damaged files
-            first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
-            raise CheckpointError(f"{file}: cannot be loaded (corrupt or not a checkpoint "
-                                  f"file): {type(exc).__name__}: {first}") from None
+        state = _torch_load(file)
         if not isinstance(state, dict):
             raise CheckpointError(f"{file}: not a learner state (a {type(state).__name__}, "
                                   "expected a dict of tensors)")
@@ -338,12 +352,7 @@ class Checkpoint:
         """``torch.load(weights_only=True)`` of the run state ``extra/<key>.pt``."""
         file = self.path / "extra" / f"{key}.pt"
         self._check_file(file, f"extra/{key}.pt")
-        try:
-            return torch.load(file, map_location="cpu", weights_only=True)
-        except Exception as exc:
-            raise CheckpointError(f"{file}: cannot be loaded: {type(exc).__name__}: "
-                                  f"{str(exc).strip().splitlines()[0] if str(exc).strip() else ''}"
-                                  ) from None
+        return _torch_load(file)
 
     def replay(self, name: str) -> dict[str, np.ndarray] | None:
         file = self.path / f"{name}.replay.npz"
@@ -379,7 +388,7 @@ class Checkpoint:
         state = self.state(name)
         try:
             learner.load_state_dict(state, weights_only=weights_only)
-        except (RuntimeError, KeyError, ValueError) as exc:
+        except FIT_ERRORS as exc:
             raise CheckpointError(f"{self.path / (name + '.pt')}: does not fit a {spec.algo} "
                                   f"learner with obs_dim {self.obs_dim} and its saved config: "
                                   f"{type(exc).__name__}: {load_problem(exc)}") from None
@@ -426,6 +435,11 @@ _OPTIONAL_FIELDS = {"observation": {"action_repeat": 1},
                     "progress": {"cut": 0, "clone_pending": False}}
 
 
+# what a learner's load_state_dict raises for a state that does not fit it: a tensor of
+# another shape, a missing key, a value of another type (a hand-edited file)
+FIT_ERRORS = (RuntimeError, KeyError, ValueError, TypeError, AttributeError, IndexError)
+
+
 def load_problem(exc: BaseException) -> str:
     """What a failed ``load_state_dict`` says, on one line: torch's heading and the first
     two tensors that differ (their names and shapes follow the heading's line)."""
@@ -459,6 +473,9 @@ def _check_meta(meta: dict[str, Any], meta_file: Path) -> None:
     for key in ("scenario", "train_config"):
         if not isinstance(meta[key], dict):
             raise fail(key, f"must be an object, got {meta[key]!r}")
+    seats = meta["scenario"].get("seats", [])
+    if not isinstance(seats, list) or not all(isinstance(t, dict) for t in seats):
+        raise fail("scenario.seats", f"must be a list of seat objects, got {seats!r}")
     learners = meta["learners"]
     if (not isinstance(learners, list) or not learners
             or not all(isinstance(d, dict) and isinstance(d.get("name"), str) and d["name"]

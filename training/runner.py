@@ -61,6 +61,7 @@ from alphatank.game.observe import slot_counts
 from alphatank.game.scenarios import Scenario
 from alphatank.training.buffers import memory_budget
 from alphatank.training.checkpoint import (
+    FIT_ERRORS,
     Checkpoint,
     CheckpointError,
     LivePolicy,
@@ -429,7 +430,7 @@ class Trainer:
                 arrays = ckpt.replay(name)
                 if arrays is not None:
                     learner.load_arrays(arrays)
-            except (RuntimeError, ValueError, KeyError) as exc:
+            except FIT_ERRORS as exc:
                 if isinstance(exc, CheckpointError):
                     raise
                 raise CheckpointError(f"{ckpt.path / (name + '.pt')}: does not fit learner "
