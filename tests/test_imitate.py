@@ -364,3 +364,14 @@ def test_a_teacher_for_a_scenario_the_run_does_not_play_is_refused_before_it_sta
                                          r"'vs_smart'; its scenarios: vs_aggressive"):
         Trainer(run_config("bc", imitate=table), tmp_path / "bc", progress=False)
     assert not (tmp_path / "bc").exists()
+
+
+def test_a_teacher_that_cannot_play_the_learner_seats_is_refused_before_it_starts(tmp_path):
+    """An agent of a 2-against-1 team in a 1v1 run: refused when the run is made, naming
+    the field, not once the cloning starts (which left the run's folder behind)."""
+    table = {"bot": "agent:team_vs_def", "steps": 32}
+    with pytest.raises(FieldError, match=r"imitate\.bot 'agent:team_vs_def' cannot play the "
+                                         r"learner seats \[0\] of scenario 'vs_aggressive': "
+                                         r".*team_vs_def: expects 336 observation features"):
+        Trainer(run_config("bc", imitate=table), tmp_path / "bc", progress=False)
+    assert not (tmp_path / "bc").exists()

@@ -39,6 +39,7 @@ import numpy as np
 import torch
 
 from alphatank.envs.core import MatchSet
+from alphatank.errors import InputError
 from alphatank.game.scenarios import Scenario
 from alphatank.sim.episode import episode_seeds, reset_controllers
 from alphatank.sim.policy import NOOP, BatchPolicy
@@ -59,6 +60,30 @@ def teacher(cfg: ImitateConfig, scenario: str, scenarios: list[str]) -> str:
                          f"{', '.join(map(repr, unknown))}; its scenarios: "
                          f"{', '.join(scenarios)}")
     return cfg.teachers.get(scenario, cfg.bot)
+
+
+def check_teachers(cfg: ImitateConfig, scenarios: list[Scenario], driven: list[int],
+                   game: dict[str, Any]) -> None:
+    """FieldError naming the field (``imitate.bot``, ``imitate.teachers.NAME``) of a teacher
+    that cannot play the learner seats ``driven`` of its scenario on each of its maps (a
+    checkpoint of another tank count or team size, or with no room for a map's walls):
+    said before the run starts, not once its folder is made and the cloning begins."""
+    from alphatank.game.lineup import check_fit, spec_seat
+    from alphatank.game.seats import make_controller
+
+    names = [sc.name for sc in scenarios]
+    for sc in scenarios:
+        spec = teacher(cfg, sc.name, names)
+        field = f"teachers.{sc.name}" if sc.name in cfg.teachers else "bot"
+        seats = [sc.learner_seats[d] for d in driven]
+        stand = spec_seat(spec, sc.seats[seats[0]].team, where=f"imitate.{field} {spec!r}")
+        if stand.controller == "bot":  # a bot plays any seat of any map
+            continue
+        try:
+            check_fit(sc, [(seat, make_controller(stand)) for seat in seats], game)
+        except InputError as exc:
+            raise FieldError("imitate", field, f"{spec!r} cannot play the learner seats "
+                             f"{seats} of scenario {sc.name!r}: {exc}") from None
 
 
 @dataclass
