@@ -309,6 +309,25 @@ def test_truncated_meta_and_missing_files_are_named(trained, tmp_path):
         load_checkpoint(tmp_path)
 
 
+def test_a_latest_naming_a_removed_save_lists_the_runs_saves(trained, tmp_path):
+    """The newest save removed by hand (to go back to an earlier one): latest says which
+    saves the run has and how to use one; a latest of two lines says it names one."""
+    run = tmp_path / "run"
+    shutil.copytree(trained, run)
+    newest = load_checkpoint(run).path.name
+    (run / "latest").write_text("checkpoints/step_0000999999\n")
+    with pytest.raises(CheckpointError) as err:
+        load_checkpoint(run)
+    saves = ", ".join(p.name for p in sorted((run / "checkpoints").iterdir()))
+    assert str(err.value) == (
+        f"{run / 'latest'}: points at {run / 'checkpoints' / 'step_0000999999'}, which does "
+        f"not exist; the run's saves: {saves} (give one, e.g. {run / 'checkpoints' / newest}, "
+        f"or write checkpoints/{newest} into {run / 'latest'})")
+    (run / "latest").write_text(f"checkpoints/{newest}\ncheckpoints/{newest}\n")
+    with pytest.raises(CheckpointError, match=r"latest: holds 2 lines; it names one save"):
+        load_checkpoint(run)
+
+
 def test_meta_fields_that_resuming_reads_are_checked_at_load(trained, tmp_path):
     """progress is required and typed; its later fields (cut, clone_pending) get their
     defaults in an older checkpoint; windows maps learner names to numbers."""

@@ -242,10 +242,20 @@ def resolve_checkpoint_dir(path: str | Path) -> Path:
         if not name:  # read as the run folder itself
             raise CheckpointError(f"{latest}: is empty; it names the run's latest save "
                                   "(checkpoints/step_N)")
+        if "\n" in name:
+            raise CheckpointError(f"{latest}: holds {len(name.splitlines())} lines; it names "
+                                  f"one save, the run's latest (checkpoints/step_N)")
         target = p / name
         moved = sorted(target.parent.glob(f".{target.name}.old-*/meta.json"))
         if not target.exists() and moved:  # killed while re-saving this tag
             return moved[-1].parent
+        if not target.exists():  # its save was removed
+            saves = run_saves(p / "checkpoints") if (p / "checkpoints").is_dir() else []
+            raise CheckpointError(
+                f"{latest}: points at {target}, which does not exist" + (
+                    f"; the run's saves: {', '.join(s.name for s in saves)} (give one, e.g. "
+                    f"{saves[-1]}, or write checkpoints/{saves[-1].name} into {latest})"
+                    if saves else "; the run has no saves"))
         if not (target / "meta.json").exists():
             raise CheckpointError(f"{latest}: points at {target}, which holds no meta.json")
         return target
