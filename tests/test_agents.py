@@ -4,6 +4,7 @@ in its own scenario; export strips training state; unknown names list the shippe
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import pytest
@@ -210,3 +211,15 @@ def test_export_replaces_only_an_agent_folder(tmp_path, capsys):
     assert "NOTES.md, which replacing it would delete" in capsys.readouterr().err
     assert (dest / "NOTES.md").read_text() == "mine"
     assert load_checkpoint(dest).meta["agent"]["description"] == "second"
+
+
+def test_an_export_that_fails_leaves_nothing_behind(tmp_path, capsys):
+    """A damaged learner file is found before anything is written: no temporary folder
+    (it was left as .NAME.tmp-PID) and no parent folder made for it."""
+    src = tmp_path / "src"
+    shutil.copytree(agent_path(shipped_agents()[0]), src)
+    pt = next(src.glob("*.pt"))
+    pt.write_bytes(pt.read_bytes()[:1000])
+    assert main(["agents", "export", str(src), str(tmp_path / "out" / "agent")]) == 2
+    assert f"{pt}: corrupt or truncated" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["src"]

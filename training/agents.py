@@ -23,11 +23,9 @@ import shutil
 from pathlib import Path
 from typing import Any
 
-import torch
-
 from alphatank.errors import InputError
-from alphatank.files import temp_name
-from alphatank.training.checkpoint import _sha256, load_checkpoint
+from alphatank.files import missing_folders, remove_empty_folders, temp_name
+from alphatank.training.checkpoint import _sha256, _torch_save, load_checkpoint
 from alphatank.training.learners import inference_state
 
 
@@ -53,21 +51,31 @@ def export_agent(source: str | Path, dest: str | Path, record: dict[str, Any] | 
             raise InputError(f"{dest}: an agent folder that also holds {', '.join(others)}, "
                              f"which replacing it would delete; move them out or give "
                              f"another folder")
+    # every learner file read and checked before anything is written
+    states = {spec.name: inference_state(spec.algo, ckpt.state(spec.name))
+              for spec in ckpt.learner_specs}
     tmp = dest.with_name(temp_name(dest.name))
+    made = missing_folders(dest.parent)
     if tmp.exists():
         shutil.rmtree(tmp)
-    tmp.mkdir(parents=True)
-    files = {}
-    for spec in ckpt.learner_specs:
-        name = spec.name
-        state = inference_state(spec.algo, ckpt.state(name))
-        torch.save(state, tmp / f"{name}.pt")
-        files[f"{name}.pt"] = _sha256(tmp / f"{name}.pt")
-    meta = {k: v for k, v in ckpt.meta.items() if k not in ("windows", "wandb_id", "files")}
-    meta["agent"] = {"source": str(ckpt.path), "progress": ckpt.meta.get("progress", {}),
-                     **(record or {})}
-    meta["files"] = files
-    (tmp / "meta.json").write_text(json.dumps(meta, indent=1) + "\n", encoding="utf-8")
+    try:
+        tmp.mkdir(parents=True)
+        files = {}
+        for name, state in states.items():
+            _torch_save(state, tmp / f"{name}.pt")
+            files[f"{name}.pt"] = _sha256(tmp / f"{name}.pt")
+        meta = {k: v for k, v in ckpt.meta.items() if k not in ("windows", "wandb_id", "files")}
+        meta["agent"] = {"source": str(ckpt.path), "progress": ckpt.meta.get("progress", {}),
+                         **(record or {})}
+        meta["files"] = files
+        (tmp / "meta.json").write_text(json.dumps(meta, indent=1) + "\n", encoding="utf-8")
+    except BaseException as exc:  # a failed or aborted export leaves nothing behind
+        shutil.rmtree(tmp, ignore_errors=True)
+        remove_empty_folders(made)
+        if isinstance(exc, OSError):  # disk full, folder not writable
+            raise OSError(f"{dest}: the agent folder cannot be written "
+                          f"({exc.strerror or exc}); nothing was changed") from None
+        raise
     old = dest.with_name(temp_name(dest.name, kind="old"))
     if dest.exists():
         os.replace(dest, old)  # kept until the new folder is in place
