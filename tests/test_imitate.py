@@ -375,3 +375,16 @@ def test_a_teacher_that_cannot_play_the_learner_seats_is_refused_before_it_start
                                          r".*team_vs_def: expects 336 observation features"):
         Trainer(run_config("bc", imitate=table), tmp_path / "bc", progress=False)
     assert not (tmp_path / "bc").exists()
+
+
+def test_demonstrations_too_big_for_the_memory_are_refused_before_the_run_starts(tmp_path):
+    """They were allocated at the cloning's start: a numpy traceback after the run's folder
+    was made (or, a little smaller, filled lazily until the machine ran out)."""
+    table = {"bot": "smart", "steps": 10**10, "dagger": 2}
+    with pytest.raises(ValueError, match=r"^imitate: the demonstrations of 10,000,000,000 "
+                                         r"vector steps and 2 DAgger rounds of 2,048 x 2 "
+                                         r"matches x 1 learner seats x \d+ inputs needs "
+                                         r"[\d,.]+ GiB; this machine has .* lower "
+                                         r"imitate\.steps or imitate\.dagger_steps"):
+        Trainer(run_config("bc", imitate=table), tmp_path / "bc", progress=False)
+    assert not (tmp_path / "bc").exists()

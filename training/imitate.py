@@ -43,6 +43,7 @@ from alphatank.errors import InputError
 from alphatank.game.scenarios import Scenario
 from alphatank.sim.episode import episode_seeds, reset_controllers
 from alphatank.sim.policy import NOOP, BatchPolicy
+from alphatank.training.buffers import check_memory
 from alphatank.training.fields import FieldError
 from alphatank.training.hparams import ImitateConfig
 from alphatank.training.mappo import MAPPO
@@ -84,6 +85,22 @@ def check_teachers(cfg: ImitateConfig, scenarios: list[Scenario], driven: list[i
         except InputError as exc:
             raise FieldError("imitate", field, f"{spec!r} cannot play the learner seats "
                              f"{seats} of scenario {sc.name!r}: {exc}") from None
+
+
+def check_demonstrations_memory(cfg: ImitateConfig, num_envs: int, seats: int,
+                                obs_dim: int) -> None:
+    """ValueError before the run starts when the demonstrations (with every DAgger round's,
+    all kept for the refits) would not fit in the memory available: at their peak the
+    learners' flat copies of them double it (the arrays were allocated at the cloning's
+    start, a traceback for too many steps, or filled lazily until the machine ran out)."""
+    steps = cfg.steps + cfg.dagger * cfg.dagger_steps
+    rounds = (f" and {cfg.dagger} DAgger round{'s' if cfg.dagger > 1 else ''} of "
+              f"{cfg.dagger_steps:,}" if cfg.dagger else "")
+    check_memory(2 * steps * num_envs * seats * (4 * obs_dim + 37),
+                 f"imitate: the demonstrations of {cfg.steps:,} vector steps{rounds} x "
+                 f"{num_envs} matches x {seats} learner seats x {obs_dim} inputs",
+                 "lower imitate.steps" + (" or imitate.dagger_steps" if cfg.dagger else "")
+                 + " (vector steps: each steps all the run's matches)")
 
 
 @dataclass

@@ -348,15 +348,17 @@ class Trainer:
         self.imitation = (imitate_config(cfg.imitate) if resume is None
                           or resume.meta["progress"].get("clone_pending") is True else None)
         if self.imitation is not None:
-            from alphatank.training.imitate import check_teachers
+            from alphatank.training.imitate import check_demonstrations_memory, check_teachers
             from alphatank.training.warmstart import WARM_STARTED
             others = [(s.name, s.algo) for s in self.specs if s.algo not in WARM_STARTED]
             if others:
                 raise ValueError(f"imitate: the cloning fills "
                                  f"{' and '.join(a.upper() for a in WARM_STARTED)} learners "
                                  f"only; this run also has {others}")
+            driven = sorted(s for spec in self.specs for s in spec.seats)
+            check_demonstrations_memory(self.imitation, self.E, len(driven), self.D)
             check_teachers(self.imitation, getattr(env, "scenarios", [self.scenario]),
-                           sorted(s for spec in self.specs for s in spec.seats), cfg.game)
+                           driven, cfg.game)
         if resume is None and self.imitation is None:  # with imitate: after the cloning
             for lr in self.learners.values():
                 lr.anchor()
