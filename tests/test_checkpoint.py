@@ -25,6 +25,7 @@ from alphatank.training.checkpoint import (
     npz_arrays,
     save_checkpoint,
 )
+from alphatank.training.hparams import MAPPOConfig
 from alphatank.training.ppo import PPOConfig
 from alphatank.training.presets import LearnerSpec, TrainConfig
 from alphatank.training.runner import Trainer, resume_trainer
@@ -291,6 +292,29 @@ def test_hand_edited_learner_files_give_one_line_naming_the_file(trained, tmp_pa
     with pytest.raises(CheckpointError, match=r"ppo\.pt: does not fit a ppo learner .* "
                                               r"TypeError: Expected state_dict to be dict-like"):
         load_policy(ck)
+
+
+def test_a_hand_edited_self_play_pool_is_named_on_resume(tmp_path):
+    """extra/selfplay.pt edited (its digest dropped) without a key the pool reads: one
+    line naming it, not a KeyError traceback."""
+    mappo = MAPPOConfig(num_steps=16, update_epochs=1, hidden=32)
+    cfg = TrainConfig(name="sp", scenario="team", total_steps=64, num_envs=4, seed=1,
+                      wandb="disabled", game={"max_steps": 30},
+                      learners=(LearnerSpec("team", "mappo", (0, 1), mappo),),
+                      selfplay={"window": 2, "every": 64})
+    run = tmp_path / "sp"
+    Trainer(cfg, run, progress=False).train()
+    ck = load_checkpoint(run).path
+    meta = json.loads((ck / "meta.json").read_text())
+    del meta["files"]["extra/selfplay.pt"]
+    (ck / "meta.json").write_text(json.dumps(meta))
+    state = torch.load(ck / "extra" / "selfplay.pt", weights_only=True)
+    del state["pool"]["league"]
+    torch.save(state, ck / "extra" / "selfplay.pt")
+    with pytest.raises(CheckpointError) as err:
+        resume_trainer(run, progress=False, total_steps=128)
+    assert str(err.value) == (f"{ck / 'extra' / 'selfplay.pt'}: does not fit the run's "
+                              f"self-play pool: KeyError: 'league'")
 
 
 def test_truncated_meta_and_missing_files_are_named(trained, tmp_path):

@@ -444,7 +444,14 @@ class Trainer:
         self.schedule.load_state_dict(ckpt.meta.get("schedule", {}))
         self._load_windows(ckpt.meta.get("windows", {}))
         if self.selfplay is not None:
-            self.selfplay.load_state_dict(ckpt.extra_state("selfplay"))
+            try:
+                self.selfplay.load_state_dict(ckpt.extra_state("selfplay"))
+            except FIT_ERRORS as exc:
+                if isinstance(exc, CheckpointError):
+                    raise
+                raise CheckpointError(f"{ckpt.path / 'extra' / 'selfplay.pt'}: does not fit "
+                                      f"the run's self-play pool: {type(exc).__name__}: "
+                                      f"{load_problem(exc)}") from None
 
     def _windows(self) -> dict[str, Any]:
         """The rolling episode windows as a checkpoint holds them (copies)."""
