@@ -352,6 +352,31 @@ def test_a_latest_naming_a_removed_save_lists_the_runs_saves(trained, tmp_path):
         load_checkpoint(run)
 
 
+def test_a_run_folder_without_latest_says_what_it_has(trained, tmp_path):
+    """latest removed: the run's saves are listed; no save yet: said so. Both read 'not a
+    run directory'."""
+    run = tmp_path / "run"
+    shutil.copytree(trained, run)
+    (run / "latest").unlink()
+    saves = sorted((run / "checkpoints").iterdir())
+    with pytest.raises(CheckpointError) as err:
+        load_checkpoint(run)
+    assert str(err.value) == (
+        f"{run}: a run folder without its 'latest' file; the run's saves: "
+        f"{', '.join(p.name for p in saves)} (give one, e.g. {saves[-1]}, or write "
+        f"checkpoints/{saves[-1].name} into {run / 'latest'})")
+    shutil.rmtree(run / "checkpoints")
+    with pytest.raises(CheckpointError, match=r"run: a run folder with no save yet \(a run "
+                                              r"saves after every checkpoint_every iterations"):
+        load_checkpoint(run)
+    meta = json.loads((load_checkpoint(trained).path / "meta.json").read_text())
+    ck = _copy(trained, tmp_path)
+    (ck / "meta.json").write_text(json.dumps({**meta, "version": "1"}))
+    with pytest.raises(CheckpointError, match=r"meta\.json: version: must be an integer "
+                                              r"\(this alphatank reads version 1\), got '1'"):
+        load_checkpoint(ck)
+
+
 def test_meta_fields_that_resuming_reads_are_checked_at_load(trained, tmp_path):
     """progress is required and typed; its later fields (cut, clone_pending) get their
     defaults in an older checkpoint; windows maps learner names to numbers."""

@@ -259,6 +259,15 @@ def resolve_checkpoint_dir(path: str | Path) -> Path:
         if not (target / "meta.json").exists():
             raise CheckpointError(f"{latest}: points at {target}, which holds no meta.json")
         return target
+    saves = run_saves(p / "checkpoints") if (p / "checkpoints").is_dir() else []
+    if saves:  # latest removed
+        raise CheckpointError(f"{p}: a run folder without its 'latest' file; the run's saves: "
+                              f"{', '.join(s.name for s in saves)} (give one, e.g. "
+                              f"{saves[-1]}, or write checkpoints/{saves[-1].name} into "
+                              f"{latest})")
+    if (p / "metrics.jsonl").is_file():
+        raise CheckpointError(f"{p}: a run folder with no save yet (a run saves after every "
+                              f"checkpoint_every iterations and when it stops)")
     raise CheckpointError(f"{p}: not a checkpoint (no meta.json) and not a run directory "
                           f"(no 'latest' file)")
 
@@ -420,9 +429,13 @@ def load_checkpoint(path: str | Path) -> Checkpoint:
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         raise CheckpointError(f"{meta_file}: not an alphatank checkpoint (format "
                               f"{meta.get('format') if isinstance(meta, dict) else None!r})")
-    if meta.get("version") != VERSION:
-        raise CheckpointError(f"{meta_file}: checkpoint version {meta.get('version')!r}, this "
-                              f"alphatank reads version {VERSION}")
+    version = meta.get("version")
+    if not isinstance(version, int) or isinstance(version, bool):
+        raise CheckpointError(f"{meta_file}: version: must be an integer (this alphatank reads "
+                              f"version {VERSION}), got {version!r}")
+    if version != VERSION:
+        raise CheckpointError(f"{meta_file}: checkpoint version {version}, this alphatank "
+                              f"reads version {VERSION}")
     for key in ("train_config", "scenario", "observation", "learners", "files", "progress"):
         if key not in meta:
             raise CheckpointError(f"{meta_file}: missing field {key!r}")
