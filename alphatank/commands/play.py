@@ -30,7 +30,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="window scale, 0.1 to 8 times the map's size (default: fit the screen)")
     p.add_argument("--save-replay", type=given, metavar="FILE",
                    help="save each match as a replay: FILE (refused if it exists, unless "
-                        "--force), then FILE-2, FILE-3, ... (an existing one is skipped)")
+                        "--force), then -2, -3, ... before its suffix (m.npz, m-2.npz, "
+                        "m-3.npz; an existing one is skipped)")
     p.add_argument("--force", action="store_true", help="overwrite an existing --save-replay")
     p.add_argument("--headless-test", action="store_true",
                    help="allow SDL_VIDEODRIVER=dummy and run frames unthrottled (automated "

@@ -37,7 +37,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="MP4 to write (default: match.mp4)")
     p.add_argument("--gif", type=given, metavar="FILE",
                    help="also write a GIF: half size, every other frame at half the frame "
-                        "rate (15 fps in real time)")
+                        "rate, so it plays at the video's speed (15 fps at real time with "
+                        "--every 1)")
     p.add_argument("--replay", type=given, metavar="FILE",
                    help="also save the match as a replay file (refused if it exists, unless "
                         "--force)")
