@@ -33,7 +33,8 @@ from alphatank.extras import MissingExtraError, install_hint
 # verb -> module in alphatank.commands exposing add_arguments(parser) and run(args) -> int
 COMMANDS = {
     "demo": "The main job: train PPO vs the aggressive bot, evaluate, record (runs/<name>/).",
-    "train": "Train PPO/SAC learners from a named preset (vs bots, self-play, teams).",
+    "train": "Train PPO, MAPPO or SAC learners from a preset or a run file (vs bots, "
+             "self-play, teams).",
     "eval": "Evaluate a checkpoint against bots: Table-3 layout with Wilson 95% intervals.",
     "experiments": "The paper's tables in one command: train every row within a budget, "
                    "evaluate, report with the paper's figures.",

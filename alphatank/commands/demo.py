@@ -24,7 +24,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="evaluation games (default: 100)")
     p.add_argument("--workers", type=positive_int, default=2,
                    help="env worker processes (default: 2)")
-    p.add_argument("--wandb", default="offline", choices=("offline", "online", "disabled"))
+    p.add_argument("--wandb", default="offline", choices=("offline", "online", "disabled"),
+                   help="wandb mode (default: offline)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
