@@ -53,7 +53,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--team-stats", action="store_true",
                    help="also measure cooperation in the same games: share of won games in "
                         "which every teammate hit an enemy, kills in crossfire, hits per "
-                        "seat (written to FILE.team.json with --json)")
+                        "seat (with --json t.json, written to t.team.json)")
     p.add_argument("--csv", type=given, metavar="FILE", help="also write the rows as CSV")
     p.add_argument("--json", type=given, metavar="FILE",
                    help="also write the rows as JSON (with every game's outcome)")
