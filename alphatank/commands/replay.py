@@ -14,7 +14,7 @@ import time
 
 from alphatank.commands.argtypes import given, positive_int, replay_speed
 from alphatank.commands.lineup_options import overlays
-from alphatank.errors import one_line
+from alphatank.errors import InputError, one_line
 from alphatank.files import check_distinct
 from alphatank.ui.render import (
     DEFAULT_OVERLAYS,
@@ -45,7 +45,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--gif", type=given, metavar="FILE",
                    help="render the replay to a GIF (with --record: as well as the MP4)")
     p.add_argument("--render", action="store_true", help="play it back in a window")
-    p.add_argument("--speed", type=replay_speed, default=1.0,
+    p.add_argument("--speed", type=replay_speed,
                    help="playback speed for --render, 0.05 to 50 (default: 1, real time)")
     p.add_argument("--overlays", type=overlays, default=",".join(DEFAULT_OVERLAYS),
                    help="aim,trajectory,bfs | all | none (default: aim,bfs)")
@@ -55,6 +55,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if not args.render:  # a window's flag alone would be ignored: the user meant --render
+        window_only = [flag for flag, on in (("--speed", args.speed is not None),
+                                             ("--max-frames", args.max_frames is not None),
+                                             ("--headless-test", args.headless_test)) if on]
+        if window_only:
+            raise InputError(f"{window_only[0]} is for the window of --render; give --render "
+                             f"with it")
     try:
         check_outputs(args.record, args.gif, ("--record", "--gif"))
         check_distinct({"the replay file": args.file, "--record": args.record,
@@ -110,7 +117,8 @@ def _labels(replay: Replay) -> list[str]:
 
 def _render(replay: Replay, args: argparse.Namespace) -> int:
     tick_hz = replay.game_config().tick_hz
-    session = PlaySession(fps=tick_hz * args.speed, overlays=args.overlays, verbose=False,
+    speed = 1.0 if args.speed is None else args.speed
+    session = PlaySession(fps=tick_hz * speed, overlays=args.overlays, verbose=False,
                           new_episode=lambda _seed, hooks: replay_episode(replay, hooks),
                           labels=_labels(replay))
     try:
