@@ -283,6 +283,8 @@ CASES = [
     ("arena-map-unknown", ["arena", "--map", "nowhere"],
      ["arena: error: --map: unknown map 'nowhere'", "battlefield", "folder of maps"]),
     ("arena-games", ["arena", "--games", "0"], ["--games", ">= 1"]),
+    ("arena-fps-no-render", ["arena", "--seats", "smart,random", "--fps", "30"],
+     ["arena: error: --fps is the frame rate of --render's window; give --render with it"]),
     ("arena-render-dummy", ["arena", "--render", "--seats", "smart,random", "--games", "1",
                             "--max-steps", "5"],
      ["arena: error: --render: SDL_VIDEODRIVER=dummy shows nothing", "leave out --render"]),

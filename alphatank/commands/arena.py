@@ -9,6 +9,7 @@ import sys
 import time
 
 from alphatank.commands.argtypes import given, max_steps, positive_int, seed, window_fps
+from alphatank.errors import InputError
 from alphatank.game.arena import arena_scenario, run_arena
 from alphatank.game.lineup import spec_seat
 from alphatank.game.scenarios import ScenarioError
@@ -36,11 +37,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "preset's)")
     p.add_argument("--render", action="store_true",
                    help="show every game in a window (refused without a display)")
-    p.add_argument("--fps", type=window_fps, default=60.0,
+    p.add_argument("--fps", type=window_fps,
                    help="frame rate with --render, 1 to 1000 (default: 60)")
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.fps is not None and not args.render:  # ignored, the user meant a window
+        raise InputError("--fps is the frame rate of --render's window; give --render with it")
     if args.render:  # a window that would show nothing is refused before any game
         from alphatank.ui.render import DisplayUnavailable, window_display
 
@@ -65,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
     if args.render:
         from alphatank.ui.render import DisplayUnavailable, Renderer, RenderHook
 
-        renderer = Renderer("human", fps=args.fps, caption="AlphaTank arena")
+        renderer = Renderer("human", fps=args.fps or 60.0, caption="AlphaTank arena")
         hooks.append(RenderHook(renderer))
         no_window = (DisplayUnavailable,)
     pairs = len(seats) * (len(seats) - 1) // 2
