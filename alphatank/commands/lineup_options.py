@@ -23,7 +23,8 @@ def add_lineup_arguments(p: argparse.ArgumentParser) -> None:
                    help="who plays the scenario's learner seats: a checkpoint or run folder, "
                         "checkpoint:PATH, agent:NAME or bot:NAME")
     p.add_argument("--stand-in", type=given, default="smart",
-                   help="bot for learner seats when no --checkpoint is given (default: smart)")
+                   help="bot for learner seats when no --checkpoint is given, and for human "
+                        "seats where there is no keyboard (record) (default: smart)")
     p.add_argument("--seed", type=seed, default=0, help="episode seed (default: 0)")
     p.add_argument("--max-steps", type=max_steps,
                    help="episode length limit in ticks, 1 to 10,000,000")
