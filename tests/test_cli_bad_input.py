@@ -706,6 +706,8 @@ CASES = [
      ["--config and --preset"]),
     ("train-resume-new-flags", ["train", "--resume", "{run}", "--hp", "ppo.gamma=0.9",
                                 "--init-from", "{run}"], ["--hp, --init-from apply to new runs"]),
+    ("train-resume-new-flag", ["train", "--resume", "{run}", "--schedule", "cycle:fixed"],
+     ["--schedule applies to new runs"]),
     ("train-resume-name", ["train", "--resume", "{run}", "--name", "branch"],
      ["--name and --runs name a new run's folder", "copy its folder"]),
     ("train-resume-num-envs", ["train", "--resume", "{run}", "--num-envs", "3"],

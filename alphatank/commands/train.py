@@ -439,8 +439,8 @@ def _start(args: argparse.Namespace, progress: bool, stack: contextlib.ExitStack
         given = [f"--{k.replace('_', '-')}" for k in NEW_RUN_ONLY
                  if getattr(args, k) not in (None, "", [])]
         if given:
-            raise InputError(f"{', '.join(given)} apply to new runs; a resumed run keeps its "
-                             f"settings")
+            raise InputError(f"{', '.join(given)} appl{'ies' if len(given) == 1 else 'y'} to "
+                             f"new runs; a resumed run keeps its settings")
         if args.name is not None or args.runs is not None:
             raise InputError("--name and --runs name a new run's folder; a resumed run "
                              "continues in its own (--resume DIR); to branch a run, copy its "
