@@ -1067,6 +1067,25 @@ def test_a_finished_run_whose_checkpoint_fails_says_how_to_train_it_again(
     assert not json.loads((out / "tiny.json").read_text())["missing"]
 
 
+def test_a_failure_of_a_row_shown_beside_rows_is_listed_not_a_traceback(made, tmp_path,
+                                                                       capsys):
+    """--rows a_random --resume plays again the damaged evaluation of b_cycle (a row its
+    table shows), whose checkpoint is damaged too: the failure is listed as any other
+    (exit 1); the list once ended in a KeyError traceback (b_cycle is not in the plan of
+    --rows)."""
+    out, args = copy_of_made(made, tmp_path)
+    run = sorted((out / "runs").iterdir())[1]
+    cut = sorted((run / "eval").iterdir())[0]
+    cut.write_text("{")
+    ppo = Path(load_checkpoint(run).path) / "ppo.pt"
+    ppo.write_bytes(ppo.read_bytes()[:200])
+    assert cli(*args, "--rows", "a_random", "--resume") == 1
+    err = capsys.readouterr().err
+    assert f"set aside as {cut}.damaged; the evaluation is played again" in err, err
+    assert f"  tiny/b_cycle seed 0: CheckpointError: {ppo}: corrupt or truncated" in err, err
+    assert "Traceback" not in err and f"({run}/error.txt)" in err
+
+
 @pytest.mark.parametrize("size", [0, 60])
 def test_a_damaged_table_json_is_named_not_taken_for_no_report(made, tmp_path, capsys, size):
     """The report that says which results a new one must keep, cut short: one line naming

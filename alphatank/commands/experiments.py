@@ -226,7 +226,7 @@ def run(args: argparse.Namespace) -> int:
     if failed:
         print(f"{len(failed)} run(s) failed (their error.txt holds the traceback) or "
               f"busy (another command is training them):", file=sys.stderr)
-        by_key = {j.key: j for j in plan.jobs}
+        by_key = {j.key: j for j in todo}  # also a row shown beside --rows made again
         for key, err in failed.items():
             job = by_key[key]
             where = "busy" if err.startswith(BUSY) else f"{job.run_dir}/error.txt"
