@@ -333,6 +333,27 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
         assert capsys.readouterr().err.count("\n") == 1
 
 
+def test_an_experiments_dir_without_tables_is_one_line(tmp_path, capsys):
+    """A folder of no tables (empty, or a table's own folder given) is refused naming
+    it: `all` did nothing with exit status 0, a table was 'unknown; choose one of all'."""
+    root = write_rows(tmp_path / "exp")
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "file").write_text("")
+    for where, table, why in (
+            (root / "tiny", "tiny", f"--experiments-dir {root / 'tiny'}: holds no table (a "
+             "folder <table> with a _table.toml and its row files); it is the folder of "
+             "table 'tiny': give the folder above it"),
+            (tmp_path / "empty", "all", f"--experiments-dir {tmp_path / 'empty'}: holds no "
+             "table (a folder <table> with a _table.toml and its row files)\n"),
+            (tmp_path / "file", "all", f"--experiments-dir {tmp_path / 'file'}: is a file, "
+             "not a folder")):
+        assert cli(table, "--experiments-dir", str(where), "--out", str(tmp_path / "out"),
+                   "--steps", "512") == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and why in err, err
+    assert not (tmp_path / "out").exists()
+
+
 @pytest.mark.parametrize("name", ["runs", "figures", "tiny.md"])
 def test_a_file_or_folder_where_out_writes_is_one_line_before_training(tmp_path, capsys,
                                                                        name):

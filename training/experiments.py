@@ -179,16 +179,25 @@ def _root(experiments_dir: str | Path | None) -> Any:
     if experiments_dir is not None:
         p = Path(experiments_dir)
         if not p.is_dir():
-            raise ExperimentError(f"{p}: no such experiments folder")
+            raise ExperimentError(f"--experiments-dir {p}: "
+                                  + ("is a file, not a folder" if p.exists() else
+                                     "no such experiments folder"))
         return p
     return resources.files("alphatank").joinpath("data", "experiments")
 
 
 def table_names(experiments_dir: str | Path | None = None) -> list[str]:
-    """Tables in the experiments folder, the paper's order first."""
+    """Tables in the experiments folder, the paper's order first; ExperimentError for a
+    folder given that holds none (a table's own folder, say)."""
     root = _root(experiments_dir)
     found = sorted(p.name for p in root.iterdir()
                    if p.is_dir() and p.joinpath("_table.toml").is_file())
+    if not found and experiments_dir is not None:
+        own = root.joinpath("_table.toml").is_file()
+        raise ExperimentError(f"--experiments-dir {root}: holds no table (a folder <table> "
+                              "with a _table.toml and its row files)"
+                              + (f"; it is the folder of table {root.absolute().name!r}: give "
+                                 "the folder above it" if own else ""))
     return [t for t in TABLES if t in found] + [t for t in found if t not in TABLES]
 
 
