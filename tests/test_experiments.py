@@ -1161,6 +1161,20 @@ def test_best_average_is_not_met_before_every_specialist_has_an_average(tmp_path
                                 "average yet of c_spec)"]
 
 
+def test_a_check_is_not_judged_before_every_seed_has_its_figures(made, tmp_path, capsys):
+    """Seed 0 of two finished (the command was interrupted, say): the report shows its
+    results, and its check is not measurable yet; it was judged on seed 0 alone (NOT met,
+    or met, and so printed and written), then could turn once seed 1 finished."""
+    out, args = copy_of_made(made, tmp_path)
+    assert cli(*args, "--report-only", "--seeds", "2") == 0
+    assert "tiny.md  [beats_paper: not measurable]  (2 missing)" in capsys.readouterr().out
+    data = json.loads((out / "tiny.json").read_text())
+    assert data["checks"][0]["passed"] is None and data["checks"][0]["details"] == []
+    assert data["rows"][0]["columns"]["random"]["rates"] == [0.0]  # seed 0 still shown
+    assert "every cell with a paper figure is at or above it: **not measurable yet**" in (
+        out / "tiny.md").read_text()
+
+
 def test_a_report_without_results_leaves_no_figure_of_an_earlier_one(made, tmp_path):
     """The runs moved away (as the report's own hints say) and the report written anew:
     its figures showed the earlier results still (they were left, unlinked, in figures/)."""

@@ -92,6 +92,7 @@ class RowResult:
     runs: dict[int, dict[str, Any]] = field(default_factory=dict)  # seed -> done.json
     run_dirs: dict[int, str] = field(default_factory=dict)
     errors: dict[int, str] = field(default_factory=dict)
+    seeds: int = 1  # the plan's: a check measures a figure once every seed has it
 
     def agg(self, col: str) -> Agg | None:
         cells = self.evals.get(col, {})
@@ -115,9 +116,15 @@ class RowResult:
                                    for n in names])) for s in seeds])
 
     def ours(self, col: str) -> float | None:
-        """The value checks compare: the IQM over seeds, in percent."""
+        """The IQM over seeds, in percent."""
         a = self.average() if col == "average" else self.agg(col)
         return None if a is None else 100.0 * a.iqm
+
+    def measured(self, col: str) -> float | None:
+        """The value checks compare: :meth:`ours`, None until every seed of the plan has
+        it (a check does not judge the seeds that finished first)."""
+        a = self.average() if col == "average" else self.agg(col)
+        return None if a is None or len(a.rates) < self.seeds else 100.0 * a.iqm
 
     def paper_value(self, col: str) -> float | None:
         if col in self.row.paper:
@@ -133,7 +140,7 @@ def collect(plan: Plan, table: Table) -> list[RowResult]:
     """What the plan's runs left on disk for ``table``'s rows."""
     out = []
     for row in table.rows:
-        rr = RowResult(row, table.row_columns(row))
+        rr = RowResult(row, table.row_columns(row), seeds=plan.seeds)
         for s in range(plan.seeds):
             job, specs = plan.cells[(row.id, s)]
             rr.run_dirs[s] = job.run_dir
@@ -333,7 +340,7 @@ def run_checks(table: Table, results: list[RowResult]) -> list[dict[str, Any]]:
                     continue
                 for c in [*rr.columns, *([Column("average", "Average")]
                                          if table.average else [])]:
-                    paper, ours = rr.paper_value(c.name), rr.ours(c.name)
+                    paper, ours = rr.paper_value(c.name), rr.measured(c.name)
                     if paper is None:
                         continue
                     if ours is None:
@@ -346,7 +353,7 @@ def run_checks(table: Table, results: list[RowResult]) -> list[dict[str, Any]]:
             passed = _all(verdicts)
             text = "every cell with a paper figure is at or above it"
         elif kind == "best_average":
-            theirs = {n: by_name[n].ours("average") if n in by_name else None
+            theirs = {n: by_name[n].measured("average") if n in by_name else None
                       for n in chk.get("against", [])}
             best = max((x for x in theirs.values() if x is not None), default=None)
             unmeasured = [n for n, x in theirs.items() if x is None]
@@ -354,7 +361,7 @@ def run_checks(table: Table, results: list[RowResult]) -> list[dict[str, Any]]:
             verdicts = []
             for name in chk.get("rows", []):
                 rr = by_name.get(name)
-                mine = None if rr is None else rr.ours("average")
+                mine = None if rr is None else rr.measured("average")
                 if mine is None or best is None:
                     verdicts.append(None)
                     continue
@@ -375,8 +382,8 @@ def run_checks(table: Table, results: list[RowResult]) -> list[dict[str, Any]]:
             verdicts = []
             for col, spec_name in chk.get("specialists", {}).items():
                 spec = by_name.get(spec_name)
-                mine = None if rr is None else rr.ours(col)
-                theirs = None if spec is None else spec.ours(col)
+                mine = None if rr is None else rr.measured(col)
+                theirs = None if spec is None else spec.measured(col)
                 if mine is None or theirs is None:
                     verdicts.append(None)
                     continue
@@ -392,7 +399,7 @@ def run_checks(table: Table, results: list[RowResult]) -> list[dict[str, Any]]:
             points = float(chk.get("points", 10))
             verdicts = []
             for rr in results:
-                x, y = rr.ours(a), rr.ours(b)
+                x, y = rr.measured(a), rr.measured(b)
                 if x is None or y is None:
                     verdicts.append(None)
                     continue
