@@ -191,6 +191,22 @@ def test_a_report_never_drops_the_results_it_shows(made, tmp_path, capsys):
     assert {p.name: p.read_bytes() for p in out.glob("tiny.*")} == reports
 
 
+def test_the_command_a_report_records_makes_that_report(tmp_path, capsys):
+    """`all --rows tiny/a_random`, a row name another table has too: the report recorded
+    `--rows a_random`, which makes the other table's row and report as well."""
+    root = write_rows(tmp_path / "exp")
+    shutil.copytree(root / "tiny", root / "other")
+    out = tmp_path / "out"
+    assert cli("all", "--experiments-dir", str(root), "--out", str(out), "--rows",
+               "tiny/a_random", "--report-only") == 0
+    command = json.loads((out / "tiny.json").read_text())["command"]
+    assert "--rows tiny/a_random " in command and not (out / "other.json").exists()
+    (out / "tiny.json").unlink()
+    assert cli(*shlex.split(command)[2:], "--report-only") == 0
+    assert sorted(p.name for p in out.glob("*.json")) == ["tiny.json"]
+    assert json.loads((out / "tiny.json").read_text())["command"] == command
+
+
 def test_two_seeds_pool_their_games_in_the_report(made, tmp_path, capsys):
     root, one_seed, _ = made
     assert "## Seeds pooled" not in (one_seed / "tiny.md").read_text()

@@ -11,6 +11,7 @@ import argparse
 import functools
 import shlex
 import sys
+from collections import Counter
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -141,7 +142,10 @@ def run(args: argparse.Namespace) -> int:
             report = planned(rows=rows, report_only=True)
         except (ExperimentError, ValueError) as exc:
             return _error(str(exc))
-        args.rows = ",".join(r.name for t in report.tables for r in t.rows)  # the command
+        # the command: each row by name, or TABLE/ROW where another table has that name
+        named = Counter(r.name for t in tables for r in t.rows)
+        args.rows = ",".join(r.name if named[r.name] == 1 else r.id
+                             for t in report.tables for r in t.rows)
     damaged = damaged_results(report.jobs)  # a results file cut short: made again
     if damaged and (args.report_only or not args.resume):
         more = f" (and {len(damaged) - 1} more)" if len(damaged) > 1 else ""
