@@ -1191,6 +1191,23 @@ def test_a_check_is_not_judged_before_every_seed_has_its_figures(made, tmp_path,
         out / "tiny.md").read_text()
 
 
+def test_a_cell_without_results_has_the_keys_of_one_with_them(made, tmp_path):
+    """A missing cell of the JSON report holds the keys of a cell with results, its
+    figures null ("pooled" in every cell, as the docs say); it held only "runs": [] and
+    "paper" (cell["iqm"] was a KeyError)."""
+    out, args = copy_of_made(made, tmp_path)
+    for f in sorted((out / "runs").iterdir())[1].glob("eval/*.json"):
+        f.unlink()
+    (out / "tiny.json").unlink()
+    assert cli(*args, "--report-only") == 0
+    a, b = json.loads((out / "tiny.json").read_text())["rows"]
+    assert b["columns"]["random"] == {"rates": [], "median": None, "iqm": None,
+                                      "iqm_ci95": None, "pooled": None, "paper": None,
+                                      "per_seed": []}
+    assert a["columns"]["random"].keys() == b["columns"]["random"].keys()
+    assert a["average"].keys() == b["average"].keys() and b["average"]["iqm"] is None
+
+
 def test_a_report_without_results_leaves_no_figure_of_an_earlier_one(made, tmp_path):
     """The runs moved away (as the report's own hints say) and the report written anew:
     its figures showed the earlier results still (they were left, unlinked, in figures/)."""

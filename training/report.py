@@ -560,8 +560,9 @@ def _markdown(plan: Plan, table: Table, results: list[RowResult], checks: list[d
 
 
 def _agg_json(a: Agg | None, paper: float | None) -> dict[str, Any]:
-    if a is None:
-        return {"runs": [], "paper": paper}
+    if a is None:  # the keys of a cell with results, none of their figures
+        return {"rates": [], "median": None, "iqm": None, "iqm_ci95": None, "pooled": None,
+                "paper": paper}
     ci, pool = a.ci, a.pooled
     return {"rates": [round(r, 4) for r in a.rates], "median": round(a.median, 4),
             "iqm": round(a.iqm, 4), "iqm_ci95": None if ci is None else [round(ci[0], 4),
