@@ -479,6 +479,16 @@ def test_the_estimate_is_at_least_the_longest_run(tmp_path, capsys, workers, min
         f"2 runs (1 seed(s)), 2 to do: about {minutes} min with {workers} worker(s)")
 
 
+def test_an_estimate_under_a_minute_is_not_zero(tmp_path, capsys):
+    """Budgets of a few seconds (2 runs of 6 s, 2 evaluations of 2 games each) were
+    'about 0 min'."""
+    root = write_rows(tmp_path / "exp")
+    assert cli("tiny", "--experiments-dir", str(root), "--out", str(tmp_path / "out"),
+               "--budget", "0.1", "--games", "2", "--list") == 0
+    assert capsys.readouterr().out.splitlines()[-1] == (
+        "2 runs (1 seed(s)), 2 to do: about 0.26 min with 1 worker(s)")
+
+
 def test_list_with_ray_does_not_claim_one_worker(tmp_path, capsys):
     """--list --ray does not connect, so it cannot know the cluster's CPUs: it gives the
     one-CPU time and says the cluster shares it out (it said 'with 1 worker(s)')."""

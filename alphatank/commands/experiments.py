@@ -196,7 +196,7 @@ def run(args: argparse.Namespace) -> int:
             from alphatank.training.ray_jobs import run_on_ray as runner
         eta = estimate_minutes(plan, todo, workers)
         print(f"experiments {', '.join(t.name for t in plan.tables)}: {len(plan.jobs)} runs, "
-              f"{len(todo)} to do, about {eta:.0f} min with {where} -> "
+              f"{len(todo)} to do, about {_minutes(eta)} with {where} -> "
               f"{args.out}", flush=True)
 
         def on_done(job, error, seconds):  # noqa: ANN001, ANN202
@@ -275,6 +275,12 @@ def _command(args: argparse.Namespace) -> str:
     return " ".join(shlex.quote(p) for p in parts)
 
 
+def _minutes(m: float) -> str:
+    """An estimate in minutes: whole ones, two digits under one (a few seconds' budget
+    is not 'about 0 min')."""
+    return f"{m:.0f} min" if m >= 1 else f"{m:.2g} min"
+
+
 def _print_plan(plan: Plan, workers: int | None) -> None:
     """Rows, runs and the time the missing ones take on ``workers`` (None: a Ray cluster,
     whose CPUs --list does not connect to count); a run whose results file is damaged
@@ -318,6 +324,6 @@ def _print_plan(plan: Plan, workers: int | None) -> None:
                   + retrain_hint(job, failure))
     minutes = estimate_minutes(plan, todo, workers or 1, [p for _, p, _ in damaged])
     print(f"{len(plan.jobs)} runs ({plan.seeds} seed(s)), {len(todo)} to do"
-          + (f" ({len(redo)} damaged)" if redo else "") + f": about {minutes:.0f} min "
+          + (f" ({len(redo)} damaged)" if redo else "") + f": about {_minutes(minutes)} "
           + (f"with {workers} worker(s)" if workers else
              "on one CPU, shared out over the Ray cluster's CPUs (the run says how many)"))
