@@ -1119,7 +1119,7 @@ def test_a_failure_of_a_row_shown_beside_rows_is_listed_not_a_traceback(made, tm
     """--rows a_random --resume plays again the damaged evaluation of b_cycle (a row its
     table shows), whose checkpoint is damaged too: the failure is listed as any other
     (exit 1); the list once ended in a KeyError traceback (b_cycle is not in the plan of
-    --rows)."""
+    --rows), and the start line counted b_cycle's run to do but not among the runs."""
     out, args = copy_of_made(made, tmp_path)
     run = sorted((out / "runs").iterdir())[1]
     cut = sorted((run / "eval").iterdir())[0]
@@ -1127,7 +1127,8 @@ def test_a_failure_of_a_row_shown_beside_rows_is_listed_not_a_traceback(made, tm
     ppo = Path(load_checkpoint(run).path) / "ppo.pt"
     ppo.write_bytes(ppo.read_bytes()[:200])
     assert cli(*args, "--rows", "a_random", "--resume") == 1
-    err = capsys.readouterr().err
+    out_text, err = capsys.readouterr()
+    assert "experiments tiny: 2 runs, 1 to do" in out_text, out_text  # was '1 runs, 1 to do'
     assert f"set aside as {cut}.damaged; the evaluation is played again" in err, err
     assert f"  tiny/b_cycle seed 0: CheckpointError: {ppo}: corrupt or truncated" in err, err
     assert "Traceback" not in err and f"({run}/error.txt)" in err

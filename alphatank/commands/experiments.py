@@ -195,7 +195,8 @@ def run(args: argparse.Namespace) -> int:
             workers, where = max(1, int(connection.cpus)), f"Ray ({connection.cpus:g} CPUs)"
             from alphatank.training.ray_jobs import run_on_ray as runner
         eta = estimate_minutes(plan, todo, workers)
-        print(f"experiments {', '.join(t.name for t in plan.tables)}: {len(plan.jobs)} runs, "
+        runs = len(planned_keys | {j.key for j in todo})  # with rows shown beside --rows
+        print(f"experiments {', '.join(t.name for t in plan.tables)}: {runs} runs, "
               f"{len(todo)} to do, about {_minutes(eta)} with {where} -> "
               f"{args.out}", flush=True)
 
