@@ -308,7 +308,11 @@ def test_a_row_another_command_is_training_is_left_alone(tmp_path, held_elsewher
 def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys):
     root = write_rows(tmp_path / "exp")
     assert cli("nosuch", "--experiments-dir", str(root)) == 2
-    assert "unknown table 'nosuch'" in capsys.readouterr().err
+    assert "unknown table 'nosuch'; choose one of tiny, all" in capsys.readouterr().err
+    (root / "new").mkdir()  # a table being written: its _table.toml not yet
+    assert cli("new", "--experiments-dir", str(root)) == 2
+    assert (f"unknown table 'new' ({root / 'new'} holds no _table.toml); choose one of tiny, "
+            "all") in capsys.readouterr().err
     (root / "tiny" / "c_bad.toml").write_text('title = "x"\nprest = "ppo_vs_smart"\n')
     assert cli("tiny", "--experiments-dir", str(root), "--list") == 2
     err = capsys.readouterr().err.strip()

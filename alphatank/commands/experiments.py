@@ -111,7 +111,10 @@ def run(args: argparse.Namespace) -> int:
         elif args.table in names:
             wanted = [args.table]
         else:
-            return _error(f"unknown table {args.table!r}; choose one of "
+            folder = Path(args.experiments_dir or "", args.table)
+            why = (f" ({folder} holds no _table.toml)"
+                   if args.experiments_dir and folder.is_dir() else "")
+            return _error(f"unknown table {args.table!r}{why}; choose one of "
                           f"{', '.join([*names, 'all'])}")
         tables = load_tables(wanted, args.experiments_dir)
         planned = functools.partial(make_plan, tables, args.out, seeds=args.seeds,
