@@ -701,6 +701,26 @@ def test_a_rows_paper_figure_must_be_a_percent(tmp_path, value):
         load_tables(["tiny"], root)
 
 
+@pytest.mark.parametrize(("where", "setting"), [
+    ("budget_fractions", '"seed" = 0.5'), ("budget_fractions", "total_steps = 0.5"),
+    ("run", "seed = 3"), ("run", "eval_every = 4")])
+def test_a_row_setting_what_the_command_sets_for_each_run_is_refused(tmp_path, where,
+                                                                     setting):
+    """A fraction of the steps as the seed made every seed index's run of the first seed
+    train with one seed (the seed rule broken: past 1,000,000 with enough steps), and the
+    other seeds with theirs; a [run] seed or eval_every was dropped without a word."""
+    root = write_rows(tmp_path / "exp")
+    row = root / "tiny" / "b_cycle.toml"
+    text = row.read_text()
+    row.write_text(text.replace("[budget_fractions]\n", f"[budget_fractions]\n{setting}\n")
+                   if where == "budget_fractions" else
+                   text.replace("[run]\n", f"[run]\n{setting}\n"))
+    key = setting.split(" =")[0].strip('"')
+    with pytest.raises(ValueError, match=rf"b_cycle\.toml: {where}\.{key}: set by alphatank "
+                                         r"experiments for each run \(from --budget, "):
+        load_tables(["tiny"], root)
+
+
 def test_a_rows_run_observation_and_imitate_are_checked_when_it_is_planned(tmp_path):
     """Before anything trains, not when the row's run starts after the others."""
     root = write_rows(tmp_path / "exp")

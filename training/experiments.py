@@ -279,6 +279,10 @@ def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+# run settings the command gives each run (row_config): a row's [run] or
+# [budget_fractions] setting one would be overwritten, or would override the seed rule
+PER_RUN = ("name", "seed", "total_steps", "time_limit_s", "wandb", "num_workers",
+           "keep_checkpoints", "eval_every", "video_every")
 ROW_KEYS = ("title", "order", "preset", "same_as", "run", "hp", "scenarios", "paper",
             "steps_per_minute", "budget_fractions", "columns", "note", "eval_game")
 
@@ -330,6 +334,12 @@ def _row(table: str, name: str, data: dict[str, Any], source: str,
         if not isinstance(v, int | float) or isinstance(v, bool) or not 0 < v <= 1:
             raise ExperimentError(f"{source}: budget_fractions.{k}: needs a fraction in (0, 1], "
                                   f"got {v!r}")
+    for where, keys in (("run", run), ("budget_fractions", fractions)):
+        for k in keys:
+            if k.split(".")[0] in PER_RUN:
+                raise ExperimentError(f"{source}: {where}.{k}: set by alphatank experiments "
+                                      "for each run (from --budget, --steps, the seed index, "
+                                      "--wandb); leave it out")
     rate = _typed(data, "steps_per_minute", (int, float), source, DEFAULT_STEPS_PER_MINUTE)
     if not 0 < rate < math.inf:
         raise ExperimentError(f"{source}: steps_per_minute: must be a finite number > 0, "
@@ -493,7 +503,7 @@ def row_config(row: Row, seed: int, budget_min: float, steps: int | None = None,
         data["imitate"] = {**data["imitate"], "teachers": teachers}
     data.update(name=_run_name(row, seed), seed=seed, total_steps=total,
                 time_limit_s=float(budget_min) * 60.0, wandb=wandb, num_workers=1,
-                keep_checkpoints=1, eval_every=0, video_every=0)
+                keep_checkpoints=1, eval_every=0, video_every=0)  # PER_RUN
     for path, frac in row.fractions.items():
         _set_path(data, path, max(1, int(total * frac)))
     if row.scenarios:
