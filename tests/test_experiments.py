@@ -611,7 +611,8 @@ def test_a_row_taught_by_another_row_trains_after_it_on_its_checkpoint(tmp_path,
     refused when planning."""
     root = write_rows(tmp_path / "exp", broken=True)
     (root / "tiny" / "c_student.toml").write_text(STUDENT.replace("TEACHER", "row:a_random"))
-    (root / "tiny" / "d_student.toml").write_text(STUDENT.replace("TEACHER", "row:b_cycle"))
+    (root / "tiny" / "d_student.toml").write_text(STUDENT.replace("TEACHER", "row:b_cycle")
+                                                  .replace("Student", "Student D"))
     tables = load_tables(["tiny"], root)
     plan = make_plan(tables, tmp_path / "out", steps=256, games=2, budget_min=2,
                      rows=["c_student", "d_student"])
@@ -633,7 +634,8 @@ def test_a_row_taught_by_another_row_trains_after_it_on_its_checkpoint(tmp_path,
     for teacher_spec, message in (("row:nosuch", "no row 'nosuch' in table tiny"),
                                   ("row:e_student", "rows need each other: tiny/e_student "
                                                     "-> tiny/e_student")):
-        (root / "tiny" / "e_student.toml").write_text(STUDENT.replace("TEACHER", teacher_spec))
+        (root / "tiny" / "e_student.toml").write_text(STUDENT.replace("TEACHER", teacher_spec)
+                                                      .replace("Student", "Student E"))
         with pytest.raises(ValueError, match=message):
             make_plan(load_tables(["tiny"], root), tmp_path / "x", rows=["e_student"])
 
@@ -719,6 +721,21 @@ def test_a_row_setting_what_the_command_sets_for_each_run_is_refused(tmp_path, w
     with pytest.raises(ValueError, match=rf"b_cycle\.toml: {where}\.{key}: set by alphatank "
                                          r"experiments for each run \(from --budget, "):
         load_tables(["tiny"], root)
+
+
+def test_two_rows_of_a_table_with_one_title_are_refused(tmp_path):
+    """A row file copied for a variant, its title kept: the tables showed two rows alike
+    and the openskill table rated both rows' agents as one player ('Random Bot s0')."""
+    root = write_rows(tmp_path / "exp")
+    (root / "tiny" / "c_copy.toml").write_text((root / "tiny" / "a_random.toml").read_text())
+    with pytest.raises(ValueError, match=r"c_copy\.toml: title: 'Random Bot' is the title of "
+                                         r".*a_random\.toml too; give each row of a table its "
+                                         r"own"):
+        load_tables(["tiny"], root)
+    (root / "tiny" / "c_copy.toml").write_text(  # without titles: the file names
+        (root / "tiny" / "a_random.toml").read_text().replace('title = "Random Bot"\n', ""))
+    assert [r.title for r in load_tables(["tiny"], root)[0].rows] == ["Random Bot", "c_copy",
+                                                                     "Cycle"]
 
 
 def test_a_rows_run_observation_and_imitate_are_checked_when_it_is_planned(tmp_path):
@@ -1181,7 +1198,8 @@ def test_best_average_is_not_met_before_every_specialist_has_an_average(tmp_path
     the check "NOT met" though another row could still meet it."""
     root = write_rows(tmp_path / "exp")
     (root / "tiny" / "c_spec.toml").write_text(
-        (root / "tiny" / "a_random.toml").read_text().replace("order = 1", "order = 3"))
+        (root / "tiny" / "a_random.toml").read_text().replace("order = 1", "order = 3")
+        .replace("Random Bot", "Specialist"))
     with open(root / "tiny" / "_table.toml", "a") as f:
         f.write('[[checks]]\nkind = "best_average"\nrows = ["b_cycle"]\n'
                 'against = ["a_random", "c_spec"]\n[[checks]]\nkind = "best_average"\n'

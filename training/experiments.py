@@ -416,6 +416,12 @@ def load_tables(names: Sequence[str], experiments_dir: str | Path | None = None
                 rows.append(row)
         if not rows:
             raise ExperimentError(f"{where}/{t}: no row files")
+        titled: dict[str, Row] = {}
+        for row in rows:  # the tables and the ratings name a row by its title
+            other = titled.setdefault(row.title, row)
+            if other is not row:
+                raise ExperimentError(f"{row.source}: title: {row.title!r} is the title of "
+                                      f"{other.source} too; give each row of a table its own")
         checks = tuple(_typed(data, "checks", list, source, []))
         for i, chk in enumerate(checks):
             if not isinstance(chk, dict) or chk.get("kind") not in CHECKS:
