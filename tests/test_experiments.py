@@ -207,6 +207,23 @@ def test_the_command_a_report_records_makes_that_report(tmp_path, capsys):
     assert json.loads((out / "tiny.json").read_text())["command"] == command
 
 
+def test_a_report_of_a_row_renamed_since_says_so(made, tmp_path, capsys):
+    """b_cycle.toml renamed c_cycle.toml: the report showing b_cycle is kept and the line
+    says why; it blamed other settings ('e.g. --seeds'), which no setting fixes."""
+    out, args = copy_of_made(made, tmp_path)
+    root = tmp_path / "exp"
+    shutil.copytree(made[0], root)
+    (root / "tiny" / "b_cycle.toml").rename(root / "tiny" / "c_cycle.toml")
+    args[args.index("--experiments-dir") + 1] = str(root)
+    before = (out / "tiny.json").read_bytes()
+    assert cli(*args, "--report-only") == 2
+    assert capsys.readouterr().err == (
+        f"alphatank experiments: error: --out {out}: tiny.json reports results of row(s) "
+        "b_cycle, which table tiny has no more (a row file renamed or removed?); restore it, "
+        "or move that report away to write it anew\n")
+    assert (out / "tiny.json").read_bytes() == before
+
+
 def test_two_seeds_pool_their_games_in_the_report(made, tmp_path, capsys):
     root, one_seed, _ = made
     assert "## Seeds pooled" not in (one_seed / "tiny.md").read_text()

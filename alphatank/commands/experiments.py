@@ -168,6 +168,13 @@ def run(args: argparse.Namespace) -> int:
                           "must keep: restore it, or move it away to write it anew from "
                           f"{report.out / 'runs'}")
         lost = sorted(shown - {(r.name, s) for r in coming for s in range(report.seeds)})
+        rows_now = {r.name for r in next(x for x in tables if x.name == t.name).rows}
+        gone = sorted({row for row, _ in lost} - rows_now)
+        if gone:  # its row file removed or renamed since: no settings bring it back
+            return _error(f"--out {args.out}: {t.name}.json reports results of row(s) "
+                          f"{', '.join(gone)}, which table {t.name} has no more (a row file "
+                          "renamed or removed?); restore it, or move that report away to "
+                          "write it anew")
         if lost:
             runs = ", ".join(f"{row} seed {seed}" for row, seed in lost)
             return _error(f"--out {args.out}: {t.name}.json reports results of {runs} that "
