@@ -547,7 +547,7 @@ CASES = [
       "paper observation"]),
     ("eval-agent-map", ["eval", "agent:ppo_vs_smart", "--map", "maze"],
      ["expects 236 observation features; scenario 'vs_smart' on map 'maze' gives 256",
-      "its training scenario 'vs_smart'"]),
+      "its training scenario 'vs_smart' (map 'battlefield', teams"]),
     ("eval-checkpoint-empty", ["eval", "checkpoint:"], ["needs the checkpoint folder"]),
     ("eval-map", ["eval", "agent:ppo_vs_smart", "--map", "nowhere"],
      ["eval: error: --map: unknown map 'nowhere'", "battlefield"]),

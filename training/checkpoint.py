@@ -333,12 +333,14 @@ class Checkpoint:
 
     @property
     def trained_as(self) -> str:
-        """Its training scenario for error messages: name, teams and observation kind."""
+        """Its training scenario for error messages: name, map, teams and observation
+        kind."""
         sc = self.meta.get("scenario", {})
         teams = [str(t.get("team", "?")) for t in sc.get("seats", [])]
         if not teams:
             return ""
-        return (f"its training scenario {sc.get('name', '?')!r} (teams {teams}, "
+        where = f"map {sc['map']!r}, " if isinstance(sc.get("map"), str) else ""
+        return (f"its training scenario {sc.get('name', '?')!r} ({where}teams {teams}, "
                 f"{self.meta['observation']['kind']} observation)")
 
     @property
