@@ -242,6 +242,21 @@ def test_rgb_array_render_gives_one_frame_per_env():
     v.close()
 
 
+def test_sb3_reset_options_are_refused_not_ignored():
+    from alphatank.envs.sb3 import make_sb3_env
+
+    env = make_sb3_env("vs_random", 2, seed=0, game_overrides=SHORT)
+    env.set_options(None)
+    env.set_options([{}, {}])  # SB3's "no options" forms pass
+    first = env.reset()
+    for options in ({"map": "maze"}, [{}, {"map": "maze"}]):
+        with pytest.raises(ValueError, match=r"reset takes no options \(got \['map'\]\) for SB3"):
+            env.set_options(options)
+    env.seed(0)
+    assert np.array_equal(env.reset(), first)
+    env.close()
+
+
 def test_stable_baselines3_ppo_trains_on_the_batched_env():
     from stable_baselines3 import PPO
 

@@ -29,7 +29,7 @@ require("sb3", "alphatank.envs.sb3")
 
 from stable_baselines3.common.vec_env import VecEnv  # noqa: E402
 
-from alphatank.envs.core import check_actions  # noqa: E402
+from alphatank.envs.core import check_actions, check_reset_options  # noqa: E402
 from alphatank.envs.vector import (  # noqa: E402
     SubprocVectorMatchEnv,
     TankBattleVectorEnv,
@@ -58,6 +58,12 @@ class SB3VecEnv(VecEnv):
         self._reset_seeds()
         self._reset_options()
         return obs.reshape(self.num_envs, -1)
+
+    def set_options(self, options: list[dict] | dict | None = None) -> None:
+        """The engine's reset takes no options: refuse any rather than ignore them."""
+        for opts in options if isinstance(options, list) else [options]:
+            check_reset_options(opts, " for SB3VecEnv: the batched engine's reset has none")
+        super().set_options(options)
 
     def step_async(self, actions: np.ndarray) -> None:
         """``actions``: (num_envs, 3), one row per SB3 env (errors name the env and the
