@@ -257,6 +257,21 @@ def test_sb3_reset_options_are_refused_not_ignored():
     env.close()
 
 
+@pytest.mark.parametrize("make", [
+    lambda: gym.make("AlphaTank/VsRandom-v0"),
+    lambda: gym.make_vec("AlphaTank/VsRandom-v0", num_envs=2, vectorization_mode="sync"),
+    lambda: gym.wrappers.vector.RecordEpisodeStatistics(vec(num_envs=2)),
+], ids=["single", "sync", "wrapped"])
+def test_sb3_adapter_refuses_what_it_cannot_batch(make):
+    from alphatank.envs.sb3 import SB3VecEnv
+
+    env = make()
+    with pytest.raises(TypeError, match=r"^SB3VecEnv needs make_vector_env.*got "
+                                        r"(OrderEnforcing|SyncVectorEnv|RecordEpisodeStatistics);"):
+        SB3VecEnv(env)
+    env.close()
+
+
 def test_stable_baselines3_ppo_trains_on_the_batched_env():
     from stable_baselines3 import PPO
 

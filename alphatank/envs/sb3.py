@@ -45,6 +45,12 @@ class SB3VecEnv(VecEnv):
     :class:`TankBattleVectorEnv`) as an SB3 VecEnv of ``num_envs * num_learners`` envs."""
 
     def __init__(self, env: Engine | TankBattleVectorEnv):
+        if not isinstance(env, VectorMatchEnv | SubprocVectorMatchEnv | TankBattleVectorEnv):
+            raise TypeError(
+                "SB3VecEnv needs make_vector_env(...)'s engine or gymnasium.make_vec(id, "
+                "num_envs=N)'s TankBattleVectorEnv (the default vectorization mode, "
+                f"unwrapped), got {type(env).__name__}; a gymnasium.make(id) env goes into "
+                "SB3 as it is (SB3 wraps it in a DummyVecEnv)")
         self.engine: Engine = env.engine if isinstance(env, TankBattleVectorEnv) else env
         eng = self.engine
         self.matches, self.learners = eng.num_envs, eng.num_learners
