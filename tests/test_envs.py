@@ -357,3 +357,24 @@ def test_ids_carry_the_env_version_and_checkpoints_name_their_env():
     assert env_id("team") == env_id("bot_teams") == f"AlphaTank/TankBattle-v{ENV_VERSION}"
     changed = dataclasses.replace(load_scenario("vs_smart"), preset="long_range")
     assert env_id(changed) == f"AlphaTank/TankBattle-v{ENV_VERSION}"
+
+
+def test_action_repeat_holds_each_action_for_k_ticks():
+    held = gymnasium.make("AlphaTank/VsSmart-v0", action_repeat=3)
+    every = gymnasium.make("AlphaTank/VsSmart-v0")
+    held.reset(seed=4)
+    every.reset(seed=4)
+    rng = np.random.default_rng(0)
+    for _ in range(10):
+        a = rng.integers([3, 3, 2])
+        obs, rew, *_ = held.step(a)
+        obs1, rew1 = None, 0.0
+        for _ in range(3):
+            obs1, r, *_ = every.step(a)
+            rew1 += r
+        assert np.array_equal(obs, obs1) and rew == pytest.approx(rew1)
+    assert held.unwrapped.match.tick == 30
+    check_env(held.unwrapped, skip_render_check=True)
+    with pytest.raises(ValueError, match=r"^action_repeat must be a whole number of ticks in "
+                                         r"1\.\.30, got 0$"):
+        gymnasium.make("AlphaTank/VsSmart-v0", action_repeat=0)

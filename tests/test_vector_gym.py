@@ -242,6 +242,19 @@ def test_rgb_array_render_gives_one_frame_per_env():
     v.close()
 
 
+def test_make_vec_action_repeat_as_make():
+    v = vec(num_envs=2, action_repeat=3, max_episode_steps=4)
+    v.reset(seed=0)
+    v.step(np.ones((2, 3), dtype=np.int64))
+    assert [m.tick for m in v.engine.core.matches] == [3, 3]
+    for _ in range(3):
+        _, _, _, trunc, infos = v.step(np.ones((2, 3), dtype=np.int64))
+    assert trunc.all() and infos["final_info"]["length"].tolist() == [4, 4]  # steps, not ticks
+    v.close()
+    with pytest.raises(ValueError, match=r"^action_repeat must be a whole number of ticks"):
+        vec(num_envs=2, action_repeat=31)
+
+
 def test_sb3_reset_options_are_refused_not_ignored():
     from alphatank.envs.sb3 import make_sb3_env
 

@@ -35,7 +35,9 @@ Arguments
     every seat the env plays),
     ``seat_policies`` ({seat: Policy}; the scenario's other learner seats need one),
     ``game_overrides`` / ``reward_overrides`` (GameConfig / RewardConfig fields),
-    ``render_mode`` (None, "rgb_array", "human").
+    ``action_repeat`` (ticks each step holds the action for, 1..30, rewards summed over
+    them, as a run's ``action_repeat``; default 1), ``render_mode`` (None, "rgb_array",
+    "human").
 
 Version history (``ENV_VERSION`` in :mod:`alphatank.envs.ids`, shared by every AlphaTank
 env and written into checkpoints)
@@ -112,13 +114,13 @@ class TankBattleEnv(gym.Env):
                  seat_policies: Mapping[int, Policy] | None = None,
                  game_overrides: Mapping[str, Any] | None = None,
                  reward_overrides: Mapping[str, Any] | None = None,
-                 render_mode: str | None = None):
+                 action_repeat: int = 1, render_mode: str | None = None):
         sc = load_scenario(scenario)
         seat = single_learner_seat(sc, learner_seat, seat_policies, opponent_policy)
         check_render_mode(render_mode)
         self.core = MatchSet(sc, 1, observation=observation, game_overrides=game_overrides,
                              reward_overrides=reward_overrides, driven=[seat],
-                             seat_policies=seat_policies)
+                             seat_policies=seat_policies, action_repeat=action_repeat)
         self.core.opponent_policy = opponent_policy
         self.scenario, self.seat = sc, seat
         self.render_mode = render_mode

@@ -24,6 +24,7 @@ vectorization_mode="vector_entry_point")``. Each sub-env is exactly
   ``SeedSequence(s, spawn_key=(i, k))``; ``reset()`` continues with fresh episodes.
 * Arguments: ``scenario``, ``num_envs``, ``observation``, ``learner_seat``,
   ``opponent_policy``, ``seat_policies``, ``game_overrides``, ``reward_overrides``,
+  ``action_repeat`` (ticks each step holds the action for, as the single env),
   ``num_workers`` (>1: worker processes, same results), ``render_mode`` (None or
   ``"rgb_array"``: ``render()`` returns one frame per sub-env), ``max_episode_steps``
   (what ``make_vec`` passes for ``gymnasium.make``'s TimeLimit: the sub-envs' episodes
@@ -75,6 +76,7 @@ from gymnasium.vector.utils import batch_space
 from alphatank.envs.core import (
     MatchSet,
     action_space,
+    check_action_repeat,
     check_actions,
     check_benched,
     check_bot_names,
@@ -858,13 +860,15 @@ class TankBattleVectorEnv(VectorEnv):
                  opponent_policy: Policy | None = None,
                  seat_policies: Mapping[int, Policy] | None = None,
                  game_overrides: Mapping[str, Any] | None = None,
-                 reward_overrides: Mapping[str, Any] | None = None, num_workers: int = 1,
+                 reward_overrides: Mapping[str, Any] | None = None,
+                 action_repeat: int = 1, num_workers: int = 1,
                  render_mode: str | None = None, max_episode_steps: int | None = None):
         sc = load_scenario(scenario)
         seat = single_learner_seat(sc, learner_seat, seat_policies, opponent_policy)
         game = check_overrides(game_overrides, "game_overrides")
+        check_action_repeat(action_repeat)
         if max_episode_steps is not None:  # make_vec's TimeLimit: the game's own step limit
-            limit = check_step_limit(max_episode_steps, "max_episode_steps")
+            limit = check_step_limit(max_episode_steps, "max_episode_steps") * action_repeat
             game["max_steps"] = min(limit, sc.game_config(**game).max_steps)
         if render_mode is not None and render_mode not in VECTOR_RENDER_MODES:
             raise ValueError(f"render_mode must be one of {VECTOR_RENDER_MODES} or None, "
@@ -875,7 +879,7 @@ class TankBattleVectorEnv(VectorEnv):
             sc, num_envs, 0, num_workers, observation=observation,
             game_overrides=game or None,
             reward_overrides=check_overrides(reward_overrides, "reward_overrides") or None,
-            seat_policies=seat_policies, learner_seats=[seat])
+            seat_policies=seat_policies, learner_seats=[seat], action_repeat=action_repeat)
         if opponent_policy is not None:
             self.engine.set_opponent_policy(opponent_policy)
         self.scenario, self.learner_seat = sc, seat
