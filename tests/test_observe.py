@@ -554,6 +554,21 @@ def test_dead_tank_alive_flag():
     assert feat(ms, obs, "self.alive", learner=1) == 0.0
 
 
+@pytest.mark.parametrize("kind", OBS_KINDS)
+def test_a_game_without_bullets_observes_zero_bullets(kind):
+    """Every bullet limit 0 (nobody can fire; the match runs): observations build and
+    read no bullets, instead of dividing by the capacity 0."""
+    seats = [{"team": t, "controller": "learner"} for t in ("A", "B")]
+    game = {"max_bullets": 0, "buff_max_bullets": 0, "debuff_max_bullets": 0}
+    sc = parse_scenario({"name": "unarmed", "map": "open", "observation": kind,
+                         "seats": seats, "game": game})
+    ms = MatchSet(sc, 1)
+    ms.reset_env(0, 1)
+    _, obs = ms.step(np.array([[[2, 2, 1], [0, 2, 1]]]))
+    assert np.isfinite(obs).all()
+    assert feat(ms, obs, "self.bullets") == 0.0 and not ms.matches[0].bullet_active.any()
+
+
 # sha256 (first 16 hex digits) of observations built from seeded synthetic states, per env
 # version. Observations are part of the env's definition: a change that alters them must
 # bump ENV_VERSION (alphatank/envs/ids.py) and pin the new digests under the new version.

@@ -548,7 +548,7 @@ class ObservationBuilder:
         self._gl = np.arange(L)[None, :, None]
         self._tt = np.zeros((E, n, len(TANK_FIELDS)))
         self._bt = np.zeros((E, batch.n_bullets, len(BULLET_FIELDS)))
-        self._count_scale = np.array([1.0 / self.cfg.cooldown_ticks, 1.0 / cap])
+        self._count_scale = np.array([1.0 / self.cfg.cooldown_ticks, 1.0 / max(cap, 1)])
         self._ray_angles = np.arange(rays) * (2 * math.pi / rays)
         self._ray_out: np.ndarray | None = None  # ray_distances' output
         # Reads of other tanks' bullets: a view when the seat pattern allows (a 1v1),
