@@ -209,7 +209,11 @@ def test_eval_game_settings_override_the_checkpoints_own(checkpoint, capsys, tmp
                         ("max_steps", ["--game: expected KEY=VALUE"]),
                         ("max_steps=0", ["--game max_steps: must be in [1, 10000000], got 0"]),
                         ("tank_speed=nan", ["--game tank_speed: must be a finite number"]),
-                        ("bullet_speed=50", ["--game bullet_speed: (50) must exceed tank_speed"])):
+                        ("bullet_speed=50", ["--game bullet_speed: (50) must exceed tank_speed"]),
+                        # more bullets per tank than its observations hold (it crashed as
+                        # "expects N observation features ... another layout")
+                        ("max_steps=20,buff_max_bullets=20", ["--game buff_max_bullets: lets a "
+                         "tank have up to 20 bullets alive", "trained with 10", "most at 10"])):
         assert main(["eval", str(checkpoint), "--games", "2", "--game", text]) == 2
         err = capsys.readouterr().err
         assert all(w in err for w in words) and len(err.strip().splitlines()) == 1, err

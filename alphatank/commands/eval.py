@@ -186,7 +186,9 @@ def load_source(arg: str, scenario: str | None) -> Checkpoint | None:
 def check_game(game: dict[str, Any], scenario: str | None, ckpt: Checkpoint | None) -> None:
     """``--game`` over the game a row plays (its scenario's, then the checkpoint's own
     settings), before any game: a rule across settings it breaks (bullets faster than
-    tanks) names the flag."""
+    tanks) names the flag, and so do bullet limits that change the bullets a tank may
+    have alive from those the checkpoint trained with (its observations hold that many
+    per tank)."""
     from alphatank.game.scenarios import load_scenario
     from alphatank.sim.config import ConfigError, game_config
 
@@ -195,9 +197,20 @@ def check_game(game: dict[str, Any], scenario: str | None, ckpt: Checkpoint | No
     sc = load_scenario(scenario) if scenario is not None else ckpt.scenario
     own = ckpt.train_config.game if ckpt is not None else {}
     try:
-        game_config(sc.preset, **{**sc.game, **own, **game})
+        cap = game_config(sc.preset, **{**sc.game, **own, **game}).bullet_capacity
     except ConfigError as exc:
         raise InputError(f"--game {exc.key}: {exc.reason}") from None
+    limits = [k for k in ("max_bullets", "buff_max_bullets", "debuff_max_bullets") if k in game]
+    if ckpt is None or not limits:
+        return
+    trained = ckpt.scenario
+    was = game_config(trained.preset, **{**trained.game, **own}).bullet_capacity
+    if cap != was:
+        raise InputError(
+            f"--game {', '.join(limits)}: lets a tank have up to {cap} bullets alive (the "
+            f"most of max_bullets, buff_max_bullets, debuff_max_bullets); {ckpt.path} "
+            f"trained with {was}, and its observations hold {was} per tank: keep that "
+            f"most at {was}")
 
 
 def check_pool(args: argparse.Namespace, sources: Sequence[Checkpoint | None],
