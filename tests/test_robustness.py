@@ -310,6 +310,21 @@ def test_resimulation_work_is_capped(recording, tmp_path):
         load_replay(path)
 
 
+def test_a_config_whose_tanks_do_not_fit_the_maps_cells_is_refused_on_load(recording,
+                                                                        tmp_path):
+    rep = load_replay(recording[0])  # a consistent file (digest and all), made by hand
+    wide = dataclasses.replace(rep, config={**rep.config, "tank_width": 500.0})
+    path = tmp_path / "wide.npz"
+    np.savez_compressed(path, **wide.arrays(),
+                        meta=np.frombuffer(json.dumps(wide.meta()).encode(), np.uint8))
+    with pytest.raises(ReplayError) as info:
+        load_replay(path)  # before: loaded, then simulate's MapError named no file
+    assert str(info.value).startswith(f"{path}: meta.config: does not fit meta.map_text: "
+                                      "cells of 70 px are too small for tanks of 500 x")
+    with pytest.raises(ReplayError, match="not saved, it would not load: meta.config"):
+        save_replay(wide, tmp_path / "again.npz")
+
+
 # ---- checkpoints and envs ------------------------------------------------------------
 
 def test_non_finite_tensors_are_named():

@@ -9,7 +9,8 @@ a replay's video shows the same path overlay as the original recording.
 Files are ``.npz`` archives (``actions``, ``routes`` and a JSON ``meta`` record), written
 atomically (temporary file + ``os.replace``) and loaded without pickle. A replay from
 someone else is untrusted input: :func:`load_replay` bounds the archive's sizes, checks
-the type and range of every meta field (the config through GameConfig's own ranges), caps
+the type and range of every meta field (the config through GameConfig's own ranges, and
+that its tanks fit the map's cells), caps
 the physics work a re-simulation may take (:data:`MAX_SUBSTEPS`), and checks ``digest``, a
 SHA-256 over the map text, config, seats, teams, actions, routes and recorded outcome
 (every meta field and array), so an edit anywhere in the file is caught even where it
@@ -416,6 +417,10 @@ def load_replay(path: str | Path) -> Replay:
     if spec.tank_room(n) < n:
         raise fail("meta.map_text", f"map has room for {spec.tank_room(n)} tanks, the "
                    f"replay has {n}")
+    try:  # rules across config and map (tanks must fit the map's cells), checked up front
+        Match(cfg, spec, teams, seed=meta["match_seed"])
+    except MapError as exc:
+        raise fail("meta.config", f"does not fit meta.map_text: {exc.message}") from None
     ticks = meta["ticks"]
     if ticks > cfg.max_steps:
         raise fail("meta.ticks", f"{ticks} ticks exceed the config's max_steps "
