@@ -36,11 +36,14 @@ from alphatank.sim.config import (
 )
 from alphatank.sim.mapspec import MapError, load_map, parse_map
 from alphatank.sim.match import Match
+from alphatank.sim.world import substeps_for
 from alphatank.ui.replay import (
+    MAX_BODY_SUBSTEPS,
     MAX_SUBSTEPS,
     ReplayError,
     ReplayPolicy,
     ReplayRecorder,
+    check_replay_room,
     load_replay,
     save_replay,
     simulate,
@@ -308,6 +311,27 @@ def test_resimulation_work_is_capped(recording, tmp_path):
     np.savez_compressed(path, **big.arrays(), meta=blob)
     with pytest.raises(ReplayError, match="physics substeps; a replay may ask for at most"):
         load_replay(path)
+
+
+def test_resimulation_work_counts_the_bullets(recording, tmp_path):
+    rep = load_replay(recording[0])
+    cfg = {**rep.config, "max_steps": 10_000_000, "max_bullets": 64, "buff_max_bullets": 64}
+    ticks = MAX_BODY_SUBSTEPS // (2 * 65) + 1  # under MAX_SUBSTEPS: loaded before
+    assert ticks * substeps_for(from_dict(GameConfig, cfg), rep.map_spec()
+                                .min_wall_thickness()) <= MAX_SUBSTEPS
+    busy = dataclasses.replace(rep, config=cfg, actions=np.ones((ticks, 2, 3), np.int8),
+                               routes=None)
+    path = tmp_path / "busy.npz"
+    np.savez_compressed(path, **busy.arrays(),
+                        meta=np.frombuffer(json.dumps(busy.meta()).encode(), np.uint8))
+    with pytest.raises(ReplayError, match=r"busy\.npz: meta\.config: re-simulating .* ticks "
+                                          r"would take .* physics substeps of up to 130 bodies "
+                                          r"\(2 tanks and 64 bullets each\)"):
+        load_replay(path)
+    with pytest.raises(InputError, match="--replay: a game of up to 1,000,000 ticks .* 130 bodies"):
+        check_replay_room(GameConfig(max_steps=1_000_000, max_bullets=64), [rep.map_spec()],
+                          2, "--replay")
+    check_replay_room(GameConfig(max_steps=1_000_000), [rep.map_spec()], 2, "--replay")
 
 
 def test_a_config_whose_tanks_do_not_fit_the_maps_cells_is_refused_on_load(recording,

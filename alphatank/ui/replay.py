@@ -11,7 +11,8 @@ atomically (temporary file + ``os.replace``) and loaded without pickle. A replay
 someone else is untrusted input: :func:`load_replay` bounds the archive's sizes, checks
 the type and range of every meta field (the config through GameConfig's own ranges, and
 that its tanks fit the map's cells), caps
-the physics work a re-simulation may take (:data:`MAX_SUBSTEPS`), and checks ``digest``, a
+the physics work a re-simulation may take (:data:`MAX_SUBSTEPS`, :data:`MAX_BODY_SUBSTEPS`),
+and checks ``digest``, a
 SHA-256 over the map text, config, seats, teams, actions, routes and recorded outcome
 (every meta field and array), so an edit anywhere in the file is caught even where it
 would not change the re-simulation.
@@ -50,6 +51,10 @@ _META_KEYS = ("format", "version", "seed", "match_seed", "scenario", "seats", "m
               "map_text", "config", "teams", "labels", "ticks", "final_hash", "winner",
               "digest")
 MAX_SUBSTEPS = 5_000_000  # physics substeps a re-simulation may take (ticks x substeps)
+# ... and substeps x bodies (each tank and every bullet it may have alive): what
+# MAX_SUBSTEPS of a default duel take (2 tanks x (1 + 10 bullets)); a substep of 64 tanks
+# with 64 bullets each costs ~200 times one of a duel
+MAX_BODY_SUBSTEPS = 110_000_000
 MAX_TANKS = 64
 LABEL_MAX = 4096  # characters of a seat's description or label (a checkpoint path), of the
 # scenario (its name or .toml path) and of the map's name
@@ -289,7 +294,8 @@ def check_replay_room(cfg: GameConfig, specs: Sequence[MapSpec], tanks: int, fla
     """InputError ``flag: why`` when a game of ``tanks`` tanks and ``cfg`` on one of
     ``specs`` might make a replay that :func:`load_replay` refuses (more than
     :data:`MAX_TANKS` tanks, or a longest game that would ask for more than
-    :data:`MAX_SUBSTEPS` of re-simulation): asked before recording one."""
+    :data:`MAX_SUBSTEPS` or :data:`MAX_BODY_SUBSTEPS` of re-simulation): asked before
+    recording one."""
     if tanks > MAX_TANKS:
         raise InputError(f"{flag}: a replay holds at most {MAX_TANKS} tanks, this game has "
                          f"{tanks}")
@@ -298,6 +304,20 @@ def check_replay_room(cfg: GameConfig, specs: Sequence[MapSpec], tanks: int, fla
         raise InputError(f"{flag}: a game of up to {cfg.max_steps:,} ticks (max_steps) may "
                          f"take {work:,} physics substeps to re-simulate; a replay may ask "
                          f"for at most {MAX_SUBSTEPS:,} (lower max_steps)")
+    if (why := _body_work_problem(cfg, tanks, work)) is not None:
+        raise InputError(f"{flag}: a game of up to {cfg.max_steps:,} ticks (max_steps) {why} "
+                         "(lower max_steps, or the tanks or bullets)")
+
+
+def _body_work_problem(cfg: GameConfig, tanks: int, substeps: int) -> str | None:
+    """Why ``substeps`` of ``tanks`` tanks and their bullets exceed
+    :data:`MAX_BODY_SUBSTEPS`; None if they do not."""
+    bodies = tanks * (1 + cfg.bullet_capacity)
+    if substeps * bodies <= MAX_BODY_SUBSTEPS:
+        return None
+    return (f"would take {substeps:,} physics substeps of up to {bodies:,} bodies ({tanks} "
+            f"tanks and {cfg.bullet_capacity} bullets each), {substeps * bodies:,} in all; a "
+            f"replay may ask for at most {MAX_BODY_SUBSTEPS:,}")
 
 
 def _declared_bytes(zf: zipfile.ZipFile, info: zipfile.ZipInfo) -> int:
@@ -429,6 +449,8 @@ def load_replay(path: str | Path) -> Replay:
     if work > MAX_SUBSTEPS:
         raise fail("meta.config", f"re-simulating {ticks:,} ticks would take {work:,} physics "
                    f"substeps; a replay may ask for at most {MAX_SUBSTEPS:,}")
+    if (why := _body_work_problem(cfg, n, work)) is not None:
+        raise fail("meta.config", f"re-simulating {ticks:,} ticks {why}")
     actions = arrays.get("actions")
     if actions.dtype != np.int8 or actions.ndim != 3 or actions.shape[1:] != (n, 3):
         raise fail("actions", f"must be int8 of shape (ticks, {n}, 3), got {actions.dtype} "
