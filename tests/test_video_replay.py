@@ -192,6 +192,11 @@ def test_corrupt_replay_files_give_clear_errors(recorded, tmp_path):
         load_replay(truncated)
     with pytest.raises(ReplayError, match="no such replay file"):
         load_replay(tmp_path / "missing.npz")
+    pipe = tmp_path / "pipe.npz"  # `alphatank replay <(curl ...)` gives a pipe
+    os.mkfifo(pipe)
+    with pytest.raises(ReplayError, match=r"pipe\.npz: is not a regular file \(a pipe or "
+                                          r"device\); save the replay to a file"):
+        load_replay(pipe)  # before: 'no such replay file'
     other = tmp_path / "other.npz"
     np.savez(other, actions=np.zeros((3, 2, 3), np.int8),
              meta=np.frombuffer(json.dumps({"format": "x"}).encode(), np.uint8))

@@ -371,6 +371,9 @@ def load_replay(path: str | Path) -> Replay:
     path = Path(path)
     if path.is_dir():
         raise ReplayError(f"{path}: is a folder, not a replay file (.npz)")
+    if path.exists() and not path.is_file():  # zip archives are read by seeking
+        raise ReplayError(f"{path}: is not a regular file (a pipe or device); save the "
+                          "replay to a file and give that")
     if not path.is_file():
         raise ReplayError(f"{path}: no such replay file")
     arrays, meta = _read_archive(path)
