@@ -215,6 +215,17 @@ def test_corrupt_replay_files_give_clear_errors(recorded, tmp_path):
         load_replay(tmp_path / "range.npz")
     with zipfile.ZipFile(recorded["replay"]) as z:
         assert sorted(z.namelist()) == ["actions.npy", "meta.npy", "routes.npy"]
+    extra = tmp_path / "extra.npz"  # before: every member was read (each up to 256 MiB:
+    extra.write_bytes(recorded["replay"].read_bytes())  # many of them, out of memory)
+    with zipfile.ZipFile(extra, "a") as z:
+        for k in range(10):
+            with z.open(f"x{k}.npy", "w") as f:  # declares 100 MB, holds none of it
+                np.lib.format.write_array_header_1_0(
+                    f, {"descr": "|u1", "fortran_order": False, "shape": (100_000_000,)})
+    with pytest.raises(ReplayError, match=r"extra\.npz: arrays: unexpected member\(s\) "
+                                          r"\['x0\.npy', .*'x7\.npy'\] and 2 more; a replay "
+                                          "holds actions, routes and meta"):
+        load_replay(extra)  # refused unread
 
 
 def test_save_is_atomic_and_readable(recorded, tmp_path):

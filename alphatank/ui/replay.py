@@ -59,6 +59,7 @@ MAX_TANKS = 64
 LABEL_MAX = 4096  # characters of a seat's description or label (a checkpoint path), of the
 # scenario (its name or .toml path) and of the map's name
 MAX_META_BYTES = 8 << 20
+_MEMBERS = ("actions.npy", "routes.npy", "meta.npy")
 MAX_ARRAY_BYTES = 256 << 20
 _HEX64 = re.compile(r"[0-9a-f]{64}")
 _U64 = (0, 2**64 - 1)
@@ -333,10 +334,25 @@ def _declared_bytes(zf: zipfile.ZipFile, info: zipfile.ZipInfo) -> int:
     return math.prod(shape) * dtype.itemsize
 
 
+def _some(names: list[str], shown: int = 8) -> str:
+    """The first ``shown`` of ``names`` as a list, with how many more there are."""
+    more = len(names) - shown
+    return f"{names[:shown]}" + (f" and {more:,} more" if more > 0 else "")
+
+
 def _read_archive(path: Path) -> tuple[dict[str, np.ndarray], Any]:
     """The arrays and the decoded meta of a replay archive; sizes bounded before reading."""
     try:
         with zipfile.ZipFile(path) as zf:
+            names = zf.namelist()
+            missing = [k for k in ("actions", "meta") if f"{k}.npy" not in names]
+            if missing:
+                raise ReplayError(f"{path}: not a replay file: missing {missing} "
+                                  f"(found {_some(names)})")
+            extra = sorted(set(names) - set(_MEMBERS))
+            if extra:  # refused unread: each could unpack to MAX_ARRAY_BYTES
+                raise ReplayError(f"{path}: arrays: unexpected member(s) {_some(extra)}; a "
+                                  "replay holds actions, routes and meta")
             for info in zf.infolist():
                 name = info.filename
                 cap = MAX_META_BYTES if name == "meta.npy" else MAX_ARRAY_BYTES
@@ -345,10 +361,6 @@ def _read_archive(path: Path) -> tuple[dict[str, np.ndarray], Any]:
                     raise ReplayError(f"{path}: member {name!r} unpacks to {size:,} bytes; "
                                       f"a replay member may hold at most {cap:,}")
         with np.load(path, allow_pickle=False) as z:
-            missing = [k for k in ("actions", "meta") if k not in z.files]
-            if missing:
-                raise ReplayError(f"{path}: not a replay file: missing {missing} "
-                                  f"(found {z.files})")
             arrays = {k: z[k] for k in z.files if k != "meta"}
             raw = z["meta"]
         if raw.dtype != np.uint8 or raw.ndim != 1:
@@ -473,10 +485,6 @@ def load_replay(path: str | Path) -> Replay:
               & (routes[..., 1::2] >= 0) & (routes[..., 1::2] < cols)).all(axis=-1)
     if not (none | inside).all():
         raise fail("routes", f"cells must lie in the {rows} x {cols} grid (or be -1)")
-    extra = sorted(set(arrays) - {"actions", "routes"})
-    if extra:
-        raise fail("arrays", f"unexpected member(s) {extra}; a replay holds actions, routes "
-                   "and meta")
     if content_digest(meta, {"actions": actions, "routes": routes}) != meta["digest"]:
         raise fail("meta.digest", "does not match the file's contents: the replay was "
                    "altered or damaged after it was saved")
