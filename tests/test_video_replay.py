@@ -236,6 +236,11 @@ def test_save_is_atomic_and_readable(recorded, tmp_path):
     os.umask(umask)
     assert path.stat().st_mode & 0o777 == 0o666 & ~umask
     assert load_replay(path).final_hash == rep.final_hash
+    link = tmp_path / "link.npz"  # a link to a file in folders not made yet: made, as for
+    link.symlink_to(tmp_path / "new" / "deep" / "r.npz")  # any path (before: OSError)
+    save_replay(rep, link)
+    assert link.is_symlink() and load_replay(link).final_hash == rep.final_hash
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["link.npz", "new", "sub"]
 
 
 def test_record_match_every_and_hold(tmp_path):
