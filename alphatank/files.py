@@ -167,7 +167,8 @@ def remove_empty_folders(folders: list[Path]) -> None:
 def replace_into(tmp: str | Path, path: str | Path) -> None:
     """Finish an atomic write: ``os.replace`` the complete temporary file ``tmp`` onto
     ``path``, its symbolic links resolved (a rename onto a link would put a file in the
-    link's place and leave its target as it was); a target on another file system gets a
+    link's place and leave its target as it was; the target's missing folders are made, as
+    the writer made those of ``path``); a target on another file system gets a
     copy of ``tmp`` beside it renamed over it. Where ``path`` (its links followed) is
     something other than a regular file (a device such as ``/dev/null`` or ``/dev/stdout``,
     a pipe), a rename would put a file in its place (as root, ``/dev/null`` itself), so the
@@ -178,6 +179,7 @@ def replace_into(tmp: str | Path, path: str | Path) -> None:
         mode = None
     if mode is None or stat.S_ISREG(mode):
         real = os.path.realpath(path)
+        os.makedirs(os.path.dirname(real), exist_ok=True)
         try:
             os.replace(tmp, real)
         except OSError as exc:

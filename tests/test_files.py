@@ -144,6 +144,15 @@ def test_replace_into_swaps_a_regular_file_whole(tmp_path):
     assert (tmp_path / "out").read_bytes() == b"new" and not tmp.exists()
 
 
+def test_replace_into_a_link_makes_its_targets_folders(tmp_path):
+    tmp = tmp_path / ".out.tmp"
+    tmp.write_bytes(b"new")
+    link = tmp_path / "out.mp4"  # `record -o out.mp4`, a link into a folder not made yet
+    link.symlink_to(tmp_path / "videos" / "today" / "out.mp4")
+    replace_into(tmp, link)  # before: FileNotFoundError after the whole match
+    assert link.is_symlink() and link.read_bytes() == b"new" and not tmp.exists()
+
+
 def lock_in_another_process(folder) -> str:
     """What a second Python process gets when it tries ``FolderLock(folder)``."""
     code = ("import sys\nfrom alphatank.files import FolderLock\n"

@@ -259,8 +259,7 @@ def save_replay(replay: Replay, path: str | Path) -> Path:
     back with :func:`load_replay` first: a replay that would not load is not saved
     (ReplayError naming ``path`` and the field)."""
     path = Path(path)
-    for folder in {path.parent, Path(os.path.realpath(path)).parent}:  # a link's target's too
-        folder.mkdir(parents=True, exist_ok=True)
+    path.parent.mkdir(parents=True, exist_ok=True)
     try:
         text = json.dumps(replay.meta(), default=_plain)
     except (TypeError, ValueError) as exc:
