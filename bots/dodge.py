@@ -6,9 +6,14 @@ import math
 from typing import TYPE_CHECKING
 
 from alphatank.bots.base import BACK, DRIVE_RADIUS, FORWARD, NONE, STOP, Bot, Evader, wrap
+from alphatank.sim.mapspec import MAX_WORLD
 
 if TYPE_CHECKING:
     from alphatank.sim.match import Match
+
+
+MAX_HORIZON_TICKS = 600  # 20 s of look-ahead at the default 30 ticks/s (9 paths of it)
+MAX_DANGER_PX = 2.0 * MAX_WORLD  # past the diagonal of the largest world
 
 
 class DodgeBot(Bot):
@@ -27,9 +32,10 @@ class DodgeBot(Bot):
         if not 0 <= near_frac < far_frac <= 1:
             raise ValueError(f"DodgeBot: need 0 <= near_frac < far_frac <= 1, got "
                              f"near_frac={near_frac}, far_frac={far_frac}")
-        if horizon_ticks < 1 or danger_px <= 0:
-            raise ValueError(f"DodgeBot: horizon_ticks must be >= 1 and danger_px > 0, got "
-                             f"{horizon_ticks}, {danger_px}")
+        if not (1 <= horizon_ticks <= MAX_HORIZON_TICKS and 0 < danger_px <= MAX_DANGER_PX):
+            raise ValueError(f"DodgeBot: need 1 <= horizon_ticks <= {MAX_HORIZON_TICKS} and "
+                             f"0 < danger_px <= {MAX_DANGER_PX:g}, got horizon_ticks="
+                             f"{horizon_ticks}, danger_px={danger_px}")
         self.near_frac, self.far_frac = near_frac, far_frac
         self.horizon_ticks, self.danger_px = horizon_ticks, danger_px
 

@@ -108,6 +108,20 @@ def test_bot_spec_strings():
         parse_bot_spec("tank")
 
 
+
+@pytest.mark.parametrize("spec, said", [
+    ("dodge:danger_px=1e300", "danger_px=1e+300"),  # its square overflowed at reset
+    ("dodge:horizon_ticks=1000000000", "horizon_ticks=1000000000"),  # 7 GiB of paths
+])
+def test_dodge_refuses_a_horizon_or_danger_it_cannot_play(capsys, spec, said):
+    rc = main(["arena", "--seats", f"{spec},random", "--map", "open", "--games", "1",
+               "--max-steps", "5"])
+    err = capsys.readouterr().err
+    assert rc == 2 and len(err.strip().splitlines()) == 1
+    assert "need 1 <= horizon_ticks <= 600 and 0 < danger_px <=" in err and said in err
+    bot = make_bot("dodge", seed=0, horizon_ticks=600, danger_px=2 * 128 * 70)
+    play_game(GameConfig(max_steps=5), load_map("open"), [bot, make_bot("random")])
+
 # ---- weakness and determinism ------------------------------------------------------
 
 @pytest.mark.parametrize("w", [0.0, 0.1, 0.5, 0.8, 1.0])
