@@ -82,7 +82,11 @@ def parse_bot_spec(text: str) -> tuple[str, float | None, dict[str, Any]]:
         if not eq or not key.strip():
             raise BotError(f"bot spec {text!r}: option {pair!r} must be KEY=VALUE; "
                              f"valid options of {name!r}: {bot_options(name)}")
-        options[key.strip()] = _value(value.strip())
+        key = key.strip()
+        if key in options:
+            raise BotError(f"bot spec {text!r}: option {key!r} given twice; give each "
+                           f"option once")
+        options[key] = _value(value.strip())
     weakness = None
     if at:
         try:
