@@ -84,7 +84,7 @@ def parse_bot_spec(text: str) -> tuple[str, float | None, dict[str, Any]]:
                              f"valid options of {name!r}: {bot_options(name)}")
         key = key.strip()
         if key in options:
-            raise BotError(f"bot spec {text!r}: option {key!r} given twice; give each "
+            raise BotError(f"bot spec {text!r}: option {key!r} is given twice; give each "
                            f"option once")
         options[key] = _value(value.strip())
     weakness = None

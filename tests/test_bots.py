@@ -106,7 +106,7 @@ def test_bot_spec_strings():
         parse_bot_spec("smart@lots")
     with pytest.raises(ValueError, match="valid bots"):
         parse_bot_spec("tank")
-    with pytest.raises(ValueError, match="option 'ricochet' given twice"):  # was: the last won
+    with pytest.raises(ValueError, match="option 'ricochet' is given twice"):  # was: the last won
         parse_bot_spec("smart:ricochet=false:ricochet=true")
 
 
