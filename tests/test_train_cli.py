@@ -574,3 +574,24 @@ def test_a_run_in_use_is_refused_before_torch_is_loaded(tmp_path, held_elsewhere
         assert run.stdout.split()[-2:] == ["False", "2"], (run.stdout, run.stderr)
         assert re.search(f"{re.escape(str(folder))}: pid {pid} on .* is using it",
                          run.stderr), run.stderr
+
+
+@pytest.mark.parametrize(("scenario", "seats"), [("pair", "[0, 1]"), ("team", "[0, 2]")])
+def test_a_mappo_learner_over_two_teams_is_refused_before_the_run_folder(capsys, tmp_path,
+                                                                         scenario, seats):
+    """A MAPPO learner is one team's (its critic's team values and a dead seat's credit are
+    its teammates'): one driving both sides of a 1v1 or seats of both teams trained, its
+    dead seats bootstrapped from enemies' values. It is refused, naming the file."""
+    other = '\n[[learners]]\nname = "red"\nalgo = "mappo"\nseats = [1, 3]\n' \
+        if scenario == "team" else ""
+    run = tmp_path / "r.toml"
+    run.write_text(f'scenario = "{scenario}"\n\n[[learners]]\nname = "blue"\nalgo = "mappo"\n'
+                   f'seats = {seats}\n{other}')
+    argv = ["train", "--config", str(run), "--runs", str(tmp_path / "runs"), "--no-progress",
+            "--total-steps", "100", "--wandb", "disabled"]
+    assert main(argv) == 2
+    assert capsys.readouterr().err == (
+        f"alphatank train: error: {run}: learners: mappo learner 'blue' drives seats {seats} "
+        f"of teams ['A', 'B'] in scenario '{scenario}'; a mappo learner drives the seats of "
+        "one team (one learner per team)\n")
+    assert not (tmp_path / "runs").exists()

@@ -256,6 +256,7 @@ def learners_fit(specs: Sequence[LearnerSpec], num_learners: int, selfplay: bool
     return seats == list(range(num_learners))
 
 
+TEAM_ALGOS = ("mappo",)  # one learner per team: its critic and credit are the team's
 SELFPLAY_KEYS = ("learner", "window", "latest_share", "every")
 # Most snapshots a self-play pool keeps, each a copy of the learner's networks (up to
 # ~0.5 GiB at the widest): far more would not fit, and past 2**63 the window could not
@@ -465,6 +466,13 @@ def check_run_fields(cfg: TrainConfig, sc: Any, source: str, where: str | None =
                              "leave at least one to the snapshot pool")
         raise ValueError(f"{source}: learners {drives} do not drive each of the {n} learner "
                          f"seat(s) of scenario {sc.name!r} exactly once")
+    for spec in run_learners(cfg, n):
+        teams = sorted({sc.teams[sc.learner_seats[s]] for s in spec.seats})
+        if spec.algo in TEAM_ALGOS and len(teams) > 1:
+            raise ValueError(f"{where}: learners: {spec.algo} learner {spec.name!r} drives "
+                             f"seats {sorted(spec.seats)} of teams {teams} in scenario "
+                             f"{sc.name!r}; a {spec.algo} learner drives the seats of one "
+                             f"team (one learner per team)")
     kind = cfg.schedule.get("kind", "none")
     if kind != "none" and not any(s.controller == "bot" for s in sc.seats):
         raise ValueError(f"{source}: schedule: the {kind} schedule needs bot seats; scenario "
