@@ -595,3 +595,24 @@ def test_a_mappo_learner_over_two_teams_is_refused_before_the_run_folder(capsys,
         f"of teams ['A', 'B'] in scenario '{scenario}'; a mappo learner drives the seats of "
         "one team (one learner per team)\n")
     assert not (tmp_path / "runs").exists()
+
+
+def test_learner_rollouts_that_do_not_divide_the_longest_name_the_run_file(capsys, tmp_path):
+    """Without rollout_steps the iteration is the longest num_steps; learners whose num_steps
+    do not divide it were refused only once the trainer was being made, in a line naming
+    neither the file nor a setting the user gave ('rollout_steps 128'). Now the run file's
+    rollout_steps is named, with a common multiple that works."""
+    run = tmp_path / "r.toml"
+    run.write_text('scenario = "pair"\n\n[[learners]]\nname = "a"\nalgo = "ppo"\nseats = [0]\n'
+                   'config = {num_steps = 96}\n\n[[learners]]\nname = "b"\nalgo = "ppo"\n'
+                   'seats = [1]\nconfig = {num_steps = 128}\n')
+    argv = ["train", "--config", str(run), "--runs", str(tmp_path / "runs"), "--no-progress",
+            "--print-config"]
+    assert main(argv) == 2
+    assert capsys.readouterr().err == (
+        f"alphatank train: error: {run}: rollout_steps: 0 (the longest num_steps, 128) must be "
+        "a multiple of every learner's rollout length, num_steps ({'a': 96, 'b': 128}); set "
+        "rollout_steps to a common multiple, e.g. 384\n")
+    run.write_text(run.read_text().replace('scenario = "pair"\n',
+                                           'scenario = "pair"\nrollout_steps = 384\n'))
+    assert main(argv) == 0

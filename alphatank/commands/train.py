@@ -8,6 +8,7 @@ import argparse
 import contextlib
 import dataclasses
 import gc
+import math
 import sys
 import warnings
 from collections.abc import Iterator
@@ -335,9 +336,15 @@ def build_run(args: argparse.Namespace) -> TrainConfig:
     cfg = with_hp(cfg, parse_hp(hp_items, flags), n, flags)
     wants = {s.name: s.config.num_steps for s in run_learners(cfg, n)
              if hasattr(s.config, "num_steps")}
-    if cfg.rollout_steps and any(cfg.rollout_steps % k for k in wants.values()):
-        raise ValueError(f"{source}: rollout_steps: {cfg.rollout_steps} must be a multiple of "
-                         f"every learner's rollout length, num_steps ({wants})")
+    rollout = cfg.rollout_steps or max(wants.values(), default=0)  # as the Trainer's
+    if rollout and any(rollout % k for k in wants.values()):
+        if cfg.rollout_steps:
+            raise ValueError(f"{source}: rollout_steps: {rollout} must be a multiple of "
+                             f"every learner's rollout length, num_steps ({wants})")
+        raise ValueError(f"{source}: rollout_steps: 0 (the longest num_steps, {rollout}) must "
+                         f"be a multiple of every learner's rollout length, num_steps "
+                         f"({wants}); set rollout_steps to a common multiple, e.g. "
+                         f"{math.lcm(*wants.values())}")
     return cfg
 
 
