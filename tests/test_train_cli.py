@@ -616,3 +616,18 @@ def test_learner_rollouts_that_do_not_divide_the_longest_name_the_run_file(capsy
     run.write_text(run.read_text().replace('scenario = "pair"\n',
                                            'scenario = "pair"\nrollout_steps = 384\n'))
     assert main(argv) == 0
+
+
+@pytest.mark.parametrize("flag", ["--fragments", "--overlap"])
+def test_a_run_that_cannot_act_in_fragments_names_the_flag_given(capsys, tmp_path, flag):
+    """SAC with --overlap was refused as 'fragments: ...', naming no flag the user gave; the
+    line now starts with the flag given, and no run folder is left."""
+    argv = ["train", "--preset", "sac_vs_aggressive", flag, "--num-envs", "2", "--workers",
+            "1", "--total-steps", "100", "--wandb", "disabled", "--no-progress", "--runs",
+            str(tmp_path / "runs")]
+    assert main(argv) == 2
+    assert capsys.readouterr().err == (
+        f"alphatank train: error: {flag}: this run cannot act in fragments: fragments are "
+        "acted by PPO and MAPPO learners only; this run has ['sac (sac)'] (SAC acts step by "
+        "step)\n")
+    assert not (tmp_path / "runs").exists()

@@ -81,6 +81,14 @@ class FrozenLearners:
         return out
 
 
+class FragmentsRefused(ValueError):
+    """A run that cannot act in fragments; ``problems`` says why (``; ``-joined)."""
+
+    def __init__(self, problems: list[str]):
+        self.problems = "; ".join(problems)
+        super().__init__(f"fragments: {self.problems}")
+
+
 def fragment_problems(learners: Mapping[str, Any], rollout_steps: int, *, masks: bool,
                       selfplay: bool, env: Any) -> list[str]:
     """Why this run cannot act in fragments (empty: it can)."""

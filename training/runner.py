@@ -73,6 +73,7 @@ from alphatank.training.checkpoint import (
     scenario_to_dict,
 )
 from alphatank.training.fragments import (
+    FragmentsRefused,
     FrozenLearners,
     fragment_problems,
     ingest_fragment,
@@ -298,7 +299,7 @@ class Trainer:
                                          selfplay=bool(cfg.selfplay),
                                          env=env) if self.fragments else []
             if problems:
-                raise ValueError("fragments: " + "; ".join(problems))
+                raise FragmentsRefused(problems)
             steps_per_iter = self.rollout_steps * self.E
             self.total_iterations = max(1, math.ceil(cfg.total_steps / steps_per_iter))
             # total_steps rounded up to whole iterations (presets.planned_steps): where it ends

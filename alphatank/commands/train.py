@@ -478,7 +478,7 @@ def _start(args: argparse.Namespace, progress: bool, stack: contextlib.ExitStack
                                          fragments=args.fragments, overlap=args.overlap,
                                          stop=stop, **_overrides(args))
         except ValueError as exc:
-            raise as_input_error(exc) from None
+            raise _as_flag_error(exc, args) from None
         stretched = _stretched(saved, trainer.cfg)
         if stretched:
             print(f"note: --total-steps {trainer.cfg.total_steps:,} (the run was planned for "
@@ -515,12 +515,23 @@ def _start(args: argparse.Namespace, progress: bool, stack: contextlib.ExitStack
                               env_runner_timeout_s=_runner_timeout(args),
                               fragments=args.fragments, overlap=args.overlap, stop=stop)
     except ValueError as exc:
-        raise as_input_error(exc) from None
+        raise _as_flag_error(exc, args) from None
     for name, counts in trainer.warm_start.items():
         print(f"warm start {name} from {cfg.init_from}: {counts['mapped']} features "
               f"mapped, {counts['new']} new (zero weight), {counts['dropped']} dropped"
               f"{', critic copied' if counts['critic'] else ', critic fresh'}")
     return trainer
+
+
+def _as_flag_error(exc: ValueError, args: argparse.Namespace) -> InputError:
+    """``exc`` (raised while the trainer was made) as one line; a run that cannot act in
+    fragments names the flag that asked for them."""
+    from alphatank.training.fragments import FragmentsRefused
+
+    if isinstance(exc, FragmentsRefused):
+        flag = "--overlap" if args.overlap else "--fragments"
+        return InputError(f"{flag}: this run cannot act in fragments: {exc.problems}")
+    return as_input_error(exc)
 
 
 def _note_rounding(cfg: TrainConfig) -> None:
