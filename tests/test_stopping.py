@@ -501,6 +501,8 @@ def test_a_wandb_variable_wandb_cannot_read_is_one_line_naming_it(tmp_path, monk
     cannot read (WANDB_MODE=garbage) stopped the run with pydantic's text ('1 validation
     error for Settings | mode | Input should be ...'), naming neither wandb nor the
     variable. It is one InputError line naming the variable and its value."""
+    import wandb
+    wandb.teardown()  # wandb reads the environment once a process: forget an earlier test's
     monkeypatch.setenv("WANDB_MODE", "garbage")
     with pytest.raises(InputError, match="^wandb offline: the environment's WANDB_MODE="
                                          "'garbage': Input should be 'online', 'offline'.*; "
